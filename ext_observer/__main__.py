@@ -1,0 +1,100 @@
+"""
+Command line of ext_observer: ``python -m ext_observer <command>``.
+
+Commands
+--------
+gains
+    The gain certificate of Theorem 1 on S³ (admissible α).
+reproduce
+    The paper's Figure 1, Figure 2 and Table 1.
+demo
+    The gyro → observer → monitor pipeline in one process.
+"""
+
+import argparse
+import json
+import sys
+
+
+def _gains(args):
+    from ext_observer.core import optimal_delta, s3_certificate
+    cert = s3_certificate(args.epsilon, args.delta, alpha=args.alpha)
+    result = {key: value for key, value in cert.to_dict().items()
+              if value is not None}
+    if args.optimize_delta:
+        result['delta_opt'], result['alpha_max_opt'] = optimal_delta(args.epsilon)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f'Gain certificate on S³, V(x) = (x̄x − 1)², epsilon = {cert.epsilon}, '
+          f'delta = {cert.delta}')
+    print(f'  L = max ‖∇V‖ on V⁻¹([0, ε])      = {cert.L:.6g}')
+    print(f'  d = sup λ_max(D²V) on S_δ         = {cert.d:.6g}')
+    print(f'  b with ‖∇V‖² ≥ b V                = {cert.b:.6g}')
+    print(f'  alpha_max = min(2/d, δ/L)         = {cert.alpha_max:.6g}')
+    if cert.alpha is not None:
+        print(f'  alpha = {cert.alpha:g}: c = α − α²d/2 = {cert.c:.6g}, '
+              f'certified factor 1 − bc = {cert.factor:.6g} per step on V')
+    if args.optimize_delta:
+        print(f'  best delta = {result["delta_opt"]:.6g} gives alpha_max = '
+              f'{result["alpha_max_opt"]:.6g}')
+    return 0
+
+
+def _positive_float(text):
+    value = float(text)
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f'must be positive, got {text}')
+    return value
+
+
+def build_parser():
+    """Return the argument parser of ``python -m ext_observer``."""
+    parser = argparse.ArgumentParser(
+        prog='python -m ext_observer',
+        description='Transversally stable extension observers on S³.')
+    sub = parser.add_subparsers(dest='command', required=True)
+
+    gains = sub.add_parser('gains', help='gain certificate of Theorem 1 on S³')
+    gains.add_argument('--epsilon', type=_positive_float, default=0.5,
+                       help='sublevel of V, in (0, 1) (default 0.5)')
+    gains.add_argument('--delta', type=_positive_float, default=0.059,
+                       help='margin of S_delta (default 0.059, the paper)')
+    gains.add_argument('--alpha', type=_positive_float, default=None,
+                       help='also give c and the certified factor for this α')
+    gains.add_argument('--optimize-delta', action='store_true',
+                       help='also find the delta that maximizes alpha_max')
+    gains.add_argument('--json', action='store_true', help='print JSON')
+    gains.set_defaults(func=_gains)
+
+    reproduce = sub.add_parser(
+        'reproduce', add_help=False,
+        help="the paper's Figure 1, Figure 2 and Table 1 (see reproduce -h)")
+    reproduce.set_defaults(func=None, module='ext_observer.reproduce')
+    demo = sub.add_parser(
+        'demo', add_help=False,
+        help='gyro → observer → monitor pipeline (see demo -h)')
+    demo.set_defaults(func=None, module='ext_observer.demo')
+    return parser
+
+
+def main(argv=None):
+    """Run the command line; return the exit code."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser()
+    args, rest = parser.parse_known_args(argv)
+    if args.func is None:
+        # reproduce and demo parse their own options.
+        import importlib
+        return importlib.import_module(args.module).main(rest)
+    if rest:
+        parser.error(f'unrecognized arguments: {" ".join(rest)}')
+    try:
+        return args.func(args)
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+
+
+if __name__ == '__main__':
+    sys.exit(main())

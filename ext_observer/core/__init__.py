@@ -1,0 +1,45 @@
+"""
+The numerical core of ext_observer: numpy only, no ROS.
+
+Modules
+-------
+quaternion
+    Batched quaternion algebra, scalar first ``(w, x, y, z)``.
+extension
+    The transversal extension of Theorems 1 and 2 (S³ and SO(3) built in).
+certificate
+    The gain certificate: admissible α and the certified contraction.
+observer
+    The extended, plain and projected Luenberger-like observers.
+gyro_model
+    The simulated gyro and attitude sensor.
+"""
+
+from .certificate import (GainCertificate, certified_alpha_max,
+                          estimate_certificate, optimal_delta, s3_certificate)
+from .extension import (ConstraintExtension, TransversalExtension,
+                        so3_extension, sphere_extension, sphere_grad_V,
+                        sphere_hessian_V, sphere_V)
+from .gyro_model import GyroSample, SimulatedGyro, Trajectory
+from .observer import (GAIN_MODES, LuenbergerObserver, ObserverConfig,
+                       PAPER_ALPHA, PAPER_GAIN, SingleObserver, VARIANTS)
+from .quaternion import (attitude_error, check_quaternions, check_vectors,
+                         conjugate, constraint_residual, exp, IDENTITY, log,
+                         manifold_distance, multiply, norm, normalize,
+                         quaternion_from_rotation_vector,
+                         random_unit_quaternions,
+                         rotation_vector_from_quaternion, squared_norm)
+
+__all__ = [
+    'ConstraintExtension', 'GAIN_MODES', 'GainCertificate', 'GyroSample',
+    'IDENTITY', 'LuenbergerObserver', 'ObserverConfig', 'PAPER_ALPHA',
+    'PAPER_GAIN', 'SimulatedGyro', 'SingleObserver', 'Trajectory',
+    'TransversalExtension', 'VARIANTS', 'attitude_error',
+    'certified_alpha_max', 'check_quaternions', 'check_vectors', 'conjugate',
+    'constraint_residual', 'estimate_certificate', 'exp', 'log',
+    'manifold_distance', 'multiply', 'norm', 'normalize', 'optimal_delta',
+    'quaternion_from_rotation_vector', 'random_unit_quaternions',
+    'rotation_vector_from_quaternion', 's3_certificate', 'so3_extension',
+    'sphere_extension', 'sphere_grad_V', 'sphere_hessian_V', 'sphere_V',
+    'squared_norm',
+]
