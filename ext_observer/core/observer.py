@@ -47,7 +47,7 @@ VARIANTS = ('extended', 'plain', 'projected')
 GAIN_MODES = ('constant', 'rotating', 'scheduled')
 PAPER_GAIN = (0.11, -0.18, -0.18, -0.18)
 PAPER_ALPHA = 0.01
-DEFAULT_KAPPA = 0.5
+DEFAULT_KAPPA = 0.05
 DEFAULT_KAPPA_MIN = 0.02
 
 

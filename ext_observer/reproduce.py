@@ -1,0 +1,369 @@
+"""
+Reproduce the paper's simulations: ``python -m ext_observer reproduce``.
+
+Figure 1 (Section 3.1), Figure 2 (a–d) and Table 1 (Section 3.2), printed
+beside the paper's numbers, plus our rows: the ``projected`` observer and
+the gain modes ``rotating`` and ``scheduled``, with exact increments and
+with gyro noise, next to the accuracy limit. All maths comes from
+:mod:`ext_observer.core.experiments`.
+"""
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+from ext_observer.core.experiments import (accuracy_limit, error_table,
+                                           manifold_convergence,
+                                           ObserverSpec, observer_runs)
+from ext_observer.core.observer import GAIN_MODES, VARIANTS
+
+# Table 1 of the paper: ‖q − q̂‖ and dist(q, S³) (which is |q̂̄q̂ − 1|).
+PAPER_TABLE = {
+    'extended': {'error': {'mean': 0.138, 'std': 0.07, 'max': 1.816, 'min': 0.007},
+                 'distance': {'mean': 0.084, 'std': 0.072, 'max': 2.182,
+                              'min': 0.0}},
+    'plain': {'error': {'mean': 0.148, 'std': 0.076, 'max': 4.747, 'min': 0.007},
+              'distance': {'mean': 0.112, 'std': 0.101, 'max': 25.121,
+                           'min': 0.0}},
+}
+STATS = ('mean', 'std', 'max', 'min')
+COLUMNS = ('error', 'distance')
+PAPER_ROWS = ('extended', 'plain', 'projected')
+# Gyro noise of the "with gyro errors" rows: 0.01 rad of angle noise per step.
+DEFAULT_GYRO_NOISE = 0.01
+
+
+class Progress:
+    """A one-line progress display on stderr (plain lines when not a tty)."""
+
+    def __init__(self, total, enabled=True, stream=sys.stderr):
+        self.total = total
+        self.done = 0
+        self.enabled = enabled
+        self.stream = stream
+        self.tty = stream.isatty()
+        self.start = time.perf_counter()
+
+    def advance(self, label):
+        """Mark one unit done and show ``label``."""
+        self.done += 1
+        if not self.enabled:
+            return
+        elapsed = time.perf_counter() - self.start
+        line = f'[{self.done}/{self.total}] {label} ({elapsed:.1f} s)'
+        if self.tty:
+            end = '\n' if self.done == self.total else ''
+            self.stream.write('\r\033[K' + line + end)
+        else:
+            self.stream.write(line + '\n')
+        self.stream.flush()
+
+
+def observer_specs(alpha, modes=GAIN_MODES):
+    """Return one spec per variant and gain mode."""
+    return [ObserverSpec(variant, mode, alpha=alpha)
+            for mode in modes for variant in VARIANTS]
+
+
+def _aggregate(tables):
+    """Mean and spread (std over seeds) of a list of per-seed tables."""
+    mean, spread = {}, {}
+    for row in tables[0]:
+        mean[row], spread[row] = {}, {}
+        for column in tables[0][row]:
+            values = {stat: [t[row][column][stat] for t in tables]
+                      for stat in STATS}
+            mean[row][column] = {s: float(np.mean(v)) for s, v in values.items()}
+            spread[row][column] = {s: float(np.std(v)) for s, v in values.items()}
+    return mean, spread
+
+
+def markdown_table(table, spread=None, rows=None, columns=COLUMNS,
+                   paper=PAPER_TABLE):
+    """
+    Render Table 1 as Markdown, with the paper's rows and the difference.
+
+    Parameters
+    ----------
+    table, spread : dict
+        Row → column → stat (spread: std over seeds, optional).
+    rows : sequence of str, optional
+    columns : sequence of str
+    paper : dict
+        The paper's values; rows present there get a "paper" line and a
+        relative difference line.
+
+    Returns
+    -------
+    text : str
+
+    """
+    rows = list(table) if rows is None else rows
+    labels = {'error': '‖q − q̂‖', 'distance': '|q̂̄q̂ − 1|',
+              'euclidean_distance': '|‖q̂‖ − 1|', 'angle': 'angle (rad)'}
+    header = '| Observer | ' + ' | '.join(
+        f'{labels[c]} {s.capitalize()}' for c in columns for s in STATS) + ' |'
+    lines = [header, '|' + '---|' * (1 + len(columns) * len(STATS))]
+    for row in rows:
+        cells = []
+        for c in columns:
+            for s in STATS:
+                value = table[row][c][s]
+                text = f'{value:.3f}' if abs(value) < 100 else f'{value:.1f}'
+                if spread is not None and spread[row][c][s] > 0:
+                    text += f' ± {spread[row][c][s]:.3f}'
+                cells.append(text)
+        lines.append(f'| {row} | ' + ' | '.join(cells) + ' |')
+        if row in paper and all(c in paper[row] for c in columns):
+            lines.append(f'| *{row}, paper* | ' + ' | '.join(
+                f'*{paper[row][c][s]:g}*' for c in columns for s in STATS) + ' |')
+            diffs = []
+            for c in columns:
+                for s in STATS:
+                    ref = paper[row][c][s]
+                    diffs.append('—' if ref == 0 else
+                                 f'{100 * (table[row][c][s] - ref) / ref:+.0f}%')
+            lines.append(f'| *difference* | ' + ' | '.join(diffs) + ' |')
+    return '\n'.join(lines)
+
+
+def run(runs=1000, epochs=100, seed=0, seeds=1, alpha=0.01,
+        gyro_noise=DEFAULT_GYRO_NOISE, modes=GAIN_MODES, progress=None,
+        keep_histories=True):
+    """
+    Run every experiment over ``seeds`` consecutive seeds.
+
+    Returns
+    -------
+    result : dict
+        The JSON-ready summary, and (``keep_histories``) the first seed's
+        per-epoch histories under ``'_histories'`` for the figures.
+
+    """
+    start = time.perf_counter()
+    specs = observer_specs(alpha, modes)
+    fig1_factors, fig1_residual_factors = [], []
+    tables, noisy_tables = [], []
+    histories = {}
+    for index, s in enumerate(range(seed, seed + seeds)):
+        fig1 = manifold_convergence(runs=runs, epochs=epochs, alpha=alpha,
+                                    seed=s)
+        fig1_factors.append(fig1['fitted_factor'])
+        fig1_residual_factors.append(fig1['fitted_residual_factor'])
+        if progress:
+            progress.advance(f'seed {s}: Figure 1')
+        exact = observer_runs(specs, runs=runs, epochs=epochs, seed=s)
+        tables.append({name: error_table(h) for name, h in exact.items()})
+        if progress:
+            progress.advance(f'seed {s}: Table 1, exact increments')
+        noisy = observer_runs(specs, runs=runs, epochs=epochs, seed=s,
+                              gyro_noise_std=gyro_noise)
+        noisy_tables.append({name: error_table(h) for name, h in noisy.items()})
+        if progress:
+            progress.advance(f'seed {s}: gyro noise {gyro_noise} rad')
+        if index == 0 and keep_histories:
+            histories = {'figure1': fig1, 'exact': exact, 'noisy': noisy}
+    table, spread = _aggregate(tables)
+    noisy_table, noisy_spread = _aggregate(noisy_tables)
+    limit = accuracy_limit(0.1, epochs)
+    cert = fig1['certificate']
+    result = {
+        'runs': runs, 'epochs': epochs, 'seeds': list(range(seed, seed + seeds)),
+        'alpha': alpha,
+        'table': table,
+        'table_spread': spread,
+        'table_gyro_noise': noisy_table,
+        'table_gyro_noise_spread': noisy_spread,
+        'gyro_noise_std': gyro_noise,
+        'paper': PAPER_TABLE,
+        'limit': limit,
+        'figure1': {
+            'fitted_factor': float(np.mean(fig1_factors)),
+            'fitted_factor_spread': float(np.std(fig1_factors)),
+            'fitted_residual_factor': float(np.mean(fig1_residual_factors)),
+            'certified_factor': cert.factor,
+            'certificate': cert.to_dict(),
+        },
+        'best_mode': min(table, key=lambda row: table[row]['error']['mean']),
+    }
+    result['seconds'] = time.perf_counter() - start
+    if keep_histories:
+        result['_histories'] = histories
+    return result
+
+
+def plot(result, out_dir):
+    """Write the figures as PNG files in ``out_dir``; return their paths."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    os.makedirs(out_dir, exist_ok=True)
+    hist = result['_histories']
+    paths = []
+    epochs = np.arange(result['epochs'] + 1)
+
+    fig1 = hist['figure1']
+    fig, ax = plt.subplots(figsize=(6, 4))
+    residual = fig1['residual']
+    ax.fill_between(epochs, residual.min(axis=1), residual.max(axis=1),
+                    color='0.8', label='spread (min–max)')
+    ax.semilogy(epochs, residual.mean(axis=1), 'k', label='mean')
+    rho = np.sqrt(fig1['certified_factor'])
+    ax.semilogy(epochs, residual.mean(axis=1)[0] * rho ** epochs, 'k--',
+                label=f'certified rate √(1 − bc) = {rho:.3f}')
+    ax.set_xlabel('epoch k')
+    ax.set_ylabel('|q̄q − 1| (distance to S³)')
+    ax.set_title('Figure 1: extended kinematics converge to S³')
+    ax.legend()
+    fig.tight_layout()
+    paths.append(os.path.join(out_dir, 'figure1.png'))
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+
+    exact = hist['exact']
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7), sharex=True)
+    panels = [('error', 'mean', '(a) mean ‖q − q̂‖'),
+              ('error', 'max', '(b) worst run ‖q − q̂‖'),
+              ('residual', 'mean', '(c) mean |q̂̄q̂ − 1|'),
+              ('residual', 'max', '(d) worst run |q̂̄q̂ − 1|')]
+    for ax, (key, how, title) in zip(axes.flat, panels):
+        # projected sits on S³ by construction (residual ~1e-16): left out of
+        # the distance panels so that the two paper rows stay readable.
+        rows = PAPER_ROWS if key == 'error' else PAPER_ROWS[:2]
+        for row, style in zip(rows, ('C0', 'C1', 'C2')):
+            values = exact[row][key]
+            curve = values.mean(axis=1) if how == 'mean' else values.max(axis=1)
+            ax.semilogy(epochs, np.maximum(curve, 1e-17), style, label=row)
+        ax.set_title(title)
+        ax.set_xlabel('epoch k')
+    axes[0, 0].legend()
+    fig.suptitle('Figure 2: Luenberger-like observers on S³')
+    fig.tight_layout()
+    paths.append(os.path.join(out_dir, 'figure2.png'))
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    for ax, key, title in ((axes[0], 'exact', 'exact increments'),
+                           (axes[1], 'noisy',
+                            f'gyro noise {result["gyro_noise_std"]} rad/step')):
+        for row, values in hist[key].items():
+            if row.startswith('extended'):
+                ax.semilogy(epochs, values['error'].mean(axis=1), label=row)
+        ax.axhline(result['limit'], color='k', ls='--',
+                   label=f'limit σE[χ₃]/√K = {result["limit"]:.4f}')
+        ax.set_title(f'Mean ‖q − q̂‖ per gain mode, {title}')
+        ax.set_xlabel('epoch k')
+    axes[0].legend()
+    fig.tight_layout()
+    paths.append(os.path.join(out_dir, 'gain_modes.png'))
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+    return paths
+
+
+def report(result):
+    """Return the human-readable summary (Markdown)."""
+    f1 = result['figure1']
+    n = len(result['seeds'])
+    lines = [
+        f"Runs {result['runs']} × epochs {result['epochs']}, seeds "
+        f"{result['seeds'][0]}..{result['seeds'][-1]} ({n}), α = {result['alpha']}"
+        + (' (± is the std over seeds)' if n > 1 else ''),
+        '',
+        '## Figure 1: convergence to S³',
+        f"fitted factor on V per epoch: {f1['fitted_factor']:.4f}   "
+        f"certified 1 − bc: {f1['certified_factor']:.4f}   "
+        f"(fitted on |q̄q − 1|: {f1['fitted_residual_factor']:.4f})",
+        '',
+        '## Table 1 (paper rows; distance = |q̂̄q̂ − 1| as in the paper)',
+        markdown_table(result['table'], result['table_spread'] if n > 1 else None,
+                       rows=PAPER_ROWS),
+        '',
+        '## Both distances to S³ (|q̂̄q̂ − 1| and the Euclidean |‖q̂‖ − 1|)',
+        markdown_table(result['table'], None, rows=PAPER_ROWS,
+                       columns=('distance', 'euclidean_distance'), paper={}),
+        '',
+        f"## Gain modes, exact increments (limit σE[χ₃]/√K = {result['limit']:.4f})",
+        markdown_table(result['table'], None, paper={}),
+        '',
+        f"## Gain modes, gyro noise {result['gyro_noise_std']} rad per step",
+        markdown_table(result['table_gyro_noise'], None, paper={}),
+        '',
+        f"Best mode (exact increments): {result['best_mode']}, final mean error "
+        f"{result['table'][result['best_mode']]['error']['mean']:.4f}",
+        f"Time: {result['seconds']:.2f} s",
+    ]
+    return '\n'.join(lines)
+
+
+def build_parser():
+    """Return the argument parser of ``reproduce``."""
+    parser = argparse.ArgumentParser(
+        prog='python -m ext_observer reproduce',
+        description="Reproduce the paper's Figure 1, Figure 2 and Table 1.")
+    parser.add_argument('--runs', type=int, default=1000,
+                        help='Monte Carlo runs (default 1000)')
+    parser.add_argument('--epochs', type=int, default=100,
+                        help='steps per run (default 100)')
+    parser.add_argument('--seed', type=int, default=0, help='first seed')
+    parser.add_argument('--seeds', type=int, default=1,
+                        help='repeat with N consecutive seeds, report mean ± std')
+    parser.add_argument('--alpha', type=float, default=0.01,
+                        help='extension gain α (default 0.01, the paper)')
+    parser.add_argument('--gyro-noise', type=float, default=DEFAULT_GYRO_NOISE,
+                        help='gyro angle noise of the gyro-error rows, rad/step')
+    parser.add_argument('--out', default='out/reproduce',
+                        help='folder for the PNG figures (default out/reproduce)')
+    parser.add_argument('--no-plots', action='store_true',
+                        help='skip the figures')
+    parser.add_argument('--json', metavar='PATH',
+                        help="also write the JSON summary ('-' for stdout)")
+    parser.add_argument('--quiet', action='store_true',
+                        help='no progress display and no report')
+    return parser
+
+
+def main(argv=None):
+    """Run ``reproduce``; return the exit code."""
+    args = build_parser().parse_args(argv)
+    for name in ('runs', 'epochs', 'seeds'):
+        if getattr(args, name) < 1:
+            print(f'error: --{name} must be at least 1', file=sys.stderr)
+            return 2
+    if args.epochs <= 25:
+        print('error: --epochs must exceed 25 (Max/Min are over k > 25)',
+              file=sys.stderr)
+        return 2
+    progress = Progress(3 * args.seeds, enabled=not args.quiet)
+    try:
+        result = run(args.runs, args.epochs, args.seed, args.seeds, args.alpha,
+                     args.gyro_noise, progress=progress,
+                     keep_histories=not args.no_plots)
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    if not args.no_plots:
+        result['figures'] = plot(result, args.out)
+    result.pop('_histories', None)
+    if not args.quiet:
+        print(report(result))
+        if 'figures' in result:
+            print('Figures: ' + ', '.join(result['figures']))
+    if args.json:
+        text = json.dumps(result, indent=2)
+        if args.json == '-':
+            print(text)
+        else:
+            with open(args.json, 'w') as f:
+                f.write(text + '\n')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
