@@ -215,8 +215,10 @@ def observer_runs(specs, runs=1000, epochs=100, seed=0, increment_max=10.0,
     truth = [gyro.attitude]
     for _ in range(epochs):
         sample = gyro.step()
+        E = quat.quaternion_from_rotation_vector(sample.increment)
         for name, obs in observers.items():
-            history[name].append(obs.step(sample.increment, sample.measurement))
+            history[name].append(
+                obs.step(sample.increment, sample.measurement, rotation=E))
         truth.append(gyro.attitude)
     truth = np.stack(truth)
     result = {}

@@ -183,7 +183,7 @@ class LuenbergerObserver:
         self.state = np.broadcast_to(initial, self.batch_shape + (4,)).copy()
         self.measurements_used = 0
 
-    def step(self, increment, measurement=None):
+    def step(self, increment, measurement=None, rotation=None):
         """
         Advance by one step: from ``q̂_k`` to ``q̂_{k+1}``.
 
@@ -195,6 +195,9 @@ class LuenbergerObserver:
         measurement : array_like, shape (..., 4), optional
             ``y_k``, the measured attitude at ``t_k``. Without it the step
             propagates, with the extension term only.
+        rotation : array_like, shape (..., 4), optional
+            ``E_k = exp(Ω_k / 2)`` if already computed (several observers fed
+            the same increments share it); ``increment`` is then ignored.
 
         Returns
         -------
@@ -204,7 +207,8 @@ class LuenbergerObserver:
         """
         cfg = self.config
         q = self.state
-        E = quat.quaternion_from_rotation_vector(increment)
+        E = (quat.quaternion_from_rotation_vector(increment)
+             if rotation is None else rotation)
         propagated = quat.multiply(q, E)
         new = propagated
         if measurement is not None:
