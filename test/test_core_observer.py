@@ -171,3 +171,30 @@ def test_observer_step_stays_finite_for_bounded_inputs(theta, y):
     for _ in range(5):
         state = obs.step(theta, y)
     assert all(np.isfinite(state))
+
+
+def test_sign_alignment_makes_flipped_measurements_harmless():
+    """y and −y are one rotation: with align_sign the estimate ignores the flip."""
+    runs = 300
+    gyro = SimulatedGyro(increment_max=0.5, noise_std=0.02, seed=12,
+                         batch_shape=(runs,))
+    rng = np.random.default_rng(13)
+    kwargs = dict(variant='extended', gain_mode='rotating', kappa=0.2,
+                  batch_shape=(runs,))
+    aligned = LuenbergerObserver(align_sign=True, **kwargs)
+    naive = LuenbergerObserver(align_sign=False, **kwargs)
+    single = SingleObserver('extended', gain_mode='rotating', kappa=0.2,
+                            align_sign=True)
+    for _ in range(80):
+        s = gyro.step()
+        flip = np.where(rng.uniform(size=(runs, 1)) < 0.5, -1.0, 1.0)
+        y = s.measurement * flip
+        aligned.step(s.increment, y)
+        naive.step(s.increment, y)
+        single.step(tuple(s.increment[0]), tuple(y[0]))
+    assert_allclose(single.state, aligned.state[0], rtol=1e-10, atol=1e-12)
+    angle_aligned = quat.attitude_error(gyro.attitude, aligned.state)
+    angle_naive = quat.attitude_error(gyro.attitude, naive.state)
+    assert np.max(angle_aligned) < 0.1
+    assert np.mean(angle_naive) > 5 * np.mean(angle_aligned)
+    assert np.mean(angle_naive) > 0.2

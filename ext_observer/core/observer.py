@@ -84,6 +84,11 @@ class ObserverConfig:
         Floor ``κ_min`` of the ``scheduled`` mode, in (0, 1].
     initial : sequence of 4 float
         Initial estimate (ambient, need not be unit); nonzero and finite.
+    align_sign : bool
+        Flip each measurement ``y`` to the hemisphere of ``q̂`` (``y`` and
+        ``−y`` are the same rotation, but the R⁴ innovation ``y − q̂`` is
+        not). Off by default, which keeps the paper's setup exact; on for
+        real sources that publish ``w ≥ 0`` or flip sign.
 
     Raises
     ------
@@ -94,7 +99,8 @@ class ObserverConfig:
 
     def __init__(self, variant='extended', alpha=PAPER_ALPHA, gain=PAPER_GAIN,
                  gain_mode='constant', kappa=DEFAULT_KAPPA,
-                 kappa_min=DEFAULT_KAPPA_MIN, initial=(1.0, 0.0, 0.0, 0.0)):
+                 kappa_min=DEFAULT_KAPPA_MIN, initial=(1.0, 0.0, 0.0, 0.0),
+                 align_sign=False):
         if variant not in VARIANTS:
             raise ValueError(f'variant must be one of {VARIANTS}, got {variant!r}')
         if gain_mode not in GAIN_MODES:
@@ -113,6 +119,7 @@ class ObserverConfig:
         self.kappa = float(kappa)
         self.kappa_min = float(kappa_min)
         self.initial = _finite_tuple(initial, 4, 'initial estimate')
+        self.align_sign = bool(align_sign)
         if sum(v * v for v in self.initial) == 0.0:
             raise ValueError('initial estimate must be a nonzero quaternion')
 
@@ -134,7 +141,8 @@ class ObserverConfig:
         """Return the parameters as a dict."""
         return dict(variant=self.variant, alpha=self.alpha, gain=self.gain,
                     gain_mode=self.gain_mode, kappa=self.kappa,
-                    kappa_min=self.kappa_min, initial=self.initial)
+                    kappa_min=self.kappa_min, initial=self.initial,
+                    align_sign=self.align_sign)
 
 
 class LuenbergerObserver:
@@ -143,7 +151,7 @@ class LuenbergerObserver:
 
     Parameters
     ----------
-    variant, alpha, gain, gain_mode, kappa, kappa_min, initial
+    variant, alpha, gain, gain_mode, kappa, kappa_min, initial, align_sign
         See :class:`ObserverConfig`.
     batch_shape : tuple of int
         Leading shape of the state; ``()`` for a single estimate.
@@ -160,9 +168,9 @@ class LuenbergerObserver:
     def __init__(self, variant='extended', alpha=PAPER_ALPHA, gain=PAPER_GAIN,
                  initial=(1.0, 0.0, 0.0, 0.0), batch_shape=(),
                  gain_mode='constant', kappa=DEFAULT_KAPPA,
-                 kappa_min=DEFAULT_KAPPA_MIN):
+                 kappa_min=DEFAULT_KAPPA_MIN, align_sign=False):
         self.config = ObserverConfig(variant, alpha, gain, gain_mode, kappa,
-                                     kappa_min, initial)
+                                     kappa_min, initial, align_sign)
         self.batch_shape = tuple(batch_shape)
         self._gain = np.array(self.config.gain)
         self.reset()
@@ -212,7 +220,11 @@ class LuenbergerObserver:
         propagated = quat.multiply(q, E)
         new = propagated
         if measurement is not None:
-            innovation = quat.check_quaternions(measurement, 'measurement') - q
+            y = quat.check_quaternions(measurement, 'measurement')
+            if cfg.align_sign:
+                dot = np.einsum('...i,...i->...', y, q)
+                y = np.where((dot < 0.0)[..., np.newaxis], -y, y)
+            innovation = y - q
             if cfg.gain_mode == 'constant':
                 new = new + quat.multiply(innovation, self._gain)
             else:
@@ -259,7 +271,7 @@ class SingleObserver:
 
     Parameters
     ----------
-    variant, alpha, gain, gain_mode, kappa, kappa_min, initial
+    variant, alpha, gain, gain_mode, kappa, kappa_min, initial, align_sign
         See :class:`ObserverConfig`.
 
     Attributes
@@ -272,9 +284,10 @@ class SingleObserver:
 
     def __init__(self, variant='extended', alpha=PAPER_ALPHA, gain=PAPER_GAIN,
                  initial=(1.0, 0.0, 0.0, 0.0), gain_mode='constant',
-                 kappa=DEFAULT_KAPPA, kappa_min=DEFAULT_KAPPA_MIN):
+                 kappa=DEFAULT_KAPPA, kappa_min=DEFAULT_KAPPA_MIN,
+                 align_sign=False):
         self.config = ObserverConfig(variant, alpha, gain, gain_mode, kappa,
-                                     kappa_min, initial)
+                                     kappa_min, initial, align_sign)
         self.reset()
 
     def reset(self, initial=None):
@@ -315,8 +328,11 @@ class SingleObserver:
         new = _multiply(q, E)
         propagated = new
         if measurement is not None:
-            innovation = (measurement[0] - q[0], measurement[1] - q[1],
-                          measurement[2] - q[2], measurement[3] - q[3])
+            y0, y1, y2, y3 = measurement
+            if cfg.align_sign and (y0 * q[0] + y1 * q[1] + y2 * q[2]
+                                   + y3 * q[3]) < 0.0:
+                y0, y1, y2, y3 = -y0, -y1, -y2, -y3
+            innovation = (y0 - q[0], y1 - q[1], y2 - q[2], y3 - q[3])
             if cfg.gain_mode == 'constant':
                 c = _multiply(innovation, cfg.gain)
             else:
