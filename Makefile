@@ -1,0 +1,42 @@
+# Two commands on a fresh machine: `make demo` and `make test`.
+# Both create .venv if it is missing and install only what changed since the
+# last run (stamp files), so a second run starts at once.
+
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+PIP := $(PY) -m pip --disable-pip-version-check -q
+RUNTIME_STAMP := $(VENV)/.ext_observer-runtime
+TEST_STAMP := $(VENV)/.ext_observer-test
+
+# Every process that starts a ROS node stays on this machine.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+
+.PHONY: all venv demo test clean
+
+all: test
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+# The package is installed in editable mode: the console scripts gyro_node,
+# observer_node and monitor_node land in $(VENV)/bin and run this tree.
+$(RUNTIME_STAMP): requirements.txt setup.py setup.cfg package.xml resource/ext_observer $(wildcard config/*.yaml) | $(PY)
+	$(PIP) install -r requirements.txt wheel
+	$(PIP) install --no-deps --no-build-isolation --use-pep517 -e .
+	touch $@
+
+$(TEST_STAMP): requirements-test.txt $(RUNTIME_STAMP)
+	$(PIP) install -r requirements-test.txt
+	touch $@
+
+venv: $(RUNTIME_STAMP)
+
+demo: $(RUNTIME_STAMP)
+	$(PY) -m ext_observer demo $(DEMO_ARGS)
+
+test: $(TEST_STAMP)
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+clean:
+	rm -rf $(VENV) build install log out .pytest_cache .hypothesis *.egg-info

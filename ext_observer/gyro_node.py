@@ -1,0 +1,208 @@
+"""
+The ``gyro`` node: a simulated rate-integrating gyro and attitude sensor.
+
+At every tick of a timer at ``rate_hz`` it draws step k from the core's
+:class:`~ext_observer.core.SimulatedGyro` and publishes
+
+- ``attitude/ground_truth`` (``QuaternionStamped``): the true ``q_k``;
+- ``attitude/measurement`` (``QuaternionStamped``): ``y_k = q_k ⊗ exp(ν_k)``;
+- ``gyro/increment`` (``Vector3Stamped``): ``θ_k`` in rad, the body rotation
+  over ``[t_k, t_{k+1})``, so that ``q_{k+1} = q_k ⊗ exp(θ_k / 2)``;
+
+all three stamped ``t_k``. The stamps lie on the grid
+``t_k = t_0 + k / rate_hz`` (``t_0``: the node clock at the first step), so
+that ``t_{k+1} − t_k`` is exactly one period and a consumer can tell which
+steps it missed. After ``steps`` steps (0 = never) the node stops publishing
+and stays up until it is stopped.
+"""
+
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from ext_observer.conversions import quaternion_stamped, vector_stamped
+from ext_observer.core import SimulatedGyro
+from ext_observer.node_common import (NodeParameters, ParameterError,
+                                      ParameterSpec, run_node)
+
+__all__ = ['GYRO_PARAMETERS', 'GyroNode', 'main']
+
+INT32_MAX = 2 ** 31 - 1
+
+GYRO_PARAMETERS = (
+    ParameterSpec('rate_hz', 20.0, 'Steps per second, Hz.', (0.1, 10000.0)),
+    ParameterSpec('increment_max', 10.0,
+                  'Upper bound of the uniform increment θ_k per axis, rad per step '
+                  '(the paper: 10).', (0.0, 100.0), read_only=True),
+    ParameterSpec('measurement_noise_std', 0.1,
+                  'σ of the measurement noise ν_k, rad (the paper: 0.1).',
+                  (0.0, 10.0), read_only=True),
+    ParameterSpec('seed', -1, 'Seed of the random stream; -1 = fresh from the OS.',
+                  (-1, INT32_MAX), read_only=True),
+    ParameterSpec('initial_attitude', Parameter.Type.DOUBLE_ARRAY,
+                  'True attitude q_0 as w, x, y, z (normalized); empty = uniform '
+                  'random on S³.', read_only=True,
+                  constraints='Empty or 4 finite numbers, not all zero.'),
+    ParameterSpec('steps', 0, 'Steps to publish, then stop publishing; 0 = no end.',
+                  (0, INT32_MAX), read_only=True),
+    ParameterSpec('frame_id', 'world',
+                  'frame_id of the attitude messages (the reference frame).'),
+    ParameterSpec('body_frame_id', 'base_link',
+                  'frame_id of the increment (a rotation of the body frame).'),
+    ParameterSpec('queue_depth', 10, 'History depth of the publishers (reliable, '
+                  'keep last).', (1, 10000), read_only=True),
+)
+
+
+def gyro_settings(values):
+    """
+    Validate the gyro's parameters.
+
+    Parameters
+    ----------
+    values : dict
+        Every parameter of :data:`GYRO_PARAMETERS` by name.
+
+    Returns
+    -------
+    settings : dict
+        ``values`` with ``initial_attitude`` as ``None`` (random) or 4 floats.
+
+    Raises
+    ------
+    ValueError
+        With the reason.
+
+    """
+    settings = dict(values)
+    initial = values['initial_attitude']
+    if not initial:
+        settings['initial_attitude'] = None
+    elif len(initial) != 4:
+        raise ValueError('initial_attitude must be empty or have 4 elements '
+                         f'(w, x, y, z), got {len(initial)}')
+    if not values['rate_hz'] > 0.0:
+        raise ValueError(f'rate_hz must be positive, got {values["rate_hz"]}')
+    # The core's constructor is the reference for what it accepts.
+    try:
+        _make_gyro(settings)
+    except ValueError as error:
+        raise ValueError(f'the simulated gyro refuses these parameters: {error}') from None
+    return settings
+
+
+def _make_gyro(settings):
+    seed = settings['seed']
+    return SimulatedGyro(increment_max=settings['increment_max'],
+                         noise_std=settings['measurement_noise_std'],
+                         seed=None if seed < 0 else seed,
+                         initial_attitude=settings['initial_attitude'])
+
+
+class GyroNode(Node):
+    """
+    Publish simulated increments, measurements and the ground truth.
+
+    Parameters
+    ----------
+    node_name : str
+        Default ``gyro``.
+    **kwargs
+        Passed to ``rclpy.node.Node`` (``context``, ``namespace``,
+        ``parameter_overrides``, ...).
+
+    Attributes
+    ----------
+    steps_published : int
+    finished : bool
+        True once ``steps`` steps have been published.
+
+    Raises
+    ------
+    ParameterError
+        If a parameter is refused at start-up.
+
+    """
+
+    NODE_NAME = 'gyro'
+
+    def __init__(self, node_name=NODE_NAME, **kwargs):
+        super().__init__(node_name, **kwargs)
+        try:
+            self.parameters = NodeParameters(self, GYRO_PARAMETERS, gyro_settings,
+                                             self._apply_parameters)
+        except ParameterError:
+            self.destroy_node()
+            raise
+        settings = self.parameters.settings
+        self.gyro = _make_gyro(settings)
+        depth = settings['queue_depth']
+        self.truth_publisher = self.create_publisher(
+            QuaternionStamped, 'attitude/ground_truth', depth)
+        self.measurement_publisher = self.create_publisher(
+            QuaternionStamped, 'attitude/measurement', depth)
+        self.increment_publisher = self.create_publisher(
+            Vector3Stamped, 'gyro/increment', depth)
+        self.steps_published = 0
+        self.finished = False
+        self._anchor = None
+        self._last_stamp = None
+        self._timer = self.create_timer(1.0 / settings['rate_hz'], self.timer_callback)
+        self.get_logger().info(
+            f'publishing at {settings["rate_hz"]:g} Hz, increments up to '
+            f'{settings["increment_max"]:g} rad per axis, measurement noise '
+            f'{settings["measurement_noise_std"]:g}'
+            + (f', {settings["steps"]} steps' if settings['steps'] else ''))
+
+    def _stamp(self):
+        rate = self.parameters.settings['rate_hz']
+        if self._anchor is None:
+            self._anchor = (self.get_clock().now().nanoseconds, self.steps_published)
+        start, first = self._anchor
+        return start + round((self.steps_published - first) * 1e9 / rate)
+
+    def timer_callback(self):
+        """Publish one step."""
+        settings = self.parameters.settings
+        if settings['steps'] and self.steps_published >= settings['steps']:
+            self._finish()
+            return
+        sample = self.gyro.step()
+        stamp = self._stamp()
+        self.truth_publisher.publish(
+            quaternion_stamped(sample.attitude, stamp, settings['frame_id']))
+        self.measurement_publisher.publish(
+            quaternion_stamped(sample.measurement, stamp, settings['frame_id']))
+        self.increment_publisher.publish(
+            vector_stamped(sample.increment, stamp, settings['body_frame_id']))
+        self._last_stamp = stamp
+        self.steps_published += 1
+        if settings['steps'] and self.steps_published >= settings['steps']:
+            self._finish()
+
+    def _finish(self):
+        if not self.finished:
+            self.finished = True
+            self._timer.cancel()
+            self.get_logger().info(f'published {self.steps_published} steps; idle')
+
+    def _apply_parameters(self, settings, changed):
+        if 'rate_hz' in changed and not self.finished:
+            period = 1.0 / settings['rate_hz']
+            # The grid restarts one new period after the last stamp.
+            if self._last_stamp is not None:
+                self._anchor = (self._last_stamp + round(period * 1e9),
+                                self.steps_published)
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(period, self.timer_callback)
+            self.get_logger().info(f'rate changed to {settings["rate_hz"]:g} Hz')
+
+
+def main(args=None):
+    """Run the ``gyro`` node (``ros2 run ext_observer gyro_node``)."""
+    return run_node(GyroNode, args)
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())

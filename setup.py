@@ -1,0 +1,34 @@
+"""Packaging of ext_observer: the ament_python layout of ``ros2 pkg create``."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'ext_observer'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+    ],
+    # The ROS client libraries come from a ROS installation or from the wheels
+    # in requirements.txt; listing them here would make colcon's entry-point
+    # scripts refuse to start on a ROS machine without those wheels.
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='ext_observer maintainers',
+    maintainer_email='maintainers@example.com',
+    description='Attitude observers on S3 with a transversally stable extension',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'gyro_node = ext_observer.gyro_node:main',
+            'observer_node = ext_observer.observer_node:main',
+            'monitor_node = ext_observer.monitor_node:main',
+        ],
+    },
+)
