@@ -1,0 +1,290 @@
+"""
+Where the observer node's per-message time goes.
+
+Two measurements, each in a child process with its own ROS domain:
+
+``direct``
+    The node's callbacks called directly with prepared messages (no
+    executor, no DDS receive): the exact cost, in µs per step, of the work
+    the node's own code does, next to its parts (the core step, the numpy
+    normalization, building the messages, publishing, reading the clock)
+    and to the bare relay's callbacks.
+``loop``
+    The node hosted on an executor, fed at 1 kHz by the driver process,
+    under cProfile (wall clock; its overhead inflates the Python parts):
+    the share of the main thread spent idle in the wait set, in the
+    executor's own Python code, in taking and deserializing messages, and
+    in the node's callbacks.
+
+Run by ``python -m bench`` (see :func:`profile_direct`, :func:`profile_loop`).
+"""
+
+import argparse
+import cProfile
+import json
+import os
+import pstats
+import sys
+import tempfile
+import threading
+import time
+
+from bench.procs import Child, children, reserved_domain_id, ros_env
+from bench.rosutil import (EXECUTORS, make_executor, set_stamp,
+                           spin_until_shutdown)
+
+DIRECT_STEPS = 5000
+LOOP_RATE = 1000  # Hz
+LOOP_SECONDS = 3.0
+
+
+def _best_per_call(function, calls, repeat=5):
+    """Best of ``repeat`` runs of ``calls`` calls, µs per call."""
+    best = float('inf')
+    for _ in range(repeat):
+        start = time.perf_counter()
+        for _ in range(calls):
+            function()
+        best = min(best, (time.perf_counter() - start) / calls)
+    return best * 1e6
+
+
+def _messages(steps, period_ns=1_000_000):
+    from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+    start = time.time_ns()
+    pairs = []
+    for k in range(steps):
+        inc = Vector3Stamped()
+        inc.header.frame_id = 'imu'
+        inc.vector.x, inc.vector.y, inc.vector.z = 0.001, -0.002, 0.003
+        meas = QuaternionStamped()
+        meas.header.frame_id = 'imu'
+        meas.quaternion.w = 1.0
+        set_stamp(inc.header.stamp, start + k * period_ns)
+        set_stamp(meas.header.stamp, start + k * period_ns)
+        pairs.append((inc, meas))
+    return pairs
+
+
+def _run_pairs(increment_callback, measurement_callback, pairs):
+    start = time.perf_counter()
+    for inc, meas in pairs:
+        increment_callback(inc)
+        measurement_callback(meas)
+    return (time.perf_counter() - start) / len(pairs) * 1e6
+
+
+def direct(steps=DIRECT_STEPS):
+    """
+    Time the node's and the relay's callbacks, and the parts of a step.
+
+    Returns
+    -------
+    result : dict
+        µs per step (``observer_callbacks``, ``relay_callbacks``) and per
+        call of each part.
+
+    """
+    import numpy as np
+    import rclpy
+    from rclpy.context import Context
+
+    from bench.relay import RelayNode
+    from ext_observer.conversions import quaternion_stamped
+    from ext_observer.core import normalize, SingleObserver
+    from ext_observer.observer_node import ObserverNode
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = ObserverNode(context=context)
+        relay = RelayNode(context)
+        result = {}
+        # Warm up, then take the best of three passes over fresh stamps.
+        runs = []
+        for _ in range(4):
+            node.observer.reset()
+            node._last_stamp = node._last_interval = None
+            runs.append(_run_pairs(node.increment_callback,
+                                   node.measurement_callback, _messages(steps)))
+        result['observer_callbacks'] = min(runs[1:])
+        runs = [_run_pairs(relay.increment_callback, relay.measurement_callback,
+                           _messages(steps)) for _ in range(4)]
+        result['relay_callbacks'] = min(runs[1:])
+        observer = SingleObserver()
+        increment, measurement = (0.001, -0.002, 0.003), (1.0, 0.0, 0.0, 0.0)
+        result['core_step'] = _best_per_call(
+            lambda: observer.step(increment, measurement), steps)
+        state = observer.state
+        result['numpy_normalize'] = _best_per_call(
+            lambda: normalize(np.asarray(state)), steps)
+        msg = quaternion_stamped(state, time.time_ns(), 'world')
+        result['build_message'] = _best_per_call(
+            lambda: quaternion_stamped(state, 1_000_000_000, 'world'), steps)
+        result['publish'] = _best_per_call(
+            lambda: node.estimate_publisher.publish(msg), steps)
+        clock = node.get_clock()
+        result['clock_now'] = _best_per_call(lambda: clock.now().nanoseconds,
+                                             steps)
+        node.destroy_node()
+        relay.node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    return result
+
+
+def _categories(stats, steps):
+    """Main-thread time per step by category, µs, from a pstats.Stats."""
+    idle = take = callbacks = 0.0
+    parts = dict.fromkeys(('core_step', 'numpy_normalize', 'build_message',
+                           'publish', 'clock_now'), 0.0)
+    total = 0.0
+    for (path, _, name), (_, _, tottime, cumtime, _) in stats.stats.items():
+        if name == 'spin_once' and path.endswith('rosutil.py'):
+            continue
+        if name.startswith('<') and 'wait' in name and 'rclpy' in name:
+            idle += tottime
+        elif name == '_take_subscription':
+            take += cumtime
+        elif name in ('increment_callback', 'measurement_callback',
+                      'timeout_callback', 'diagnostic_callback'):
+            callbacks += cumtime
+        elif name == 'step' and path.endswith('observer.py'):
+            parts['core_step'] += cumtime
+        elif name == 'normalize' and path.endswith('quaternion.py'):
+            parts['numpy_normalize'] += cumtime
+        elif name == 'quaternion_stamped':
+            parts['build_message'] += cumtime
+        elif name == 'publish' and path.endswith('publisher.py'):
+            parts['publish'] += cumtime
+        elif name == 'now' and path.endswith('clock.py'):
+            parts['clock_now'] += cumtime
+        if name == 'spin_until_shutdown':
+            total = cumtime
+    per_step = 1e6 / max(steps, 1)
+    return {
+        'steps': steps,
+        'total': total * per_step,
+        'idle_wait': idle * per_step,
+        'take_deserialize': take * per_step,
+        'callbacks': callbacks * per_step,
+        'executor_python': (total - idle - take - callbacks) * per_step,
+        'callback_parts': {k: v * per_step for k, v in parts.items()},
+    }
+
+
+def loop(executor_kind, out_path, seconds):
+    """Host the node, profile its spin between 'start' and the end."""
+    import rclpy
+    from rclpy.context import Context
+
+    from ext_observer.observer_node import ObserverNode
+    context = Context()
+    rclpy.init(context=context)
+    node = ObserverNode(context=context)
+    executor = make_executor(executor_kind, context)
+    executor.add_node(node)
+    started = threading.Event()
+    stop = threading.Event()
+
+    def serve():
+        for line in sys.stdin:
+            if line.strip() == 'start':
+                started.set()
+                break
+    threading.Thread(target=serve, daemon=True).start()
+    print('ready', flush=True)
+    try:
+        while not started.is_set() and context.ok():
+            executor.spin_once(timeout_sec=0.05)
+        steps0 = node.counts['steps_corrected'] + node.counts['steps_propagated']
+        timer = threading.Timer(seconds, stop.set)
+        timer.start()
+        profile = cProfile.Profile()
+        profile.runcall(spin_until_shutdown, executor, context, stop)
+        steps = (node.counts['steps_corrected'] + node.counts['steps_propagated']
+                 - steps0)
+        result = _categories(pstats.Stats(profile), steps)
+        result['executor'] = executor_kind
+        with open(out_path, 'w') as out:
+            json.dump(result, out)
+        print('profiled', flush=True)
+        # Hold on until the parent ends this process.
+        spin_until_shutdown(executor, context)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def profile_direct(index=0, log_dir=None):
+    """Run :func:`direct` in a child process; return its result."""
+    with tempfile.TemporaryDirectory(prefix='bench-') as tmp, \
+            reserved_domain_id(index) as domain_id, children() as started:
+        out = os.path.join(tmp, 'direct.json')
+        child = Child('profile direct', ['-m', 'bench.profile_node', 'direct',
+                                         '--out', out], ros_env(domain_id),
+                      os.path.join(log_dir or tmp, 'profile-direct.log'))
+        started.append(child)
+        child.expect('profiled', 120)
+        with open(out) as f:
+            return json.load(f)
+
+
+def profile_loop(executor='single', index=0, rate=LOOP_RATE,
+                 seconds=LOOP_SECONDS, log_dir=None):
+    """Profile the node on ``executor`` fed at ``rate``; return the shares."""
+    with tempfile.TemporaryDirectory(prefix='bench-') as tmp, \
+            reserved_domain_id(index) as domain_id, children() as started:
+        env = ros_env(domain_id)
+        logs = log_dir or tmp
+        out = os.path.join(tmp, 'loop.json')
+        host = Child('profile loop', ['-m', 'bench.profile_node', 'loop',
+                                      '--executor', executor, '--out', out,
+                                      '--seconds', str(seconds)], env,
+                     os.path.join(logs, f'profile-loop-{executor}.log'))
+        started.append(host)
+        probe = Child('probe', ['-m', 'bench.probe'], env,
+                      os.path.join(logs, 'profile-probe.log'))
+        started.append(probe)
+        driver = Child('driver', ['-m', 'bench.driver'], env,
+                       os.path.join(logs, 'profile-driver.log'))
+        started.append(driver)
+        for child in (host, probe, driver):
+            child.expect('ready', 30)
+        driver.send('match 30')
+        if driver.expect('', 40) != 'matched':
+            raise RuntimeError('profile: the node did not subscribe'
+                               + host.log_tail())
+        probe.send('match 30')
+        probe.expect('', 40)
+        time.sleep(0.5)
+        host.send('start')
+        driver.send(f'run {rate} {seconds + 1.0} {os.path.join(tmp, "d.npz")}')
+        host.expect('profiled', seconds + 60)
+        driver.expect('done', seconds + 60)
+        with open(out) as f:
+            result = json.load(f)
+        result['rate'] = rate
+        return result
+
+
+def main(argv=None):
+    """Child entry point: ``direct`` or ``loop``."""
+    parser = argparse.ArgumentParser(prog='python -m bench.profile_node')
+    parser.add_argument('mode', choices=('direct', 'loop'))
+    parser.add_argument('--out', required=True)
+    parser.add_argument('--executor', choices=EXECUTORS, default='single')
+    parser.add_argument('--seconds', type=float, default=LOOP_SECONDS)
+    args = parser.parse_args(argv)
+    if args.mode == 'direct':
+        result = direct()
+        with open(args.out, 'w') as out:
+            json.dump(result, out)
+        print('profiled', flush=True)
+    else:
+        loop(args.executor, args.out, args.seconds)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

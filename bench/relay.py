@@ -1,0 +1,115 @@
+"""
+A bare relay: the observer node's message path without the maths.
+
+Subscribes to ``gyro/increment`` (geometry_msgs/Vector3Stamped) and
+``attitude/measurement`` (geometry_msgs/QuaternionStamped), pairs them by
+stamp, and publishes one ``attitude_estimate`` (QuaternionStamped, the
+measurement's quaternion) per paired step. Its sustained rate is the
+ceiling of a naive rclpy node on this machine; the observer's rate divided
+by it is what the maths costs on top of rclpy.
+
+Run as ``python -m bench.relay --executor single|multi|events``; SIGINT
+ends it.
+"""
+
+import argparse
+import sys
+
+from bench.rosutil import EXECUTORS, make_executor, spin_until_shutdown
+
+# Unpaired halves kept at most (a lost partner must not grow the dicts).
+MAX_PENDING = 1000
+
+
+class RelayNode:
+    """
+    The relay, built on a given rclpy context.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context
+    depth : int
+        Queue depth of the subscriptions and the publisher.
+
+    """
+
+    def __init__(self, context, depth=10):
+        from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+        from rclpy.node import Node
+        self.node = Node('relay', context=context)
+        self._out = QuaternionStamped
+        self.increments = {}
+        self.measurements = {}
+        self.steps = 0
+        self.estimate_publisher = self.node.create_publisher(
+            QuaternionStamped, 'attitude_estimate', depth)
+        self.node.create_subscription(Vector3Stamped, 'gyro/increment',
+                                      self.increment_callback, depth)
+        self.node.create_subscription(QuaternionStamped, 'attitude/measurement',
+                                      self.measurement_callback, depth)
+
+    @staticmethod
+    def _key(msg):
+        stamp = msg.header.stamp
+        return stamp.sec, stamp.nanosec
+
+    def increment_callback(self, msg):
+        """Keep the increment until its measurement comes, or pair it."""
+        key = self._key(msg)
+        measurement = self.measurements.pop(key, None)
+        if measurement is None:
+            self._keep(self.increments, key, msg)
+        else:
+            self._publish(msg, measurement)
+
+    def measurement_callback(self, msg):
+        """Keep the measurement until its increment comes, or pair it."""
+        key = self._key(msg)
+        increment = self.increments.pop(key, None)
+        if increment is None:
+            self._keep(self.measurements, key, msg)
+        else:
+            self._publish(increment, msg)
+
+    @staticmethod
+    def _keep(pending, key, msg):
+        if len(pending) >= MAX_PENDING:
+            del pending[next(iter(pending))]
+        pending[key] = msg
+
+    def _publish(self, increment, measurement):
+        out = self._out()
+        out.header.frame_id = measurement.header.frame_id
+        # The step's stamp t_k (the observer's t_{k+1} would need the period,
+        # which costs nothing measurable).
+        out.header.stamp = measurement.header.stamp
+        out.quaternion = measurement.quaternion
+        self.estimate_publisher.publish(out)
+        self.steps += 1
+
+
+def main(argv=None):
+    """Run the relay until SIGINT."""
+    parser = argparse.ArgumentParser(prog='python -m bench.relay')
+    parser.add_argument('--executor', choices=EXECUTORS, default='single')
+    parser.add_argument('--depth', type=int, default=10)
+    args = parser.parse_args(argv)
+    import rclpy
+    from rclpy.context import Context
+    context = Context()
+    rclpy.init(context=context)
+    relay = RelayNode(context, args.depth)
+    executor = make_executor(args.executor, context)
+    executor.add_node(relay.node)
+    print('ready', flush=True)
+    try:
+        spin_until_shutdown(executor, context)
+    finally:
+        executor.shutdown()
+        relay.node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,81 @@
+"""
+ROS helpers shared by the relay, the driver and the probe.
+
+Stamps are integer nanoseconds of the wall clock (``time.time_ns``), the
+same clock in every process of the machine, so a latency is the difference
+of two stamps taken in two processes.
+"""
+
+import struct
+
+EXECUTORS = ('single', 'multi', 'events')
+# Spin timeout of the loops, s: finite, because rclpy 7.1's EventsExecutor
+# busy-waits without one and hangs when shut down from another thread.
+SPIN_TIMEOUT = 0.1
+# Offset of builtin_interfaces/Time in a serialized *Stamped message: the
+# 4-byte CDR encapsulation header, then header.stamp (int32 sec, uint32
+# nanosec) first.
+_STAMP = struct.Struct('<iI')
+STAMP_OFFSET = 4
+
+
+def make_executor(kind, context=None):
+    """
+    Return an rclpy executor by name.
+
+    Parameters
+    ----------
+    kind : {'single', 'multi', 'events'}
+        SingleThreadedExecutor, MultiThreadedExecutor (default threads) or
+        rclpy.experimental.EventsExecutor.
+
+    """
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+    if kind == 'single':
+        return SingleThreadedExecutor(context=context)
+    if kind == 'multi':
+        return MultiThreadedExecutor(context=context)
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor(context=context)
+    raise ValueError(f'executor must be one of {EXECUTORS}, got {kind!r}')
+
+
+def spin_until_shutdown(executor, context, stop=None):
+    """
+    Spin with finite timeouts until the context shuts down or ``stop`` is set.
+
+    Parameters
+    ----------
+    executor : rclpy executor
+    context : rclpy.context.Context
+    stop : threading.Event, optional
+
+    """
+    from rclpy.executors import ExternalShutdownException
+    try:
+        while context.ok() and not (stop is not None and stop.is_set()):
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+
+
+def stamp_ns(stamp):
+    """Return a builtin_interfaces/Time as integer nanoseconds."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def set_stamp(stamp, ns):
+    """Set a builtin_interfaces/Time from integer nanoseconds."""
+    stamp.sec, stamp.nanosec = divmod(ns, 1_000_000_000)
+
+
+def raw_stamp_ns(data):
+    """Return the header stamp (ns) of a serialized *Stamped message."""
+    sec, nanosec = _STAMP.unpack_from(data, STAMP_OFFSET)
+    return sec * 1_000_000_000 + nanosec
+
+
+def write_raw_stamp(buffer, ns):
+    """Write the header stamp (ns) into a serialized *Stamped message."""
+    _STAMP.pack_into(buffer, STAMP_OFFSET, *divmod(ns, 1_000_000_000))
