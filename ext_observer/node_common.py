@@ -230,6 +230,7 @@ def markdown_table(specs):
         description = spec.description
         if spec.constraints:
             description += f' {spec.constraints}'
+        description = description.replace('|', '\\|')
         rows.append(f'| `{spec.name}` | {spec.type_name} | `{spec.default_text}` | '
                     f'{bounds} | {runtime} | {description} |')
     return '\n'.join(rows) + '\n'

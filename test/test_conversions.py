@@ -1,0 +1,76 @@
+"""The one place where ROS's (x, y, z, w) meets the core's (w, x, y, z)."""
+
+import math
+
+from hypothesis import given, strategies as st
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+pytest.importorskip('geometry_msgs')
+
+from ext_observer.conversions import (  # noqa: E402
+    msg_from_quaternion, msg_from_vector, nanoseconds_from_stamp, quaternion_from_msg,
+    quaternion_stamped, stamp_from_nanoseconds, vector_from_msg, vector_stamped)
+from ext_observer.core import quaternion_from_rotation_vector  # noqa: E402
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+def test_field_order_is_scalar_first():
+    msg = msg_from_quaternion((1.0, 2.0, 3.0, 4.0))
+    assert (msg.w, msg.x, msg.y, msg.z) == (1.0, 2.0, 3.0, 4.0)
+    assert quaternion_from_msg(msg) == (1.0, 2.0, 3.0, 4.0)
+
+
+def test_rotation_about_z_keeps_its_meaning():
+    # A quarter turn about z: (w, x, y, z) = (cos π/4, 0, 0, sin π/4).
+    q = quaternion_from_rotation_vector(np.array([0.0, 0.0, math.pi / 2]))
+    msg = msg_from_quaternion(q)
+    assert msg.z == pytest.approx(math.sqrt(0.5))
+    assert msg.w == pytest.approx(math.sqrt(0.5))
+    assert msg.x == msg.y == 0.0
+
+
+@given(st.tuples(finite, finite, finite, finite))
+def test_quaternion_round_trip(q):
+    assert quaternion_from_msg(msg_from_quaternion(q)) == q
+
+
+@given(st.tuples(finite, finite, finite))
+def test_vector_round_trip(v):
+    assert vector_from_msg(msg_from_vector(v)) == v
+
+
+def test_numpy_input():
+    q = np.array([0.5, -0.5, 0.5, -0.5])
+    assert_allclose(quaternion_from_msg(msg_from_quaternion(q)), q)
+    assert vector_from_msg(msg_from_vector(np.arange(3.0))) == (0.0, 1.0, 2.0)
+
+
+@pytest.mark.parametrize('values', [(1.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0, 0.0)])
+def test_quaternion_needs_four(values):
+    with pytest.raises(ValueError, match='needs 4 elements, got'):
+        msg_from_quaternion(values)
+
+
+def test_vector_needs_three():
+    with pytest.raises(ValueError, match='needs 3 elements, got 4'):
+        msg_from_vector((1.0, 2.0, 3.0, 4.0))
+
+
+@given(st.integers(min_value=0, max_value=(2 ** 31 - 1) * 10 ** 9 + 999_999_999))
+def test_stamp_round_trip(nanoseconds):
+    stamp = stamp_from_nanoseconds(nanoseconds)
+    assert 0 <= stamp.nanosec < 10 ** 9
+    assert nanoseconds_from_stamp(stamp) == nanoseconds
+
+
+def test_stamped_messages():
+    msg = quaternion_stamped((1.0, 0.0, 0.0, 0.0), 3_000_000_007, 'world')
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (3, 7)
+    assert msg.header.frame_id == 'world'
+    assert msg.quaternion.w == 1.0
+    vector = vector_stamped((0.1, 0.2, 0.3), 5, 'base_link')
+    assert nanoseconds_from_stamp(vector.header.stamp) == 5
+    assert vector_from_msg(vector.vector) == (0.1, 0.2, 0.3)

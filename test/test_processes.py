@@ -1,0 +1,129 @@
+"""
+Cross-process tests: the installed executables as separate processes.
+
+The executables are the console scripts pip installed next to this Python
+(``make test`` installs the package). A probe node in the test process checks
+the pipeline end to end, calls the observer's parameter services, and every
+process is ended by the test (SIGINT, checked), or by the fixture on failure.
+"""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy')
+
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
+from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
+from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
+
+from conftest import CONFIG  # noqa: E402
+from ext_observer.core import attitude_error, manifold_distance  # noqa: E402
+from ext_observer.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, STATUS_NAME  # noqa: E402
+from ros_helpers import Probe, values_of  # noqa: E402
+
+
+def installed(name):
+    """Return the console script ``name`` that pip installed next to this Python."""
+    path = os.path.join(os.path.dirname(sys.executable), name)
+    if not os.path.exists(path):
+        pytest.fail(f'{name} is not installed next to {sys.executable}; run `make test`')
+    return path
+
+
+def assert_clean_exit(process, code=0):
+    output = process.output
+    assert process.process.returncode == code, output
+    assert 'Traceback' not in output, output
+
+
+def call(spinner, client, request, timeout=10.0):
+    spinner.spin_until(lambda: client.service_is_ready(), timeout,
+                       f'the service {client.srv_name}')
+    future = client.call_async(request)
+    spinner.spin_until(future.done, timeout, f'the answer of {client.srv_name}')
+    return future.result()
+
+
+def wait_for_nodes(spinner, probe, names, timeout=20.0):
+    spinner.spin_until(lambda: set(names) <= set(probe.get_node_names()), timeout,
+                       f'the nodes {names}')
+
+
+def test_installed_nodes_end_to_end(ros_processes, ros_context, spinner):
+    probe = spinner.add(Probe(ros_context))
+    gyro = ros_processes([installed('gyro_node'), '--ros-args', '-p', 'rate_hz:=50.0',
+                          '-p', 'seed:=5'])
+    observer = ros_processes([
+        installed('observer_node'), '--ros-args', '--params-file', CONFIG,
+        '-p', 'initial_estimate:=[1.3, 0.0, 0.0, 0.0]', '-p', 'step_period:=0.02',
+        '-p', 'diagnostic_period:=0.25'])
+    monitor = ros_processes([
+        installed('monitor_node'), '--ros-args', '--params-file', CONFIG,
+        '-p', 'diagnostic_period:=0.25', '-p', 'window:=20'])
+    wait_for_nodes(spinner, probe, ['gyro', 'observer', 'monitor'])
+    # Discovery between processes takes its time (up to a few seconds): judge
+    # only what arrives once the probe sees the publishers.
+    spinner.spin_until(lambda: probe.count_publishers('attitude/ground_truth') > 0
+                       and probe.count_publishers('attitude_estimate') > 0, 20.0,
+                       'the publishers of gyro and observer')
+
+    def paired():
+        return sorted(t for t in probe.estimates if t in probe.truths)
+
+    spinner.spin_until(lambda: len(paired()) >= 120, 40.0,
+                       '120 estimates paired with the ground truth')
+    spinner.spin_until(
+        lambda: ERROR_KEYS[0] in values_of(probe.last_status(STATUS_NAME) or
+                                           DiagnosticStatus()), 10.0,
+        'a monitor status with the attitude error')
+
+    # Converged: the estimates of the last 30 steps, against the truth.
+    late = paired()[-30:]
+    estimates = np.array([probe.estimates[t] for t in late])
+    truths = np.array([probe.truths[t] for t in late])
+    assert np.mean(attitude_error(estimates, truths)) < 0.6
+    assert np.mean(manifold_distance(estimates)) < 0.15
+    status = probe.last_status(STATUS_NAME)
+    assert status.level == DiagnosticStatus.OK, status.message
+    assert set(DIAGNOSTIC_KEYS + ERROR_KEYS) <= set(values_of(status))
+    assert float(values_of(status)['attitude_error_mean']) < 1.0
+
+    # The parameter services of another process: the file's value, and a refusal.
+    getter = probe.create_client(GetParameters, '/observer/get_parameters')
+    answer = call(spinner, getter, GetParameters.Request(names=['variant', 'alpha']))
+    assert [v.string_value for v in answer.values[:1]] == ['extended']
+    assert answer.values[1].double_value == 0.01
+    setter = probe.create_client(SetParameters, '/observer/set_parameters')
+    request = SetParameters.Request(parameters=[ParameterMsg(
+        name='alpha', value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
+                                           double_value=0.5))])
+    [result] = call(spinner, setter, request).results
+    assert not result.successful
+    assert 'outside the range certified by Theorem 1' in result.reason
+
+    # Ctrl-C: every node exits 0 without a traceback.
+    for process in (gyro, observer, monitor):
+        process.interrupt(timeout=10.0)
+        assert_clean_exit(process)
+
+
+@pytest.mark.parametrize('name', ['gyro_node', 'observer_node', 'monitor_node'])
+def test_ctrl_c_on_an_idle_node_exits_cleanly(ros_processes, ros_context, spinner, name):
+    probe = spinner.add(Probe(ros_context))
+    process = ros_processes([installed(name)])
+    wait_for_nodes(spinner, probe, [name[:-len('_node')]])
+    spinner.spin_for(0.3)
+    process.interrupt(timeout=10.0)
+    assert_clean_exit(process)
+
+
+def test_invalid_start_up_parameter_exits_with_the_reason(ros_processes):
+    process = ros_processes([installed('observer_node'), '--ros-args', '-p', 'alpha:=0.5'])
+    process.wait(timeout=20.0)
+    assert_clean_exit(process, code=2)
+    assert 'outside the range certified by Theorem 1' in process.output
+    assert 'allow_uncertified_alpha' in process.output
