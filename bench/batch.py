@@ -197,9 +197,12 @@ def accuracy(runs=1000, epochs=100, seed=0):
             'observers': len(specs)}
 
 
-def reproduce_time(seeds=5, timeout=300.0):
+def reproduce_time(seeds=5, no_plots=False, timeout=300.0):
     """
     Wall time of ``python -m ext_observer reproduce --seeds N`` (a child).
+
+    The figures go to a temporary folder; ``no_plots`` adds ``--no-plots``
+    (the Monte Carlo alone, in a fresh interpreter).
 
     Returns
     -------
@@ -211,7 +214,9 @@ def reproduce_time(seeds=5, timeout=300.0):
     repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     command = [sys.executable, '-m', 'ext_observer', 'reproduce',
                '--seeds', str(seeds)]
-    shown = f'python -m ext_observer reproduce --seeds {seeds}'
+    if no_plots:
+        command.append('--no-plots')
+    shown = ' '.join(['python'] + command[1:])
     if not os.path.exists(os.path.join(repo, 'ext_observer', 'reproduce.py')):
         return {'command': shown, 'note': 'not measured: reproduce is missing'}
     env = dict(os.environ)

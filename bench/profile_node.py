@@ -35,7 +35,7 @@ from bench.rosutil import (EXECUTORS, make_executor, set_stamp,
 
 DIRECT_STEPS = 5000
 LOOP_RATE = 1000  # Hz
-LOOP_SECONDS = 3.0
+LOOP_SECONDS = 2.0
 
 
 def _best_per_call(function, calls, repeat=5):
@@ -110,6 +110,21 @@ def direct(steps=DIRECT_STEPS):
         runs = [_run_pairs(relay.increment_callback, relay.measurement_callback,
                            _messages(steps)) for _ in range(4)]
         result['relay_callbacks'] = min(runs[1:])
+        # Which numpy-based code runs per step (numpy's own Python functions
+        # and the core's batched quaternion module).
+        node.observer.reset()
+        node._last_stamp = node._last_interval = None
+        profile = cProfile.Profile()
+        count = 1000
+        profile.runcall(_run_pairs, node.increment_callback,
+                        node.measurement_callback, _messages(count))
+        numpy_calls = {}
+        for (path, _, name), (calls, *_) in pstats.Stats(profile).stats.items():
+            if (f'{os.sep}numpy{os.sep}' in path
+                    or path.endswith(os.path.join('core', 'quaternion.py'))):
+                label = f'{os.path.basename(path)}:{name}'
+                numpy_calls[label] = calls / count
+        result['numpy_calls_per_step'] = numpy_calls
         observer = SingleObserver()
         increment, measurement = (0.001, -0.002, 0.003), (1.0, 0.0, 0.0, 0.0)
         result['core_step'] = _best_per_call(
@@ -139,8 +154,6 @@ def _categories(stats, steps):
                            'publish', 'clock_now'), 0.0)
     total = 0.0
     for (path, _, name), (_, _, tottime, cumtime, _) in stats.stats.items():
-        if name == 'spin_once' and path.endswith('rosutil.py'):
-            continue
         if name.startswith('<') and 'wait' in name and 'rclpy' in name:
             idle += tottime
         elif name == '_take_subscription':
@@ -158,7 +171,7 @@ def _categories(stats, steps):
             parts['publish'] += cumtime
         elif name == 'now' and path.endswith('clock.py'):
             parts['clock_now'] += cumtime
-        if name == 'spin_until_shutdown':
+        if name == '_spin_for':
             total = cumtime
     per_step = 1e6 / max(steps, 1)
     return {
@@ -172,19 +185,63 @@ def _categories(stats, steps):
     }
 
 
-def loop(executor_kind, out_path, seconds):
-    """Host the node, profile its spin between 'start' and the end."""
+class _Timed:
+    """A callback wrapper that adds up the wall and CPU time inside it."""
+
+    def __init__(self, callback):
+        self.callback = callback
+        self.seconds = 0.0
+        self.cpu_seconds = 0.0
+        self.calls = 0
+
+    def __call__(self, msg):
+        start, cpu = time.perf_counter(), time.thread_time()
+        self.callback(msg)
+        self.cpu_seconds += time.thread_time() - cpu
+        self.seconds += time.perf_counter() - start
+        self.calls += 1
+
+
+def _steps(node):
+    if hasattr(node, 'counts'):
+        return node.counts['steps_corrected'] + node.counts['steps_propagated']
+    return node.steps
+
+
+def _spin_for(executor, context, seconds):
+    stop = threading.Event()
+    timer = threading.Timer(seconds, stop.set)
+    timer.start()
+    spin_until_shutdown(executor, context, stop)
+    timer.cancel()
+
+
+def loop(executor_kind, out_path, seconds, node_kind='observer'):
+    """
+    Host the node and measure its main thread, after 'start' on stdin.
+
+    ``node_kind`` is ``observer`` (the package's ObserverNode) or ``relay``.
+
+    First ``seconds`` with the subscription callbacks wrapped in timers
+    (no profiler): CPU time of the main thread and of the whole process per
+    step, and the time inside the callbacks. Then ``seconds`` under
+    cProfile, for the split (see :func:`_categories`).
+    """
     import rclpy
     from rclpy.context import Context
 
+    from bench.relay import RelayNode
     from ext_observer.observer_node import ObserverNode
     context = Context()
     rclpy.init(context=context)
-    node = ObserverNode(context=context)
+    if node_kind == 'relay':
+        node = RelayNode(context)
+        ros_node = node.node
+    else:
+        node = ros_node = ObserverNode(context=context)
     executor = make_executor(executor_kind, context)
-    executor.add_node(node)
+    executor.add_node(ros_node)
     started = threading.Event()
-    stop = threading.Event()
 
     def serve():
         for line in sys.stdin:
@@ -196,15 +253,33 @@ def loop(executor_kind, out_path, seconds):
     try:
         while not started.is_set() and context.ok():
             executor.spin_once(timeout_sec=0.05)
-        steps0 = node.counts['steps_corrected'] + node.counts['steps_propagated']
-        timer = threading.Timer(seconds, stop.set)
-        timer.start()
+        timed = {}
+        for name in ('increment_subscription', 'measurement_subscription'):
+            subscription = getattr(node, name)
+            timed[name] = _Timed(subscription.callback)
+            subscription.callback = timed[name]
+        steps0, thread0, process0 = (_steps(node), time.thread_time(),
+                                     time.process_time())
+        _spin_for(executor, context, seconds)
+        steps = max(_steps(node) - steps0, 1)
+        result = {
+            'executor': executor_kind,
+            'node': node_kind,
+            'timed_steps': steps,
+            'main_thread_cpu': (time.thread_time() - thread0) / steps * 1e6,
+            'process_cpu': (time.process_time() - process0) / steps * 1e6,
+            'callbacks_wall': sum(t.seconds for t in timed.values())
+            / steps * 1e6,
+            'callbacks_cpu': sum(t.cpu_seconds for t in timed.values())
+            / steps * 1e6,
+        }
+        for name, t in timed.items():
+            getattr(node, name).callback = t.callback
+        steps0 = _steps(node)
         profile = cProfile.Profile()
-        profile.runcall(spin_until_shutdown, executor, context, stop)
-        steps = (node.counts['steps_corrected'] + node.counts['steps_propagated']
-                 - steps0)
-        result = _categories(pstats.Stats(profile), steps)
-        result['executor'] = executor_kind
+        profile.runcall(_spin_for, executor, context, seconds)
+        result['cprofile'] = _categories(pstats.Stats(profile),
+                                         _steps(node) - steps0)
         with open(out_path, 'w') as out:
             json.dump(result, out)
         print('profiled', flush=True)
@@ -212,7 +287,7 @@ def loop(executor_kind, out_path, seconds):
         spin_until_shutdown(executor, context)
     finally:
         executor.shutdown()
-        node.destroy_node()
+        ros_node.destroy_node()
         rclpy.try_shutdown(context=context)
 
 
@@ -231,17 +306,17 @@ def profile_direct(index=0, log_dir=None):
 
 
 def profile_loop(executor='single', index=0, rate=LOOP_RATE,
-                 seconds=LOOP_SECONDS, log_dir=None):
-    """Profile the node on ``executor`` fed at ``rate``; return the shares."""
+                 seconds=LOOP_SECONDS, log_dir=None, node='observer'):
+    """Measure ``node`` on ``executor`` fed at ``rate`` (see :func:`loop`)."""
     with tempfile.TemporaryDirectory(prefix='bench-') as tmp, \
             reserved_domain_id(index) as domain_id, children() as started:
         env = ros_env(domain_id)
         logs = log_dir or tmp
         out = os.path.join(tmp, 'loop.json')
         host = Child('profile loop', ['-m', 'bench.profile_node', 'loop',
-                                      '--executor', executor, '--out', out,
-                                      '--seconds', str(seconds)], env,
-                     os.path.join(logs, f'profile-loop-{executor}.log'))
+                                      '--node', node, '--executor', executor,
+                                      '--out', out, '--seconds', str(seconds)],
+                     env, os.path.join(logs, f'profile-{node}-{executor}.log'))
         started.append(host)
         probe = Child('probe', ['-m', 'bench.probe'], env,
                       os.path.join(logs, 'profile-probe.log'))
@@ -259,9 +334,10 @@ def profile_loop(executor='single', index=0, rate=LOOP_RATE,
         probe.expect('', 40)
         time.sleep(0.5)
         host.send('start')
-        driver.send(f'run {rate} {seconds + 1.0} {os.path.join(tmp, "d.npz")}')
-        host.expect('profiled', seconds + 60)
-        driver.expect('done', seconds + 60)
+        driver.send(f'run {rate} {2 * seconds + 1.0} '
+                    f'{os.path.join(tmp, "d.npz")}')
+        host.expect('profiled', 2 * seconds + 60)
+        driver.expect('done', 2 * seconds + 60)
         with open(out) as f:
             result = json.load(f)
         result['rate'] = rate
@@ -275,6 +351,8 @@ def main(argv=None):
     parser.add_argument('--out', required=True)
     parser.add_argument('--executor', choices=EXECUTORS, default='single')
     parser.add_argument('--seconds', type=float, default=LOOP_SECONDS)
+    parser.add_argument('--node', choices=('observer', 'relay'),
+                        default='observer')
     args = parser.parse_args(argv)
     if args.mode == 'direct':
         result = direct()
@@ -282,7 +360,7 @@ def main(argv=None):
             json.dump(result, out)
         print('profiled', flush=True)
     else:
-        loop(args.executor, args.out, args.seconds)
+        loop(args.executor, args.out, args.seconds, args.node)
     return 0
 
 

@@ -43,10 +43,11 @@ class RelayNode:
         self.steps = 0
         self.estimate_publisher = self.node.create_publisher(
             QuaternionStamped, 'attitude_estimate', depth)
-        self.node.create_subscription(Vector3Stamped, 'gyro/increment',
-                                      self.increment_callback, depth)
-        self.node.create_subscription(QuaternionStamped, 'attitude/measurement',
-                                      self.measurement_callback, depth)
+        self.increment_subscription = self.node.create_subscription(
+            Vector3Stamped, 'gyro/increment', self.increment_callback, depth)
+        self.measurement_subscription = self.node.create_subscription(
+            QuaternionStamped, 'attitude/measurement', self.measurement_callback,
+            depth)
 
     @staticmethod
     def _key(msg):

@@ -1,0 +1,167 @@
+"""
+``python -m bench``: run every benchmark, print the tables, write the file.
+
+Sections: batch core (with ``reproduce --seeds 5``), node throughput and
+latency (relay and observer, per executor), accuracy beside the limit, and
+the node's profile. Progress goes to stderr, the Markdown to stdout and to
+``docs/performance.md``. Timing never fails the run; a section that cannot
+run (a node that does not start) is reported as such.
+"""
+
+import argparse
+import json
+import os
+import signal
+import sys
+import time
+
+from bench import machine, report
+from bench.procs import REPO
+
+SECTIONS = ('batch', 'accuracy', 'nodes', 'profile')
+
+
+def _log(text):
+    print(text, file=sys.stderr, flush=True)
+
+
+def _batch(quick):
+    from bench import batch
+    result = {}
+    _log('batch core: observer updates per second ...')
+    sizes = (1, 1000) if quick else batch.BATCH_SIZES
+    result['observer_rates'] = batch.observer_rates(sizes)
+    result['single'] = batch.single_observer_costs()
+    _log('batch core: products and exp ...')
+    result['products'] = batch.product_costs()
+    result['lean'] = batch.lean_prototype_rate()
+    result['reproduce'] = []
+    if not quick:
+        _log('batch core: reproduce --seeds 5 ...')
+        result['reproduce'].append(batch.reproduce_time(5))
+        result['reproduce'].append(batch.reproduce_time(5, no_plots=True))
+    return result
+
+
+def _nodes(quick, log_dir):
+    from bench import nodes
+    targets = nodes.relay_targets()
+    notes = ['Queue depth 10 everywhere (the observer\'s default '
+             '`queue_depth`, reliable, keep last); the probe keeps 1000.']
+    if os.path.exists(os.path.join(REPO, 'ext_observer', 'observer_node.py')):
+        targets += nodes.observer_targets()
+        notes.append('observer/single is the shipped entry point '
+                     '(`python -m ext_observer.observer_node`, `rclpy.spin`); '
+                     'it has no executor option, so observer/multi and '
+                     'observer/events host the same `ObserverNode` class in '
+                     '`bench/observer_host.py`. Parameters: the defaults '
+                     '(extended, paper gain) and `diagnostic_period:=0.1`.')
+    else:
+        notes.append('The observer node is not in the repository yet: relay '
+                      'only.')
+    rates = nodes.RATES
+    seconds, latency_seconds = nodes.SEGMENT_SECONDS, nodes.LATENCY_SECONDS
+    if quick:
+        rates, seconds, latency_seconds = (250, 1000, 4000), 1.0, 1.0
+    results = []
+    for index, target in enumerate(targets):
+        _log(f'node throughput: {target.name} ...')
+        results += nodes.sweep(target, index, rates, seconds, latency_seconds,
+                               log_dir=log_dir, progress=_log)
+    return results, list(rates), notes
+
+
+def _profile(log_dir):
+    from bench import profile_node
+    if not os.path.exists(os.path.join(REPO, 'ext_observer', 'observer_node.py')):
+        return None, []
+    _log('profile: the node\'s callbacks, direct ...')
+    direct = profile_node.profile_direct(index=10, log_dir=log_dir)
+    loops = []
+    for index, (node, executor) in enumerate(
+            (('observer', 'single'), ('relay', 'single'),
+             ('observer', 'events'), ('relay', 'events'))):
+        _log(f'profile: {node}/{executor} at {profile_node.LOOP_RATE} Hz ...')
+        loops.append(profile_node.profile_loop(executor, index=11 + index,
+                                               log_dir=log_dir, node=node))
+    return direct, loops
+
+
+def build_parser():
+    """Return the parser of ``python -m bench``."""
+    parser = argparse.ArgumentParser(
+        prog='python -m bench',
+        description='Benchmarks of ext_observer; writes docs/performance.md.')
+    parser.add_argument('--sections', default=','.join(SECTIONS),
+                        help=f'comma-separated subset of {",".join(SECTIONS)}')
+    parser.add_argument('--quick', action='store_true',
+                        help='a short smoke run (few sizes and rates)')
+    parser.add_argument('--output',
+                        default=os.path.join(REPO, 'docs', 'performance.md'),
+                        help='Markdown file to write (default docs/performance.md)')
+    parser.add_argument('--no-write', action='store_true',
+                        help='print only, write no file')
+    parser.add_argument('--json', metavar='PATH', help='also write raw results')
+    parser.add_argument('--log-dir', metavar='DIR',
+                        help="keep the child processes' stderr there")
+    parser.add_argument('--render', metavar='JSON',
+                        help='only render results saved by --json')
+    return parser
+
+
+def main(argv=None):
+    """Run the benchmarks; return 0 (timings never fail the run)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(argv)
+    sections = [s.strip() for s in args.sections.split(',') if s.strip()]
+    unknown = set(sections) - set(SECTIONS)
+    if unknown:
+        print(f'error: unknown sections {sorted(unknown)}; choose from '
+              f'{SECTIONS}', file=sys.stderr)
+        return 2
+    if args.log_dir:
+        os.makedirs(args.log_dir, exist_ok=True)
+    if args.render:
+        with open(args.render) as saved:
+            return _write(report.render(json.load(saved)), args)
+    # SIGTERM ends the run through the finally blocks that stop the children.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    start = time.monotonic()
+    results = {'machine': machine.describe(),
+               'command': ' '.join(['python -m bench'] + argv)}
+    notes = []
+    if 'batch' in sections:
+        results['batch'] = _batch(args.quick)
+    if 'accuracy' in sections:
+        from bench import batch
+        _log('accuracy: Table 1 setup ...')
+        results['accuracy'] = batch.accuracy()
+    if 'nodes' in sections:
+        results['nodes'], results['rates'], results['node_notes'] = _nodes(
+            args.quick, args.log_dir)
+    if 'profile' in sections:
+        try:
+            results['profile_direct'], results['profile_loops'] = _profile(
+                args.log_dir)
+        except RuntimeError as error:
+            notes.append(f'profile failed: {error.args[0].splitlines()[0]}')
+    notes.append(f'The whole run took {time.monotonic() - start:.0f} s.')
+    results['notes'] = notes
+    if args.json:
+        with open(args.json, 'w') as out:
+            json.dump(results, out, indent=1)
+    return _write(report.render(results), args)
+
+
+def _write(text, args):
+    print(text)
+    if not args.no_write:
+        os.makedirs(os.path.dirname(os.path.abspath(args.output)), exist_ok=True)
+        with open(args.output, 'w') as out:
+            out.write(text)
+        _log(f'wrote {args.output}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

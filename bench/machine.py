@@ -1,0 +1,57 @@
+"""The machine and software a benchmark ran on."""
+
+import datetime
+import os
+import platform
+import subprocess
+from importlib import metadata
+
+from bench.procs import REPO
+
+
+def _version(*distributions):
+    for name in distributions:
+        try:
+            return metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    return 'not installed'
+
+
+def _cpu_model():
+    try:
+        with open('/proc/cpuinfo') as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith('model name'):
+                    return line.split(':', 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or 'unknown'
+
+
+def _commit():
+    try:
+        done = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=REPO,
+                              capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.TimeoutExpired):
+        return 'unknown'
+    return done.stdout.strip() or 'unknown'
+
+
+def describe():
+    """Return the facts shown at the top of the report, as a dict."""
+    import numpy
+    return {
+        'date': datetime.datetime.now(datetime.timezone.utc).strftime(
+            '%Y-%m-%d %H:%M UTC'),
+        'cores': os.cpu_count(),
+        'cpu': _cpu_model(),
+        'python': platform.python_version(),
+        'numpy': numpy.__version__,
+        'rclpy': _version('ros-jazzy-rclpy', 'ros-rclpy', 'rclpy'),
+        'rmw': os.environ.get('RMW_IMPLEMENTATION',
+                              'rmw_fastrtps_cpp (default)'),
+        'rmw_fastrtps_cpp': _version('ros-jazzy-rmw-fastrtps-cpp',
+                                     'ros-rmw-fastrtps-cpp'),
+        'commit': _commit(),
+    }

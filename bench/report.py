@@ -1,0 +1,457 @@
+"""Render the benchmark's results as Markdown (docs/performance.md)."""
+
+from bench.nodes import LATENCY_RATE, SUSTAINED_MEDIAN_MS, sustained_rate
+
+BATCH_TARGET = 20e6  # updates/s at batch size 100 000
+REPRODUCE_TARGET = 5.0  # s
+LATENCY_MARGIN_MS = 0.2
+
+
+def _si(value):
+    for scale, suffix in ((1e9, ' G'), (1e6, ' M'), (1e3, ' k')):
+        if value >= scale:
+            return f'{value / scale:.3g}{suffix}'
+    return f'{value:.3g}'
+
+
+def _us(value):
+    if value is None:
+        return '—'
+    if value >= 1000:
+        return f'{value / 1000:.3g} ms'
+    return f'{value:.3g} µs'
+
+
+def _ms(value):
+    return '—' if value is None else f'{value:.2f}' if value < 10 else f'{value:.0f}'
+
+
+def _table(header, rows):
+    lines = ['| ' + ' | '.join(header) + ' |',
+             '|' + '|'.join('---' for _ in header) + '|']
+    lines += ['| ' + ' | '.join(str(c) for c in row) + ' |' for row in rows]
+    return '\n'.join(lines)
+
+
+def machine_section(m, command):
+    """The header: what ran where."""
+    return '\n'.join([
+        '# Performance',
+        '',
+        f'Produced by `{command}` on {m["date"]}, commit `{m["commit"]}`. '
+        'Regenerate with `make bench` (it rewrites this file; figures vary '
+        'from run to run on shared cores, so read them as magnitudes).',
+        '',
+        _table(['cores', 'CPU', 'Python', 'numpy', 'rclpy', 'RMW'],
+               [[m['cores'], m['cpu'], m['python'], m['numpy'], m['rclpy'],
+                 f'{m["rmw"]} {m["rmw_fastrtps_cpp"]}']]),
+    ])
+
+
+def batch_section(r):
+    """Section 1: observer updates/s, the ceilings, reproduce."""
+    rows = {}
+    for row in r['observer_rates']:
+        rows.setdefault(row['variant'], {})[row['batch']] = row
+    batches = sorted({row['batch'] for row in r['observer_rates']})
+    header = ['variant'] + [f'batch {b:,}' for b in batches] + [
+        f'batch {batches[-1]:,}, E = exp(Ω/2) given', 'SingleObserver (floats)']
+    body = []
+    for variant, by_batch in rows.items():
+        cells = [variant]
+        for b in batches:
+            x = by_batch[b]
+            cells.append(f'{_si(x["updates_per_s"])}/s ({_us(x["us_per_step"])})')
+        x = by_batch[batches[-1]]
+        cells.append(f'{_si(x["updates_per_s_rotation_given"])}/s '
+                     f'({_us(x["us_per_step_rotation_given"])})')
+        cells.append(f'{_us(r["single"][variant])} per step')
+        body.append(cells)
+    p = r['products']
+    n = p['batch']
+    ceilings = [
+        ['`quaternion.multiply` (our product)',
+         _us(p['multiply_us']), f'{_si(n / p["multiply_us"] * 1e6)}/s'],
+        ['numpy-quaternion product (external reference'
+         + (f', {p["numpy_quaternion_version"]})'
+            if p['numpy_quaternion_us'] else ', not installed)'),
+         _us(p['numpy_quaternion_us']),
+         '—' if not p['numpy_quaternion_us']
+         else f'{_si(n / p["numpy_quaternion_us"] * 1e6)}/s'],
+        ['`quaternion_from_rotation_vector` (E = exp(Ω/2))',
+         _us(p['exp_half_us']), f'{_si(n / p["exp_half_us"] * 1e6)}/s'],
+        ['numpy `sin` + `cos` of the half angles alone (floor of exp)',
+         _us(p['sincos_us']), f'{_si(n / p["sincos_us"] * 1e6)}/s'],
+    ]
+    lean = r.get('lean')
+    if lean:
+        ceilings.append(
+            ['prototype extended step, E given (`bench/lean.py`: (4, N) '
+             'layout, gain as a 4×4 matmul, `out=` buffers; equal to the core '
+             f'to {lean["gap"]:.0e})',
+             _us(lean['us_per_step']), f'{_si(lean["updates_per_s"])}/s'])
+    lines = [
+        '## 1. Batch core',
+        '',
+        'Observer updates per second (µs per step in brackets), '
+        '`LuenbergerObserver.step` with increments and measurements of the '
+        "paper's setup (increments uniform in [0, 10) rad per axis, σ = 0.1, "
+        'paper gain); batch 1 is `batch_shape=()`. The last columns: the same '
+        'step with `rotation=` precomputed (the experiments share it between '
+        'observers), and `SingleObserver.step` on plain floats (the node\'s '
+        'path).',
+        '',
+        _table(header, body),
+        '',
+        f'Ceilings, for {n:,} quaternions per call:',
+        '',
+        _table(['operation', 'per call', 'per second'], ceilings),
+        '',
+    ]
+    for rep in r['reproduce']:
+        if 'seconds' in rep:
+            lines.append(f'- `{rep["command"]}`: {rep["seconds"]:.1f} s wall '
+                         '(a fresh interpreter, imports included).')
+        else:
+            lines.append(f'- `{rep["command"]}`: {rep["note"]}.')
+    return '\n'.join(lines)
+
+
+def _cell(x):
+    if 'error' in x:
+        return 'error'
+    if x['sustained']:
+        return f'✓ {_ms(x["p50"])}'
+    parts = []
+    if x['lost']:
+        parts.append(f'{100 * x["lost"] / x["steps"]:.2g}% lost')
+    if x.get('propagated'):
+        parts.append(f'{x["propagated"]} uncorrected')
+    if x['p50'] is not None:
+        parts.append(f'p50 {_ms(x["p50"])}')
+    return '✗ ' + ', '.join(parts)
+
+
+def _by_target(results):
+    by_target = {}
+    for x in results:
+        by_target.setdefault(x['target'], []).append(x)
+    return by_target
+
+
+def nodes_section(results, rates, notes):
+    """Section 2: throughput, each target against the rising rates."""
+    by_target = _by_target(results)
+    header = ['node/executor'] + [f'{r:g} Hz' for r in rates] + [
+        'sustained', f'node CPU per step at {LATENCY_RATE} Hz']
+    body = []
+    for target, xs in by_target.items():
+        by_rate = {x.get('rate'): x for x in xs}
+        cells = [target]
+        for rate in rates:
+            cells.append(_cell(by_rate[rate]) if rate in by_rate else '·')
+        best = sustained_rate(xs)
+        cells.append('none' if best is None else f'{best:g} Hz')
+        at = by_rate.get(LATENCY_RATE)
+        cells.append(_us(at['cpu_us_per_step']) if at and 'error' not in at
+                     else '—')
+        body.append(cells)
+    errors = [x for x in results if 'error' in x]
+    detail = []
+    for x in results:
+        if 'error' in x:
+            continue
+        degraded = ('—' if x.get('propagated') is None
+                    else f'{x["propagated"]} / {x["dropped"]}')
+        detail.append([x['target'], f'{x["rate"]:g}', f'{x["achieved"]:.0f}',
+                       x['steps'], x['lost'], degraded, _ms(x['p50']),
+                       _ms(x['p99']), _ms(x['max']), _us(x['cpu_us_per_step'])])
+    lines = [
+        '## 2. Node throughput',
+        '',
+        'Three processes on the same cores: a paced driver publishes paired '
+        '`gyro/increment` and `attitude/measurement` (same stamp) at each rate, '
+        'the node under test runs in its own process, and a probe process '
+        'records every `attitude_estimate`. Cells: ✓ and the median latency '
+        f'(ms) when the rate is *sustained* (zero lost steps and median latency '
+        f'< {SUSTAINED_MEDIAN_MS:g} ms), else ✗ and why. A sweep stops after '
+        'two unsustained rates (·). Node CPU per step: user + system time of '
+        'the node process (all its threads) over the run, divided by the '
+        'steps.',
+        '',
+        _table(header, body),
+        '',
+    ]
+    lines += [f'- {note}' for note in notes]
+    for x in errors:
+        lines.append(f'- {x["target"]}: {x["error"].splitlines()[0]}')
+    ratios = _ratios(by_target)
+    if ratios:
+        lines += ['', 'Sustained rate, observer / relay (the figure of merit):',
+                  '']
+        lines += [f'- {text}' for text in ratios]
+    lines += [
+        '',
+        '<details><summary>Every run</summary>',
+        '',
+        _table(['node/executor', 'rate (Hz)', 'driver (Hz)', 'steps', 'lost',
+                'uncorrected / dropped', 'p50 (ms)', 'p99 (ms)', 'max (ms)',
+                'node CPU per step'], detail),
+        '',
+        '"uncorrected / dropped": from the observer\'s own input counters '
+        '(`/diagnostics`): steps propagated without their measurement and '
+        'inputs it dropped; the relay has none.',
+        '',
+        '</details>',
+    ]
+    return '\n'.join(lines)
+
+
+def _ratios(by_target):
+    sustained = {t: sustained_rate(xs) for t, xs in by_target.items()}
+    relay_single = sustained.get('relay/single')
+    lines = []
+    for ex in ('single', 'multi', 'events'):
+        obs, relay = sustained.get(f'observer/{ex}'), sustained.get(f'relay/{ex}')
+        if f'observer/{ex}' not in sustained or f'relay/{ex}' not in sustained:
+            continue
+        if obs and relay:
+            lines.append(f'{ex}: {obs:g} / {relay:g} Hz = {obs / relay:.2g}')
+        else:
+            lines.append(f'{ex}: {obs or "none"} / {relay or "none"}')
+    best = max(((sustained[t] or 0, t) for t in sustained
+                if t.startswith('observer/')), default=None)
+    if best and relay_single:
+        lines.append(f'best observer ({best[1]}, {best[0]:g} Hz) against the '
+                     f'naive relay (relay/single, {relay_single:g} Hz): '
+                     f'{best[0] / relay_single:.2g}× (goal: 2×)')
+    return lines
+
+
+def latency_section(results):
+    """Section 3: latency at the latency rate, observer beside relay."""
+    rows = []
+    at = {x['target']: x for x in results
+          if 'error' not in x and x['rate'] == LATENCY_RATE}
+    for target, x in at.items():
+        rows.append([target, x['steps'], x['lost'], _ms(x['p50']),
+                     _ms(x['p99']), _ms(x['max'])])
+    lines = [
+        f'## 3. Latency at {LATENCY_RATE} Hz',
+        '',
+        'From the driver\'s wall-clock time just before it publishes a '
+        "step's measurement to the arrival of that step's estimate at the "
+        'probe (another process; same clock), in ms.',
+        '',
+        _table(['node/executor', 'steps', 'lost', 'p50', 'p99', 'max'], rows),
+        '',
+    ]
+    for ex in ('single', 'multi', 'events'):
+        obs, relay = at.get(f'observer/{ex}'), at.get(f'relay/{ex}')
+        if obs and relay and obs['p50'] is not None and relay['p50'] is not None:
+            diff = obs['p50'] - relay['p50']
+            lines.append(f'- {ex}: observer median − relay median = '
+                         f'{diff:+.2f} ms (target: within '
+                         f'{LATENCY_MARGIN_MS} ms).')
+    return '\n'.join(lines)
+
+
+def accuracy_section(a):
+    """Section 4: final mean error beside the limit."""
+    limit = a['limit']
+    rows = [[name, f'{v["mean"]:.4f} ± {v["std"]:.4f}',
+             f'{v["mean"] / limit:.2f}×']
+            for name, v in sorted(a['rows'].items(),
+                                  key=lambda item: item[1]['mean'])]
+    return '\n'.join([
+        '## 4. Accuracy beside the limit',
+        '',
+        f'Table 1 setup: {a["runs"]} runs × {a["epochs"]} epochs, '
+        '`SimulatedGyro(increment_max=10, noise_std=0.1)`, observers started '
+        'at 1 against a uniform true attitude '
+        '(`experiments.observer_runs`). Final ‖q − q̂‖ (mean ± std over runs) '
+        'of each variant and gain mode, next to the limit for exact '
+        f'increments σ·E[χ₃]/√K = {limit:.4f} (σ = 0.1, K = {a["epochs"]}). '
+        f'The {a["observers"]} observers together took {a["seconds"]:.2f} s.',
+        '',
+        _table(['observer', 'final ‖q − q̂‖', '/ limit'], rows),
+    ])
+
+
+def profile_section(direct, loops):
+    """Section 5: where the node's per-message time goes."""
+    lines = ['## 5. Where the node\'s time goes', '']
+    if loops:
+        names = [f'{x["node"]}/{x["executor"]}' for x in loops]
+        rate = loops[0]['rate']
+        rows = [
+            ['node process (all threads)'] + [_us(x['process_cpu']) for x in loops],
+            ['main thread'] + [_us(x['main_thread_cpu']) for x in loops],
+            ['… inside the two subscription callbacks']
+            + [_us(x['callbacks_cpu']) for x in loops],
+            ['… executor, take and deserialize (the rest of the main thread)']
+            + [_us(x['main_thread_cpu'] - x['callbacks_cpu']) for x in loops],
+            ['DDS threads (process − main thread)']
+            + [_us(x['process_cpu'] - x['main_thread_cpu']) for x in loops],
+        ]
+        lines += [
+            f'CPU time per step at {rate} Hz, the node fed by the driver '
+            '(the same three processes as in section 2), no profiler: '
+            'the subscription callbacks are wrapped in CPU timers '
+            '(`time.thread_time`).',
+            '',
+            _table(['per step'] + names, rows),
+            '',
+        ]
+    if direct:
+        parts = [
+            ('`SingleObserver.step` (the maths)', direct['core_step'], 1),
+            ('`normalize(np.asarray(state))` for `attitude_estimate/unit`',
+             direct['numpy_normalize'], 1),
+            ('`quaternion_stamped(...)`: build a message', direct['build_message'], 2),
+            ('`Publisher.publish` (no subscriber)', direct['publish'], 2),
+            ('`get_clock().now()`', direct['clock_now'], 3),
+        ]
+        rows = [[name, _us(cost), f'×{times}', _us(cost * times)]
+                for name, cost, times in parts]
+        accounted = sum(cost * times for _, cost, times in parts)
+        rows.append(['rest (pairing, dicts, stamps, counters)', '', '',
+                     _us(direct['observer_callbacks'] - accounted)])
+        lines += [
+            'The same callbacks called directly in a tight loop with prepared '
+            'messages (no executor, no DDS receive, warm caches): '
+            f'**{_us(direct["observer_callbacks"])}** per step for the observer '
+            f'node, {_us(direct["relay_callbacks"])} for the bare relay. In the '
+            'real loop above they cost more (cold caches after every wake-up, '
+            'other processes on the same cores), but in the same proportions. '
+            'The parts, each timed alone:',
+            '',
+            _table(['part', 'per call', 'calls per step', 'per step'], rows),
+            '',
+        ]
+    profiled = [x for x in loops if x['node'] == 'observer' and x.get('cprofile')]
+    if profiled:
+        keys = list(profiled[0]['cprofile']['callback_parts'])
+        rows = []
+        for key in keys + ['rest']:
+            cells = [key.replace('_', ' ')]
+            for x in profiled:
+                c = x['cprofile']
+                parts = c['callback_parts']
+                value = (c['callbacks'] - sum(parts.values()) if key == 'rest'
+                         else parts[key])
+                cells.append(f'{100 * value / c["callbacks"]:.0f}%'
+                             if c['callbacks'] else '—')
+            rows.append(cells)
+        lines += [
+            'Under cProfile in the same loop (its overhead inflates Python '
+            'calls, so only shares): the observer\'s callback time by part.',
+            '',
+            _table(['part of the callbacks'] + [f'observer/{x["executor"]}'
+                                                for x in profiled], rows),
+            '',
+        ]
+    return '\n'.join(lines)
+
+
+def targets_section(r):
+    """The targets of issue 6, met or not, from the measured figures."""
+    rows = []
+    batch = r.get('batch') or {'observer_rates': [], 'reproduce': []}
+    largest = max((x['batch'] for x in batch['observer_rates']), default=None)
+    if largest == 100_000:
+        best = max((x for x in batch['observer_rates'] if x['batch'] == largest),
+                   key=lambda x: x['updates_per_s'])
+        value = best['updates_per_s']
+        rows.append([f'≥ {_si(BATCH_TARGET)} observer updates/s at batch 100 000',
+                     f'{_si(value)}/s ({best["variant"]}, best variant; '
+                     f'{_si(best["updates_per_s_rotation_given"])}/s with E '
+                     'given)',
+                     _verdict(value >= BATCH_TARGET,
+                              f'{BATCH_TARGET / value:.1f}× short')])
+    for rep in batch['reproduce']:
+        if rep['command'].endswith('reproduce --seeds 5'):
+            if 'seconds' in rep:
+                rows.append(['`reproduce --seeds 5` under 5 s',
+                             f'{rep["seconds"]:.1f} s',
+                             _verdict(rep['seconds'] < REPRODUCE_TARGET,
+                                      f'{rep["seconds"] - REPRODUCE_TARGET:.1f} s over')])
+            else:
+                rows.append(['`reproduce --seeds 5` under 5 s', rep['note'],
+                             'not measured'])
+    nodes = r.get('nodes')
+    if nodes:
+        by_target = _by_target(nodes)
+        at = {x['target']: x for x in nodes
+              if 'error' not in x and x.get('rate') == LATENCY_RATE}
+        obs = at.get('observer/single')
+        if obs:
+            rows.append([f'observer node (as shipped): zero loss at {LATENCY_RATE} Hz',
+                         f'{obs["lost"]} lost, {obs.get("propagated") or 0} '
+                         f'uncorrected of {obs["steps"]}',
+                         _verdict(obs['lost'] == 0 and not obs.get('propagated'),
+                                  'steps lost')])
+            relay = at.get('relay/single')
+            if relay and obs['p50'] is not None and relay['p50'] is not None:
+                diff = obs['p50'] - relay['p50']
+                rows.append(['median latency within 0.2 ms of the relay\'s '
+                             '(single)', f'{diff:+.2f} ms',
+                             _verdict(diff <= LATENCY_MARGIN_MS,
+                                      f'{diff - LATENCY_MARGIN_MS:.2f} ms over')])
+        sustained = {t: sustained_rate(xs) for t, xs in by_target.items()}
+        relay = sustained.get('relay/single')
+        if 'observer/single' in sustained and relay:
+            obs_rate = sustained['observer/single'] or 0
+            rows.append(['sustained rate ≥ the relay\'s (both as shipped: '
+                         'single)', f'{obs_rate:g} vs {relay:g} Hz',
+                         _verdict(obs_rate >= relay, f'{obs_rate / relay:.2g}×')])
+            best = max((sustained[t] or 0, t) for t in sustained
+                       if t.startswith('observer/'))
+            rows.append(['goal: twice the relay\'s sustained rate',
+                         f'{best[0]:g} Hz ({best[1]}) vs 2 × {relay:g} Hz',
+                         _verdict(best[0] >= 2 * relay,
+                                  f'{best[0] / relay:.2g}×')])
+    direct = r.get('profile_direct')
+    if direct:
+        numpy_calls = {k: v for k, v in
+                       direct.get('numpy_calls_per_step', {}).items()
+                       if k.startswith('quaternion.py')}
+        if numpy_calls:
+            listed = ', '.join(f'`{k.split(":")[1]}` ×{v:g}'
+                               for k, v in sorted(numpy_calls.items()))
+            rows.append(['node hot path: no per-message numpy allocation',
+                         f'numpy core functions per step: {listed} '
+                         f'(`normalize(np.asarray(state))` alone: '
+                         f'{_us(direct["numpy_normalize"])})', 'no'])
+        else:
+            rows.append(['node hot path: no per-message numpy allocation',
+                         'no numpy-based core call per step', 'yes'])
+        rows.append(['node hot path: profiled and reported',
+                     f'callbacks {_us(direct["observer_callbacks"])} per step '
+                     f'(maths {_us(direct["core_step"])})', 'yes (section 5)'])
+    return '\n'.join(['## Targets of issue 6', '',
+                      _table(['target', 'measured', 'met'], rows)])
+
+
+def _verdict(ok, shortfall):
+    return 'yes' if ok else f'no ({shortfall})'
+
+
+def render(r):
+    """The whole report."""
+    sections = [machine_section(r['machine'], r['command'])]
+    sections.append(targets_section(r))
+    if r.get('batch'):
+        sections.append(batch_section(r['batch']))
+    if r.get('nodes') is not None:
+        sections.append(nodes_section(r['nodes'], r['rates'],
+                                      r.get('node_notes', [])))
+        sections.append(latency_section(r['nodes']))
+    if r.get('accuracy'):
+        sections.append(accuracy_section(r['accuracy']))
+    if r.get('profile_direct') or r.get('profile_loops'):
+        sections.append(profile_section(r.get('profile_direct'),
+                                        r.get('profile_loops', [])))
+    if r.get('notes'):
+        sections.append('## Notes\n\n' + '\n'.join(f'- {n}' for n in r['notes']))
+    return '\n\n'.join(sections) + '\n'
