@@ -46,8 +46,13 @@ def _batch(quick):
 def _nodes(quick, log_dir):
     from bench import nodes
     targets = nodes.relay_targets()
-    notes = ['Queue depth 10 everywhere (the observer\'s default '
-             '`queue_depth`, reliable, keep last); the probe keeps 1000.']
+    notes = ['Queue depth 10 (the observer\'s default `queue_depth`, '
+             'reliable, keep last) except the polling relay (100, as its '
+             'batches need); the probe keeps 1000.',
+             'relay/events-poll2ms is `bench.relay.PollingRelay`: its '
+             'subscriptions are never spun, one 2 ms timer on the '
+             'EventsExecutor takes every waiting message and pairs them (fewer '
+             'wake-ups, messages taken in batches; up to 2 ms added latency).']
     if os.path.exists(os.path.join(REPO, 'ext_observer', 'observer_node.py')):
         targets += nodes.observer_targets()
         notes.append('observer/single is the shipped entry point '
@@ -146,6 +151,7 @@ def main(argv=None):
         except RuntimeError as error:
             notes.append(f'profile failed: {error.args[0].splitlines()[0]}')
     notes.append(f'The whole run took {time.monotonic() - start:.0f} s.')
+    results['machine']['load_end'] = machine.load()
     results['notes'] = notes
     if args.json:
         with open(args.json, 'w') as out:

@@ -54,4 +54,13 @@ def describe():
         'rmw_fastrtps_cpp': _version('ros-jazzy-rmw-fastrtps-cpp',
                                      'ros-rmw-fastrtps-cpp'),
         'commit': _commit(),
+        'load_start': load(),
     }
+
+
+def load():
+    """The 1-minute load average (other work on the machine skews timings)."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except OSError:
+        return None

@@ -89,17 +89,75 @@ class RelayNode:
         self.steps += 1
 
 
+class PollingRelay(RelayNode):
+    """
+    The relay with fewer wake-ups: a timer takes every waiting message.
+
+    The subscriptions belong to a second node that no executor spins; a
+    timer of ``period`` s on the relay node takes all the messages waiting
+    in both (``take_message`` until empty) and pairs them as the relay
+    does. One wake-up serves ``rate × period`` steps, at the price of up to
+    ``period`` of added latency; the queues must hold ``rate × period``
+    messages.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context
+    depth : int
+    period : float
+        Poll period, s.
+
+    """
+
+    def __init__(self, context, depth=100, period=0.001):
+        from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+        from rclpy.node import Node
+        self.node = Node('relay', context=context)
+        self.inputs = Node('relay_inputs', context=context)
+        self._out = QuaternionStamped
+        self.increments = {}
+        self.measurements = {}
+        self.steps = 0
+        self.estimate_publisher = self.node.create_publisher(
+            QuaternionStamped, 'attitude_estimate', depth)
+        self.increment_subscription = self.inputs.create_subscription(
+            Vector3Stamped, 'gyro/increment', self.increment_callback, depth)
+        self.measurement_subscription = self.inputs.create_subscription(
+            QuaternionStamped, 'attitude/measurement', self.measurement_callback,
+            depth)
+        self.poll_timer = self.node.create_timer(period, self.poll_callback)
+
+    def poll_callback(self):
+        """Take and pair every waiting increment and measurement."""
+        for subscription in (self.increment_subscription,
+                             self.measurement_subscription):
+            with subscription.handle:
+                take = subscription.handle.take_message
+                while True:
+                    taken = take(subscription.msg_type, False)
+                    if taken is None:
+                        break
+                    subscription.callback(taken[0])
+
+
 def main(argv=None):
     """Run the relay until SIGINT."""
     parser = argparse.ArgumentParser(prog='python -m bench.relay')
     parser.add_argument('--executor', choices=EXECUTORS, default='single')
-    parser.add_argument('--depth', type=int, default=10)
+    parser.add_argument('--depth', type=int, default=None,
+                        help='queue depth (default 10; 100 with --poll)')
+    parser.add_argument('--poll', type=float, default=None, metavar='PERIOD',
+                        help='take messages in batches every PERIOD s '
+                             '(PollingRelay) instead of one callback each')
     args = parser.parse_args(argv)
     import rclpy
     from rclpy.context import Context
     context = Context()
     rclpy.init(context=context)
-    relay = RelayNode(context, args.depth)
+    if args.poll:
+        relay = PollingRelay(context, args.depth or 100, args.poll)
+    else:
+        relay = RelayNode(context, args.depth or 10)
     executor = make_executor(args.executor, context)
     executor.add_node(relay.node)
     print('ready', flush=True)
@@ -107,6 +165,8 @@ def main(argv=None):
         spin_until_shutdown(executor, context)
     finally:
         executor.shutdown()
+        if isinstance(relay, PollingRelay):
+            relay.inputs.destroy_node()
         relay.node.destroy_node()
         rclpy.try_shutdown(context=context)
     return 0

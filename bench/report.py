@@ -42,9 +42,11 @@ def machine_section(m, command):
         'Regenerate with `make bench` (it rewrites this file; figures vary '
         'from run to run on shared cores, so read them as magnitudes).',
         '',
-        _table(['cores', 'CPU', 'Python', 'numpy', 'rclpy', 'RMW'],
+        _table(['cores', 'CPU', 'Python', 'numpy', 'rclpy', 'RMW',
+                'load average (start → end)'],
                [[m['cores'], m['cpu'], m['python'], m['numpy'], m['rclpy'],
-                 f'{m["rmw"]} {m["rmw_fastrtps_cpp"]}']]),
+                 f'{m["rmw"]} {m["rmw_fastrtps_cpp"]}',
+                 f'{m.get("load_start")} → {m.get("load_end")}']]),
     ])
 
 
@@ -165,7 +167,9 @@ def nodes_section(results, rates, notes):
                     else f'{x["propagated"]} / {x["dropped"]}')
         detail.append([x['target'], f'{x["rate"]:g}', f'{x["achieved"]:.0f}',
                        x['steps'], x['lost'], degraded, _ms(x['p50']),
-                       _ms(x['p99']), _ms(x['max']), _us(x['cpu_us_per_step'])])
+                       _ms(x['p99']), _ms(x['max']), _us(x['cpu_us_per_step']),
+                       f'{_us(x.get("driver_cpu_us_per_step"))} / '
+                       f'{_us(x.get("probe_cpu_us_per_step"))}'])
     lines = [
         '## 2. Node throughput',
         '',
@@ -196,7 +200,7 @@ def nodes_section(results, rates, notes):
         '',
         _table(['node/executor', 'rate (Hz)', 'driver (Hz)', 'steps', 'lost',
                 'uncorrected / dropped', 'p50 (ms)', 'p99 (ms)', 'max (ms)',
-                'node CPU per step'], detail),
+                'node CPU per step', 'driver / probe CPU per step'], detail),
         '',
         '"uncorrected / dropped": from the observer\'s own input counters '
         '(`/diagnostics`): steps propagated without their measurement and '
@@ -219,6 +223,11 @@ def _ratios(by_target):
             lines.append(f'{ex}: {obs:g} / {relay:g} Hz = {obs / relay:.2g}')
         else:
             lines.append(f'{ex}: {obs or "none"} / {relay or "none"}')
+    for t, rate in sustained.items():
+        if t.startswith('relay/') and t != 'relay/single' and rate and relay_single:
+            lines.append(f'{t} against relay/single: {rate:g} / '
+                         f'{relay_single:g} Hz = {rate / relay_single:.2g}× (what '
+                         'the executor and subscription path alone give)')
     best = max(((sustained[t] or 0, t) for t in sustained
                 if t.startswith('observer/')), default=None)
     if best and relay_single:
