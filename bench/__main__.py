@@ -62,8 +62,8 @@ def _nodes(quick, log_dir):
                      '`bench/observer_host.py`. Parameters: the defaults '
                      '(extended, paper gain) and `diagnostic_period:=0.1`.')
     else:
-        notes.append('The observer node is not in the repository yet: relay '
-                      'only.')
+        notes.append('The observer node is not in the repository yet: '
+                     'relay only.')
     rates = nodes.RATES
     seconds, latency_seconds = nodes.SEGMENT_SECONDS, nodes.LATENCY_SECONDS
     if quick:

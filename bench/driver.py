@@ -6,10 +6,11 @@ then ``attitude/measurement`` (geometry_msgs/QuaternionStamped) with the
 same stamp ``t_k``: nominal, on the driver's own clock like an IMU's,
 ``1 / rate`` apart and continuing across runs (the first step of a run is
 one new period after the last step of the previous run), so a node that
-stamps its estimate ``t_k + (t_k − t_{k−1})`` stamps every step right. Messages are serialized once (a cycle of simulated steps) and only
-their stamp is patched, so the driver spends little CPU per step. Pacing
-sleeps until the next deadline and then publishes every step that is due,
-so above ~5 kHz steps go out in small bursts at the nominal mean rate.
+stamps its estimate ``t_k + (t_k − t_{k−1})`` stamps every step right.
+Messages are serialized once (a cycle of simulated steps) and only their
+stamp is patched, so the driver spends little CPU per step. Pacing sleeps
+until the next deadline and then publishes every step that is due, so at
+high rates steps go out in small bursts at the nominal mean rate.
 
 Controlled by lines on stdin (``python -m bench.driver``):
 

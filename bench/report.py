@@ -442,6 +442,68 @@ def targets_section(r):
                       _table(['target', 'measured', 'met'], rows)])
 
 
+def analysis_section(r):
+    """What limits each figure, in the measured numbers of this run."""
+    lines = ['## What limits the figures', '']
+    batch = r.get('batch')
+    if batch and batch.get('products'):
+        p = batch['products']
+        n = p['batch']
+        text = (f'- **Batch.** One `quaternion.multiply` of {n:,} quaternions '
+                f'costs {_us(p["multiply_us"])} ({_si(n / p["multiply_us"] * 1e6)}'
+                '/s): numpy works on the strided components of `(N, 4)` arrays '
+                'and allocates a temporary per operation, and a constant-gain '
+                'step does two general products, the exponential and the '
+                'extension term.')
+        if p.get('numpy_quaternion_us'):
+            text += (f' numpy-quaternion\'s compiled product takes '
+                     f'{_us(p["numpy_quaternion_us"])}.')
+        text += (f' With increments, `exp(Ω/2)` alone costs '
+                 f'{_us(p["exp_half_us"])}, {_us(p["sincos_us"])} of it in '
+                 "numpy's float64 `sin` and `cos`, so that path stays under "
+                 f'{_si(n / p["sincos_us"] * 1e6)} updates/s whatever the rest '
+                 'costs.')
+        lean = batch.get('lean')
+        if lean:
+            text += (f' The same extended step with E given, in a `(4, N)` '
+                     'layout with the gain as a 4×4 matmul and `out=` buffers '
+                     f'(`bench/lean.py`), runs at {_si(lean["updates_per_s"])}'
+                     '/s in this run.')
+        lines.append(text)
+    loops = {f'{x["node"]}/{x["executor"]}': x
+             for x in r.get('profile_loops') or []}
+    direct = r.get('profile_direct')
+    if loops.get('observer/single') and loops.get('observer/events'):
+        single, events = loops['observer/single'], loops['observer/events']
+        relay = loops.get('relay/events')
+        text = ('- **Node.** On the SingleThreadedExecutor the observer\'s main '
+                f'thread spends {_us(single["main_thread_cpu"])} per step at '
+                f'{single["rate"]} Hz, '
+                f'{_us(single["main_thread_cpu"] - single["callbacks_cpu"])} of '
+                'it in rclpy\'s executor (wait-set rebuilding, take, '
+                'deserialization) and '
+                f'{_us(single["callbacks_cpu"])} in the node\'s callbacks. The '
+                'EventsExecutor cuts the executor\'s part to '
+                f'{_us(events["main_thread_cpu"] - events["callbacks_cpu"])}; '
+                f'then the callbacks ({_us(events["callbacks_cpu"])}')
+        if relay:
+            text += f', against the relay\'s {_us(relay["callbacks_cpu"])}'
+        text += ') are most of the per-step cost.'
+        if direct:
+            text += (f' Of the callbacks, the maths is {_us(direct["core_step"])}; '
+                     'the rest is building two messages, publishing two, a '
+                     'numpy normalization, three clock reads and the pairing '
+                     '(section 5).')
+        lines.append(text)
+    if r.get('nodes'):
+        lines.append(
+            '- **Cores.** Driver, node and probe share 2 cores (with whatever '
+            'else runs: see the load average); a node process that is '
+            'descheduled for a few ms overflows a queue of depth 10 at a few '
+            'kHz, so losses at the top rates come and go from run to run.')
+    return '\n'.join(lines)
+
+
 def _verdict(ok, shortfall):
     return 'yes' if ok else f'no ({shortfall})'
 
@@ -461,6 +523,7 @@ def render(r):
     if r.get('profile_direct') or r.get('profile_loops'):
         sections.append(profile_section(r.get('profile_direct'),
                                         r.get('profile_loops', [])))
+    sections.append(analysis_section(r))
     if r.get('notes'):
         sections.append('## Notes\n\n' + '\n'.join(f'- {n}' for n in r['notes']))
     return '\n\n'.join(sections) + '\n'
