@@ -76,7 +76,8 @@ def batch_section(r):
          _us(p['multiply_us']), f'{_si(n / p["multiply_us"] * 1e6)}/s'],
         ['numpy-quaternion product (external reference'
          + (f', {p["numpy_quaternion_version"]})'
-            if p['numpy_quaternion_us'] else ', not installed)'),
+            if p['numpy_quaternion_us']
+            else ', not installed: `pip install numpy-quaternion`)'),
          _us(p['numpy_quaternion_us']),
          '—' if not p['numpy_quaternion_us']
          else f'{_si(n / p["numpy_quaternion_us"] * 1e6)}/s'],
