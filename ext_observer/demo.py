@@ -19,6 +19,8 @@ import os
 import sys
 import time
 
+from ext_observer.core import VARIANTS
+
 __all__ = ['main', 'run_demo']
 
 DEFAULT_INITIAL_ESTIMATE = (1.3, 0.0, 0.0, 0.0)
@@ -55,8 +57,8 @@ def build_parser():
                         help='steps per second, Hz (default 30)')
     parser.add_argument('--seed', type=int, default=7,
                         help='seed of the simulated gyro (default 7; -1 = random)')
-    parser.add_argument('--variant', default='extended',
-                        help='extended | plain | projected (default extended)')
+    parser.add_argument('--variant', default='extended', choices=VARIANTS,
+                        help='observer (default extended)')
     parser.add_argument('--increment-max', type=float, default=10.0,
                         help='bound of the increment per axis, rad (default 10, '
                              'the paper)')
@@ -322,6 +324,7 @@ def main(argv=None):
     """
     args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
     from ext_observer.node_common import ParameterError
+    from rclpy.executors import ExternalShutdownException
 
     print(f'ext_observer demo: {args.variant} observer, {args.steps} steps at '
           f'{args.rate:g} Hz, increments up to {args.increment_max:g} rad per axis, '
@@ -336,7 +339,7 @@ def main(argv=None):
     except (ParameterError, ValueError) as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):
         print('interrupted', file=sys.stderr)
         return 130
 

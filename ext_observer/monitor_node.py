@@ -25,9 +25,9 @@ from collections import deque
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped
+import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import Float64
-import numpy as np
 
 from ext_observer.conversions import nanoseconds_from_stamp, quaternion_from_msg
 from ext_observer.core import attitude_error, constraint_residual, manifold_distance

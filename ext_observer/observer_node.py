@@ -33,8 +33,8 @@ Stamps
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-from rclpy.node import Node
 import numpy as np
+from rclpy.node import Node
 
 from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
                                       quaternion_stamped, vector_from_msg)
@@ -299,8 +299,11 @@ class ObserverNode(Node):
     def _start_timeout_timer(self, settings):
         if self._timeout_timer is not None:
             self.destroy_timer(self._timeout_timer)
-        # Deadlines are checked four times per timeout, at most at 500 Hz.
-        period = min(max(settings['measurement_timeout'] / 4.0, 0.002), 0.25)
+        # Deadlines are checked four times per timeout (at most at 200 Hz).
+        # With no timeout at all an increment never waits, so a slow check is
+        # enough.
+        timeout = settings['measurement_timeout']
+        period = min(max(timeout / 4.0, 0.005), 0.25) if timeout > 0.0 else 0.25
         self._timeout_timer = self.create_timer(period, self.timeout_callback)
 
     def _apply_parameters(self, settings, changed):

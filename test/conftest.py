@@ -17,7 +17,6 @@ import os
 import random
 import signal
 import subprocess
-import sys
 import time
 
 import pytest
@@ -174,4 +173,3 @@ def ros_processes(ros_domain_id, tmp_path):
             except subprocess.TimeoutExpired:
                 pass
             process.kill()
-

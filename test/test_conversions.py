@@ -7,12 +7,10 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-pytest.importorskip('geometry_msgs')
-
-from ext_observer.conversions import (  # noqa: E402
+from ext_observer.conversions import (
     msg_from_quaternion, msg_from_vector, nanoseconds_from_stamp, quaternion_from_msg,
     quaternion_stamped, stamp_from_nanoseconds, vector_from_msg, vector_stamped)
-from ext_observer.core import quaternion_from_rotation_vector  # noqa: E402
+from ext_observer.core import quaternion_from_rotation_vector
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 

@@ -6,28 +6,24 @@ SingleThreadedExecutor with their own context, through real topics.
 import math
 import os
 
+from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
+import rclpy
+from rclpy.parameter import Parameter
 
-pytest.importorskip('rclpy')
-
-from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
-import rclpy  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-
-from ext_observer.conversions import quaternion_stamped  # noqa: E402
-from ext_observer.core import (attitude_error, certified_alpha_max,  # noqa: E402
-                               manifold_distance, multiply, norm,
-                               quaternion_from_rotation_vector, SingleObserver)
-from ext_observer.gyro_node import GYRO_PARAMETERS, GyroNode  # noqa: E402
-from ext_observer.monitor_node import (DIAGNOSTIC_KEYS, ERROR_KEYS,  # noqa: E402
-                                       MONITOR_PARAMETERS, MonitorNode, STATUS_NAME)
-from ext_observer.node_common import ParameterError  # noqa: E402
-from ext_observer.observer_node import (DROP_REASONS,  # noqa: E402
-                                        OBSERVER_PARAMETERS, ObserverNode)
-from ros_helpers import (overrides, Probe, SECOND, values_of,  # noqa: E402
-                         wait_for_subscribers)
+from conftest import CONFIG, REPO
+from ext_observer.conversions import quaternion_stamped
+from ext_observer.core import (attitude_error, certified_alpha_max, manifold_distance,
+                               multiply, norm, quaternion_from_rotation_vector,
+                               SingleObserver)
+from ext_observer.gyro_node import GYRO_PARAMETERS, GyroNode
+from ext_observer.monitor_node import (DIAGNOSTIC_KEYS, ERROR_KEYS, MONITOR_PARAMETERS,
+                                       MonitorNode, STATUS_NAME)
+from ext_observer.node_common import markdown_table, ParameterError
+from ext_observer.observer_node import DROP_REASONS, OBSERVER_PARAMETERS, ObserverNode
+from ros_helpers import overrides, Probe, SECOND, values_of, wait_for_subscribers
 
 
 # The whole pipeline -------------------------------------------------------
@@ -101,9 +97,10 @@ def test_pipeline_converges_and_matches_the_core(ros_context, spinner):
     assert int(values['estimates_received']) == monitor.estimates_received == steps
     assert float(values['estimate_rate_hz']) == pytest.approx(rate, rel=0.3)
     assert float(values['attitude_error_mean']) < 1.0
-    observer_status = probe.last_status('observer: inputs')
-    assert observer_status.level == DiagnosticStatus.OK
-    assert values_of(observer_status)['steps_corrected'] == str(steps)
+    spinner.spin_until(
+        lambda: values_of(probe.last_status('observer: inputs')).get(
+            'steps_corrected') == str(steps), 5.0, 'an observer status after the last step')
+    assert probe.last_status('observer: inputs').level == DiagnosticStatus.OK
 
 
 # The observer's pairing -----------------------------------------------------
@@ -311,7 +308,6 @@ monitor:
 
 
 def test_shipped_params_file_loads_with_the_defaults(ros_domain_id):
-    from conftest import CONFIG
     context = rclpy.context.Context()
     rclpy.init(args=['--ros-args', '--params-file', CONFIG], context=context,
                domain_id=ros_domain_id)
@@ -443,8 +439,6 @@ ALL_SPECS = (('gyro', GYRO_PARAMETERS), ('observer', OBSERVER_PARAMETERS),
 
 
 def test_readme_tables_match_the_code():
-    from conftest import REPO
-    from ext_observer.node_common import markdown_table
     with open(os.path.join(REPO, 'README.md'), encoding='utf-8') as readme:
         text = readme.read()
     for name, specs in ALL_SPECS:
@@ -459,7 +453,6 @@ def test_readme_tables_match_the_code():
 
 def test_params_file_has_every_parameter_with_a_comment():
     import yaml
-    from conftest import CONFIG
     with open(CONFIG, encoding='utf-8') as config:
         lines = config.read().splitlines()
         config.seek(0)

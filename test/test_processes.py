@@ -9,21 +9,19 @@ process is ended by the test (SIGINT, checked), or by the fixture on failure.
 
 import os
 import sys
+import time
 
+from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, SetParameters
 
-pytest.importorskip('rclpy')
-
-from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
-from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
-from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
-from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
-
-from conftest import CONFIG  # noqa: E402
-from ext_observer.core import attitude_error, manifold_distance  # noqa: E402
-from ext_observer.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, STATUS_NAME  # noqa: E402
-from ros_helpers import Probe, values_of  # noqa: E402
+from conftest import CONFIG
+from ext_observer.core import attitude_error, manifold_distance
+from ext_observer.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, STATUS_NAME
+from ros_helpers import Probe, values_of
 
 
 def installed(name):
@@ -127,3 +125,36 @@ def test_invalid_start_up_parameter_exits_with_the_reason(ros_processes):
     assert_clean_exit(process, code=2)
     assert 'outside the range certified by Theorem 1' in process.output
     assert 'allow_uncertified_alpha' in process.output
+
+
+def wait_for_output(process, text, timeout):
+    deadline = time.monotonic() + timeout
+    while text not in process.output:
+        assert process.process.poll() is None, process.output
+        if time.monotonic() > deadline:
+            pytest.fail(f'no {text!r} within {timeout} s:\n{process.output}')
+        time.sleep(0.1)
+
+
+def test_demo_converges_and_writes_the_plot(ros_processes, tmp_path):
+    plot = tmp_path / 'demo.png'
+    process = ros_processes([sys.executable, '-m', 'ext_observer', 'demo', '--steps', '60',
+                             '--rate', '60', '--plot', str(plot)])
+    process.wait(timeout=60.0)
+    assert_clean_exit(process)
+    output = process.output
+    assert 'monitor OK' in output or 'monitor WARN' in output
+    assert 'Summary: 60 steps' in output
+    assert 'distance to S³' in output and 'attitude error (rad)' in output
+    assert output.rstrip().endswith('converged')
+    with open(plot, 'rb') as png:
+        assert png.read(8) == b'\x89PNG\r\n\x1a\n'
+
+
+def test_ctrl_c_on_the_demo_exits_cleanly(ros_processes):
+    process = ros_processes([sys.executable, '-m', 'ext_observer', 'demo', '--steps',
+                             '10000', '--plot', ''])
+    wait_for_output(process, 'monitor', 30.0)
+    assert process.interrupt(timeout=15.0) == 130
+    assert 'interrupted' in process.output
+    assert 'Traceback' not in process.output
