@@ -36,10 +36,11 @@ demo: $(RUNTIME_STAMP)
 	$(PY) -m ext_observer demo $(DEMO_ARGS)
 
 # The core tests run in a process of their own, which never imports rclpy
-# (test_core_observer.py checks that); then everything else.
+# (test_core_observer.py checks that); then everything else, with the
+# benchmark's own logic checks (bench/test_*.py).
 test: $(TEST_STAMP)
 	$(PY) -m pytest $(PYTEST_ARGS) test/test_core_*.py
-	$(PY) -m pytest $(PYTEST_ARGS) --ignore-glob='test/test_core_*.py' test
+	$(PY) -m pytest $(PYTEST_ARGS) --ignore-glob='test/test_core_*.py' test $(wildcard bench/test_*.py)
 
 clean:
 	rm -rf $(VENV) build install log out .pytest_cache .hypothesis *.egg-info
