@@ -216,7 +216,13 @@ class MonitorNode(Node):
             del waiting[min(waiting)]
 
     def _add_error(self, estimate, truth):
-        error = float(attitude_error(estimate, truth))
+        try:
+            error = float(attitude_error(estimate, truth))
+        except ValueError as exc:
+            # A zero or non-finite quaternion has no attitude.
+            self.get_logger().warning(f'no attitude error: {exc}',
+                                      throttle_duration_sec=5.0)
+            return
         self.errors.append(error)
         self._last_error = error
 

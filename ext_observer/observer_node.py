@@ -19,9 +19,10 @@ Pairing
 
 Stamps
     An input whose stamp is not newer than the last processed step is dropped:
-    ``duplicate`` if equal, ``stale`` if older. So is a second input with the
-    stamp of one still waiting. Every drop is counted by reason and reported
-    in ``/diagnostics``.
+    ``duplicate`` if that step already used one like it, ``stale`` otherwise
+    (older, or a measurement arriving after its step went on without it). So
+    is a second input with the stamp of one still waiting (``duplicate``).
+    Every drop is counted by reason and reported in ``/diagnostics``.
 
 ``t_{k+1}``
     The increment covers ``[t_k, t_{k+1})`` but carries only ``t_k``. The
@@ -193,6 +194,7 @@ class ObserverNode(Node):
         self._measurements = {}
         self._last_stamp = None
         self._last_interval = None
+        self._last_corrected = False
         depth = settings['queue_depth']
         self.estimate_publisher = self.create_publisher(
             QuaternionStamped, 'attitude_estimate', depth)
@@ -239,10 +241,13 @@ class ObserverNode(Node):
         self._process()
 
     def _refuse(self, stamp, waiting, kind):
-        if stamp in waiting or stamp == self._last_stamp:
+        # A measurement for the last step, which went on without one, came
+        # too late: stale, not a duplicate.
+        used = kind == 'increment' or self._last_corrected
+        if stamp in waiting or (stamp == self._last_stamp and used):
             self.drops[f'duplicate_{kind}'] += 1
             return True
-        if self._last_stamp is not None and stamp < self._last_stamp:
+        if self._last_stamp is not None and stamp <= self._last_stamp:
             self.drops[f'stale_{kind}'] += 1
             return True
         return False
@@ -280,6 +285,7 @@ class ObserverNode(Node):
         if self._last_stamp is not None:
             self._last_interval = stamp - self._last_stamp
         self._last_stamp = stamp
+        self._last_corrected = measurement is not None
         for old in [t for t in self._measurements if t <= stamp]:
             del self._measurements[old]
             self.drops['unpaired_measurement'] += 1

@@ -133,11 +133,15 @@ def test_observer_pairs_by_stamp_waits_and_counts_drops(ros_context, spinner):
     spinner.spin_until(lambda: len(probe.estimates) == 2, 5.0, 'the second estimate')
     assert probe.estimates[2 * SECOND + SECOND // 100] == reference.step(theta)
 
-    # A duplicate and a stale input are dropped and counted.
+    # Duplicate and stale inputs are dropped and counted; so is a measurement
+    # that comes after its step went on without it.
     probe.send_increment(2 * SECOND, theta)
     probe.send_measurement(SECOND + SECOND // 2, y)
-    spinner.spin_until(lambda: observer.drops['duplicate_increment'] == 1
-                       and observer.drops['stale_measurement'] == 1, 5.0, 'the drops')
+    probe.send_measurement(2 * SECOND, y)
+    spinner.spin_until(lambda: observer.counts['measurements'] == 3, 5.0, 'the inputs')
+    assert observer.drops['duplicate_increment'] == 1
+    assert observer.drops['stale_measurement'] == 2
+    assert steps() == 2
 
     # A measurement may come first; one without increment is dropped as unpaired
     # once a newer step is processed.
@@ -147,6 +151,10 @@ def test_observer_pairs_by_stamp_waits_and_counts_drops(ros_context, spinner):
     spinner.spin_until(lambda: steps() == 3, 5.0, 'the third step')
     assert observer.counts['steps_corrected'] == 2
     assert observer.drops['unpaired_measurement'] == 1
+    # The measurement of a corrected step, again: a duplicate.
+    probe.send_measurement(4 * SECOND, y)
+    spinner.spin_until(lambda: observer.drops['duplicate_measurement'] == 1, 5.0,
+                       'the duplicate measurement')
 
     # A newer measurement shows that an older one will not come: no waiting.
     probe.send_increment(5 * SECOND, theta)
@@ -162,8 +170,9 @@ def test_observer_pairs_by_stamp_waits_and_counts_drops(ros_context, spinner):
     values = values_of(probe.last_status('observer: inputs'))
     assert {f'dropped_{reason}' for reason in DROP_REASONS} <= set(values)
     assert values['dropped_duplicate_increment'] == '1'
-    assert values['dropped_stale_measurement'] == '1'
+    assert values['dropped_stale_measurement'] == '2'
     assert values['dropped_unpaired_measurement'] == '1'
+    assert values['dropped_duplicate_measurement'] == '1'
     warned = [s for s in probe.statuses['observer: inputs']
               if s.level == DiagnosticStatus.WARN]
     assert warned and 'dropping inputs' in warned[0].message
@@ -226,6 +235,11 @@ def test_monitor_levels_and_keys(ros_context, spinner):
     assert status.level == DiagnosticStatus.ERROR, status.message
     assert float(values_of(status)['distance_max']) == pytest.approx(0.5)
     assert probe.distances[-1] == pytest.approx(0.5)
+    # A zero quaternion has no attitude: no error sample, and no crash.
+    errors = len(monitor.errors)
+    status = send([(0.0, 0.0, 0.0, 0.0)], truth=(1.0, 0.0, 0.0, 0.0))
+    assert len(monitor.errors) == errors
+    assert float(values_of(status)['distance']) == 1.0
 
     # Silence: STALE after stale_timeout.
     spinner.spin_until(
