@@ -8,11 +8,12 @@ PY := $(VENV)/bin/python
 PIP := $(PY) -m pip --disable-pip-version-check -q
 RUNTIME_STAMP := $(VENV)/.ext_observer-runtime
 TEST_STAMP := $(VENV)/.ext_observer-test
+BENCH_STAMP := $(VENV)/.ext_observer-bench
 
 # Every process that starts a ROS node stays on this machine.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-.PHONY: all venv demo test clean
+.PHONY: all venv demo test reproduce bench clean
 
 all: test
 
@@ -40,6 +41,18 @@ demo: $(RUNTIME_STAMP)
 # no ROS.
 test: $(TEST_STAMP)
 	$(PY) -m pytest $(PYTEST_ARGS) test $(wildcard bench/test_*.py)
+
+# The paper's figures and Table 1, regenerated into docs/reproduction.md.
+reproduce: $(RUNTIME_STAMP)
+	$(PY) -m ext_observer reproduce --seeds 5 --docs docs
+
+$(BENCH_STAMP): requirements-bench.txt $(TEST_STAMP)
+	$(PIP) install -r requirements-bench.txt
+	touch $@
+
+# Benchmarks print figures and write docs/performance.md; never a pass/fail.
+bench: $(BENCH_STAMP)
+	$(PY) -m bench $(BENCH_ARGS)
 
 clean:
 	rm -rf $(VENV) build install log out .pytest_cache .hypothesis *.egg-info
