@@ -47,8 +47,9 @@ def _nodes(quick, log_dir):
     from bench import nodes
     targets = nodes.relay_targets()
     notes = ['Queue depth 10 (the observer\'s default `queue_depth`, '
-             'reliable, keep last) except the polling relay (100, as its '
-             'batches need); the probe keeps 1000.',
+             'reliable, keep last) except the `-depth100` targets and the '
+             'polling relay (100: `--depth 100`, `-p queue_depth:=100`); the '
+             'probe keeps 1000.',
              'relay/events-poll2ms is `bench.relay.PollingRelay`: its '
              'subscriptions are never spun, one 2 ms timer on the '
              'EventsExecutor takes every waiting message and pairs them (fewer '

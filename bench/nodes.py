@@ -68,11 +68,18 @@ class Target:
 
 
 POLL_PERIOD = 0.002  # s, of the polling relay
+# Queue depth of the "deep" targets: 100 ms of messages at 1 kHz, against
+# the 10 (10 ms) of the observer's default.
+DEEP_QUEUE = 100
 
 
-def relay_targets(executors=('single', 'multi', 'events'), polling=True):
+def relay_targets(executors=('single', 'multi', 'events'), polling=True,
+                  deep=True):
     """
     Return the bare relay on each executor (it stamps ``t_k``).
+
+    With ``deep``, also the relay on the EventsExecutor with queues of
+    :data:`DEEP_QUEUE` instead of 10.
 
     With ``polling``, also :class:`bench.relay.PollingRelay` on the
     EventsExecutor: one timer takes every waiting message each
@@ -80,6 +87,11 @@ def relay_targets(executors=('single', 'multi', 'events'), polling=True):
     """
     targets = [Target('relay', ex, ['-m', 'bench.relay', '--executor', ex])
                for ex in executors]
+    if deep and 'events' in executors:
+        targets.append(Target(
+            'relay', f'events-depth{DEEP_QUEUE}',
+            ['-m', 'bench.relay', '--executor', 'events', '--depth',
+             str(DEEP_QUEUE)]))
     if polling:
         ms = f'{POLL_PERIOD * 1e3:g}'
         targets.append(Target(
@@ -316,7 +328,7 @@ def sustained_rate(results):
 OBSERVER_ROS_ARGS = ('--ros-args', '-p', 'diagnostic_period:=0.1')
 
 
-def observer_targets(executors=('single', 'multi', 'events')):
+def observer_targets(executors=('single', 'multi', 'events'), deep=True):
     """
     Return the observer node: as shipped on 'single', hosted on the others.
 
@@ -334,4 +346,10 @@ def observer_targets(executors=('single', 'multi', 'events')):
             note = 'ObserverNode hosted by bench.observer_host'
         targets.append(Target('observer', ex, args + list(OBSERVER_ROS_ARGS),
                               stamp_offset=1, note=note))
+    if deep and 'events' in executors:
+        targets.append(Target(
+            'observer', f'events-depth{DEEP_QUEUE}',
+            ['-m', 'bench.observer_host', '--executor', 'events']
+            + list(OBSERVER_ROS_ARGS) + ['-p', f'queue_depth:={DEEP_QUEUE}'],
+            stamp_offset=1))
     return targets

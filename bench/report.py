@@ -216,7 +216,8 @@ def _ratios(by_target):
     sustained = {t: sustained_rate(xs) for t, xs in by_target.items()}
     relay_single = sustained.get('relay/single')
     lines = []
-    for ex in ('single', 'multi', 'events'):
+    executors = [t.split('/', 1)[1] for t in sustained if t.startswith('observer/')]
+    for ex in executors:
         obs, relay = sustained.get(f'observer/{ex}'), sustained.get(f'relay/{ex}')
         if f'observer/{ex}' not in sustained or f'relay/{ex}' not in sustained:
             continue
@@ -256,7 +257,7 @@ def latency_section(results):
         _table(['node/executor', 'steps', 'lost', 'p50', 'p99', 'max'], rows),
         '',
     ]
-    for ex in ('single', 'multi', 'events'):
+    for ex in [t.split('/', 1)[1] for t in at if t.startswith('observer/')]:
         obs, relay = at.get(f'observer/{ex}'), at.get(f'relay/{ex}')
         if obs and relay and obs['p50'] is not None and relay['p50'] is not None:
             diff = obs['p50'] - relay['p50']
