@@ -49,9 +49,9 @@ def _best_per_call(function, calls, repeat=5):
     return best * 1e6
 
 
-def _messages(steps, period_ns=1_000_000):
+def _messages(steps, start, period_ns=1_000_000):
+    """Paired messages of ``steps`` steps, stamped from ``start`` (ns) on."""
     from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-    start = time.time_ns()
     pairs = []
     for k in range(steps):
         inc = Vector3Stamped()
@@ -66,6 +66,13 @@ def _messages(steps, period_ns=1_000_000):
     return pairs
 
 
+def _passes(count, steps, period_ns=1_000_000):
+    """``count`` passes of messages on one continuous time line."""
+    start = time.time_ns()
+    return [_messages(steps, start + i * steps * period_ns, period_ns)
+            for i in range(count)]
+
+
 def _run_pairs(increment_callback, measurement_callback, pairs):
     start = time.perf_counter()
     for inc, meas in pairs:
@@ -74,15 +81,32 @@ def _run_pairs(increment_callback, measurement_callback, pairs):
     return (time.perf_counter() - start) / len(pairs) * 1e6
 
 
+# The parts of a step timed alone, and how to recognise their calls in a
+# profile: (file name ending, function name).
+PARTS = {
+    'core_step': ('observer.py', 'step'),
+    'numpy_normalize': ('quaternion.py', 'normalize'),
+    'build_message': ('conversions.py', 'quaternion_stamped'),
+    'publish': ('publisher.py', 'publish'),
+    'clock_now': ('clock.py', 'now'),
+}
+TOP_FUNCTIONS = 10
+
+
 def direct(steps=DIRECT_STEPS):
     """
     Time the node's and the relay's callbacks, and the parts of a step.
 
+    The node's internals are not assumed: how often each part runs per step
+    is counted by cProfile on the same callbacks.
+
     Returns
     -------
     result : dict
-        µs per step (``observer_callbacks``, ``relay_callbacks``) and per
-        call of each part.
+        µs per step (``observer_callbacks``, ``relay_callbacks``); µs per
+        call of each part of :data:`PARTS` and ``calls_per_step``;
+        ``numpy_calls_per_step``; ``top``, the functions with the most own
+        time per step under cProfile.
 
     """
     import numpy as np
@@ -99,32 +123,37 @@ def direct(steps=DIRECT_STEPS):
         node = ObserverNode(context=context)
         relay = RelayNode(context)
         result = {}
-        # Warm up, then take the best of three passes over fresh stamps.
-        runs = []
-        for _ in range(4):
-            node.observer.reset()
-            node._last_stamp = node._last_interval = None
-            runs.append(_run_pairs(node.increment_callback,
-                                   node.measurement_callback, _messages(steps)))
+        # Warm up, then the best of three passes; stamps go on across passes.
+        profiled_steps = 1000
+        *timed, profiled = _passes(5, steps)
+        runs = [_run_pairs(node.increment_callback, node.measurement_callback,
+                           pairs) for pairs in timed]
         result['observer_callbacks'] = min(runs[1:])
         runs = [_run_pairs(relay.increment_callback, relay.measurement_callback,
-                           _messages(steps)) for _ in range(4)]
+                           pairs) for pairs in _passes(4, steps)]
         result['relay_callbacks'] = min(runs[1:])
-        # Which numpy-based code runs per step (numpy's own Python functions
-        # and the core's batched quaternion module).
-        node.observer.reset()
-        node._last_stamp = node._last_interval = None
         profile = cProfile.Profile()
-        count = 1000
         profile.runcall(_run_pairs, node.increment_callback,
-                        node.measurement_callback, _messages(count))
-        numpy_calls = {}
-        for (path, _, name), (calls, *_) in pstats.Stats(profile).stats.items():
+                        node.measurement_callback, profiled[:profiled_steps])
+        stats = pstats.Stats(profile).stats
+        numpy_calls, calls_per_step, own = {}, dict.fromkeys(PARTS, 0.0), []
+        for (path, _, name), (_, calls, tottime, _, _) in stats.items():
+            label = f'{os.path.basename(path)}:{name}' if path != '~' else name
             if (f'{os.sep}numpy{os.sep}' in path
                     or path.endswith(os.path.join('core', 'quaternion.py'))):
-                label = f'{os.path.basename(path)}:{name}'
-                numpy_calls[label] = calls / count
+                numpy_calls[label] = calls / profiled_steps
+            for key, (ending, function) in PARTS.items():
+                if name == function and path.endswith(ending):
+                    calls_per_step[key] += calls / profiled_steps
+            if name not in ('_run_pairs', "<method 'disable' of "
+                            "'_lsprof.Profiler' objects>"):
+                own.append((tottime / profiled_steps * 1e6, label,
+                            calls / profiled_steps))
         result['numpy_calls_per_step'] = numpy_calls
+        result['calls_per_step'] = calls_per_step
+        result['top'] = [{'function': label, 'own_us': us, 'calls': calls}
+                         for us, label, calls in sorted(own, reverse=True)
+                         [:TOP_FUNCTIONS]]
         observer = SingleObserver()
         increment, measurement = (0.001, -0.002, 0.003), (1.0, 0.0, 0.0, 0.0)
         result['core_step'] = _best_per_call(
@@ -202,10 +231,17 @@ class _Timed:
         self.calls += 1
 
 
-def _steps(node):
-    if hasattr(node, 'counts'):
-        return node.counts['steps_corrected'] + node.counts['steps_propagated']
-    return node.steps
+class _PublishCounter:
+    """Counts the estimates a node publishes (one per step)."""
+
+    def __init__(self, publisher):
+        self.publish = publisher.publish
+        self.count = 0
+        publisher.publish = self
+
+    def __call__(self, msg):
+        self.count += 1
+        self.publish(msg)
 
 
 def _spin_for(executor, context, seconds):
@@ -253,15 +289,16 @@ def loop(executor_kind, out_path, seconds, node_kind='observer'):
     try:
         while not started.is_set() and context.ok():
             executor.spin_once(timeout_sec=0.05)
+        counter = _PublishCounter(node.estimate_publisher)
         timed = {}
         for name in ('increment_subscription', 'measurement_subscription'):
             subscription = getattr(node, name)
             timed[name] = _Timed(subscription.callback)
             subscription.callback = timed[name]
-        steps0, thread0, process0 = (_steps(node), time.thread_time(),
+        steps0, thread0, process0 = (counter.count, time.thread_time(),
                                      time.process_time())
         _spin_for(executor, context, seconds)
-        steps = max(_steps(node) - steps0, 1)
+        steps = max(counter.count - steps0, 1)
         result = {
             'executor': executor_kind,
             'node': node_kind,
@@ -275,11 +312,11 @@ def loop(executor_kind, out_path, seconds, node_kind='observer'):
         }
         for name, t in timed.items():
             getattr(node, name).callback = t.callback
-        steps0 = _steps(node)
+        steps0 = counter.count
         profile = cProfile.Profile()
         profile.runcall(_spin_for, executor, context, seconds)
         result['cprofile'] = _categories(pstats.Stats(profile),
-                                         _steps(node) - steps0)
+                                         counter.count - steps0)
         with open(out_path, 'w') as out:
             json.dump(result, out)
         print('profiled', flush=True)

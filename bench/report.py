@@ -315,18 +315,22 @@ def profile_section(direct, loops):
             '',
         ]
     if direct:
+        counts = direct.get('calls_per_step') or {
+            'core_step': 1, 'numpy_normalize': 1, 'build_message': 2,
+            'publish': 2, 'clock_now': 3}
         parts = [
-            ('`SingleObserver.step` (the maths)', direct['core_step'], 1),
-            ('`normalize(np.asarray(state))` for `attitude_estimate/unit`',
-             direct['numpy_normalize'], 1),
-            ('`quaternion_stamped(...)`: build a message', direct['build_message'], 2),
-            ('`Publisher.publish` (no subscriber)', direct['publish'], 2),
-            ('`get_clock().now()`', direct['clock_now'], 3),
+            ('`SingleObserver.step` (the maths)', 'core_step'),
+            ('`normalize(np.asarray(state))` (numpy)', 'numpy_normalize'),
+            ('`quaternion_stamped(...)`: build a message', 'build_message'),
+            ('`Publisher.publish` (no subscriber)', 'publish'),
+            ('`get_clock().now()`', 'clock_now'),
         ]
-        rows = [[name, _us(cost), f'×{times}', _us(cost * times)]
-                for name, cost, times in parts]
-        accounted = sum(cost * times for _, cost, times in parts)
-        rows.append(['rest (pairing, dicts, stamps, counters)', '', '',
+        rows = [[name, _us(direct[key]), f'×{counts[key]:.3g}',
+                 _us(direct[key] * counts[key])]
+                for name, key in parts if counts.get(key)]
+        accounted = sum(direct[key] * counts[key] for _, key in parts
+                        if counts.get(key))
+        rows.append(['rest (pairing, checks, dicts, stamps, counters)', '', '',
                      _us(direct['observer_callbacks'] - accounted)])
         lines += [
             'The same callbacks called directly in a tight loop with prepared '
@@ -334,15 +338,26 @@ def profile_section(direct, loops):
             f'**{_us(direct["observer_callbacks"])}** per step for the observer '
             f'node, {_us(direct["relay_callbacks"])} for the bare relay. In the '
             'real loop above they cost more (cold caches after every wake-up, '
-            'other processes on the same cores), but in the same proportions. '
-            'The parts, each timed alone:',
+            'other processes on the same cores). The parts, each timed alone, '
+            'times how often a step calls them (counted by cProfile):',
             '',
             _table(['part', 'per call', 'calls per step', 'per step'], rows),
             '',
         ]
+        if direct.get('top'):
+            lines += [
+                'The functions with the most own time in that loop, under '
+                'cProfile (inflated by its per-call cost; read the order):',
+                '',
+                _table(['function', 'own time per step', 'calls per step'],
+                       [[f'`{t["function"]}`', _us(t['own_us']),
+                         f'{t["calls"]:.3g}'] for t in direct['top']]),
+                '',
+            ]
     profiled = [x for x in loops if x['node'] == 'observer' and x.get('cprofile')]
     if profiled:
-        keys = list(profiled[0]['cprofile']['callback_parts'])
+        keys = [k for k in profiled[0]['cprofile']['callback_parts']
+                if any(x['cprofile']['callback_parts'][k] for x in profiled)]
         rows = []
         for key in keys + ['rest']:
             cells = [key.replace('_', ' ')]
@@ -492,9 +507,14 @@ def analysis_section(r):
             text += f', against the relay\'s {_us(relay["callbacks_cpu"])}'
         text += ') are most of the per-step cost.'
         if direct:
+            counts = direct.get('calls_per_step', {})
+            named = [(n, counts.get(key, 0)) for n, key in (
+                ('message builds', 'build_message'), ('publishes', 'publish'),
+                ('numpy normalizations', 'numpy_normalize'),
+                ('clock reads', 'clock_now'))]
+            listed = ', '.join(f'{c:.2g} {n}' for n, c in named if c)
             text += (f' Of the callbacks, the maths is {_us(direct["core_step"])}; '
-                     'the rest is building two messages, publishing two, a '
-                     'numpy normalization, three clock reads and the pairing '
+                     f'the rest is {listed} per step, and the pairing '
                      '(section 5).')
         lines.append(text)
     if r.get('nodes'):
