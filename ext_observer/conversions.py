@@ -12,14 +12,16 @@ This is the one place where ROS meets the core's conventions:
 - A ``builtin_interfaces/Time`` stamp is an integer number of nanoseconds
   here (``sec * 10**9 + nanosec``), so stamps compare and pair exactly.
 
-The functions copy the values as floats and check nothing else: validation
-belongs to the core (and, for bad input on topics, to the nodes).
+The functions from messages copy the values as floats (NaN, infinities and
+subnormals pass unchanged) and never raise on a message: validation belongs
+to the core (``ext_observer.core.validation``), applied by the nodes.
 """
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Quaternion, QuaternionStamped, Vector3, Vector3Stamped
 
 __all__ = [
+    'STAMP_MAX',
     'msg_from_quaternion',
     'msg_from_vector',
     'nanoseconds_from_stamp',
@@ -31,6 +33,9 @@ __all__ = [
 ]
 
 NANOSECONDS_PER_SECOND = 1_000_000_000
+
+# The latest stamp a builtin_interfaces/Time holds (sec is an int32), ns.
+STAMP_MAX = (2 ** 31 - 1) * NANOSECONDS_PER_SECOND + NANOSECONDS_PER_SECOND - 1
 
 
 def quaternion_from_msg(msg):
@@ -122,6 +127,8 @@ def nanoseconds_from_stamp(stamp):
     Returns
     -------
     nanoseconds : int
+        Negative for a negative ``sec`` (a ROS time never is; the nodes drop
+        such stamps with the zero ones).
 
     """
     return int(stamp.sec) * NANOSECONDS_PER_SECOND + int(stamp.nanosec)
@@ -134,14 +141,22 @@ def stamp_from_nanoseconds(nanoseconds):
     Parameters
     ----------
     nanoseconds : int
-        Non-negative, below ``2**31`` seconds.
+        In ``[0, STAMP_MAX]``.
 
     Returns
     -------
     stamp : builtin_interfaces.msg.Time
 
+    Raises
+    ------
+    ValueError
+        Outside that range.
+
     """
-    sec, nanosec = divmod(int(nanoseconds), NANOSECONDS_PER_SECOND)
+    nanoseconds = int(nanoseconds)
+    if not 0 <= nanoseconds <= STAMP_MAX:
+        raise ValueError(f'a stamp must lie in [0, {STAMP_MAX}] ns, got {nanoseconds}')
+    sec, nanosec = divmod(nanoseconds, NANOSECONDS_PER_SECOND)
     return Time(sec=sec, nanosec=nanosec)
 
 

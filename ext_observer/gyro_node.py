@@ -14,18 +14,29 @@ all three stamped ``t_k``. The stamps lie on the grid
 that ``t_{k+1} − t_k`` is exactly one period and a consumer can tell which
 steps it missed. After ``steps`` steps (0 = never) the node stops publishing
 and stays up until it is stopped.
+
+The reported increment may carry gyro errors (``gyro_noise_std``,
+``gyro_bias``, ``bias_walk_std``; off by default, the paper's setup); the
+truth always moves by the exact one. Every ``diagnostic_period`` the status
+``gyro: outputs`` on ``/diagnostics`` gives the steps published and any
+subscriber with incompatible QoS (WARN, with the fix).
 """
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
 
 from ext_observer.conversions import quaternion_stamped, vector_stamped
 from ext_observer.core import SimulatedGyro
-from ext_observer.node_common import (NodeParameters, ParameterError,
-                                      ParameterSpec, run_node)
+from ext_observer.node_common import (diagnostic_array, key_values, NodeParameters,
+                                      ParameterError, ParameterSpec, QosWatch, run_node)
 
-__all__ = ['GYRO_PARAMETERS', 'GyroNode', 'main']
+__all__ = ['GYRO_PARAMETERS', 'GyroNode', 'STATUS_SUFFIX', 'main']
+
+# The status is named '<node name>: outputs'.
+STATUS_SUFFIX = ': outputs'
 
 INT32_MAX = 2 ** 31 - 1
 
@@ -37,6 +48,15 @@ GYRO_PARAMETERS = (
     ParameterSpec('measurement_noise_std', 0.1,
                   'σ of the measurement noise ν_k, rad (the paper: 0.1).',
                   (0.0, 10.0), read_only=True),
+    ParameterSpec('gyro_noise_std', 0.0,
+                  'σ_g of the noise added to each reported increment, rad per step per '
+                  'axis (0: exact increments, the paper).', (0.0, 10.0), read_only=True),
+    ParameterSpec('gyro_bias', [0.0, 0.0, 0.0],
+                  'Initial bias of the reported increment as x, y, z, rad per step.',
+                  read_only=True, constraints='3 finite numbers.'),
+    ParameterSpec('bias_walk_std', 0.0,
+                  'Random-walk step of the bias, rad per step per step (0: constant '
+                  'bias).', (0.0, 10.0), read_only=True),
     ParameterSpec('seed', -1, 'Seed of the random stream; -1 = fresh from the OS.',
                   (-1, INT32_MAX), read_only=True),
     ParameterSpec('initial_attitude', Parameter.Type.DOUBLE_ARRAY,
@@ -51,6 +71,8 @@ GYRO_PARAMETERS = (
                   'frame_id of the increment (a rotation of the body frame).'),
     ParameterSpec('queue_depth', 10, 'History depth of the publishers (reliable, '
                   'keep last).', (1, 10000), read_only=True),
+    ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.', (0.01, 3600.0),
+                  read_only=True),
 )
 
 
@@ -81,6 +103,9 @@ def gyro_settings(values):
     elif len(initial) != 4:
         raise ValueError('initial_attitude must be empty or have 4 elements '
                          f'(w, x, y, z), got {len(initial)}')
+    if len(values['gyro_bias']) != 3:
+        raise ValueError('gyro_bias must have 3 elements (x, y, z), '
+                         f'got {len(values["gyro_bias"])}')
     if not values['rate_hz'] > 0.0:
         raise ValueError(f'rate_hz must be positive, got {values["rate_hz"]}')
     # The core's constructor is the reference for what it accepts.
@@ -96,7 +121,10 @@ def _make_gyro(settings):
     return SimulatedGyro(increment_max=settings['increment_max'],
                          noise_std=settings['measurement_noise_std'],
                          seed=None if seed < 0 else seed,
-                         initial_attitude=settings['initial_attitude'])
+                         initial_attitude=settings['initial_attitude'],
+                         gyro_noise_std=settings['gyro_noise_std'],
+                         gyro_bias=settings['gyro_bias'],
+                         bias_walk_std=settings['bias_walk_std'])
 
 
 class GyroNode(Node):
@@ -136,22 +164,38 @@ class GyroNode(Node):
             raise
         settings = self.parameters.settings
         self.gyro = _make_gyro(settings)
-        depth = settings['queue_depth']
+        qos = QoSProfile(depth=settings['queue_depth'])
+        self.qos = QosWatch(self)
         self.truth_publisher = self.create_publisher(
-            QuaternionStamped, 'attitude/ground_truth', depth)
+            QuaternionStamped, 'attitude/ground_truth', qos,
+            event_callbacks=self.qos.publisher('attitude/ground_truth', qos))
         self.measurement_publisher = self.create_publisher(
-            QuaternionStamped, 'attitude/measurement', depth)
+            QuaternionStamped, 'attitude/measurement', qos,
+            event_callbacks=self.qos.publisher('attitude/measurement', qos))
         self.increment_publisher = self.create_publisher(
-            Vector3Stamped, 'gyro/increment', depth)
+            Vector3Stamped, 'gyro/increment', qos,
+            event_callbacks=self.qos.publisher('gyro/increment', qos))
+        diagnostics_qos = QoSProfile(depth=10)
+        self.diagnostics_publisher = self.create_publisher(
+            DiagnosticArray, '/diagnostics', diagnostics_qos,
+            event_callbacks=self.qos.publisher('/diagnostics', diagnostics_qos))
         self.steps_published = 0
         self.finished = False
         self._anchor = None
         self._last_stamp = None
         self._timer = self.create_timer(1.0 / settings['rate_hz'], self.timer_callback)
+        self.diagnostic_timer = self.create_timer(
+            settings['diagnostic_period'], self.diagnostic_callback)
+        errors = ''
+        if settings['gyro_noise_std'] or any(settings['gyro_bias']) \
+                or settings['bias_walk_std']:
+            errors = (f', gyro noise {settings["gyro_noise_std"]:g}, bias '
+                      f'{list(settings["gyro_bias"])}, bias walk '
+                      f'{settings["bias_walk_std"]:g} (rad per step)')
         self.get_logger().info(
             f'publishing at {settings["rate_hz"]:g} Hz, increments up to '
             f'{settings["increment_max"]:g} rad per axis, measurement noise '
-            f'{settings["measurement_noise_std"]:g}'
+            f'{settings["measurement_noise_std"]:g}' + errors
             + (f', {settings["steps"]} steps' if settings['steps'] else ''))
 
     def _stamp(self):
@@ -185,6 +229,37 @@ class GyroNode(Node):
             self.finished = True
             self._timer.cancel()
             self.get_logger().info(f'published {self.steps_published} steps; idle')
+
+    def status(self):
+        """
+        Return the current ``DiagnosticStatus`` of the outputs.
+
+        Returns
+        -------
+        status : diagnostic_msgs.msg.DiagnosticStatus
+            WARN while a subscriber with incompatible QoS is present, else OK.
+
+        """
+        self.qos.refresh()
+        settings = self.parameters.settings
+        status = DiagnosticStatus(name=f'{self.get_name()}{STATUS_SUFFIX}',
+                                  hardware_id=self.get_fully_qualified_name())
+        if self.qos.problems:
+            status.level = DiagnosticStatus.WARN
+            status.message = 'incompatible QoS on ' + ', '.join(sorted(self.qos.problems))
+        else:
+            status.level = DiagnosticStatus.OK
+            status.message = (f'{self.steps_published} steps published'
+                              + (', finished' if self.finished else ''))
+        status.values = key_values(
+            [('steps_published', self.steps_published), ('finished', self.finished),
+             ('rate_hz', settings['rate_hz'])] + self.qos.key_values())
+        return status
+
+    def diagnostic_callback(self):
+        """Publish :meth:`status` on ``/diagnostics``."""
+        self.diagnostics_publisher.publish(
+            diagnostic_array(self.get_clock().now().to_msg(), [self.status()]))
 
     def _apply_parameters(self, settings, changed):
         if 'rate_hz' in changed and not self.finished:

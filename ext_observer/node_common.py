@@ -23,16 +23,21 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
                                 ParameterDescriptor, SetParametersResult)
 import rclpy
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import (InvalidParameterTypeException,
                               InvalidParameterValueException)
 from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
+from rclpy.qos import (DurabilityPolicy, qos_check_compatible, qos_policy_name_from_kind,
+                       QoSCompatibility, ReliabilityPolicy)
 
 __all__ = [
     'LEVEL_NAMES',
+    'CounterDeltas',
     'ParameterError',
     'ParameterSpec',
     'NodeParameters',
+    'QosWatch',
     'diagnostic_array',
     'key_values',
     'markdown_table',
@@ -275,6 +280,145 @@ def diagnostic_array(stamp, statuses):
     array.header.stamp = stamp
     array.status = list(statuses)
     return array
+
+
+class CounterDeltas:
+    """
+    What rose since the last diagnostic period.
+
+    ``deltas(counters)`` returns ``{name: increase}`` for the counters that
+    rose since the previous call (all of them count from 0 at the first call).
+    """
+
+    def __init__(self):
+        self._reported = {}
+
+    def deltas(self, counters):
+        """Return the counters of ``counters`` that rose, with their increase."""
+        rose = {name: value - self._reported.get(name, 0)
+                for name, value in counters.items()
+                if value != self._reported.get(name, 0)}
+        self._reported = dict(counters)
+        return rose
+
+
+def _endpoint_name(info):
+    namespace = info.node_namespace.rstrip('/')
+    return f'{namespace}/{info.node_name}'
+
+
+def _policy_fix(role, ours, theirs, hint):
+    """Return ``(problem, fix)`` in words for two incompatible profiles."""
+    publisher, subscription = (ours, theirs) if role == 'publisher' else (theirs, ours)
+    peer = 'subscription' if role == 'publisher' else 'publisher'
+    if (publisher.reliability == ReliabilityPolicy.BEST_EFFORT
+            and subscription.reliability == ReliabilityPolicy.RELIABLE):
+        problem = 'publisher is BEST_EFFORT, subscription is RELIABLE'
+        fix = ('publish with RELIABLE reliability' if role == 'subscription'
+               else 'subscribe with BEST_EFFORT reliability')
+    elif (publisher.durability == DurabilityPolicy.VOLATILE
+          and subscription.durability == DurabilityPolicy.TRANSIENT_LOCAL):
+        problem = 'publisher is VOLATILE, subscription is TRANSIENT_LOCAL'
+        fix = ('publish with TRANSIENT_LOCAL durability' if role == 'subscription'
+               else 'subscribe with VOLATILE durability')
+    else:
+        _, reason = qos_check_compatible(publisher, subscription)
+        problem = reason.strip().rstrip(';') or 'incompatible QoS'
+        fix = f'make the {peer}\'s QoS match this {role}\'s'
+    if hint:
+        fix += f', or {hint}'
+    return problem, fix
+
+
+class QosWatch:
+    """
+    Incompatible QoS on a node's endpoints, from the rclpy QoS event callbacks.
+
+    Pass :meth:`subscription` / :meth:`publisher` as ``event_callbacks`` when
+    creating each endpoint. An ``incompatible_qos`` event (a peer that will
+    never be matched) is logged with the fix named, counted, and kept in
+    :attr:`problems` for the diagnostics; :meth:`refresh` (each diagnostic
+    period) looks at the graph again and forgets a problem once no
+    incompatible peer remains on that topic.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+
+    Attributes
+    ----------
+    events : int
+        Incompatible peers reported so far.
+    problems : dict
+        ``topic -> text`` (who, what, the fix) for every topic that has an
+        incompatible peer now.
+
+    """
+
+    def __init__(self, node):
+        self._node = node
+        self._endpoints = {}
+        self.events = 0
+        self.problems = {}
+
+    def subscription(self, topic, qos, hint=''):
+        """Return ``SubscriptionEventCallbacks`` for a subscription on ``topic``."""
+        name = self._node.resolve_topic_name(topic)
+        self._endpoints[name] = ('subscription', qos, hint)
+        return SubscriptionEventCallbacks(
+            incompatible_qos=lambda event: self._incompatible(name, event))
+
+    def publisher(self, topic, qos, hint=''):
+        """Return ``PublisherEventCallbacks`` for a publisher on ``topic``."""
+        name = self._node.resolve_topic_name(topic)
+        self._endpoints[name] = ('publisher', qos, hint)
+        return PublisherEventCallbacks(
+            incompatible_qos=lambda event: self._incompatible(name, event))
+
+    def _incompatible(self, topic, event):
+        self.events += max(1, event.total_count_change)
+        text = self._describe(topic)
+        if text is None:
+            role = self._endpoints[topic][0]
+            peer = 'subscription' if role == 'publisher' else 'publisher'
+            policy = qos_policy_name_from_kind(event.last_policy_kind)
+            text = (f'a {peer} on {topic} has an incompatible {policy} policy; '
+                    f'match the QoS of this {role}')
+        self.problems[topic] = text
+        self._node.get_logger().warning(f'incompatible QoS: {text}')
+
+    def _describe(self, topic):
+        role, ours, hint = self._endpoints[topic]
+        if role == 'subscription':
+            peers = self._node.get_publishers_info_by_topic(topic)
+        else:
+            peers = self._node.get_subscriptions_info_by_topic(topic)
+        texts = []
+        for info in peers:
+            theirs = info.qos_profile
+            compatibility, _ = (qos_check_compatible(theirs, ours) if role == 'subscription'
+                                else qos_check_compatible(ours, theirs))
+            if compatibility != QoSCompatibility.ERROR:
+                continue
+            problem, fix = _policy_fix(role, ours, theirs, hint)
+            peer = 'subscription' if role == 'publisher' else 'publisher'
+            texts.append(f'{peer} {_endpoint_name(info)} on {topic}: {problem}: {fix}')
+        return '; '.join(texts) if texts else None
+
+    def refresh(self):
+        """Check the topics with problems again; keep only the current ones."""
+        for topic in list(self.problems):
+            text = self._describe(topic)
+            if text is None:
+                del self.problems[topic]
+            else:
+                self.problems[topic] = text
+
+    def key_values(self):
+        """Return the diagnostic pairs: the event count and one per problem topic."""
+        return ([('qos_incompatible_events', self.events)]
+                + [(f'qos_incompatible:{topic}', text)
+                   for topic, text in sorted(self.problems.items())])
 
 
 LEVEL_NAMES = {

@@ -6,59 +6,77 @@ Inputs, step k: ``gyro/increment`` (``Vector3Stamped``, ``θ_k`` in rad) and
 ``t_k``. Outputs: ``attitude_estimate`` (``QuaternionStamped``, the ambient
 ``q̂_{k+1}``, not normalized) and ``attitude_estimate/unit`` (the same,
 normalized), both stamped ``t_{k+1}``; ``/diagnostics`` every
-``diagnostic_period``.
+``diagnostic_period``; the service ``~/reset`` (``std_srvs/Trigger``).
 
-Pairing
-    Increments and measurements are paired by equal stamps and processed in
-    stamp order. An increment waits at most ``measurement_timeout`` for its
-    measurement; then, or as soon as a newer measurement shows that its own
-    will not come (a publisher sends in stamp order), the step propagates
-    with the increment only. A measurement without an increment waits until
-    a step newer than it is processed (then it is dropped as unpaired) or
-    until ``queue_depth`` newer measurements wait behind it.
+Inputs
+    Every input goes through :class:`~ext_observer.pairing.StepPairer`:
+    validated (``max_increment``, ``measurement_norm_tolerance``), checked
+    for zero, duplicate, stale and jumping stamps, paired by equal stamps
+    with a bounded wait (``measurement_timeout``) in bounded buffers
+    (``queue_depth``), and counted: received = processed + dropped (by
+    reason) + waiting, in ``/diagnostics``.
 
-Stamps
-    An input whose stamp is not newer than the last processed step is dropped:
-    ``duplicate`` if that step already used one like it, ``stale`` otherwise
-    (older, or a measurement arriving after its step went on without it). So
-    is a second input with the stamp of one still waiting (``duplicate``).
-    Every drop is counted by reason and reported in ``/diagnostics``.
+Faults
+    A stamp older than the last step by more than ``backward_jump_threshold``
+    (a bag that restarts) restarts the time line and resets the observer; so
+    does a backward jump of the node's clock (rclpy's clock jump callback:
+    with ``use_sim_time``, ``/clock`` going back) or a switch of its time
+    source. A step more than ``forward_gap_threshold`` after the previous one
+    resets the observer or just propagates (``forward_gap_action``). After
+    every step :class:`~ext_observer.guard.GuardedObserver` checks the
+    estimate (``divergence_max_residual``, ``divergence_max_innovation``)
+    and reinitializes it from the latest valid measurement when it diverged.
+    Nothing non-finite is ever published. Every reset is counted by cause
+    and logged (throttled).
 
 ``t_{k+1}``
     The increment covers ``[t_k, t_{k+1})`` but carries only ``t_k``. The
     estimate is published at once, stamped ``t_k + Δ`` with ``Δ`` =
     ``step_period`` when set, else the interval between the two last
-    processed steps; before two steps have been seen (and with
-    ``step_period`` = 0), the first estimate is stamped ``t_k``.
+    processed steps (not across a forward gap); before two steps have been
+    seen (and with ``step_period`` = 0), the first estimate is stamped
+    ``t_k``.
 """
+
+import math
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-import numpy as np
+from rclpy.clock import ClockChange, JumpThreshold
+from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_srvs.srv import Trigger
 
 from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
-                                      quaternion_stamped, vector_from_msg)
-from ext_observer.core import (certified_alpha_max, GAIN_MODES, norm, normalize,
-                               PAPER_ALPHA, PAPER_GAIN, SingleObserver, VARIANTS)
-from ext_observer.node_common import (diagnostic_array, key_values, NodeParameters,
-                                      ParameterError, ParameterSpec, run_node)
+                                      quaternion_stamped, STAMP_MAX, vector_from_msg)
+from ext_observer.core import (certified_alpha_max, GAIN_MODES, PAPER_ALPHA, PAPER_GAIN,
+                               SingleObserver, VARIANTS)
+from ext_observer.guard import GUARD_REASONS, GuardedObserver
+from ext_observer.node_common import (CounterDeltas, diagnostic_array, key_values,
+                                      NodeParameters, ParameterError, ParameterSpec,
+                                      QosWatch, run_node)
+from ext_observer.pairing import BACKWARD_JUMP, DROP_REASONS, KINDS, StepPairer
 
-__all__ = ['CERTIFIED_EPSILON', 'DROP_REASONS', 'OBSERVER_PARAMETERS',
-           'ObserverNode', 'main', 'observer_settings']
+__all__ = ['CERTIFIED_EPSILON', 'DROP_REASONS', 'GUARD_REASONS', 'OBSERVER_PARAMETERS',
+           'RESET_CAUSES', 'STATUS_SUFFIX', 'ObserverNode', 'main', 'observer_settings']
 
 # The sublevel V = (q̄q − 1)² ≤ ε of Theorem 1 that certifies `alpha`.
 CERTIFIED_EPSILON = 0.5
 
-# Why an input was dropped; every key is always reported in /diagnostics.
-DROP_REASONS = (
-    'stale_increment',
-    'duplicate_increment',
-    'stale_measurement',
-    'duplicate_measurement',
-    'unpaired_measurement',
-    'step_failed',
-)
+# Why the observer restarted from its initial estimate.
+RESET_CAUSES = ('backward_jump', 'clock_jump', 'forward_gap', 'service')
+
+FORWARD_GAP_ACTIONS = ('propagate', 'reset')
+RELIABILITIES = {'reliable': ReliabilityPolicy.RELIABLE,
+                 'best_effort': ReliabilityPolicy.BEST_EFFORT}
+
+# The status is named '<node name>: inputs'.
+STATUS_SUFFIX = ': inputs'
+
+SECOND = 1_000_000_000
+# Faults are logged at most this often per kind, s.
+LOG_THROTTLE = 5.0
 
 OBSERVER_PARAMETERS = (
     ParameterSpec('variant', 'extended',
@@ -78,13 +96,18 @@ OBSERVER_PARAMETERS = (
                   "'constant' (L), 'rotating' (κ exp(θ/2)) or 'scheduled' "
                   '(running average, then κ_min exp(θ/2)).',
                   constraints=f'One of {", ".join(GAIN_MODES)}.'),
-    ParameterSpec('kappa', 0.5, 'κ of the rotating mode.', (0.0, 1.0),
+    ParameterSpec('kappa', 0.05, 'κ of the rotating mode.', (0.0, 1.0),
                   constraints='In (0, 1].'),
     ParameterSpec('kappa_min', 0.02, 'Floor κ_min of the scheduled mode.', (0.0, 1.0),
                   constraints='In (0, 1].'),
+    ParameterSpec('align_sign', False,
+                  'Flip each measurement y to the hemisphere of the estimate (y and −y '
+                  'are the same rotation); for sources that publish w ≥ 0 or flip sign.'),
     ParameterSpec('initial_estimate', [1.0, 0.0, 0.0, 0.0],
-                  'Initial estimate q̂_0 as w, x, y, z (ambient, need not be unit).',
-                  read_only=True, constraints='4 finite numbers, not all zero.'),
+                  'Initial estimate q̂_0 as w, x, y, z (ambient, need not be unit); '
+                  'also the estimate after a reset.',
+                  read_only=True, constraints='4 finite numbers, not all zero, with a '
+                  'residual |q̂̄q̂ − 1| at most divergence_max_residual.'),
     ParameterSpec('frame_id', 'world', 'frame_id of the published estimates.'),
     ParameterSpec('measurement_timeout', 0.1,
                   'Longest wait of an increment for its measurement, s; then the step '
@@ -92,9 +115,39 @@ OBSERVER_PARAMETERS = (
     ParameterSpec('step_period', 0.0,
                   't_{k+1} − t_k used to stamp the estimate, s; 0 = the interval '
                   'between the two last steps.', (0.0, 3600.0)),
+    ParameterSpec('max_increment', 20.0,
+                  'Largest accepted increment angle ‖θ_k‖, rad; larger increments are '
+                  'dropped (the paper\'s reach ‖θ‖ ≈ 17.3).', (0.0, 1000.0),
+                  constraints='Positive.'),
+    ParameterSpec('measurement_norm_tolerance', 0.1,
+                  'Largest accepted |‖y_k‖ − 1|; within it the measurement is '
+                  'normalized, beyond it dropped.', (0.0, 1.0)),
+    ParameterSpec('backward_jump_threshold', 1.0,
+                  'An input stamp older than the last step by more than this, or a '
+                  'backward jump of the node clock by more than this, restarts the '
+                  'time line and resets the observer, s; smaller: stale, dropped.',
+                  (0.001, 3600.0)),
+    ParameterSpec('forward_gap_threshold', 1.0,
+                  'A step more than this after the previous one is a forward gap, s.',
+                  (0.001, 3600.0)),
+    ParameterSpec('forward_gap_action', 'propagate',
+                  "At a forward gap: 'propagate' (go on from the current estimate) or "
+                  "'reset' (restart from initial_estimate).",
+                  constraints=f'One of {", ".join(FORWARD_GAP_ACTIONS)}.'),
+    ParameterSpec('divergence_max_residual', 3.0,
+                  'Divergence guard: reinitialize from the latest measurement when the '
+                  'residual |q̂̄q̂ − 1| exceeds this after a step.', (0.01, 1000.0)),
+    ParameterSpec('divergence_max_innovation', 3.0,
+                  'Divergence guard: reinitialize from the latest measurement when the '
+                  'innovation ‖y − q̂‖ exceeds this (on S³ it is at most 2).',
+                  (0.01, 1000.0)),
+    ParameterSpec('input_reliability', 'reliable',
+                  "Reliability of the two subscriptions: 'reliable' or 'best_effort' "
+                  '(which also accepts BEST_EFFORT publishers, e.g. sensor drivers).',
+                  read_only=True, constraints=f'One of {", ".join(RELIABILITIES)}.'),
     ParameterSpec('queue_depth', 10,
-                  'History depth of every subscription and publisher (reliable, keep '
-                  'last), and the most inputs waiting for their pair.', (1, 10000),
+                  'History depth of every subscription and publisher (keep last), and '
+                  'the most inputs of each kind waiting for their pair.', (1, 10000),
                   read_only=True),
     ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.', (0.01, 3600.0),
                   read_only=True),
@@ -129,10 +182,22 @@ def observer_settings(values):
                 f'alpha = {alpha:g} is outside the range certified by Theorem 1, '
                 f'(0, {alpha_max:.4g}) for epsilon = {CERTIFIED_EPSILON}; set '
                 'allow_uncertified_alpha to true to use it anyway')
+    for name, choices in (('forward_gap_action', FORWARD_GAP_ACTIONS),
+                          ('input_reliability', tuple(RELIABILITIES))):
+        if values[name] not in choices:
+            raise ValueError(f'{name} must be one of {choices}, got {values[name]!r}')
+    if not values['max_increment'] > 0.0:
+        raise ValueError(f'max_increment must be positive, got {values["max_increment"]}')
     try:
-        _make_observer(values)
+        observer = _make_observer(values)
     except ValueError as error:
         raise ValueError(f'the observer refuses these parameters: {error}') from None
+    residual = abs(sum(v * v for v in observer.state) - 1.0)
+    if residual > values['divergence_max_residual']:
+        raise ValueError(
+            f'initial_estimate has |q̂̄q̂ − 1| = {residual:.4g}, above '
+            f'divergence_max_residual ({values["divergence_max_residual"]:g}): the guard '
+            'would reinitialize it at the first step')
     return dict(values)
 
 
@@ -141,7 +206,15 @@ def _make_observer(settings, initial=None):
         variant=settings['variant'], alpha=settings['alpha'], gain=settings['gain'],
         initial=settings['initial_estimate'] if initial is None else initial,
         gain_mode=settings['gain_mode'], kappa=settings['kappa'],
-        kappa_min=settings['kappa_min'])
+        kappa_min=settings['kappa_min'], align_sign=settings['align_sign'])
+
+
+def _pairing_settings(settings):
+    return dict(timeout=round(settings['measurement_timeout'] * SECOND),
+                max_increment=settings['max_increment'],
+                norm_tolerance=settings['measurement_norm_tolerance'],
+                backward_jump=round(settings['backward_jump_threshold'] * SECOND),
+                forward_gap=round(settings['forward_gap_threshold'] * SECOND))
 
 
 class ObserverNode(Node):
@@ -158,12 +231,15 @@ class ObserverNode(Node):
 
     Attributes
     ----------
-    observer : ext_observer.core.SingleObserver
-    drops : dict
-        Inputs dropped, by reason (:data:`DROP_REASONS`).
-    counts : dict
-        ``increments``, ``measurements`` received; ``steps_corrected``,
-        ``steps_propagated`` processed.
+    guarded : ext_observer.guard.GuardedObserver
+        The core's observer with the divergence guard.
+    pairer : ext_observer.pairing.StepPairer
+        Validation, stamps, pairing and the input counters.
+    resets : dict
+        Restarts from the initial estimate, by cause (:data:`RESET_CAUSES`).
+    reinitializations : dict
+        Restarts from the latest measurement by the divergence guard, by
+        reason (:data:`~ext_observer.guard.GUARD_REASONS`).
 
     Raises
     ------
@@ -176,6 +252,7 @@ class ObserverNode(Node):
 
     def __init__(self, node_name=NODE_NAME, **kwargs):
         super().__init__(node_name, **kwargs)
+        self._jump_handle = None
         try:
             self.parameters = NodeParameters(self, OBSERVER_PARAMETERS,
                                              observer_settings, self._apply_parameters)
@@ -183,121 +260,197 @@ class ObserverNode(Node):
             self.destroy_node()
             raise
         settings = self.parameters.settings
-        self.observer = _make_observer(settings)
-        self.drops = dict.fromkeys(DROP_REASONS, 0)
-        self.counts = dict.fromkeys(
-            ('increments', 'measurements', 'steps_corrected', 'steps_propagated'), 0)
-        self._drops_reported = dict(self.drops)
-        # stamp (ns) -> (increment, deadline in ns of the node clock)
-        self._increments = {}
-        # stamp (ns) -> measurement
-        self._measurements = {}
-        self._last_stamp = None
-        self._last_interval = None
-        self._last_corrected = False
         depth = settings['queue_depth']
+        self.guarded = GuardedObserver(_make_observer(settings),
+                                       settings['divergence_max_residual'],
+                                       settings['divergence_max_innovation'])
+        self.pairer = StepPairer(depth=depth, **_pairing_settings(settings))
+        self.resets = dict.fromkeys(RESET_CAUSES, 0)
+        self.reinitializations = dict.fromkeys(GUARD_REASONS, 0)
+        self._deltas = CounterDeltas()
+        self._last_interval = None
+        self.qos = QosWatch(self)
+        output_qos = QoSProfile(depth=depth)
+        input_qos = QoSProfile(depth=depth,
+                               reliability=RELIABILITIES[settings['input_reliability']])
+        hint = ("set this node's input_reliability to best_effort"
+                if settings['input_reliability'] == 'reliable' else '')
         self.estimate_publisher = self.create_publisher(
-            QuaternionStamped, 'attitude_estimate', depth)
+            QuaternionStamped, 'attitude_estimate', output_qos,
+            event_callbacks=self.qos.publisher('attitude_estimate', output_qos))
         self.unit_publisher = self.create_publisher(
-            QuaternionStamped, 'attitude_estimate/unit', depth)
+            QuaternionStamped, 'attitude_estimate/unit', output_qos,
+            event_callbacks=self.qos.publisher('attitude_estimate/unit', output_qos))
+        diagnostics_qos = QoSProfile(depth=10)
         self.diagnostics_publisher = self.create_publisher(
-            DiagnosticArray, '/diagnostics', 10)
+            DiagnosticArray, '/diagnostics', diagnostics_qos,
+            event_callbacks=self.qos.publisher('/diagnostics', diagnostics_qos))
         self.increment_subscription = self.create_subscription(
-            Vector3Stamped, 'gyro/increment', self.increment_callback, depth)
+            Vector3Stamped, 'gyro/increment', self.increment_callback, input_qos,
+            event_callbacks=self.qos.subscription('gyro/increment', input_qos, hint))
         self.measurement_subscription = self.create_subscription(
-            QuaternionStamped, 'attitude/measurement', self.measurement_callback, depth)
+            QuaternionStamped, 'attitude/measurement', self.measurement_callback, input_qos,
+            event_callbacks=self.qos.subscription('attitude/measurement', input_qos, hint))
+        self.reset_service = self.create_service(Trigger, '~/reset', self.reset_callback)
+        self._watch_clock(settings)
         self._timeout_timer = None
         self._start_timeout_timer(settings)
         self.diagnostic_timer = self.create_timer(
             settings['diagnostic_period'], self.diagnostic_callback)
         self.get_logger().info(
             f'{settings["variant"]} observer, alpha {settings["alpha"]:g}, '
-            f'{settings["gain_mode"]} gain {settings["gain"]}')
+            f'{settings["gain_mode"]} gain {self._gain_text(settings)}')
+
+    @property
+    def observer(self):
+        """The core's observer (:class:`~ext_observer.core.SingleObserver`)."""
+        return self.guarded.observer
+
+    @property
+    def drops(self):
+        """Inputs dropped, by reason (:data:`DROP_REASONS`)."""
+        return self.pairer.drops
+
+    @property
+    def counts(self):
+        """``increments``, ``measurements`` received; ``steps_corrected``, ``steps_propagated``."""
+        received, processed = self.pairer.received, self.pairer.processed
+        return {'increments': received['increment'],
+                'measurements': received['measurement'],
+                'steps_corrected': processed['measurement'],
+                'steps_propagated': processed['increment'] - processed['measurement']}
+
+    @staticmethod
+    def _gain_text(settings):
+        mode = settings['gain_mode']
+        if mode == 'constant':
+            return f'L = {settings["gain"]}'
+        if mode == 'rotating':
+            return f'kappa {settings["kappa"]:g}'
+        return f'kappa_min {settings["kappa_min"]:g}'
+
+    def destroy_node(self):
+        """Unregister the clock jump callback, then destroy the node."""
+        if getattr(self, '_jump_handle', None) is not None:
+            self._jump_handle.unregister()
+            self._jump_handle = None
+        super().destroy_node()
 
     # Inputs ---------------------------------------------------------------
 
     def increment_callback(self, msg):
-        """Queue ``θ_k`` and process every step that is ready."""
-        self.counts['increments'] += 1
+        """Take ``θ_k`` and process every step that is ready."""
+        now = self.get_clock().now().nanoseconds
         stamp = nanoseconds_from_stamp(msg.header.stamp)
-        if self._refuse(stamp, self._increments, 'increment'):
-            return
-        deadline = (self.get_clock().now().nanoseconds
-                    + round(self.parameters.settings['measurement_timeout'] * 1e9))
-        self._increments[stamp] = (vector_from_msg(msg.vector), deadline)
-        self._process()
+        if self.pairer.add_increment(stamp, vector_from_msg(msg.vector), now) == BACKWARD_JUMP:
+            self._backward_jump(stamp)
+        self._process(now)
 
     def measurement_callback(self, msg):
-        """Queue ``y_k`` and process every step that is ready."""
-        self.counts['measurements'] += 1
+        """Take ``y_k`` and process every step that is ready."""
+        now = self.get_clock().now().nanoseconds
         stamp = nanoseconds_from_stamp(msg.header.stamp)
-        if self._refuse(stamp, self._measurements, 'measurement'):
-            return
-        self._measurements[stamp] = quaternion_from_msg(msg.quaternion)
-        depth = self.parameters.settings['queue_depth']
-        while len(self._measurements) > depth:
-            del self._measurements[min(self._measurements)]
-            self.drops['unpaired_measurement'] += 1
-        self._process()
-
-    def _refuse(self, stamp, waiting, kind):
-        # A measurement for the last step, which went on without one, came
-        # too late: stale, not a duplicate.
-        used = kind == 'increment' or self._last_corrected
-        if stamp in waiting or (stamp == self._last_stamp and used):
-            self.drops[f'duplicate_{kind}'] += 1
-            return True
-        if self._last_stamp is not None and stamp <= self._last_stamp:
-            self.drops[f'stale_{kind}'] += 1
-            return True
-        return False
+        if self.pairer.add_measurement(stamp, quaternion_from_msg(msg.quaternion)) \
+                == BACKWARD_JUMP:
+            self._backward_jump(stamp)
+        self._process(now)
 
     def timeout_callback(self):
         """Propagate the steps whose measurement did not come in time."""
-        self._process()
+        self._process(self.get_clock().now().nanoseconds)
+
+    def _backward_jump(self, stamp):
+        self._reset_observer('backward_jump')
+        self.get_logger().warning(
+            f'input stamp {stamp * 1e-9:.9f} s is more than '
+            f'{self.parameters.settings["backward_jump_threshold"]:g} s older than the last '
+            'step: the time line restarted (a bag that loops?); observer reset',
+            throttle_duration_sec=LOG_THROTTLE)
+
+    def clock_jump_callback(self, jump):
+        """Reset at a backward jump of the node's clock or a switch of its time source."""
+        change = jump.clock_change
+        if change in (ClockChange.ROS_TIME_ACTIVATED, ClockChange.ROS_TIME_DEACTIVATED):
+            what = ('the clock switched to ROS time (/clock)'
+                    if change == ClockChange.ROS_TIME_ACTIVATED
+                    else 'the clock switched back to system time')
+        elif jump.delta.nanoseconds < 0:
+            what = f'the clock jumped back by {-jump.delta.nanoseconds * 1e-9:.3f} s'
+        else:
+            return
+        discarded = self.pairer.restart()
+        self._reset_observer('clock_jump')
+        self.get_logger().warning(
+            f'{what}: observer reset, {discarded} waiting inputs discarded',
+            throttle_duration_sec=LOG_THROTTLE)
+
+    def _watch_clock(self, settings):
+        # rcl calls jump callbacks when ROS time (use_sim_time) is set or
+        # switched on or off; system time never jumps for it, so the stamps
+        # are checked too (StepPairer).
+        if self._jump_handle is not None:
+            self._jump_handle.unregister()
+        threshold = JumpThreshold(
+            min_forward=None,
+            min_backward=Duration(nanoseconds=-round(
+                settings['backward_jump_threshold'] * SECOND)),
+            on_clock_change=True)
+        self._jump_handle = self.get_clock().create_jump_callback(
+            threshold, post_callback=self.clock_jump_callback)
+
+    def reset_callback(self, request, response):
+        """Service ``~/reset``: restart the observer from its initial estimate."""
+        self._reset_observer('service')
+        response.success = True
+        response.message = (f'observer reset to the initial estimate '
+                            f'{list(self.observer.state)}')
+        self.get_logger().info(response.message)
+        return response
+
+    def _reset_observer(self, cause):
+        self.guarded.reset()
+        self.resets[cause] += 1
 
     # Steps ----------------------------------------------------------------
 
-    def _process(self):
-        now = self.get_clock().now().nanoseconds
-        while self._increments:
-            stamp = min(self._increments)
-            increment, deadline = self._increments[stamp]
-            measurement = self._measurements.pop(stamp, None)
-            if measurement is None:
-                newer = any(t > stamp for t in self._measurements)
-                if not newer and now < deadline:
-                    return
-            del self._increments[stamp]
-            self._step(stamp, increment, measurement)
+    def _process(self, now):
+        for step in self.pairer.pop_ready(now):
+            self._step(step)
 
-    def _step(self, stamp, increment, measurement):
-        try:
-            state = self.observer.step(increment, measurement)
-            unit = normalize(np.asarray(state))
-        except ValueError as error:
-            self.drops['step_failed'] += 1
-            self.get_logger().warning(f'step at stamp {stamp} ns failed: {error}',
-                                      throttle_duration_sec=5.0)
-            return
-        self.counts['steps_corrected' if measurement is not None
-                    else 'steps_propagated'] += 1
-        if self._last_stamp is not None:
-            self._last_interval = stamp - self._last_stamp
-        self._last_stamp = stamp
-        self._last_corrected = measurement is not None
-        for old in [t for t in self._measurements if t <= stamp]:
-            del self._measurements[old]
-            self.drops['unpaired_measurement'] += 1
-        stamp_next = stamp + self._interval()
-        frame_id = self.parameters.settings['frame_id']
+    def _step(self, step):
+        settings = self.parameters.settings
+        if step.gap:
+            gap = (step.stamp - step.previous) * 1e-9
+            if settings['forward_gap_action'] == 'reset':
+                self._reset_observer('forward_gap')
+            self.get_logger().warning(
+                f'{gap:.3f} s since the previous step: '
+                + ('observer reset' if settings['forward_gap_action'] == 'reset'
+                   else 'propagating'), throttle_duration_sec=LOG_THROTTLE)
+        elif step.previous is not None:
+            self._last_interval = step.stamp - step.previous
+        state, reason = self.guarded.step(step.increment, step.measurement)
+        if reason is not None:
+            self.reinitializations[reason] += 1
+            self.get_logger().warning(
+                f'divergence guard ({reason}) at stamp {step.stamp} ns: observer '
+                'reinitialized from the latest measurement', throttle_duration_sec=LOG_THROTTLE)
+        if step.early:
+            self.get_logger().warning(
+                f'{settings["queue_depth"]} increments waiting: stepping without '
+                'waiting for measurements', throttle_duration_sec=LOG_THROTTLE)
+        n = math.sqrt(state[0] * state[0] + state[1] * state[1]
+                      + state[2] * state[2] + state[3] * state[3])
+        unit = (state[0] / n, state[1] / n, state[2] / n, state[3] / n)
+        stamp_next = min(step.stamp + self._interval(), STAMP_MAX)
+        frame_id = settings['frame_id']
         self.estimate_publisher.publish(quaternion_stamped(state, stamp_next, frame_id))
         self.unit_publisher.publish(quaternion_stamped(unit, stamp_next, frame_id))
 
     def _interval(self):
         period = self.parameters.settings['step_period']
         if period > 0.0:
-            return round(period * 1e9)
+            return round(period * SECOND)
         return self._last_interval or 0
 
     # Parameters -----------------------------------------------------------
@@ -313,50 +466,104 @@ class ObserverNode(Node):
         self._timeout_timer = self.create_timer(period, self.timeout_callback)
 
     def _apply_parameters(self, settings, changed):
-        structural = {'variant', 'alpha', 'gain', 'gain_mode', 'kappa', 'kappa_min'}
+        structural = {'variant', 'alpha', 'gain', 'gain_mode', 'kappa', 'kappa_min',
+                      'align_sign'}
         if changed & structural:
             # Keep the current estimate: a new gain acts from the next step on.
             observer = _make_observer(settings, initial=self.observer.state)
             observer.measurements_used = self.observer.measurements_used
-            self.observer = observer
+            self.guarded.observer = observer
             self.get_logger().info(
                 f'now {settings["variant"]} observer, alpha {settings["alpha"]:g}, '
-                f'{settings["gain_mode"]} gain {settings["gain"]}')
+                f'{settings["gain_mode"]} gain {self._gain_text(settings)}')
+        self.guarded.max_residual = settings['divergence_max_residual']
+        self.guarded.max_innovation = settings['divergence_max_innovation']
+        self.pairer.configure(**_pairing_settings(settings))
         if 'measurement_timeout' in changed:
             self._start_timeout_timer(settings)
+        if 'backward_jump_threshold' in changed:
+            self._watch_clock(settings)
 
     # Diagnostics ----------------------------------------------------------
 
-    def diagnostic_callback(self):
-        """Publish the input counters on ``/diagnostics``."""
-        new_drops = {reason: self.drops[reason] - self._drops_reported[reason]
-                     for reason in self.drops}
-        self._drops_reported = dict(self.drops)
-        dropping = [reason for reason, count in new_drops.items() if count]
-        status = DiagnosticStatus(name=f'{self.get_name()}: inputs',
+    def faults(self):
+        """
+        Return every fault counter by its diagnostic key.
+
+        Returns
+        -------
+        counters : dict
+            ``dropped_<reason>``, ``resets_<cause>``, ``reinitialized_<reason>``,
+            ``forward_gaps``, ``early_releases``.
+
+        """
+        pairer = self.pairer
+        counters = {f'dropped_{reason}': count for reason, count in pairer.drops.items()}
+        counters.update((f'resets_{cause}', count) for cause, count in self.resets.items())
+        counters.update((f'reinitialized_{reason}', count)
+                        for reason, count in self.reinitializations.items())
+        counters['forward_gaps'] = pairer.events['forward_gaps']
+        counters['early_releases'] = pairer.events['early_releases']
+        return counters
+
+    def status(self):
+        """
+        Return the current ``DiagnosticStatus`` of the inputs.
+
+        WARN while faults happen: any fault counter that rose since the last
+        status, or an incompatible QoS peer present now; OK otherwise.
+
+        Returns
+        -------
+        status : diagnostic_msgs.msg.DiagnosticStatus
+
+        """
+        self.qos.refresh()
+        faults = self.faults()
+        rose = self._deltas.deltas(faults)
+        pairer = self.pairer
+        status = DiagnosticStatus(name=f'{self.get_name()}{STATUS_SUFFIX}',
                                   hardware_id=self.get_fully_qualified_name())
-        steps = self.counts['steps_corrected'] + self.counts['steps_propagated']
+        steps = pairer.processed['increment']
+        parts = []
+        dropping = [key for key in rose if key.startswith('dropped_')]
         if dropping:
+            parts.append('dropping inputs: ' + ', '.join(
+                f'{key[len("dropped_"):]} (+{rose[key]})' for key in dropping))
+        others = [key for key in rose if not key.startswith('dropped_')]
+        if others:
+            parts.append(', '.join(f'{key} (+{rose[key]})' for key in others))
+        if self.qos.problems:
+            parts.append('incompatible QoS on ' + ', '.join(sorted(self.qos.problems)))
+        if parts:
             status.level = DiagnosticStatus.WARN
-            status.message = 'dropping inputs: ' + ', '.join(
-                f'{reason} (+{new_drops[reason]})' for reason in dropping)
-        elif steps == 0:
-            status.level = DiagnosticStatus.OK
-            status.message = 'waiting for inputs'
+            status.message = '; '.join(parts)
         else:
             status.level = DiagnosticStatus.OK
-            status.message = f'{steps} steps'
+            status.message = f'{steps} steps' if steps else 'waiting for inputs'
         settings = self.parameters.settings
+        received = sum(pairer.received.values())
+        processed = sum(pairer.processed.values())
+        dropped = sum(pairer.dropped(kind) for kind in KINDS)
+        waiting = sum(pairer.waiting(kind) for kind in KINDS)
+        state = self.observer.state
         status.values = key_values(
             [('variant', settings['variant']), ('alpha', settings['alpha']),
              ('gain_mode', settings['gain_mode']), ('steps', steps)]
             + list(self.counts.items())
-            + [(f'dropped_{reason}', count) for reason, count in self.drops.items()]
-            + [('waiting_increments', len(self._increments)),
-               ('waiting_measurements', len(self._measurements)),
-               ('estimate_norm', float(norm(np.asarray(self.observer.state))))])
+            + [('inputs_received', received), ('inputs_processed', processed),
+               ('inputs_dropped', dropped), ('inputs_waiting', waiting),
+               ('waiting_increments', pairer.waiting('increment')),
+               ('waiting_measurements', pairer.waiting('measurement'))]
+            + list(faults.items())
+            + self.qos.key_values()
+            + [('estimate_norm', math.sqrt(sum(v * v for v in state)))])
+        return status
+
+    def diagnostic_callback(self):
+        """Publish :meth:`status` on ``/diagnostics``."""
         self.diagnostics_publisher.publish(
-            diagnostic_array(self.get_clock().now().to_msg(), [status]))
+            diagnostic_array(self.get_clock().now().to_msg(), [self.status()]))
 
 
 def main(args=None):

@@ -8,8 +8,16 @@ from std_msgs.msg import Float64
 
 from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
                                       quaternion_stamped, vector_from_msg, vector_stamped)
+from ext_observer.core.validation import check_measurement
 
 SECOND = 1_000_000_000
+
+
+def unit(y, tolerance=0.1):
+    """Return ``y`` as the observer uses it: validated and normalized."""
+    normalized, reason = check_measurement(y, tolerance)
+    assert reason is None, reason
+    return normalized
 
 
 def overrides(**values):

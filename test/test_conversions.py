@@ -2,6 +2,10 @@
 
 import math
 
+import struct
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Quaternion, Vector3
 from hypothesis import given, strategies as st
 import numpy as np
 from numpy.testing import assert_allclose
@@ -9,10 +13,17 @@ import pytest
 
 from ext_observer.conversions import (
     msg_from_quaternion, msg_from_vector, nanoseconds_from_stamp, quaternion_from_msg,
-    quaternion_stamped, stamp_from_nanoseconds, vector_from_msg, vector_stamped)
+    quaternion_stamped, STAMP_MAX, stamp_from_nanoseconds, vector_from_msg, vector_stamped)
 from ext_observer.core import quaternion_from_rotation_vector
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+# NaN (any payload), infinities, subnormals, ±0 and the largest doubles.
+any_float = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True, width=64)
+
+
+def bits(values):
+    """The IEEE 754 bits of each float: equal even for NaN, distinct for ±0."""
+    return [struct.pack('<d', v) for v in values]
 
 
 def test_field_order_is_scalar_first():
@@ -57,11 +68,36 @@ def test_vector_needs_three():
         msg_from_vector((1.0, 2.0, 3.0, 4.0))
 
 
-@given(st.integers(min_value=0, max_value=(2 ** 31 - 1) * 10 ** 9 + 999_999_999))
+@given(st.tuples(any_float, any_float, any_float, any_float))
+def test_any_float_survives_both_ways(q):
+    # What arrives on a topic is copied bit for bit and never raises; the
+    # checks are the observer's (test_pairing.py).
+    msg = Quaternion(x=q[1], y=q[2], z=q[3], w=q[0])
+    assert bits(quaternion_from_msg(msg)) == bits(q)
+    assert bits(quaternion_from_msg(msg_from_quaternion(q))) == bits(q)
+    assert bits(vector_from_msg(Vector3(x=q[0], y=q[1], z=q[2]))) == bits(q[:3])
+    assert bits(vector_from_msg(msg_from_vector(q[1:]))) == bits(q[1:])
+
+
+@given(st.integers(min_value=0, max_value=STAMP_MAX))
 def test_stamp_round_trip(nanoseconds):
     stamp = stamp_from_nanoseconds(nanoseconds)
     assert 0 <= stamp.nanosec < 10 ** 9
     assert nanoseconds_from_stamp(stamp) == nanoseconds
+
+
+@given(st.integers(-2 ** 31, 2 ** 31 - 1), st.integers(0, 2 ** 32 - 1))
+def test_any_stamp_converts(sec, nanosec):
+    # Negative seconds and nanosec beyond a second exist on the wire: the
+    # conversion never raises; a time at or before 0 is dropped by the
+    # observer with the zero stamps.
+    assert nanoseconds_from_stamp(Time(sec=sec, nanosec=nanosec)) == sec * 10 ** 9 + nanosec
+
+
+@pytest.mark.parametrize('nanoseconds', [-1, STAMP_MAX + 1, 2 ** 80])
+def test_out_of_range_stamp_is_refused(nanoseconds):
+    with pytest.raises(ValueError, match='a stamp must lie in'):
+        stamp_from_nanoseconds(nanoseconds)
 
 
 def test_stamped_messages():

@@ -19,11 +19,12 @@ from ext_observer.core import (attitude_error, certified_alpha_max, manifold_dis
                                multiply, norm, quaternion_from_rotation_vector,
                                SingleObserver)
 from ext_observer.gyro_node import GYRO_PARAMETERS, GyroNode
-from ext_observer.monitor_node import (DIAGNOSTIC_KEYS, ERROR_KEYS, MONITOR_PARAMETERS,
-                                       MonitorNode, STATUS_NAME)
+from ext_observer.monitor_node import (COUNTER_KEYS, DIAGNOSTIC_KEYS, ERROR_KEYS,
+                                       MONITOR_PARAMETERS, MonitorNode, STATUS_NAME)
 from ext_observer.node_common import markdown_table, ParameterError
-from ext_observer.observer_node import DROP_REASONS, OBSERVER_PARAMETERS, ObserverNode
-from ros_helpers import overrides, Probe, SECOND, values_of, wait_for_subscribers
+from ext_observer.observer_node import (DROP_REASONS, GUARD_REASONS, OBSERVER_PARAMETERS,
+                                        ObserverNode, RESET_CAUSES)
+from ros_helpers import overrides, Probe, SECOND, unit, values_of, wait_for_subscribers
 
 
 # The whole pipeline -------------------------------------------------------
@@ -60,14 +61,14 @@ def test_pipeline_converges_and_matches_the_core(ros_context, spinner):
         assert attitude_error(moved, np.array(probe.truths[t1])) < 1e-9
 
     # The observer: every step corrected, nothing dropped, and each estimate is
-    # the core's, bit for bit, stamped t_{k+1}.
+    # the core's, bit for bit (on the normalized measurement), stamped t_{k+1}.
     assert observer.counts['steps_corrected'] == steps
     assert observer.counts['steps_propagated'] == 0
     assert not any(observer.drops.values())
     reference = SingleObserver(initial=initial)
     period = round(SECOND / rate)
     for t in stamps:
-        expected = reference.step(probe.increments[t], probe.measurements[t])
+        expected = reference.step(probe.increments[t], unit(probe.measurements[t]))
         assert probe.estimates[t + period] == expected
     for t, q in probe.units.items():
         assert norm(np.array(q)) == pytest.approx(1.0)
@@ -459,9 +460,11 @@ def test_readme_tables_match_the_code():
         table = markdown_table(specs)
         assert f'### {name}\n\n{table}' in text, (
             f'the README table of {name} differs from the code; it should read:\n{table}')
-    for key in DIAGNOSTIC_KEYS + ERROR_KEYS:
+    for key in DIAGNOSTIC_KEYS + ERROR_KEYS + COUNTER_KEYS:
         assert f'`{key}`' in text, key
     for reason in DROP_REASONS:
+        assert f'`{reason}`' in text, reason
+    for reason in GUARD_REASONS + RESET_CAUSES:
         assert f'`{reason}`' in text, reason
 
 

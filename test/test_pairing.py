@@ -1,0 +1,280 @@
+"""
+The observer's input rules without ROS: StepPairer and GuardedObserver.
+
+Examples pin each rule; hypothesis drives both with arbitrary inputs (NaN,
+infinities, subnormals, huge values, zero, negative and jumping stamps) and
+checks the invariants: every input accounted for, bounded buffers, steps in
+stamp order with valid values, and a finite estimate whatever comes in.
+"""
+
+import math
+
+from hypothesis import given, settings, strategies as st
+import pytest
+
+from ext_observer.core import GAIN_MODES, SingleObserver, VARIANTS
+from ext_observer.guard import GUARD_REASONS, GuardedObserver
+from ext_observer.pairing import BACKWARD_JUMP, DROP_REASONS, KINDS, StepPairer
+
+MS = 1_000_000
+S = 1_000_000_000
+Y = (1.0, 0.0, 0.0, 0.0)
+THETA = (0.1, 0.2, 0.3)
+nan, inf = float('nan'), float('inf')
+
+
+def make(**kwargs):
+    options = dict(depth=4, timeout=100 * MS, backward_jump=1 * S, forward_gap=1 * S)
+    options.update(kwargs)
+    return StepPairer(**options)
+
+
+def assert_accounted(pairer):
+    for kind in KINDS:
+        assert pairer.received[kind] == pairer.accounted(kind), kind
+
+
+# Examples, one rule each --------------------------------------------------------
+
+def test_pairs_by_stamp_and_waits_for_the_measurement():
+    pairer = make()
+    assert pairer.add_increment(10 * MS, THETA, now=0) is None
+    assert pairer.pop_ready(now=50 * MS) == []
+    assert pairer.add_measurement(10 * MS, (2.0 ** -0.5, 0.0, 2.0 ** -0.5, 0.0)) is None
+    [step] = pairer.pop_ready(now=60 * MS)
+    assert (step.stamp, step.increment, step.previous, step.gap, step.early) == (
+        10 * MS, THETA, None, False, False)
+    assert step.measurement == pytest.approx((2.0 ** -0.5, 0.0, 2.0 ** -0.5, 0.0))
+    assert pairer.processed == {'increment': 1, 'measurement': 1}
+    assert_accounted(pairer)
+
+
+def test_increment_propagates_after_the_timeout_or_a_newer_measurement():
+    pairer = make()
+    pairer.add_increment(10 * MS, THETA, now=0)
+    assert pairer.pop_ready(now=99 * MS) == []
+    [step] = pairer.pop_ready(now=100 * MS)
+    assert step.measurement is None
+    pairer.add_increment(20 * MS, THETA, now=100 * MS)
+    pairer.add_measurement(30 * MS, Y)
+    [step] = pairer.pop_ready(now=100 * MS)
+    assert (step.stamp, step.measurement, step.previous) == (20 * MS, None, 10 * MS)
+    assert_accounted(pairer)
+
+
+def test_measurement_is_normalized_within_the_tolerance_and_dropped_beyond():
+    pairer = make(norm_tolerance=0.1)
+    pairer.add_measurement(10 * MS, (1.05, 0.0, 0.0, 0.0))
+    pairer.add_increment(10 * MS, THETA, now=0)
+    [step] = pairer.pop_ready(now=0)
+    assert step.measurement == (1.0, 0.0, 0.0, 0.0)
+    assert pairer.add_measurement(20 * MS, (1.2, 0.0, 0.0, 0.0)) == 'norm_out_of_tolerance'
+
+
+@pytest.mark.parametrize('kind, value, reason', [
+    ('increment', (nan, 0.0, 0.0), 'non_finite_increment'),
+    ('increment', (0.0, -inf, 0.0), 'non_finite_increment'),
+    ('increment', (12.0, 12.0, 12.0), 'increment_too_large'),
+    ('increment', (1e200, 1e200, 0.0), 'increment_too_large'),
+    ('measurement', (nan, 0.0, 0.0, 0.0), 'non_finite_measurement'),
+    ('measurement', (0.0, 0.0, 0.0, 0.0), 'zero_quaternion'),
+    ('measurement', (5e-324, 0.0, 0.0, 0.0), 'zero_quaternion'),
+    ('measurement', (1e300, 1e300, 0.0, 0.0), 'norm_out_of_tolerance'),
+])
+def test_bad_values_are_dropped_by_reason(kind, value, reason):
+    pairer = make(max_increment=20.0)
+    if kind == 'increment':
+        assert pairer.add_increment(10 * MS, value, now=0) == reason
+    else:
+        assert pairer.add_measurement(10 * MS, value) == reason
+    assert pairer.drops[reason] == 1
+    assert pairer.waiting(kind) == 0
+    assert_accounted(pairer)
+
+
+def test_zero_duplicate_and_stale_stamps_are_dropped():
+    pairer = make()
+    assert pairer.add_increment(0, THETA, now=0) == 'zero_stamp_increment'
+    assert pairer.add_measurement(-5, Y) == 'zero_stamp_measurement'
+    pairer.add_increment(10 * MS, THETA, now=0)
+    assert pairer.add_increment(10 * MS, THETA, now=0) == 'duplicate_increment'
+    pairer.add_measurement(10 * MS, Y)
+    pairer.pop_ready(now=0)
+    assert pairer.add_measurement(10 * MS, Y) == 'duplicate_measurement'
+    assert pairer.add_increment(10 * MS, THETA, now=0) == 'duplicate_increment'
+    assert pairer.add_increment(5 * MS, THETA, now=0) == 'stale_increment'
+    assert pairer.add_measurement(5 * MS, Y) == 'stale_measurement'
+    assert_accounted(pairer)
+
+
+def test_backward_jump_restarts_the_time_line():
+    pairer = make()
+    pairer.add_increment(5 * S, THETA, now=0)
+    pairer.add_measurement(5 * S, Y)
+    pairer.pop_ready(now=0)
+    pairer.add_measurement(6 * S, Y)
+    # Within the threshold: stale. Beyond: a new time line.
+    assert pairer.add_increment(4 * S + 1, THETA, now=0) == 'stale_increment'
+    assert pairer.add_increment(1 * S, THETA, now=0) == BACKWARD_JUMP
+    assert pairer.events['backward_jumps'] == 1
+    assert pairer.drops['discarded_measurement'] == 1
+    pairer.add_measurement(1 * S, Y)
+    [step] = pairer.pop_ready(now=0)
+    assert (step.stamp, step.previous) == (1 * S, None)
+    assert_accounted(pairer)
+
+
+def test_forward_gap_is_flagged():
+    pairer = make()
+    for stamp in (1 * S, 2 * S, 3 * S + 1):
+        pairer.add_increment(stamp, THETA, now=0)
+        pairer.add_measurement(stamp, Y)
+    steps = pairer.pop_ready(now=0)
+    assert [step.gap for step in steps] == [False, False, True]
+    assert pairer.events['forward_gaps'] == 1
+
+
+def test_buffers_are_bounded():
+    pairer = make(depth=3, timeout=10 * S)
+    # Measurements with no increment: the oldest goes, counted.
+    for k in range(1, 6):
+        pairer.add_measurement(k * S, Y)
+    assert pairer.waiting('measurement') == 3
+    assert pairer.drops['unpaired_measurement'] == 2
+    # Increments that wait long: the oldest step goes on without waiting.
+    pairer = make(depth=3, timeout=10 * S)
+    for k in range(1, 6):
+        pairer.add_increment(k * MS, THETA, now=0)
+        pairer.pop_ready(now=0)
+    assert pairer.waiting('increment') == 3
+    assert pairer.events['early_releases'] == 2
+    assert pairer.processed['increment'] == 2
+    assert_accounted(pairer)
+
+
+def test_configure_refuses_negative_bounds():
+    with pytest.raises(ValueError, match='depth'):
+        make(depth=0)
+    with pytest.raises(ValueError, match='timeout'):
+        make().configure(timeout=-1)
+
+
+# Arbitrary input -------------------------------------------------------------------
+
+any_float = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True)
+nice_float = st.floats(-1.5, 1.5)
+stamps = st.one_of(st.integers(0, 40).map(lambda k: k * 50 * MS),   # a plausible stream
+                   st.sampled_from([0, -1, 2 ** 63, 10 ** 12]),      # zero, negative, far
+                   st.integers(-2 ** 64, 2 ** 64))
+increments = st.one_of(st.tuples(nice_float, nice_float, nice_float),
+                       st.tuples(any_float, any_float, any_float))
+measurements = st.one_of(
+    st.tuples(nice_float, nice_float, nice_float, nice_float),
+    st.tuples(any_float, any_float, any_float, any_float),
+    st.sampled_from([Y, (0.0, 0.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5)]))
+operations = st.lists(st.one_of(
+    st.tuples(st.just('increment'), stamps, increments),
+    st.tuples(st.just('measurement'), stamps, measurements),
+    st.tuples(st.just('tick'), st.integers(0, 300 * MS), st.none()),
+    st.tuples(st.just('restart'), st.none(), st.none())), max_size=60)
+
+
+@settings(max_examples=400, deadline=None)
+@given(operations, st.integers(1, 5))
+def test_every_input_is_accounted_for_and_steps_are_valid(ops, depth):
+    pairer = make(depth=depth, max_increment=2.0, norm_tolerance=0.1)
+    now = 0
+    last = None
+    for op, stamp, value in ops:
+        if op == 'increment':
+            outcome = pairer.add_increment(stamp, value, now)
+        elif op == 'measurement':
+            outcome = pairer.add_measurement(stamp, value)
+        elif op == 'tick':
+            now += stamp
+            outcome = None
+        else:
+            pairer.restart()
+            outcome = BACKWARD_JUMP
+        assert outcome is None or outcome == BACKWARD_JUMP or outcome in DROP_REASONS
+        if outcome == BACKWARD_JUMP:
+            last = None
+        for step in pairer.pop_ready(now):
+            assert step.previous == last
+            assert last is None or step.stamp > last
+            assert step.stamp > 0
+            assert all(map(math.isfinite, step.increment))
+            assert math.hypot(*step.increment) <= 2.0
+            if step.measurement is not None:
+                assert math.hypot(*step.measurement) == pytest.approx(1.0)
+            last = step.stamp
+        assert pairer.last_stamp == last
+        assert pairer.waiting('increment') <= depth
+        assert pairer.waiting('measurement') <= depth
+        assert_accounted(pairer)
+    assert set(pairer.drops) == set(DROP_REASONS)
+
+
+# The divergence guard --------------------------------------------------------------
+
+def test_guard_reinitializes_from_the_carried_measurement():
+    guarded = GuardedObserver(SingleObserver('plain'), max_residual=1.0)
+    y = (0.0, 1.0, 0.0, 0.0)
+    state, reason = guarded.step(THETA, y)
+    assert reason is None
+    guarded.observer.state = (3.0, 0.0, 0.0, 0.0)     # as if it had diverged
+    theta = (0.0, 0.0, math.pi)
+    state, reason = guarded.step(theta)
+    assert reason == 'residual_too_large'
+    # y, carried by the two increments since it arrived: y ⊗ exp(θ₁/2) ⊗ exp(θ₂/2).
+    carried = SingleObserver('projected', gain_mode='rotating', kappa=1.0, initial=y)
+    carried.step(THETA)
+    expected = carried.step(theta)
+    assert state == pytest.approx(expected, abs=1e-12)
+    assert guarded.observer.measurements_used == 0
+
+
+def test_guard_reasons():
+    # Innovation: an estimate far from a unit measurement.
+    guarded = GuardedObserver(SingleObserver('plain'), max_residual=100.0,
+                              max_innovation=2.5)
+    guarded.observer.state = (-2.0, 0.0, 0.0, 0.0)
+    state, reason = guarded.step(THETA, Y)
+    assert reason == 'innovation_too_large'
+    assert math.hypot(*state) == pytest.approx(1.0)
+    # No measurement yet: back to the initial estimate.
+    guarded = GuardedObserver(SingleObserver('plain', initial=(0.0, 0.0, 1.0, 0.0)))
+    guarded.observer.state = (0.0, 0.0, 0.0, 0.0)
+    assert guarded.step(THETA) == ((0.0, 0.0, 1.0, 0.0), 'state_zero')
+    guarded.observer.state = (nan, 0.0, 0.0, 0.0)
+    assert guarded.step(THETA) == ((0.0, 0.0, 1.0, 0.0), 'state_non_finite')
+    # The projected update raises at zero.
+    guarded = GuardedObserver(SingleObserver('projected'))
+    guarded.observer.state = (0.0, 0.0, 0.0, 0.0)
+    assert guarded.step(THETA) == (Y, 'step_failed')
+    assert set(GUARD_REASONS) == {'residual_too_large', 'innovation_too_large',
+                                  'state_non_finite', 'state_zero', 'step_failed'}
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from(VARIANTS), st.sampled_from(GAIN_MODES),
+       st.tuples(st.floats(-2, 2), st.floats(-2, 2), st.floats(-2, 2),
+                 st.floats(-2, 2)).filter(lambda q: 1e-3 < math.hypot(*q) <= 2.0),
+       st.lists(st.tuples(increments, st.one_of(st.none(), measurements)), max_size=40))
+def test_validated_and_guarded_steps_stay_finite(variant, gain_mode, initial, inputs):
+    """Arbitrary floats through the pairer's checks and the guard: always a finite estimate."""
+    pairer = make(max_increment=20.0)
+    guarded = GuardedObserver(
+        SingleObserver(variant, gain_mode=gain_mode, kappa=1.0, initial=initial,
+                       gain=(1.5, -1.0, 1.0, -1.0)), max_residual=3.0, max_innovation=3.0)
+    for k, (theta, y) in enumerate(inputs, start=1):
+        pairer.add_increment(k * MS, theta, now=0)
+        if y is not None:
+            pairer.add_measurement(k * MS, y)
+        for step in pairer.pop_ready(now=1 * S):
+            state, reason = guarded.step(step.increment, step.measurement)
+            assert all(map(math.isfinite, state))
+            assert reason is None or reason in GUARD_REASONS
+            # Checked, or reinitialized (a unit measurement or the initial estimate).
+            assert abs(sum(v * v for v in state) - 1.0) <= 3.0 + 1e-12
+            assert sum(v * v for v in state) >= 1e-12
