@@ -127,7 +127,8 @@ def _cell(x):
         return f'✓ {_ms(x["p50"])}'
     parts = []
     if x['lost']:
-        parts.append(f'{100 * x["lost"] / x["steps"]:.2g}% lost')
+        share = 100 * x['lost'] / x['steps']
+        parts.append(f'{share:.0f}% lost' if share >= 10 else f'{share:.2g}% lost')
     if x.get('propagated'):
         parts.append(f'{x["propagated"]} uncorrected')
     if x['p50'] is not None:
@@ -232,6 +233,15 @@ def _ratios(by_target):
                          'the executor and subscription path alone give)')
     best = max(((sustained[t] or 0, t) for t in sustained
                 if t.startswith('observer/')), default=None)
+    cpu = {t: x['cpu_us_per_step'] for t, xs in by_target.items() for x in xs
+           if 'error' not in x and x['rate'] == LATENCY_RATE
+           and x['cpu_us_per_step']}
+    for ex in ('single', 'events'):
+        obs, relay = cpu.get(f'observer/{ex}'), cpu.get(f'relay/{ex}')
+        if obs and relay:
+            lines.append(f'{ex}, node CPU per step at {LATENCY_RATE} Hz (steadier '
+                         f'than the sustained rate): observer {_us(obs)} / relay '
+                         f'{_us(relay)} = {obs / relay:.2g}')
     if best and relay_single:
         lines.append(f'best observer ({best[1]}, {best[0]:g} Hz) against the '
                      f'naive relay (relay/single, {relay_single:g} Hz): '
