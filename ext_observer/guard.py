@@ -68,7 +68,7 @@ class GuardedObserver:
 
     """
 
-    def __init__(self, observer, max_residual=3.0, max_innovation=3.0):
+    def __init__(self, observer, max_residual=15.0, max_innovation=5.0):
         self.observer = observer
         self.max_residual = max_residual
         self.max_innovation = max_innovation

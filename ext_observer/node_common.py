@@ -391,8 +391,17 @@ class QosWatch:
         role, ours, hint = self._endpoints[topic]
         if role == 'subscription':
             peers = self._node.get_publishers_info_by_topic(topic)
+            mine = self._node.get_subscriptions_info_by_topic(topic)
         else:
             peers = self._node.get_subscriptions_info_by_topic(topic)
+            mine = self._node.get_publishers_info_by_topic(topic)
+        # Compare profiles as the graph reports them (an unset deadline in a
+        # QoSProfile is "infinite" in the graph).
+        name = (self._node.get_name(), self._node.get_namespace())
+        for info in mine:
+            if (info.node_name, info.node_namespace) == name:
+                ours = info.qos_profile
+                break
         texts = []
         for info in peers:
             theirs = info.qos_profile

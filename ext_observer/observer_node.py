@@ -134,13 +134,14 @@ OBSERVER_PARAMETERS = (
                   "At a forward gap: 'propagate' (go on from the current estimate) or "
                   "'reset' (restart from initial_estimate).",
                   constraints=f'One of {", ".join(FORWARD_GAP_ACTIONS)}.'),
-    ParameterSpec('divergence_max_residual', 3.0,
+    ParameterSpec('divergence_max_residual', 15.0,
                   'Divergence guard: reinitialize from the latest measurement when the '
-                  'residual |q̂̄q̂ − 1| exceeds this after a step.', (0.01, 1000.0)),
-    ParameterSpec('divergence_max_innovation', 3.0,
+                  'residual |q̂̄q̂ − 1| exceeds this after a step (the paper\'s setup peaks '
+                  'at 7.5).', (0.01, 1000.0)),
+    ParameterSpec('divergence_max_innovation', 5.0,
                   'Divergence guard: reinitialize from the latest measurement when the '
-                  'innovation ‖y − q̂‖ exceeds this (on S³ it is at most 2).',
-                  (0.01, 1000.0)),
+                  'innovation ‖y − q̂‖ exceeds this (at most 1 + ‖q̂‖; the paper\'s setup '
+                  'peaks at 3.6).', (0.01, 1000.0)),
     ParameterSpec('input_reliability', 'reliable',
                   "Reliability of the two subscriptions: 'reliable' or 'best_effort' "
                   '(which also accepts BEST_EFFORT publishers, e.g. sensor drivers).',

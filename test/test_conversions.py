@@ -1,7 +1,6 @@
 """The one place where ROS's (x, y, z, w) meets the core's (w, x, y, z)."""
 
 import math
-
 import struct
 
 from builtin_interfaces.msg import Time
@@ -13,7 +12,7 @@ import pytest
 
 from ext_observer.conversions import (
     msg_from_quaternion, msg_from_vector, nanoseconds_from_stamp, quaternion_from_msg,
-    quaternion_stamped, STAMP_MAX, stamp_from_nanoseconds, vector_from_msg, vector_stamped)
+    quaternion_stamped, stamp_from_nanoseconds, STAMP_MAX, vector_from_msg, vector_stamped)
 from ext_observer.core import quaternion_from_rotation_vector
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)

@@ -104,6 +104,40 @@ def test_pipeline_converges_and_matches_the_core(ros_context, spinner):
     assert probe.last_status('observer: inputs').level == DiagnosticStatus.OK
 
 
+@pytest.mark.parametrize('gain_mode, values', [
+    ('rotating', dict(kappa=0.3, align_sign=True)),
+    ('scheduled', dict(kappa_min=0.05, variant='plain')),
+])
+def test_gain_modes_on_a_gyro_with_errors_match_the_core(ros_context, spinner, gain_mode,
+                                                         values):
+    rate, steps = 100.0, 60
+    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
+        gain_mode=gain_mode, step_period=1.0 / rate, **values)))
+    probe = spinner.add(Probe(ros_context))
+    wait_for_subscribers(spinner, probe.increment_publisher)
+    gyro = spinner.add(GyroNode(context=ros_context, parameter_overrides=overrides(
+        rate_hz=rate, steps=steps, seed=4, gyro_noise_std=0.01,
+        gyro_bias=[0.02, 0.0, -0.01], bias_walk_std=0.001)))
+    spinner.spin_until(lambda: len(probe.estimates) >= steps and gyro.finished, 20.0,
+                       f'{steps} estimates')
+    config = observer.observer.config
+    assert (config.gain_mode, config.kappa, config.kappa_min, config.align_sign) == (
+        gain_mode, values.get('kappa', 0.05), values.get('kappa_min', 0.02),
+        values.get('align_sign', False))
+    # The reported increments carry the gyro's errors: the truth moves by others.
+    stamps = sorted(probe.truths)
+    moved = multiply(np.array(probe.truths[stamps[0]]),
+                     quaternion_from_rotation_vector(np.array(probe.increments[stamps[0]])))
+    assert 1e-4 < attitude_error(moved, np.array(probe.truths[stamps[1]])) < 0.2
+    # The node's estimates are the core's with the same settings, bit for bit.
+    reference = SingleObserver(gain_mode=gain_mode, **values)
+    period = round(SECOND / rate)
+    for t in stamps:
+        expected = reference.step(probe.increments[t], unit(probe.measurements[t]))
+        assert probe.estimates[t + period] == expected
+    assert reference.measurements_used == observer.observer.measurements_used == steps
+
+
 # The observer's pairing -----------------------------------------------------
 
 def test_observer_pairs_by_stamp_waits_and_counts_drops(ros_context, spinner):
@@ -359,8 +393,18 @@ ALPHA_MAX = certified_alpha_max(0.5)
     (ObserverNode, dict(gain=[0.1, 0.2, 0.3, math.nan]), 'gain must be finite'),
     (ObserverNode, dict(initial_estimate=[0.0, 0.0, 0.0, 0.0]), 'nonzero'),
     (ObserverNode, dict(kappa=0.0), r'kappa must be in \(0, 1\]'),
+    (ObserverNode, dict(kappa_min=0.0), r'kappa_min must be in \(0, 1\]'),
+    (ObserverNode, dict(forward_gap_action='stop'), 'forward_gap_action must be one of'),
+    (ObserverNode, dict(input_reliability='sometimes'), 'input_reliability must be one of'),
+    (ObserverNode, dict(max_increment=0.0), 'max_increment must be positive'),
+    (ObserverNode, dict(initial_estimate=[3.0, 0.0, 0.0, 0.0], divergence_max_residual=5.0),
+     r'initial_estimate has \|q̂̄q̂ − 1\| = 8, above divergence_max_residual \(5\)'),
+    (ObserverNode, dict(backward_jump_threshold=0.0), 'out of range'),
     (ObserverNode, dict(alpha=1), "expecting type 'DOUBLE'"),
     (GyroNode, dict(rate_hz=0.0), 'out of range'),
+    (GyroNode, dict(gyro_noise_std=-0.1), 'out of range'),
+    (GyroNode, dict(gyro_bias=[0.1, 0.0]), 'gyro_bias must have 3 elements'),
+    (GyroNode, dict(gyro_bias=[0.1, math.inf, 0.0]), 'gyro_bias must be finite'),
     (GyroNode, dict(initial_attitude=[0.0, 0.0, 0.0, 0.0]), 'zero'),
     (GyroNode, dict(initial_attitude=[1.0, 0.0, 0.0]), 'initial_attitude must be empty or '
                                                        'have 4 elements'),
