@@ -19,9 +19,10 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 
 from conftest import CONFIG
-from ext_observer.core import attitude_error, manifold_distance
+from ext_observer.core import attitude_error, manifold_distance, SingleObserver
 from ext_observer.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, STATUS_NAME
-from ros_helpers import Probe, values_of
+from ext_observer.node_common import LEVEL_NAMES
+from ros_helpers import Probe, SECOND, unit, values_of
 
 
 def installed(name):
@@ -158,3 +159,105 @@ def test_ctrl_c_on_the_demo_exits_cleanly(ros_processes):
     assert process.interrupt(timeout=15.0) == 130
     assert 'interrupted' in process.output
     assert 'Traceback' not in process.output
+
+
+# Faults: a process killed and restarted ------------------------------------------
+
+def wait_for_level(spinner, probe, level, timeout, after=0):
+    """Wait for a monitor status of ``level`` among those after the ``after``-th."""
+    spinner.spin_until(
+        lambda: any(s.level == level for s in probe.statuses.get(STATUS_NAME, [])[after:]),
+        timeout, f'the monitor at {LEVEL_NAMES[level]}')
+
+
+def converged_after(spinner, probe, since, steps=100, timeout=40.0):
+    """Wait for ``steps`` estimates paired with the truth after stamp ``since``; check them."""
+    def paired():
+        return sorted(t for t in probe.estimates if t in probe.truths and t > since)
+
+    spinner.spin_until(lambda: len(paired()) >= steps, timeout,
+                       f'{steps} estimates paired with the ground truth')
+    late = paired()[-30:]
+    estimates = np.array([probe.estimates[t] for t in late])
+    truths = np.array([probe.truths[t] for t in late])
+    assert np.mean(attitude_error(estimates, truths)) < 0.6
+    assert all(np.isfinite(q).all() for q in map(np.array, probe.estimates.values()))
+
+
+def start_pipeline(ros_processes):
+    gyro = ros_processes([installed('gyro_node'), '--ros-args', '-p', 'rate_hz:=50.0',
+                          '-p', 'seed:=5'])
+    monitor = ros_processes([
+        installed('monitor_node'), '--ros-args', '-p', 'diagnostic_period:=0.2',
+        '-p', 'window:=20', '-p', 'stale_timeout:=1.0'])
+    return gyro, monitor, start_observer(ros_processes)
+
+
+def start_observer(ros_processes):
+    return ros_processes([
+        installed('observer_node'), '--ros-args', '-p', 'initial_estimate:=[1.3, 0.0, 0.0, 0.0]',
+        '-p', 'step_period:=0.02', '-p', 'diagnostic_period:=0.2'])
+
+
+def test_gyro_killed_and_restarted(ros_processes, ros_context, spinner):
+    probe = spinner.add(Probe(ros_context))
+    gyro, monitor, observer = start_pipeline(ros_processes)
+    wait_for_nodes(spinner, probe, ['gyro', 'observer', 'monitor'])
+    converged_after(spinner, probe, 0)
+    wait_for_level(spinner, probe, DiagnosticStatus.OK, 10.0)
+
+    # SIGKILL mid-run: no goodbye on the graph. The monitor goes STALE; the
+    # observer stays up.
+    gyro.kill()
+    last_before = max(probe.truths)
+    seen = len(probe.statuses[STATUS_NAME])
+    wait_for_level(spinner, probe, DiagnosticStatus.STALE, 10.0, after=seen)
+    assert observer.process.poll() is None and monitor.process.poll() is None
+
+    # A new gyro (another seed: another truth): the observer resumes on the new
+    # stamps (a forward gap, propagated) and converges to the new truth; the
+    # monitor is OK again.
+    ros_processes([installed('gyro_node'), '--ros-args', '-p', 'rate_hz:=50.0',
+                   '-p', 'seed:=6'])
+    seen = len(probe.statuses[STATUS_NAME])
+    converged_after(spinner, probe, last_before)
+    wait_for_level(spinner, probe, DiagnosticStatus.OK, 10.0, after=seen)
+    spinner.spin_until(lambda: int(values_of(probe.last_status('observer: inputs')).get(
+        'forward_gaps', 0)) >= 1, 5.0, 'the forward gap in the diagnostics')
+    values = values_of(probe.last_status('observer: inputs'))
+    assert int(values['inputs_received']) == (
+        int(values['inputs_processed']) + int(values['inputs_dropped'])
+        + int(values['inputs_waiting']))
+    observer.interrupt(timeout=10.0)
+    assert_clean_exit(observer)
+
+
+def test_observer_killed_and_restarted_starts_over(ros_processes, ros_context, spinner):
+    probe = spinner.add(Probe(ros_context))
+    gyro, monitor, observer = start_pipeline(ros_processes)
+    wait_for_nodes(spinner, probe, ['gyro', 'observer', 'monitor'])
+    converged_after(spinner, probe, 0)
+    steps_before = int(values_of(probe.last_status('observer: inputs'))['steps'])
+
+    observer.kill()
+    last_before = max(probe.estimates)
+    seen = len(probe.statuses[STATUS_NAME])
+    wait_for_level(spinner, probe, DiagnosticStatus.STALE, 10.0, after=seen)
+    assert gyro.process.poll() is None and monitor.process.poll() is None
+
+    # The new observer starts over from initial_estimate: its first estimate is
+    # the core's first step from q̂_0 = (1.3, 0, 0, 0); then it converges.
+    probe.statuses.pop('observer: inputs', None)
+    start_observer(ros_processes)
+    seen = len(probe.statuses[STATUS_NAME])
+    converged_after(spinner, probe, last_before)
+    first = min(t for t in probe.estimates if t > last_before)
+    stamp = first - SECOND // 50
+    # (Without its measurement if the observer matched between the two topics.)
+    expected = [SingleObserver(initial=(1.3, 0.0, 0.0, 0.0)).step(
+        probe.increments[stamp], measurement)
+        for measurement in (unit(probe.measurements[stamp]), None)]
+    assert probe.estimates[first] in expected
+    wait_for_level(spinner, probe, DiagnosticStatus.OK, 10.0, after=seen)
+    first_status = probe.statuses['observer: inputs'][0]
+    assert int(values_of(first_status)['steps']) < steps_before
