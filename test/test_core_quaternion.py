@@ -139,3 +139,12 @@ def test_random_unit_quaternions_are_uniform_and_reproducible():
 def test_norm_of_product_property(p, q):
     assert_allclose(quat.norm(quat.multiply(p, q)), quat.norm(p) * quat.norm(q),
                     rtol=1e-9, atol=1e-9)
+
+
+def test_right_matrix_is_right_multiplication():
+    rng = np.random.default_rng(8)
+    p = rng.standard_normal((6, 4))
+    q = rng.standard_normal(4)
+    assert_allclose(p @ quat.right_matrix(q), quat.multiply(p, q), atol=1e-14)
+    with pytest.raises(ValueError, match=r'shape \(4,\), got \(2, 4\)'):
+        quat.right_matrix(np.zeros((2, 4)))

@@ -27,7 +27,7 @@ from .quaternion import (attitude_error, check_quaternions, check_vectors,
                          conjugate, constraint_residual, exp, IDENTITY, log,
                          manifold_distance, multiply, norm, normalize,
                          quaternion_from_rotation_vector,
-                         random_unit_quaternions,
+                         random_unit_quaternions, right_matrix,
                          rotation_vector_from_quaternion, squared_norm)
 
 __all__ = [
@@ -39,7 +39,7 @@ __all__ = [
     'constraint_residual', 'estimate_certificate', 'exp', 'log',
     'manifold_distance', 'multiply', 'norm', 'normalize', 'optimal_delta',
     'quaternion_from_rotation_vector', 'random_unit_quaternions',
-    'rotation_vector_from_quaternion', 's3_certificate', 'so3_extension',
+    'right_matrix', 'rotation_vector_from_quaternion', 's3_certificate', 'so3_extension',
     'sphere_extension', 'sphere_grad_V', 'sphere_hessian_V', 'sphere_V',
     'squared_norm',
 ]

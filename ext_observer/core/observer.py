@@ -172,7 +172,8 @@ class LuenbergerObserver:
         self.config = ObserverConfig(variant, alpha, gain, gain_mode, kappa,
                                      kappa_min, initial, align_sign)
         self.batch_shape = tuple(batch_shape)
-        self._gain = np.array(self.config.gain)
+        # (y − q̂) ⊗ L as one matmul with the right-multiplication matrix.
+        self._gain_matrix = quat.right_matrix(self.config.gain)
         self.reset()
 
     def reset(self, initial=None):
@@ -226,7 +227,7 @@ class LuenbergerObserver:
                 y = np.where((dot < 0.0)[..., np.newaxis], -y, y)
             innovation = y - q
             if cfg.gain_mode == 'constant':
-                new = new + quat.multiply(innovation, self._gain)
+                new = new + innovation @ self._gain_matrix
             else:
                 kappa = cfg.kappa_at(self.measurements_used)
                 new = new + kappa * quat.multiply(innovation, E)

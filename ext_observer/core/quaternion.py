@@ -34,6 +34,7 @@ __all__ = [
     'normalize',
     'quaternion_from_rotation_vector',
     'random_unit_quaternions',
+    'right_matrix',
     'rotation_vector_from_quaternion',
     'squared_norm',
 ]
@@ -106,14 +107,35 @@ def multiply(p, q):
     """
     p = check_quaternions(p, 'p')
     q = check_quaternions(q, 'q')
-    pw, px, py, pz = np.moveaxis(p, -1, 0)
-    qw, qx, qy, qz = np.moveaxis(q, -1, 0)
-    return np.stack((
-        pw * qw - px * qx - py * qy - pz * qz,
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-    ), axis=-1)
+    pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    out = np.empty(np.broadcast_shapes(p.shape, q.shape))
+    out[..., 0] = pw * qw - px * qx - py * qy - pz * qz
+    out[..., 1] = pw * qx + px * qw + py * qz - pz * qy
+    out[..., 2] = pw * qy - px * qz + py * qw + pz * qx
+    out[..., 3] = pw * qz + px * qy - py * qx + pz * qw
+    return out
+
+
+def right_matrix(q):
+    """
+    Matrix ``R`` of right multiplication by ``q``: ``p ⊗ q = p @ R``.
+
+    Multiplying a batch by a constant quaternion is then one matmul.
+
+    Parameters
+    ----------
+    q : array_like, shape (4,)
+
+    Returns
+    -------
+    R : ndarray, shape (4, 4)
+
+    """
+    q = check_quaternions(q)
+    if q.shape != (4,):
+        raise ValueError(f'Expected `q` to have shape (4,), got {q.shape}')
+    return multiply(np.eye(4), q)
 
 
 def conjugate(q):
@@ -323,13 +345,18 @@ def attitude_error(p, q):
         In ``[0, π]``, rad.
 
     """
-    p = normalize(p)
-    q = normalize(q)
-    d = np.abs(np.einsum('...i,...i->...', p, q))
-    # 2 atan2(|p̄q|_vec, |p̄q|_w) is accurate at small angles, unlike acos.
-    dq = multiply(conjugate(p), q)
-    vn = np.sqrt(np.einsum('...i,...i->...', dq[..., 1:], dq[..., 1:]))
-    return 2.0 * np.arctan2(vn, d)
+    p = check_quaternions(p, 'p')
+    q = check_quaternions(q, 'q')
+    if np.any(squared_norm(p) == 0.0) or np.any(squared_norm(q) == 0.0):
+        raise ValueError('The attitude of a zero quaternion is undefined')
+    # p̄ ⊗ q = (p·q, p_w q_v − q_w p_v − p_v × q_v); both parts scale with
+    # ‖p‖‖q‖, so the angle needs no normalization. atan2 stays accurate at
+    # small angles, unlike acos.
+    dot = np.einsum('...i,...i->...', p, q)
+    v = (p[..., :1] * q[..., 1:] - q[..., :1] * p[..., 1:]
+         - np.cross(p[..., 1:], q[..., 1:]))
+    vn = np.sqrt(np.einsum('...i,...i->...', v, v))
+    return 2.0 * np.arctan2(vn, np.abs(dot))
 
 
 def manifold_distance(q):
