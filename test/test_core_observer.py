@@ -204,3 +204,22 @@ def test_sign_alignment_makes_flipped_measurements_harmless():
     assert np.max(angle_aligned) < 0.1
     assert np.mean(angle_naive) > 5 * np.mean(angle_aligned)
     assert np.mean(angle_naive) > 0.1
+
+
+def test_batch_broadcasts_a_shared_increment_and_measurement():
+    rng = np.random.default_rng(14)
+    q0 = rng.standard_normal((3, 5, 4))
+    theta = rng.uniform(0, 1, 3)
+    y = quat.random_unit_quaternions(rng, (5,))
+    obs = LuenbergerObserver('extended', batch_shape=(3, 5))
+    obs.reset(q0)
+    new = obs.step(theta, y)
+    assert new.shape == (3, 5, 4)
+    single = SingleObserver('extended', initial=tuple(q0[2, 4]))
+    assert_allclose(new[2, 4], single.step(tuple(theta), tuple(y[4])),
+                    rtol=1e-12)
+    # The caller's arrays are never modified.
+    assert_allclose(obs.step(theta, y, rotation=None).shape, (3, 5, 4))
+    theta_copy = theta.copy()
+    obs.step(theta)
+    assert_allclose(theta, theta_copy)

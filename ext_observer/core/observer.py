@@ -189,12 +189,27 @@ class LuenbergerObserver:
         initial = quat.check_quaternions(initial, 'initial')
         if not np.all(np.isfinite(initial)) or np.any(quat.norm(initial) == 0.0):
             raise ValueError('initial estimate must be finite and nonzero')
-        self.state = np.broadcast_to(initial, self.batch_shape + (4,)).copy()
+        self.state = initial
         self.measurements_used = 0
+
+    @property
+    def state(self):
+        """The estimate ``q̂_k``, shape ``(*batch_shape, 4)`` (a view)."""
+        return np.moveaxis(self._q, 0, -1)
+
+    @state.setter
+    def state(self, value):
+        value = quat.check_quaternions(value, 'state')
+        self._q = np.array(np.moveaxis(
+            np.broadcast_to(value, self.batch_shape + (4,)), -1, 0), order='C')
 
     def step(self, increment, measurement=None, rotation=None):
         """
         Advance by one step: from ``q̂_k`` to ``q̂_{k+1}``.
+
+        The batch is stored as contiguous components ``(4, *batch_shape)``
+        (structure of arrays), which is about twice as fast as working on
+        the strided components of ``(..., 4)`` arrays at large batches.
 
         Parameters
         ----------
@@ -211,35 +226,98 @@ class LuenbergerObserver:
         Returns
         -------
         state : ndarray, shape (*batch_shape, 4)
-            ``q̂_{k+1}`` (also stored in :attr:`state`).
+            ``q̂_{k+1}``, a new array (also the new :attr:`state`).
 
         """
         cfg = self.config
-        q = self.state
-        E = (quat.quaternion_from_rotation_vector(increment)
-             if rotation is None else rotation)
-        propagated = quat.multiply(q, E)
-        new = propagated
+        q = self._q
+        if rotation is None:
+            E = _rotation_components(
+                quat.check_vectors(increment, 'increment'), q.ndim - 1)
+        else:
+            E = _components(quat.check_quaternions(rotation, 'rotation'),
+                            q.ndim - 1)
+        shape = np.broadcast_shapes(q.shape, E.shape)
+        # The propagation q̂ ⊗ E, scaled by (1 − 4α(q̂̄q̂ − 1)) for extended:
+        # that is q̂ ⊗ E − α ∇V(q̂ ⊗ E), the term of Corollary 1.
+        new = _multiply_components(q, E, np.empty(shape))
+        if cfg.variant == 'extended':
+            scale = np.einsum('i...,i...->...', q, q)
+            scale -= 1.0
+            scale *= -4.0 * cfg.alpha
+            scale += 1.0
+            new *= scale
         if measurement is not None:
-            y = quat.check_quaternions(measurement, 'measurement')
+            y = _components(quat.check_quaternions(measurement, 'measurement'),
+                            q.ndim - 1)
             if cfg.align_sign:
-                dot = np.einsum('...i,...i->...', y, q)
-                y = np.where((dot < 0.0)[..., np.newaxis], -y, y)
-            innovation = y - q
+                dot = np.einsum('i...,i...->...', y, q)
+                y = np.where(dot < 0.0, -y, y)
+            innovation = y - q  # a new array, safe to scale in place
             if cfg.gain_mode == 'constant':
-                new = new + innovation @ self._gain_matrix
+                flat = innovation.reshape(4, -1)
+                new += (self._gain_matrix.T @ flat).reshape(innovation.shape)
             else:
                 kappa = cfg.kappa_at(self.measurements_used)
-                new = new + kappa * quat.multiply(innovation, E)
+                innovation *= kappa
+                new += _multiply_components(
+                    innovation, E, np.empty(np.broadcast_shapes(
+                        innovation.shape, E.shape)))
             self.measurements_used += 1
-        if cfg.variant == 'extended':
-            # 4α q̂ (q̂̄q̂ − 1) ⊗ E = α ∇V(q̂ ⊗ E), the term of Corollary 1.
-            residual = quat.squared_norm(q) - 1.0
-            new = new - (4.0 * cfg.alpha * residual)[..., np.newaxis] * propagated
-        elif cfg.variant == 'projected':
-            new = quat.normalize(new)
-        self.state = np.broadcast_to(new, self.batch_shape + (4,)).copy()
+        if cfg.variant == 'projected':
+            n = np.sqrt(np.einsum('i...,i...->...', new, new))
+            if not np.all(np.isfinite(n)) or np.any(n == 0.0):
+                raise ValueError('Cannot normalize a quaternion that is zero '
+                                 'or not finite')
+            new /= n
+        self._q = np.ascontiguousarray(np.broadcast_to(
+            new, (4,) + self.batch_shape))
         return self.state
+
+
+def _components(a, ndim=0):
+    """
+    Return ``(..., n)`` as contiguous components ``(n, ...)``.
+
+    Leading axes are padded to ``ndim`` so that the components broadcast
+    against a batch of ``ndim`` dimensions as ``(..., n)`` arrays do.
+    """
+    a = np.asarray(a, dtype=float)
+    a = a.reshape((1,) * (ndim + 1 - a.ndim) + a.shape)
+    return np.ascontiguousarray(np.moveaxis(a, -1, 0))
+
+
+def _rotation_components(theta, ndim=0):
+    """``exp((0, θ/2))`` as components ``(4, ...)`` from ``θ`` ``(..., 3)``."""
+    half = 0.5 * _components(theta, ndim)  # a new array: never scale the caller's
+    a = np.sqrt(np.einsum('i...,i...->...', half, half))
+    out = np.empty((4,) + a.shape)
+    # [row, ...] keeps a 0-d row an array (a valid `out`) for batch ().
+    np.cos(a, out=out[0, ...])
+    np.multiply(half, quat._sinc(a), out=out[1:])
+    return out
+
+
+def _multiply_components(p, q, out):
+    """Hamilton product of components ``(4, ...)`` into ``out``."""
+    pw, px, py, pz = p
+    qw, qx, qy, qz = q
+    t = np.empty(out.shape[1:])
+    for row, terms in enumerate((
+            ((pw, qw, 1), (px, qx, -1), (py, qy, -1), (pz, qz, -1)),
+            ((pw, qx, 1), (px, qw, 1), (py, qz, 1), (pz, qy, -1)),
+            ((pw, qy, 1), (px, qz, -1), (py, qw, 1), (pz, qx, 1)),
+            ((pw, qz, 1), (px, qy, 1), (py, qx, -1), (pz, qw, 1)))):
+        (a, b, _), *rest = terms
+        target = out[row, ...]
+        np.multiply(a, b, out=target)
+        for a, b, sign in rest:
+            np.multiply(a, b, out=t)
+            if sign > 0:
+                target += t
+            else:
+                target -= t
+    return out
 
 
 def _multiply(p, q):
