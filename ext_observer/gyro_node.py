@@ -65,6 +65,11 @@ GYRO_PARAMETERS = (
                   constraints='Empty or 4 finite numbers, not all zero.'),
     ParameterSpec('steps', 0, 'Steps to publish, then stop publishing; 0 = no end.',
                   (0, INT32_MAX), read_only=True),
+    ParameterSpec('wait_for_subscribers', 0,
+                  'Publish nothing until gyro/increment and attitude/measurement each '
+                  'have this many subscribers (so that no step is published before '
+                  'discovery has matched them); 0 = start at once.', (0, 1000),
+                  read_only=True),
     ParameterSpec('frame_id', 'world',
                   'frame_id of the attitude messages (the reference frame).'),
     ParameterSpec('body_frame_id', 'base_link',
@@ -180,6 +185,7 @@ class GyroNode(Node):
             DiagnosticArray, '/diagnostics', diagnostics_qos,
             event_callbacks=self.qos.publisher('/diagnostics', diagnostics_qos))
         self.steps_published = 0
+        self._rate_mark = None       # (node clock ns, steps) at the last status
         self.finished = False
         self._anchor = None
         self._last_stamp = None
@@ -211,6 +217,8 @@ class GyroNode(Node):
         if settings['steps'] and self.steps_published >= settings['steps']:
             self._finish()
             return
+        if self.steps_published == 0 and not self._subscribed(settings):
+            return
         sample = self.gyro.step()
         stamp = self._stamp()
         self.truth_publisher.publish(
@@ -223,6 +231,11 @@ class GyroNode(Node):
         self.steps_published += 1
         if settings['steps'] and self.steps_published >= settings['steps']:
             self._finish()
+
+    def _subscribed(self, settings):
+        wanted = settings['wait_for_subscribers']
+        return (self.increment_publisher.get_subscription_count() >= wanted
+                and self.measurement_publisher.get_subscription_count() >= wanted)
 
     def _finish(self):
         if not self.finished:
@@ -251,9 +264,18 @@ class GyroNode(Node):
             status.level = DiagnosticStatus.OK
             status.message = (f'{self.steps_published} steps published'
                               + (', finished' if self.finished else ''))
+        # Steps per second of the node clock since the last status: below
+        # rate_hz when the process cannot keep up (the stamps stay on the grid).
+        now = self.get_clock().now().nanoseconds
+        achieved = 0.0
+        if self._rate_mark is not None and now > self._rate_mark[0]:
+            achieved = (self.steps_published - self._rate_mark[1]) * 1e9 / (
+                now - self._rate_mark[0])
+        self._rate_mark = (now, self.steps_published)
         status.values = key_values(
             [('steps_published', self.steps_published), ('finished', self.finished),
-             ('rate_hz', settings['rate_hz'])] + self.qos.key_values())
+             ('rate_hz', settings['rate_hz']), ('achieved_rate_hz', achieved)]
+            + self.qos.key_values())
         return status
 
     def diagnostic_callback(self):

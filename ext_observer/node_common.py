@@ -27,6 +27,7 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.exceptions import (InvalidParameterTypeException,
                               InvalidParameterValueException)
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, qos_check_compatible, qos_policy_name_from_kind,
                        QoSCompatibility, ReliabilityPolicy)
@@ -443,8 +444,10 @@ def run_node(node_class, args=None):
     Run one node until Ctrl-C or shutdown; the body of each node's ``main``.
 
     As ``demo_nodes_py``'s talker: spin inside ``try``, treat
-    ``KeyboardInterrupt`` and ``ExternalShutdownException`` as a normal end,
-    and always destroy the node and shut rclpy down.
+    ``KeyboardInterrupt`` and ``ExternalShutdownException`` as a normal end
+    (and an ``RCLError`` raised because the context was shut down under a
+    callback that was publishing, as happens to a busy node on Ctrl-C), and
+    always destroy the node and shut rclpy down.
 
     Parameters
     ----------
@@ -467,6 +470,11 @@ def run_node(node_class, args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except _rclpy.RCLError:
+        # Ctrl-C shuts the context down at once; a callback that was
+        # publishing at that moment fails. That is the end we asked for.
+        if rclpy.ok():
+            raise
     except ParameterError as error:
         rclpy.logging.get_logger(node_class.NODE_NAME).fatal(
             f'invalid parameters, not starting: {error}')

@@ -1,7 +1,11 @@
 """Helpers of the ROS tests: a probe node and small utilities."""
 
+import os
+import sys
+
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+import pytest
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
@@ -11,6 +15,14 @@ from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_ms
 from ext_observer.core.validation import check_measurement
 
 SECOND = 1_000_000_000
+
+
+def installed(name):
+    """Return the console script ``name`` that pip installed next to this Python."""
+    path = os.path.join(os.path.dirname(sys.executable), name)
+    if not os.path.exists(path):
+        pytest.fail(f'{name} is not installed next to {sys.executable}; run `make test`')
+    return path
 
 
 def unit(y, tolerance=0.1):

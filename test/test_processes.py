@@ -7,7 +7,6 @@ the pipeline end to end, calls the observer's parameter services, and every
 process is ended by the test (SIGINT, checked), or by the fixture on failure.
 """
 
-import os
 import sys
 import time
 
@@ -22,15 +21,7 @@ from conftest import CONFIG
 from ext_observer.core import attitude_error, manifold_distance, SingleObserver
 from ext_observer.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, STATUS_NAME
 from ext_observer.node_common import LEVEL_NAMES
-from ros_helpers import Probe, SECOND, unit, values_of
-
-
-def installed(name):
-    """Return the console script ``name`` that pip installed next to this Python."""
-    path = os.path.join(os.path.dirname(sys.executable), name)
-    if not os.path.exists(path):
-        pytest.fail(f'{name} is not installed next to {sys.executable}; run `make test`')
-    return path
+from ros_helpers import installed, Probe, SECOND, unit, values_of
 
 
 def assert_clean_exit(process, code=0):

@@ -1,0 +1,180 @@
+"""
+The soak: gyro, observer and monitor as separate processes under load.
+
+Marked ``soak``: the default suite skips it; ``make soak`` (and CI, after
+``make test``) runs it. The gyro publishes ``SOAK_RATE`` steps per second
+for ``SOAK_SECONDS`` s. The test samples the resident memory of each node
+from ``/proc`` and, at the end, reads their ``/diagnostics``:
+
+- every input the observer received is accounted for: received = processed
+  + dropped (by reason) + waiting, and nothing waits once the gyro stopped;
+- the same for the monitor's estimates and ground truths;
+- the observer's memory is flat after the warm-up;
+- the estimates kept converging (the monitor's mean attitude error).
+
+Messages lost between processes (a DDS reader history of ``queue_depth``
+overflowing while a process is descheduled) never reach a node, so they are
+outside its accounting; the test reports them (published − received) and
+bounds them separately.
+"""
+
+import json
+import os
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+import pytest
+from rclpy.node import Node
+
+from ros_helpers import installed
+
+pytestmark = pytest.mark.soak
+
+SOAK_SECONDS = float(os.environ.get('EXT_OBSERVER_SOAK_SECONDS', '60'))
+SOAK_RATE = float(os.environ.get('EXT_OBSERVER_SOAK_RATE', '1000'))
+# The monitor is a third process at the full rate; on 2 cores the three do
+# not keep up at 1 kHz (messages are lost between processes), so it is off
+# unless asked for.
+SOAK_MONITOR = os.environ.get('EXT_OBSERVER_SOAK_MONITOR', '0') == '1'
+# Reader and writer histories: 200 ms at 1 kHz, for a process descheduled
+# that long.
+DEPTH = int(os.environ.get('EXT_OBSERVER_SOAK_DEPTH', '200'))
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+class DiagnosticsProbe(Node):
+    """Keep the last status of each name; nothing else (the probe stays light)."""
+
+    def __init__(self, context):
+        super().__init__('soak_probe', context=context)
+        self.statuses = {}
+        self.create_subscription(DiagnosticArray, '/diagnostics', self.callback, 50)
+
+    def callback(self, msg):
+        for status in msg.status:
+            self.statuses[status.name] = {kv.key: kv.value for kv in status.values}
+
+
+def rss_kib(pid):
+    with open(f'/proc/{pid}/status') as status:
+        for line in status:
+            if line.startswith('VmRSS:'):
+                return int(line.split()[1])
+    raise RuntimeError(f'no VmRSS for {pid}')
+
+
+def cpu_seconds(pid):
+    with open(f'/proc/{pid}/stat') as stat:
+        fields = stat.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def test_soak(ros_processes, ros_context, spinner):
+    period = 1.0 / SOAK_RATE
+    steps = round(SOAK_RATE * SOAK_SECONDS)
+    observer = ros_processes([
+        installed('observer_node'), '--ros-args', '-p', f'step_period:={period!r}',
+        '-p', f'queue_depth:={DEPTH}', '-p', 'diagnostic_period:=1.0'])
+    processes = {'observer': observer}
+    names = {'observer: inputs'}
+    if SOAK_MONITOR:
+        processes['monitor'] = ros_processes([
+            installed('monitor_node'), '--ros-args', '-p', f'queue_depth:={DEPTH}',
+            '-p', 'diagnostic_period:=1.0', '-p', 'window:=1000', '-p', 'stale_timeout:=5.0'])
+        names.add('monitor: attitude estimate')
+    probe = spinner.add(DiagnosticsProbe(ros_context))
+    spinner.spin_until(lambda: names <= set(probe.statuses), 20.0, 'the first statuses')
+    spinner.spin_until(lambda: probe.count_subscribers('gyro/increment') >= 1
+                       and probe.count_subscribers('attitude_estimate') >= SOAK_MONITOR,
+                       20.0, 'the subscriptions')
+    gyro = ros_processes([
+        installed('gyro_node'), '--ros-args', '-p', f'rate_hz:={SOAK_RATE!r}',
+        '-p', f'steps:={steps}', '-p', 'seed:=1', '-p', f'queue_depth:={DEPTH}',
+        '-p', 'wait_for_subscribers:=1',
+        '-p', 'diagnostic_period:=1.0'])
+    processes['gyro'] = gyro
+    names.add('gyro: outputs')
+    pids = {name: process.process.pid for name, process in processes.items()}
+
+    samples = []            # (elapsed s, {name: RSS KiB})
+    rates = []              # the gyro's achieved rate, each status
+    start = time.monotonic()
+    cpu_start = {name: cpu_seconds(pid) for name, pid in pids.items()}
+    deadline = start + SOAK_SECONDS * 2 + 30.0
+    next_sample = start
+    while probe.statuses.get('gyro: outputs', {}).get('finished') != 'true':
+        status = probe.statuses.pop('gyro: outputs', None)
+        if status is not None and int(status['steps_published']) > 0:
+            rates.append(float(status['achieved_rate_hz']))
+        if time.monotonic() > deadline:
+            pytest.fail(f'the gyro did not publish {steps} steps in time')
+        for process in processes.values():
+            assert process.process.poll() is None, process.output
+        if time.monotonic() >= next_sample:
+            samples.append((time.monotonic() - start,
+                            {name: rss_kib(pid) for name, pid in pids.items()}))
+            next_sample += 2.0
+        spinner.executor.spin_once(timeout_sec=0.1)
+    elapsed = time.monotonic() - start
+    cpu = {name: (cpu_seconds(pid) - cpu_start[name]) / elapsed for name, pid in pids.items()}
+    # Let the last inputs drain (the measurement timeout is 0.1 s), then read a
+    # status from after that.
+    spinner.spin_for(0.5)
+    probe.statuses.clear()
+    spinner.spin_until(lambda: names <= set(probe.statuses), 5.0, 'the final statuses')
+    obs = probe.statuses['observer: inputs']
+    published = int(probe.statuses['gyro: outputs']['steps_published'])
+
+    # Accounting: every input the observer got is processed or dropped by reason.
+    received, processed = int(obs['inputs_received']), int(obs['inputs_processed'])
+    dropped, waiting = int(obs['inputs_dropped']), int(obs['inputs_waiting'])
+    drops = {k[len('dropped_'):]: int(v) for k, v in obs.items()
+             if k.startswith('dropped_') and int(v)}
+    assert received == processed + dropped + waiting
+    assert waiting == 0
+    assert received == int(obs['increments']) + int(obs['measurements'])
+    mon = probe.statuses.get('monitor: attitude estimate')
+    if mon is not None:
+        assert int(mon['estimates_received']) == (
+            int(mon['estimates_processed']) + int(mon['dropped_non_finite_estimate']))
+        assert int(mon['ground_truth_received']) == (
+            int(mon['ground_truth_paired']) + int(mon['dropped_non_finite_ground_truth'])
+            + int(mon['dropped_unpaired_ground_truth']) + int(mon['waiting_ground_truth']))
+    lost = {'increments': published - int(obs['increments']),
+            'measurements': published - int(obs['measurements'])}
+
+    # Memory: flat after the warm-up (the first quarter of the run).
+    warm = [rss for t, rss in samples if t >= SOAK_SECONDS / 4]
+    growth = {name: warm[-1][name] - min(rss[name] for rss in warm) for name in pids}
+
+    summary = dict(rate_hz=SOAK_RATE, seconds=round(elapsed, 1), steps_published=published,
+                   observer_received=received, observer_processed=processed,
+                   observer_dropped=dropped, observer_drops=drops,
+                   steps_corrected=int(obs['steps_corrected']),
+                   steps_propagated=int(obs['steps_propagated']),
+                   lost_between_processes=lost,
+                   rss_kib_first={n: samples[0][1][n] for n in pids},
+                   rss_kib_after_warmup={n: warm[0][n] for n in pids},
+                   rss_kib_last={n: samples[-1][1][n] for n in pids},
+                   rss_growth_after_warmup_kib=growth,
+                   gyro_achieved_rate_hz_median=sorted(rates)[len(rates) // 2]
+                   if rates else None,
+                   cpu_cores=dict((n, round(c, 2)) for n, c in cpu.items()))
+    if mon is not None:
+        summary.update(monitor_attitude_error_mean=float(mon['attitude_error_mean']),
+                       monitor_estimates_received=int(mon['estimates_received']))
+    text = json.dumps(summary, indent=1)
+    print(f'\nsoak summary:\n{text}', file=sys.stderr)
+    os.makedirs(os.path.join(REPO, 'out'), exist_ok=True)
+    with open(os.path.join(REPO, 'out', 'soak.json'), 'w') as out:
+        out.write(text + '\n')
+
+    assert len(warm) >= 5, samples
+    # A leak of one small object per step would add megabytes over the run.
+    for name in pids:
+        assert growth[name] <= 1024, summary
+    # Losses between processes stay rare; the observer stays converged.
+    assert max(lost.values()) <= 0.01 * published, summary
+    if mon is not None:
+        assert summary['monitor_attitude_error_mean'] < 0.6, summary
