@@ -111,6 +111,64 @@ def test_ctrl_c_on_an_idle_node_exits_cleanly(ros_processes, ros_context, spinne
     assert_clean_exit(process)
 
 
+def as_background_job(argv):
+    """Return ``argv`` run as ``argv &`` in a shell script runs it: SIGINT ignored."""
+    return [sys.executable, '-c', 'import os, signal, sys; '
+            'signal.signal(signal.SIGINT, signal.SIG_IGN); os.execv(sys.argv[1], sys.argv[1:])',
+            *argv]
+
+
+def test_ctrl_c_on_busy_nodes_exits_cleanly(ros_processes, ros_context, spinner):
+    # At 2 kHz a callback is publishing most of the time, and rclpy's signal
+    # handler shuts the context down under it. When Python's own SIGINT
+    # handler is off (a node started as a background job), no
+    # KeyboardInterrupt comes first: without the care in run_node, most such
+    # gyros died with an RCLError traceback.
+    probe = spinner.add(Probe(ros_context))
+    observer = ros_processes([installed('observer_node'), '--ros-args',
+                              '-p', 'queue_depth:=100'])
+    wait_for_nodes(spinner, probe, ['observer'])
+    gyro = ros_processes(as_background_job([
+        installed('gyro_node'), '--ros-args', '-p', 'rate_hz:=2000.0',
+        '-p', 'queue_depth:=100', '-p', 'wait_for_subscribers:=1']))
+    spinner.spin_until(lambda: len(probe.estimates) > 500, 20.0, 'a busy pipeline')
+    for process in (gyro, observer):
+        process.interrupt(timeout=10.0)
+        assert_clean_exit(process)
+
+
+SHUTDOWN_UNDER_A_CALLBACK = '''
+import sys
+import rclpy
+from rclpy.node import Node
+from std_msgs.msg import Float64
+from ext_observer.node_common import run_node
+
+class Node_(Node):
+    NODE_NAME = 'busy'
+
+    def __init__(self):
+        super().__init__(self.NODE_NAME)
+        self.publisher = self.create_publisher(Float64, 'x', 10)
+        self.create_timer(0.01, self.timer_callback)
+
+    def timer_callback(self):
+        # What Ctrl-C does while a callback runs: the context goes down.
+        rclpy.shutdown()
+        self.publisher.publish(Float64(data=1.0))
+
+sys.exit(run_node(Node_, []))
+'''
+
+
+def test_run_node_ends_cleanly_when_the_context_goes_down_under_a_callback(ros_processes):
+    # The same race, made certain: publishing after the shutdown raises
+    # RCLError inside spin, which run_node takes as the end it is.
+    process = ros_processes([sys.executable, '-c', SHUTDOWN_UNDER_A_CALLBACK])
+    process.wait(timeout=20.0)
+    assert_clean_exit(process)
+
+
 def test_invalid_start_up_parameter_exits_with_the_reason(ros_processes):
     process = ros_processes([installed('observer_node'), '--ros-args', '-p', 'alpha:=0.5'])
     process.wait(timeout=20.0)
