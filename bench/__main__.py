@@ -46,20 +46,21 @@ def _batch(quick):
 def _nodes(quick, log_dir):
     from bench import nodes
     targets = nodes.relay_targets()
-    notes = ['Queue depth 10 (the observer\'s default `queue_depth`, '
-             'reliable, keep last) except the `-depth100` targets and the '
-             'polling relay (100: `--depth 100`, `-p queue_depth:=100`); the '
-             'probe keeps 1000.',
+    notes = ['Queue depth 10 (reliable, keep last) except the `-depth100` '
+             'targets and the polling relay (100: `--depth 100`; the observer '
+             'node\'s default `queue_depth`); the probe keeps 1000.',
              'relay/events-poll2ms is `bench.relay.PollingRelay`: its '
              'subscriptions are never spun, one 2 ms timer on the '
              'EventsExecutor takes every waiting message and pairs them (fewer '
              'wake-ups, messages taken in batches; up to 2 ms added latency).']
     if os.path.exists(os.path.join(REPO, 'ext_observer', 'observer_node.py')):
         targets += nodes.observer_targets()
-        notes.append('observer/single is the shipped entry point '
-                     '(`python -m ext_observer.observer_node`, `rclpy.spin`); '
-                     'it has no executor option, so observer/multi and '
-                     'observer/events host the same `ObserverNode` class in '
+        notes.append('observer/single and observer/events are the shipped entry '
+                     'point (`python -m ext_observer.observer_node --executor '
+                     'single|events -p queue_depth:=10`); observer/events-depth100 '
+                     'is the entry point as shipped, with its defaults '
+                     '(EventsExecutor, `queue_depth` 100); observer/multi hosts '
+                     'the same `ObserverNode` class on a MultiThreadedExecutor in '
                      '`bench/observer_host.py`. Parameters: the defaults '
                      '(extended, paper gain) and `diagnostic_period:=0.1`.')
     else:

@@ -323,33 +323,39 @@ def sustained_rate(results):
     return max(rates, default=None)
 
 
-# The observer runs with its defaults (extended variant, paper gain, queue
-# depth 10, as the relay) and diagnostics at 10 Hz for the input counters.
+# The observer runs with its defaults (extended variant, paper gain) but the
+# queue depth of the relay (10), so that observer and relay compare on equal
+# queues, and diagnostics at 10 Hz for the input counters. The target
+# SHIPPED runs it exactly as shipped (EventsExecutor, queue_depth 100).
 OBSERVER_ROS_ARGS = ('--ros-args', '-p', 'diagnostic_period:=0.1')
+EQUAL_DEPTH = ('-p', 'queue_depth:=10')
+SHIPPED = f'observer/events-depth{DEEP_QUEUE}'
 
 
 def observer_targets(executors=('single', 'multi', 'events'), deep=True):
     """
-    Return the observer node: as shipped on 'single', hosted on the others.
+    Return the observer node on each executor, and as shipped.
 
-    The shipped entry point (``python -m ext_observer.observer_node``) spins
-    the default SingleThreadedExecutor; other executors run the same node
-    class in :mod:`bench.observer_host`.
+    The shipped entry point (``python -m ext_observer.observer_node``) runs
+    ``--executor single`` and ``--executor events``; the MultiThreadedExecutor,
+    which the node does not offer, hosts the same node class in
+    :mod:`bench.observer_host`. With ``deep``, the entry point with its
+    defaults (:data:`SHIPPED`: EventsExecutor, ``queue_depth`` 100).
     """
     targets = []
     for ex in executors:
-        if ex == 'single':
-            args = ['-m', 'ext_observer.observer_node']
-            note = 'shipped entry point (rclpy.spin)'
+        if ex in ('single', 'events'):
+            args = ['-m', 'ext_observer.observer_node', '--executor', ex]
+            note = f'shipped entry point, --executor {ex}'
         else:
             args = ['-m', 'bench.observer_host', '--executor', ex]
             note = 'ObserverNode hosted by bench.observer_host'
-        targets.append(Target('observer', ex, args + list(OBSERVER_ROS_ARGS),
+        targets.append(Target('observer', ex,
+                              args + list(OBSERVER_ROS_ARGS) + list(EQUAL_DEPTH),
                               stamp_offset=1, note=note))
     if deep and 'events' in executors:
         targets.append(Target(
             'observer', f'events-depth{DEEP_QUEUE}',
-            ['-m', 'bench.observer_host', '--executor', 'events']
-            + list(OBSERVER_ROS_ARGS) + ['-p', f'queue_depth:={DEEP_QUEUE}'],
-            stamp_offset=1))
+            ['-m', 'ext_observer.observer_node'] + list(OBSERVER_ROS_ARGS),
+            stamp_offset=1, note='shipped entry point, its defaults'))
     return targets

@@ -39,12 +39,12 @@ def _rotation(theta):
 def _carried(q, theta):
     pw, px, py, pz = q
     qw, qx, qy, qz = _rotation(theta)
-    r = (pw * qw - px * qx - py * qy - pz * qz,
-         pw * qx + px * qw + py * qz - pz * qy,
-         pw * qy - px * qz + py * qw + pz * qx,
-         pw * qz + px * qy - py * qx + pz * qw)
-    n = math.sqrt(sum(v * v for v in r))
-    return tuple(v / n for v in r)
+    rw = pw * qw - px * qx - py * qy - pz * qz
+    rx = pw * qx + px * qw + py * qz - pz * qy
+    ry = pw * qy - px * qz + py * qw + pz * qx
+    rz = pw * qz + px * qy - py * qx + pz * qw
+    n = math.sqrt(rw * rw + rx * rx + ry * ry + rz * rz)
+    return (rw / n, rx / n, ry / n, rz / n)
 
 
 class GuardedObserver:
@@ -106,12 +106,14 @@ class GuardedObserver:
         observer = self.observer
         innovation = None
         if measurement is not None:
-            q = observer.state
-            y = tuple(measurement)
-            if observer.config.align_sign and sum(a * b for a, b in zip(y, q)) < 0.0:
-                y = tuple(-v for v in y)
-            innovation = math.sqrt(sum((a - b) * (a - b) for a, b in zip(y, q)))
-            self.latest = y
+            # Plain expressions, not sum() over generators: this runs per step.
+            q0, q1, q2, q3 = observer.state
+            y0, y1, y2, y3 = measurement
+            if observer.config.align_sign and y0 * q0 + y1 * q1 + y2 * q2 + y3 * q3 < 0.0:
+                y0, y1, y2, y3 = -y0, -y1, -y2, -y3
+            d0, d1, d2, d3 = y0 - q0, y1 - q1, y2 - q2, y3 - q3
+            innovation = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3)
+            self.latest = (y0, y1, y2, y3)
         try:
             state = observer.step(increment, measurement)
         except (ValueError, OverflowError, ZeroDivisionError):
@@ -120,7 +122,9 @@ class GuardedObserver:
             reason = check_state(state, innovation, self.max_residual, self.max_innovation)
             # 0 is a fixed point of every variant without measurements, and
             # has no attitude: as bad as a divergence.
-            if reason is None and sum(v * v for v in state) < MIN_NORM * MIN_NORM:
+            if reason is None and (state[0] * state[0] + state[1] * state[1]
+                                   + state[2] * state[2] + state[3] * state[3]
+                                   ) < MIN_NORM * MIN_NORM:
                 reason = 'state_zero'
         if self.latest is not None:
             self.latest = _carried(self.latest, increment)

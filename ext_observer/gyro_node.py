@@ -74,7 +74,7 @@ GYRO_PARAMETERS = (
                   'frame_id of the attitude messages (the reference frame).'),
     ParameterSpec('body_frame_id', 'base_link',
                   'frame_id of the increment (a rotation of the body frame).'),
-    ParameterSpec('queue_depth', 10, 'History depth of the publishers (reliable, '
+    ParameterSpec('queue_depth', 100, 'History depth of the publishers (reliable, '
                   'keep last).', (1, 10000), read_only=True),
     ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.', (0.01, 3600.0),
                   read_only=True),

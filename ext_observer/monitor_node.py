@@ -111,7 +111,7 @@ MONITOR_PARAMETERS = (
                   'Largest stamp difference between an estimate and the ground truth '
                   'paired with it, s.', (0.0, 10.0)),
     ParameterSpec('hardware_id', 'ext_observer', 'hardware_id of the status.'),
-    ParameterSpec('queue_depth', 10, 'History depth of the subscriptions and the '
+    ParameterSpec('queue_depth', 100, 'History depth of the subscriptions and the '
                   'publisher (reliable, keep last).', (1, 10000), read_only=True),
     ParameterSpec('clock_jump_threshold', 1.0,
                   'A backward jump of the node clock by more than this clears the '

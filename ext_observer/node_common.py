@@ -17,6 +17,7 @@ core's ``ValueError``.
 """
 
 import dataclasses
+import sys
 from typing import Any, Callable, Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -26,13 +27,13 @@ import rclpy
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import (InvalidParameterTypeException,
                               InvalidParameterValueException)
-from rclpy.executors import ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, qos_check_compatible, qos_policy_name_from_kind,
                        QoSCompatibility, ReliabilityPolicy)
 
 __all__ = [
+    'EXECUTORS',
     'LEVEL_NAMES',
     'CounterDeltas',
     'ParameterError',
@@ -40,6 +41,7 @@ __all__ = [
     'NodeParameters',
     'QosWatch',
     'diagnostic_array',
+    'executor_from_args',
     'key_values',
     'markdown_table',
     'run_node',
@@ -369,12 +371,18 @@ class QosWatch:
         return SubscriptionEventCallbacks(
             incompatible_qos=lambda event: self._incompatible(name, event))
 
-    def publisher(self, topic, qos, hint=''):
-        """Return ``PublisherEventCallbacks`` for a publisher on ``topic``."""
+    def publisher(self, topic, qos, hint='', matched=None):
+        """
+        Return ``PublisherEventCallbacks`` for a publisher on ``topic``.
+
+        ``matched(info)``, if given, is called when a subscription is matched
+        or unmatched (``info.current_count`` subscriptions now).
+        """
         name = self._node.resolve_topic_name(topic)
         self._endpoints[name] = ('publisher', qos, hint)
         return PublisherEventCallbacks(
-            incompatible_qos=lambda event: self._incompatible(name, event))
+            incompatible_qos=lambda event: self._incompatible(name, event),
+            matched=matched)
 
     def _incompatible(self, topic, event):
         self.events += max(1, event.total_count_change)
@@ -439,15 +447,83 @@ LEVEL_NAMES = {
 }
 
 
+# Executors of the nodes' main (``--executor``); the first is the default.
+EXECUTORS = ('events', 'single')
+# Spin timeout of the EventsExecutor loop, s. rclpy 7.1's EventsExecutor
+# busy-waits when spun without a timeout; with a finite one it sleeps.
+EVENTS_SPIN_TIMEOUT = 0.1
+
+
+def executor_from_args(args):
+    """
+    Return the executor named by ``--executor`` among the non-ROS arguments.
+
+    Parameters
+    ----------
+    args : list of str
+        The command line (``sys.argv`` or what ``main`` was given), ROS
+        arguments included; ``--executor NAME`` or ``--executor=NAME`` is
+        looked for outside ``--ros-args ... --``.
+
+    Returns
+    -------
+    executor : str
+        One of :data:`EXECUTORS`; the first when the option is absent.
+
+    Raises
+    ------
+    ValueError
+        For an unknown executor or a missing value.
+
+    """
+    from rclpy.utilities import remove_ros_args
+    words = remove_ros_args(list(args))
+    kind = EXECUTORS[0]
+    for index, word in enumerate(words):
+        if word == '--executor':
+            if index + 1 >= len(words):
+                raise ValueError(f'--executor needs a value, one of {EXECUTORS}')
+            kind = words[index + 1]
+        elif word.startswith('--executor='):
+            kind = word.split('=', 1)[1]
+    if kind not in EXECUTORS:
+        raise ValueError(f'--executor must be one of {EXECUTORS}, got {kind!r}')
+    return kind
+
+
+def _spin(node, kind):
+    context = node.context
+    if kind == 'single':
+        executor = SingleThreadedExecutor(context=context)
+    else:
+        from rclpy.experimental import EventsExecutor
+        executor = EventsExecutor(context=context)
+    executor.add_node(node)
+    try:
+        if kind == 'single':
+            executor.spin()
+        else:
+            while context.ok():
+                executor.spin_once(timeout_sec=EVENTS_SPIN_TIMEOUT)
+    finally:
+        executor.shutdown()
+
+
 def run_node(node_class, args=None):
     """
     Run one node until Ctrl-C or shutdown; the body of each node's ``main``.
 
     As ``demo_nodes_py``'s talker: spin inside ``try``, treat
     ``KeyboardInterrupt`` and ``ExternalShutdownException`` as a normal end
-    (and an ``RCLError`` raised because the context was shut down under a
-    callback that was publishing, as happens to a busy node on Ctrl-C), and
+    (and any error raised once the context is down: Ctrl-C shuts it down
+    under whatever spin was doing, publishing or taking a message), and
     always destroy the node and shut rclpy down.
+
+    The executor is chosen on the command line, before ``--ros-args``:
+    ``--executor events`` (the default: ``rclpy.experimental.EventsExecutor``
+    spun with ``spin_once(timeout_sec=0.1)`` in a loop while the context is
+    up) or ``--executor single`` (``SingleThreadedExecutor``, what
+    ``rclpy.spin`` uses).
 
     Parameters
     ----------
@@ -459,26 +535,37 @@ def run_node(node_class, args=None):
     Returns
     -------
     exit_code : int
-        0 on a normal end, 2 when the parameters were refused at start-up.
+        0 on a normal end, 2 when the parameters or the executor were
+        refused at start-up.
 
     """
+    argv = sys.argv if args is None else args
+    try:
+        kind = executor_from_args(argv)
+    except ValueError as error:
+        rclpy.logging.get_logger(node_class.NODE_NAME).fatal(f'not starting: {error}')
+        return 2
     rclpy.init(args=args)
     node = None
     exit_code = 0
     try:
         node = node_class()
-        rclpy.spin(node)
+        _spin(node, kind)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except _rclpy.RCLError:
-        # Ctrl-C shuts the context down at once; a callback that was
-        # publishing at that moment fails. That is the end we asked for.
-        if rclpy.ok():
-            raise
     except ParameterError as error:
         rclpy.logging.get_logger(node_class.NODE_NAME).fatal(
             f'invalid parameters, not starting: {error}')
         exit_code = 2
+    except Exception as error:
+        # Ctrl-C shuts the context down at once, under whatever spin was
+        # doing: a callback publishing fails with RCLError, a message being
+        # taken with RuntimeError. That is the end we asked for; with the
+        # context still up, the error is real.
+        if rclpy.ok():
+            raise
+        rclpy.logging.get_logger(node_class.NODE_NAME).debug(
+            f'stopped under a callback: {error!r}')
     finally:
         if node is not None:
             node.destroy_node()

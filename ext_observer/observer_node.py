@@ -49,7 +49,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
 from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
-                                      quaternion_stamped, STAMP_MAX, vector_from_msg)
+                                      STAMP_MAX, vector_from_msg)
 from ext_observer.core import (certified_alpha_max, GAIN_MODES, PAPER_ALPHA, PAPER_GAIN,
                                SingleObserver, VARIANTS)
 from ext_observer.guard import GUARD_REASONS, GuardedObserver
@@ -146,7 +146,7 @@ OBSERVER_PARAMETERS = (
                   "Reliability of the two subscriptions: 'reliable' or 'best_effort' "
                   '(which also accepts BEST_EFFORT publishers, e.g. sensor drivers).',
                   read_only=True, constraints=f'One of {", ".join(RELIABILITIES)}.'),
-    ParameterSpec('queue_depth', 10,
+    ParameterSpec('queue_depth', 100,
                   'History depth of every subscription and publisher (keep last), and '
                   'the most inputs of each kind waiting for their pair.', (1, 10000),
                   read_only=True),
@@ -281,7 +281,8 @@ class ObserverNode(Node):
             event_callbacks=self.qos.publisher('attitude_estimate', output_qos))
         self.unit_publisher = self.create_publisher(
             QuaternionStamped, 'attitude_estimate/unit', output_qos,
-            event_callbacks=self.qos.publisher('attitude_estimate/unit', output_qos))
+            event_callbacks=self.qos.publisher('attitude_estimate/unit', output_qos,
+                                               matched=self.unit_matched_callback))
         diagnostics_qos = QoSProfile(depth=10)
         self.diagnostics_publisher = self.create_publisher(
             DiagnosticArray, '/diagnostics', diagnostics_qos,
@@ -293,6 +294,15 @@ class ObserverNode(Node):
             QuaternionStamped, 'attitude/measurement', self.measurement_callback, input_qos,
             event_callbacks=self.qos.subscription('attitude/measurement', input_qos, hint))
         self.reset_service = self.create_service(Trigger, '~/reset', self.reset_callback)
+        # The per-step path reads no parameter and builds no message: the
+        # settings it needs are cached (_cache_settings), the outputs are
+        # built once and their fields set in place before each publish.
+        self._clock = self.get_clock()
+        self._now = self._clock.now().nanoseconds
+        self._estimate_msg = QuaternionStamped()
+        self._unit_msg = QuaternionStamped()
+        self._cache_settings(settings)
+        self._publish_unit = self.unit_publisher.get_subscription_count() > 0
         self._watch_clock(settings)
         self._timeout_timer = None
         self._start_timeout_timer(settings)
@@ -341,7 +351,11 @@ class ObserverNode(Node):
 
     def increment_callback(self, msg):
         """Take ``θ_k`` and process every step that is ready."""
-        now = self.get_clock().now().nanoseconds
+        # The clock is read once per step, here: the increment's deadline
+        # needs it. A measurement releases steps by stamps, not by time, so
+        # its callback uses this reading; the timeout timer reads the clock
+        # again for the deadlines.
+        now = self._now = self._clock.now().nanoseconds
         stamp = nanoseconds_from_stamp(msg.header.stamp)
         if self.pairer.add_increment(stamp, vector_from_msg(msg.vector), now) == BACKWARD_JUMP:
             self._backward_jump(stamp)
@@ -349,16 +363,23 @@ class ObserverNode(Node):
 
     def measurement_callback(self, msg):
         """Take ``y_k`` and process every step that is ready."""
-        now = self.get_clock().now().nanoseconds
         stamp = nanoseconds_from_stamp(msg.header.stamp)
         if self.pairer.add_measurement(stamp, quaternion_from_msg(msg.quaternion)) \
                 == BACKWARD_JUMP:
             self._backward_jump(stamp)
-        self._process(now)
+        self._process(self._now)
 
     def timeout_callback(self):
         """Propagate the steps whose measurement did not come in time."""
-        self._process(self.get_clock().now().nanoseconds)
+        now = self._now = self._clock.now().nanoseconds
+        # attitude_estimate/unit goes out only while someone subscribes to
+        # it: the matched event says so at once, this timer keeps it right.
+        self._publish_unit = self.unit_publisher.get_subscription_count() > 0
+        self._process(now)
+
+    def unit_matched_callback(self, info):
+        """A subscription to ``attitude_estimate/unit`` came or went."""
+        self._publish_unit = info.current_count > 0
 
     def _backward_jump(self, stamp):
         self._reset_observer('backward_jump')
@@ -419,8 +440,8 @@ class ObserverNode(Node):
             self._step(step)
 
     def _step(self, step):
-        settings = self.parameters.settings
         if step.gap:
+            settings = self.parameters.settings
             gap = (step.stamp - step.previous) * 1e-9
             if settings['forward_gap_action'] == 'reset':
                 self._reset_observer('forward_gap')
@@ -438,21 +459,29 @@ class ObserverNode(Node):
                 'reinitialized from the latest measurement', throttle_duration_sec=LOG_THROTTLE)
         if step.early:
             self.get_logger().warning(
-                f'{settings["queue_depth"]} increments waiting: stepping without '
-                'waiting for measurements', throttle_duration_sec=LOG_THROTTLE)
-        n = math.sqrt(state[0] * state[0] + state[1] * state[1]
-                      + state[2] * state[2] + state[3] * state[3])
-        unit = (state[0] / n, state[1] / n, state[2] / n, state[3] / n)
-        stamp_next = min(step.stamp + self._interval(), STAMP_MAX)
-        frame_id = settings['frame_id']
-        self.estimate_publisher.publish(quaternion_stamped(state, stamp_next, frame_id))
-        self.unit_publisher.publish(quaternion_stamped(unit, stamp_next, frame_id))
+                f'{self.parameters.settings["queue_depth"]} increments waiting: stepping '
+                'without waiting for measurements', throttle_duration_sec=LOG_THROTTLE)
+        sec, nanosec = divmod(
+            min(step.stamp + (self._period or self._last_interval or 0), STAMP_MAX), SECOND)
+        w, x, y, z = state
+        msg = self._estimate_msg
+        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+        q = msg.quaternion
+        q.w, q.x, q.y, q.z = w, x, y, z
+        self.estimate_publisher.publish(msg)
+        if self._publish_unit:
+            n = math.sqrt(w * w + x * x + y * y + z * z)
+            msg = self._unit_msg
+            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+            q = msg.quaternion
+            q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
+            self.unit_publisher.publish(msg)
 
-    def _interval(self):
-        period = self.parameters.settings['step_period']
-        if period > 0.0:
-            return round(period * SECOND)
-        return self._last_interval or 0
+    def _cache_settings(self, settings):
+        # step_period in ns (0: the interval between the two last steps).
+        self._period = round(settings['step_period'] * SECOND)
+        self._estimate_msg.header.frame_id = settings['frame_id']
+        self._unit_msg.header.frame_id = settings['frame_id']
 
     # Parameters -----------------------------------------------------------
 
@@ -477,6 +506,7 @@ class ObserverNode(Node):
             self.get_logger().info(
                 f'now {settings["variant"]} observer, alpha {settings["alpha"]:g}, '
                 f'{settings["gain_mode"]} gain {self._gain_text(settings)}')
+        self._cache_settings(settings)
         self.guarded.max_residual = settings['divergence_max_residual']
         self.guarded.max_innovation = settings['divergence_max_innovation']
         self.pairer.configure(**_pairing_settings(settings))

@@ -308,7 +308,8 @@ class StepPairer:
                 if len(self._increments) > self.depth:
                     early = True
                     self.events['early_releases'] += 1
-                elif now < deadline and not any(t > stamp for t in self._measurements):
+                elif now < deadline and not (self._measurements
+                                             and max(self._measurements) > stamp):
                     break
             del self._increments[stamp]
             steps.append(self._release(stamp, increment, measurement, early))
@@ -328,9 +329,10 @@ class StepPairer:
         self.processed['increment'] += 1
         if measurement is not None:
             self.processed['measurement'] += 1
-        for old in [t for t in self._measurements if t <= stamp]:
-            del self._measurements[old]
-            self.drops['unpaired_measurement'] += 1
+        if self._measurements:
+            for old in [t for t in self._measurements if t <= stamp]:
+                del self._measurements[old]
+                self.drops['unpaired_measurement'] += 1
         return Step(stamp, increment, measurement, previous, gap, early)
 
     # Accounting -------------------------------------------------------------

@@ -138,6 +138,22 @@ def test_gain_modes_on_a_gyro_with_errors_match_the_core(ros_context, spinner, g
     assert reference.measurements_used == observer.observer.measurements_used == steps
 
 
+def test_unit_estimate_goes_out_only_while_subscribed(ros_context, spinner):
+    from geometry_msgs.msg import QuaternionStamped
+    from rclpy.node import Node
+
+    observer = spinner.add(ObserverNode(context=ros_context))
+    listener = spinner.add(Node('listener', context=ros_context))
+    spinner.spin_for(0.3)
+    assert not observer._publish_unit
+    subscription = listener.create_subscription(
+        QuaternionStamped, 'attitude_estimate/unit', lambda msg: None, 10)
+    spinner.spin_until(lambda: observer._publish_unit, 5.0, 'the unit output switched on')
+    listener.destroy_subscription(subscription)
+    spinner.spin_until(lambda: not observer._publish_unit, 5.0,
+                       'the unit output switched off')
+
+
 # The observer's pairing -----------------------------------------------------
 
 def test_observer_pairs_by_stamp_waits_and_counts_drops(ros_context, spinner):
