@@ -21,7 +21,7 @@ import math
 
 from ext_observer.core.validation import check_state, MIN_NORM
 
-__all__ = ['GUARD_REASONS', 'GuardedObserver']
+__all__ = ['GUARD_REASONS', 'GuardedObserver', 'carried']
 
 # Why the observer was reinitialized.
 GUARD_REASONS = ('residual_too_large', 'innovation_too_large', 'state_non_finite',
@@ -36,7 +36,8 @@ def _rotation(theta):
     return (math.cos(a), s * hx, s * hy, s * hz)
 
 
-def _carried(q, theta):
+def carried(q, theta):
+    """Return the unit quaternion ``q ⊗ exp(θ/2)`` (``q`` unit, ``θ`` rad)."""
     pw, px, py, pz = q
     qw, qx, qy, qz = _rotation(theta)
     rw = pw * qw - px * qx - py * qy - pz * qz
@@ -127,7 +128,7 @@ class GuardedObserver:
                                    ) < MIN_NORM * MIN_NORM:
                 reason = 'state_zero'
         if self.latest is not None:
-            self.latest = _carried(self.latest, increment)
+            self.latest = carried(self.latest, increment)
         if reason is not None:
             self.observer.reset(self.latest)
             state = self.observer.state

@@ -110,7 +110,7 @@ class ParameterSpec:
     def default_text(self):
         """Return the default as written in the README and the YAML."""
         if isinstance(self.default, Parameter.Type):
-            return '[]'
+            return '[]' if self.default.name.endswith('_ARRAY') else 'unset'
         return _yaml_value(self.default)
 
 
@@ -193,13 +193,18 @@ class NodeParameters:
         values.update({p.name: _python_value(p) for p in parameters})
         return values
 
+    def _own(self, parameters):
+        # Parameters that rclpy declares itself (qos_overrides.*,
+        # use_sim_time) are not ours to validate.
+        return [p for p in parameters if p.name in self.values]
+
     def _on_set(self, parameters):
-        if not self._ready:
+        if not self._ready or not self._own(parameters):
             # Start-up: rclpy has checked the type and the range; the values
             # are validated together once all are declared.
             return SetParametersResult(successful=True)
         try:
-            self._validate(self._candidate(parameters))
+            self._validate(self._candidate(self._own(parameters)))
         except ValueError as error:
             reason = str(error)
             self._node.get_logger().warning(f'parameter change refused: {reason}')
@@ -207,8 +212,9 @@ class NodeParameters:
         return SetParametersResult(successful=True)
 
     def _post_set(self, parameters):
-        if not self._ready:
+        if not self._ready or not self._own(parameters):
             return
+        parameters = self._own(parameters)
         values = self._candidate(parameters)
         self.settings = self._validate(dict(values))
         self.values = values

@@ -4,9 +4,21 @@ The ``observer`` node: the core's Luenberger-like observer on ROS topics.
 Inputs, step k: ``gyro/increment`` (``Vector3Stamped``, ``θ_k`` in rad) and
 ``attitude/measurement`` (``QuaternionStamped``, ``y_k``), both stamped
 ``t_k``. Outputs: ``attitude_estimate`` (``QuaternionStamped``, the ambient
-``q̂_{k+1}``, not normalized) and ``attitude_estimate/unit`` (the same,
-normalized), both stamped ``t_{k+1}``; ``/diagnostics`` every
+``q̂_{k+1}``, not normalized), ``attitude_estimate/unit`` (the same,
+normalized; only while subscribed) and ``imu/data`` (``sensor_msgs/Imu``:
+the normalized estimate, ``orientation_covariance``; only while
+subscribed), stamped ``t_{k+1}``; ``/diagnostics`` every
 ``diagnostic_period``; the service ``~/reset`` (``std_srvs/Trigger``).
+
+Real sensors (``increment_source``, ``measurement_source``): the increments
+from the angular velocity of ``sensor_msgs/Imu`` on ``imu/data_raw``
+(integrated between consecutive samples, :meth:`StepPairer.add_angular_velocity`;
+``imu/data`` then passes the sample's angular velocity and acceleration
+through), the measurements from the orientation of ``sensor_msgs/Imu`` on
+``attitude/imu`` or of ``geometry_msgs/PoseStamped`` on ``attitude/pose``,
+at their own rate: a measurement corrects the step whose interval contains
+its stamp. These sensor streams are subscribed best effort (the sensor-data
+QoS at ``queue_depth``), overridable with ``qos_overrides``.
 
 Inputs
     Every input goes through :class:`~ext_observer.pairing.StepPairer`:
@@ -41,11 +53,14 @@ Faults
 import math
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped
 from rclpy.clock import ClockChange, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
 from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
@@ -68,6 +83,16 @@ CERTIFIED_EPSILON = 0.5
 RESET_CAUSES = ('backward_jump', 'clock_jump', 'forward_gap', 'service')
 
 FORWARD_GAP_ACTIONS = ('propagate', 'reset')
+INCREMENT_SOURCES = ('increment', 'imu')
+MEASUREMENT_SOURCES = ('quaternion', 'imu', 'pose')
+# Input topic of each source (relative names).
+INCREMENT_TOPICS = {'increment': 'gyro/increment', 'imu': 'imu/data_raw'}
+MEASUREMENT_TOPICS = {'quaternion': 'attitude/measurement', 'imu': 'attitude/imu',
+                      'pose': 'attitude/pose'}
+# The paper's sources keep input_reliability; the sensor streams are
+# subscribed with these, the sensor-data QoS (qos_profile_sensor_data) at
+# queue_depth, overridable by qos_overrides.<topic>.subscription.<policy>.
+SENSOR_SOURCES = {'imu', 'pose'}
 RELIABILITIES = {'reliable': ReliabilityPolicy.RELIABLE,
                  'best_effort': ReliabilityPolicy.BEST_EFFORT}
 
@@ -100,9 +125,11 @@ OBSERVER_PARAMETERS = (
                   constraints='In (0, 1].'),
     ParameterSpec('kappa_min', 0.02, 'Floor κ_min of the scheduled mode.', (0.0, 1.0),
                   constraints='In (0, 1].'),
-    ParameterSpec('align_sign', False,
+    ParameterSpec('align_sign', Parameter.Type.BOOL,
                   'Flip each measurement y to the hemisphere of the estimate (y and −y '
-                  'are the same rotation); for sources that publish w ≥ 0 or flip sign.'),
+                  'are the same rotation); for sources that publish w ≥ 0 or flip sign. '
+                  'Unset: on when measurement_source is imu or pose (real sources), off '
+                  'for quaternion (the paper\'s setup, exact).'),
     ParameterSpec('initial_estimate', [1.0, 0.0, 0.0, 0.0],
                   'Initial estimate q̂_0 as w, x, y, z (ambient, need not be unit); '
                   'also the estimate after a reset.',
@@ -142,9 +169,35 @@ OBSERVER_PARAMETERS = (
                   'Divergence guard: reinitialize from the latest measurement when the '
                   'innovation ‖y − q̂‖ exceeds this (at most 1 + ‖q̂‖; the paper\'s setup '
                   'peaks at 3.6).', (0.01, 1000.0)),
+    ParameterSpec('increment_source', 'increment',
+                  "Where the increments come from: 'increment' (θ_k on gyro/increment, "
+                  "geometry_msgs/Vector3Stamped) or 'imu' (sensor_msgs/Imu on "
+                  'imu/data_raw: θ_k = ½ (ω_k + ω_{k+1}) Δt between consecutive samples).',
+                  read_only=True, constraints=f'One of {", ".join(INCREMENT_SOURCES)}.'),
+    ParameterSpec('measurement_source', 'quaternion',
+                  "Where the measurements come from: 'quaternion' "
+                  '(geometry_msgs/QuaternionStamped on attitude/measurement), '
+                  "'imu' (the orientation of sensor_msgs/Imu on attitude/imu) or 'pose' "
+                  '(the orientation of geometry_msgs/PoseStamped on attitude/pose).',
+                  read_only=True, constraints=f'One of {", ".join(MEASUREMENT_SOURCES)}.'),
+    ParameterSpec('max_dt', 0.1,
+                  'increment_source imu: largest interval between two IMU samples, s; '
+                  'after a longer one the integration starts over from the new sample '
+                  '(dropped: dt_too_large).', (0.0001, 10.0)),
+    ParameterSpec('constant_dt', 0.0,
+                  'increment_source imu: Δt of every increment, s, instead of the '
+                  'interval between the stamps; 0 = from the stamps.', (0.0, 10.0)),
+    ParameterSpec('orientation_covariance', [0.0025, 0.0, 0.0, 0.0, 0.0025, 0.0,
+                                             0.0, 0.0, 0.0025],
+                  'orientation_covariance of imu/data, row-major 3×3 about x, y, z, '
+                  'rad² (default: 0.05 rad standard deviation per axis).',
+                  constraints='9 finite numbers with a positive diagonal.'),
     ParameterSpec('input_reliability', 'reliable',
-                  "Reliability of the two subscriptions: 'reliable' or 'best_effort' "
-                  '(which also accepts BEST_EFFORT publishers, e.g. sensor drivers).',
+                  "Reliability of the subscriptions to gyro/increment and "
+                  "attitude/measurement: 'reliable' or 'best_effort' (which also accepts "
+                  'BEST_EFFORT publishers, e.g. sensor drivers). The sensor streams '
+                  '(imu/data_raw, attitude/imu, attitude/pose) are best effort, see '
+                  'qos_overrides.',
                   read_only=True, constraints=f'One of {", ".join(RELIABILITIES)}.'),
     ParameterSpec('queue_depth', 100,
                   'History depth of every subscription and publisher (keep last), and '
@@ -184,9 +237,22 @@ def observer_settings(values):
                 f'(0, {alpha_max:.4g}) for epsilon = {CERTIFIED_EPSILON}; set '
                 'allow_uncertified_alpha to true to use it anyway')
     for name, choices in (('forward_gap_action', FORWARD_GAP_ACTIONS),
-                          ('input_reliability', tuple(RELIABILITIES))):
+                          ('input_reliability', tuple(RELIABILITIES)),
+                          ('increment_source', INCREMENT_SOURCES),
+                          ('measurement_source', MEASUREMENT_SOURCES)):
         if values[name] not in choices:
             raise ValueError(f'{name} must be one of {choices}, got {values[name]!r}')
+    covariance = values['orientation_covariance']
+    if len(covariance) != 9 or not all(map(math.isfinite, covariance)):
+        raise ValueError('orientation_covariance must be 9 finite numbers, got '
+                         f'{covariance}')
+    if not min(covariance[0], covariance[4], covariance[8]) > 0.0:
+        raise ValueError('orientation_covariance must have a positive diagonal (all '
+                         'zeros means "unknown" in sensor_msgs/Imu), got '
+                         f'{covariance}')
+    values = dict(values)
+    if values['align_sign'] is None:
+        values['align_sign'] = values['measurement_source'] in SENSOR_SOURCES
     if not values['max_increment'] > 0.0:
         raise ValueError(f'max_increment must be positive, got {values["max_increment"]}')
     try:
@@ -215,7 +281,9 @@ def _pairing_settings(settings):
                 max_increment=settings['max_increment'],
                 norm_tolerance=settings['measurement_norm_tolerance'],
                 backward_jump=round(settings['backward_jump_threshold'] * SECOND),
-                forward_gap=round(settings['forward_gap_threshold'] * SECOND))
+                forward_gap=round(settings['forward_gap_threshold'] * SECOND),
+                max_dt=round(settings['max_dt'] * SECOND),
+                constant_dt=settings['constant_dt'])
 
 
 class ObserverNode(Node):
@@ -287,12 +355,27 @@ class ObserverNode(Node):
         self.diagnostics_publisher = self.create_publisher(
             DiagnosticArray, '/diagnostics', diagnostics_qos,
             event_callbacks=self.qos.publisher('/diagnostics', diagnostics_qos))
-        self.increment_subscription = self.create_subscription(
-            Vector3Stamped, 'gyro/increment', self.increment_callback, input_qos,
-            event_callbacks=self.qos.subscription('gyro/increment', input_qos, hint))
-        self.measurement_subscription = self.create_subscription(
-            QuaternionStamped, 'attitude/measurement', self.measurement_callback, input_qos,
-            event_callbacks=self.qos.subscription('attitude/measurement', input_qos, hint))
+        self.imu_publisher = self.create_publisher(
+            Imu, 'imu/data', output_qos,
+            event_callbacks=self.qos.publisher('imu/data', output_qos,
+                                               matched=self.imu_matched_callback))
+        # Both sources are subscribed through one place: the paper's topics
+        # with input_reliability, the sensor streams best effort (overridable).
+        self.increment_source = settings['increment_source']
+        self.measurement_source = settings['measurement_source']
+        increment_type, increment_callback = {
+            'increment': (Vector3Stamped, self.increment_callback),
+            'imu': (Imu, self.imu_data_raw_callback)}[self.increment_source]
+        measurement_type, measurement_callback = {
+            'quaternion': (QuaternionStamped, self.measurement_callback),
+            'imu': (Imu, self.attitude_imu_callback),
+            'pose': (PoseStamped, self.attitude_pose_callback)}[self.measurement_source]
+        self.increment_subscription = self._subscribe(
+            increment_type, INCREMENT_TOPICS[self.increment_source], increment_callback,
+            self.increment_source in SENSOR_SOURCES, input_qos, hint)
+        self.measurement_subscription = self._subscribe(
+            measurement_type, MEASUREMENT_TOPICS[self.measurement_source],
+            measurement_callback, self.measurement_source in SENSOR_SOURCES, input_qos, hint)
         self.reset_service = self.create_service(Trigger, '~/reset', self.reset_callback)
         # The per-step path reads no parameter and builds no message: the
         # settings it needs are cached (_cache_settings), the outputs are
@@ -301,8 +384,18 @@ class ObserverNode(Node):
         self._now = self._clock.now().nanoseconds
         self._estimate_msg = QuaternionStamped()
         self._unit_msg = QuaternionStamped()
+        self._imu_msg = Imu()
+        if self.increment_source != 'imu':
+            # Not measured: -1 in the first element (sensor_msgs/Imu).
+            self._imu_msg.angular_velocity_covariance[0] = -1.0
+            self._imu_msg.linear_acceleration_covariance[0] = -1.0
+        # IMU samples by stamp, until the step their stamp ends is published
+        # (its angular velocity and acceleration go out on imu/data).
+        self._imu_samples = {}
+        self._body_frame_id = ''
         self._cache_settings(settings)
         self._publish_unit = self.unit_publisher.get_subscription_count() > 0
+        self._publish_imu = self.imu_publisher.get_subscription_count() > 0
         self._watch_clock(settings)
         self._timeout_timer = None
         self._start_timeout_timer(settings)
@@ -349,6 +442,23 @@ class ObserverNode(Node):
 
     # Inputs ---------------------------------------------------------------
 
+    def _subscribe(self, msg_type, topic, callback, sensor, input_qos, hint):
+        if not sensor:
+            return self.create_subscription(
+                msg_type, topic, callback, input_qos,
+                event_callbacks=self.qos.subscription(topic, input_qos, hint))
+        qos = QoSProfile(depth=self.parameters.settings['queue_depth'],
+                         history=HistoryPolicy.KEEP_LAST,
+                         reliability=ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.VOLATILE)
+        name = self.resolve_topic_name(topic)
+        return self.create_subscription(
+            msg_type, topic, callback, qos,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+            event_callbacks=self.qos.subscription(
+                topic, qos, f'set qos_overrides.{name}.subscription.reliability to '
+                'best_effort'))
+
     def increment_callback(self, msg):
         """Take ``θ_k`` and process every step that is ready."""
         # The clock is read once per step, here: the increment's deadline
@@ -357,15 +467,47 @@ class ObserverNode(Node):
         # again for the deadlines.
         now = self._now = self._clock.now().nanoseconds
         stamp = nanoseconds_from_stamp(msg.header.stamp)
+        self._body_frame_id = msg.header.frame_id
         if self.pairer.add_increment(stamp, vector_from_msg(msg.vector), now) == BACKWARD_JUMP:
             self._backward_jump(stamp)
         self._process(now)
 
+    def imu_data_raw_callback(self, msg):
+        """Take an IMU sample ``ω`` (rad/s); its successor makes the increment."""
+        now = self._now = self._clock.now().nanoseconds
+        stamp = nanoseconds_from_stamp(msg.header.stamp)
+        outcome = self.pairer.add_angular_velocity(
+            stamp, vector_from_msg(msg.angular_velocity), now)
+        if outcome == BACKWARD_JUMP:
+            self._imu_samples.clear()
+            self._backward_jump(stamp)
+        samples = self._imu_samples
+        samples[stamp] = msg
+        if len(samples) > 2 * self._depth + 2:
+            del samples[next(iter(samples))]
+        self._process(now)
+
+    def attitude_imu_callback(self, msg):
+        """Take ``y`` from the orientation of a ``sensor_msgs/Imu``."""
+        if msg.orientation_covariance[0] == -1.0:
+            # The driver says it has no orientation (sensor_msgs/Imu).
+            self.pairer.reject('measurement', 'no_orientation')
+            return
+        self._measurement(msg.header.stamp, msg.orientation)
+
+    def attitude_pose_callback(self, msg):
+        """Take ``y`` from the orientation of a ``geometry_msgs/PoseStamped``."""
+        self._measurement(msg.header.stamp, msg.pose.orientation)
+
     def measurement_callback(self, msg):
         """Take ``y_k`` and process every step that is ready."""
-        stamp = nanoseconds_from_stamp(msg.header.stamp)
-        if self.pairer.add_measurement(stamp, quaternion_from_msg(msg.quaternion)) \
+        self._measurement(msg.header.stamp, msg.quaternion)
+
+    def _measurement(self, header_stamp, quaternion):
+        stamp = nanoseconds_from_stamp(header_stamp)
+        if self.pairer.add_measurement(stamp, quaternion_from_msg(quaternion)) \
                 == BACKWARD_JUMP:
+            self._imu_samples.clear()
             self._backward_jump(stamp)
         self._process(self._now)
 
@@ -375,11 +517,16 @@ class ObserverNode(Node):
         # attitude_estimate/unit goes out only while someone subscribes to
         # it: the matched event says so at once, this timer keeps it right.
         self._publish_unit = self.unit_publisher.get_subscription_count() > 0
+        self._publish_imu = self.imu_publisher.get_subscription_count() > 0
         self._process(now)
 
     def unit_matched_callback(self, info):
         """A subscription to ``attitude_estimate/unit`` came or went."""
         self._publish_unit = info.current_count > 0
+
+    def imu_matched_callback(self, info):
+        """A subscription to ``imu/data`` came or went."""
+        self._publish_imu = info.current_count > 0
 
     def _backward_jump(self, stamp):
         self._reset_observer('backward_jump')
@@ -401,6 +548,7 @@ class ObserverNode(Node):
         else:
             return
         discarded = self.pairer.restart()
+        self._imu_samples.clear()
         self._reset_observer('clock_jump')
         self.get_logger().warning(
             f'{what}: observer reset, {discarded} waiting inputs discarded',
@@ -461,25 +609,60 @@ class ObserverNode(Node):
             self.get_logger().warning(
                 f'{self.parameters.settings["queue_depth"]} increments waiting: stepping '
                 'without waiting for measurements', throttle_duration_sec=LOG_THROTTLE)
-        sec, nanosec = divmod(
-            min(step.stamp + (self._period or self._last_interval or 0), STAMP_MAX), SECOND)
+        end = step.end
+        if end is None:
+            end = min(step.stamp + (self._period or self._last_interval or 0), STAMP_MAX)
+        sec, nanosec = divmod(end, SECOND)
         w, x, y, z = state
         msg = self._estimate_msg
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
         q = msg.quaternion
         q.w, q.x, q.y, q.z = w, x, y, z
         self.estimate_publisher.publish(msg)
-        if self._publish_unit:
+        if self._publish_unit or self._publish_imu:
             n = math.sqrt(w * w + x * x + y * y + z * z)
+            w, x, y, z = w / n, x / n, y / n, z / n
+        if self._publish_unit:
             msg = self._unit_msg
             msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
             q = msg.quaternion
-            q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
+            q.w, q.x, q.y, q.z = w, x, y, z
             self.unit_publisher.publish(msg)
+        if step.end is not None:
+            # The sample stamped t_{k+1} closed the step: it goes out with q̂_{k+1}.
+            sample = self._take_imu_sample(step.end)
+        if self._publish_imu:
+            msg = self._imu_msg
+            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+            q = msg.orientation
+            q.w, q.x, q.y, q.z = w, x, y, z
+            if step.end is None:
+                msg.header.frame_id = self._body_frame_id
+            elif sample is not None:
+                msg.header.frame_id = sample.header.frame_id
+                msg.angular_velocity = sample.angular_velocity
+                msg.angular_velocity_covariance = sample.angular_velocity_covariance
+                msg.linear_acceleration = sample.linear_acceleration
+                msg.linear_acceleration_covariance = sample.linear_acceleration_covariance
+            self.imu_publisher.publish(msg)
+
+    def _take_imu_sample(self, stamp):
+        samples = self._imu_samples
+        while samples:
+            first = next(iter(samples))
+            if first > stamp:
+                return None
+            sample = samples.pop(first)
+            if first == stamp:
+                return sample
+        return None
 
     def _cache_settings(self, settings):
         # step_period in ns (0: the interval between the two last steps).
         self._period = round(settings['step_period'] * SECOND)
+        self._depth = settings['queue_depth']
+        self._imu_msg.orientation_covariance = [
+            float(v) for v in settings['orientation_covariance']]
         self._estimate_msg.header.frame_id = settings['frame_id']
         self._unit_msg.header.frame_id = settings['frame_id']
 
@@ -580,7 +763,9 @@ class ObserverNode(Node):
         state = self.observer.state
         status.values = key_values(
             [('variant', settings['variant']), ('alpha', settings['alpha']),
-             ('gain_mode', settings['gain_mode']), ('steps', steps)]
+             ('gain_mode', settings['gain_mode']), ('align_sign', settings['align_sign']),
+             ('increment_source', self.increment_source),
+             ('measurement_source', self.measurement_source), ('steps', steps)]
             + list(self.counts.items())
             + [('inputs_received', received), ('inputs_processed', processed),
                ('inputs_dropped', dropped), ('inputs_waiting', waiting),

@@ -42,18 +42,42 @@ Accounting: for each kind (``increment``, ``measurement``), ``received =
 processed + dropped + waiting`` at all times (:meth:`StepPairer.accounted`),
 with the drops by reason in :attr:`StepPairer.drops` (:data:`DROP_REASONS`).
 
-Other sources of increments (issue 8: an IMU whose angular rates are
-integrated into ``θ`` between samples) plug in by calling
-:meth:`StepPairer.add_increment` with ``θ`` over ``[t_k, t_{k+1})`` stamped
-``t_k``; measurements at a lower rate than the increments are handled by
-rule 3 (each step without one propagates). Matching a measurement to a step
-is :meth:`StepPairer._take_measurement` (equal stamps); a source whose
-measurement stamps fall between step stamps replaces that one method.
+Angular velocities (an IMU)
+    :meth:`StepPairer.add_angular_velocity` takes the samples ``ω_j``
+    (rad/s) of an IMU instead of increments. A sample waits for the next one
+    (it is counted as a waiting increment); sample ``k + 1`` closes the
+    interval ``[t_k, t_{k+1})`` and makes the increment of step ``k``,
+
+        θ_k = ½ (ω_k + ω_{k+1}) Δt,
+
+    the trapezoid rule, with ``Δt = t_{k+1} − t_k`` or ``constant_dt`` when
+    that is set (the stamps still order the samples and are checked). A
+    sample not newer than the one waiting is dropped (``Δt ≤ 0``: ``stale``
+    or ``duplicate``, or a backward jump as above); when ``Δt`` exceeds
+    ``max_dt`` (ns) the waiting sample is dropped (``dt_too_large``) and the
+    new one starts over: the first sample of a time line only initializes.
+
+Measurements of a step with an interval (bracketing)
+    A step made from angular velocities knows its interval ``[t_k, t_{k+1})``.
+    The measurement stamped ``t_m`` with ``t_k ≤ t_m < t_{k+1}`` is that
+    step's (the one nearest ``t_k`` if several are; the others are dropped as
+    ``unpaired``), carried back from ``t_m`` to ``t_k`` along the step's own
+    rotation, ``y ⊗ exp(−f θ_k / 2)`` with ``f = (t_m − t_k) / Δt`` (a
+    constant rate over the interval), so that it is an attitude at ``t_k``
+    as the observer expects; at ``t_m = t_k`` it is used as it is. Rule 3
+    applies with "newer" meaning ``t_m ≥ t_{k+1}``, and a measurement older
+    than the end of the last step released is ``stale``. So a measurement at
+    a lower rate corrects the step it falls in if it arrives before that
+    step is released (within ``timeout`` of the increment's arrival, or
+    before a later measurement); the steps in between propagate.
 """
 
 from collections import namedtuple
 
+import math
+
 from ext_observer.core.validation import check_increment, check_measurement
+from ext_observer.guard import carried
 
 __all__ = ['BACKWARD_JUMP', 'DROP_REASONS', 'KINDS', 'Step', 'StepPairer']
 
@@ -67,6 +91,7 @@ INCREMENT_DROP_REASONS = (
     'stale_increment',          # older than the last step
     'duplicate_increment',      # the stamp of a step done or waiting
     'discarded_increment',      # waiting when the time line restarted
+    'dt_too_large',             # IMU sample: the next one more than max_dt later
 )
 MEASUREMENT_DROP_REASONS = (
     'non_finite_measurement',   # a NaN or an infinity
@@ -77,6 +102,7 @@ MEASUREMENT_DROP_REASONS = (
     'duplicate_measurement',
     'unpaired_measurement',     # no increment of its stamp came in time
     'discarded_measurement',
+    'no_orientation',           # sensor_msgs/Imu without orientation (covariance[0] = −1)
 )
 DROP_REASONS = INCREMENT_DROP_REASONS + MEASUREMENT_DROP_REASONS
 
@@ -94,7 +120,8 @@ _VALUE_REASONS = {
                     'norm_out_of_tolerance': 'norm_out_of_tolerance'},
 }
 
-Step = namedtuple('Step', 'stamp increment measurement previous gap early')
+Step = namedtuple('Step', 'stamp increment measurement previous gap early end',
+                  defaults=(None,))
 Step.__doc__ = """\
 One step released by :class:`StepPairer`.
 
@@ -113,6 +140,9 @@ gap : bool
 early : bool
     Released without waiting for its measurement because ``depth``
     increments were waiting behind it.
+end : int or None
+    ``t_{k+1}``, ns, for a step made from angular velocities (the stamp of
+    the sample that closed its interval); None for a given increment.
 """
 
 
@@ -150,18 +180,21 @@ class StepPairer:
 
     def __init__(self, depth=10, timeout=100_000_000, max_increment=20.0,
                  norm_tolerance=0.1, backward_jump=1_000_000_000,
-                 forward_gap=1_000_000_000):
+                 forward_gap=1_000_000_000, max_dt=100_000_000, constant_dt=0.0):
         self.configure(depth=depth, timeout=timeout, max_increment=max_increment,
                        norm_tolerance=norm_tolerance, backward_jump=backward_jump,
-                       forward_gap=forward_gap)
+                       forward_gap=forward_gap, max_dt=max_dt, constant_dt=constant_dt)
         self.received = dict.fromkeys(KINDS, 0)
         self.processed = dict.fromkeys(KINDS, 0)
         self.drops = dict.fromkeys(DROP_REASONS, 0)
         self.events = dict.fromkeys(EVENTS, 0)
-        # stamp -> (increment, deadline); stamp -> measurement
+        # stamp -> (increment, deadline, end of the interval or None);
+        # stamp -> measurement; the IMU sample waiting for the next one.
         self._increments = {}
         self._measurements = {}
+        self._pending = None
         self._last_stamp = None
+        self._last_end = None
         self._last_corrected = False
 
     def configure(self, **settings):
@@ -175,7 +208,7 @@ class StepPairer:
         """
         for name, value in settings.items():
             if name not in ('depth', 'timeout', 'max_increment', 'norm_tolerance',
-                            'backward_jump', 'forward_gap'):
+                            'backward_jump', 'forward_gap', 'max_dt', 'constant_dt'):
                 raise TypeError(f'unknown setting {name!r}')
             if not value >= (1 if name == 'depth' else 0):
                 raise ValueError(f'{name} must not be negative (depth: >= 1), got {value}')
@@ -211,8 +244,71 @@ class StepPairer:
         outcome = self._check_stamp(stamp, self._increments, 'increment')
         if outcome is not None and outcome != BACKWARD_JUMP:
             return self._drop(outcome)
-        self._increments[stamp] = (tuple(increment), now + self.timeout)
+        self._increments[stamp] = (tuple(increment), now + self.timeout, None)
         return outcome
+
+    def add_angular_velocity(self, stamp, omega, now):
+        """
+        Take an IMU sample ``ω`` (rad/s) stamped ``t``; see the module docstring.
+
+        Parameters
+        ----------
+        stamp : int
+            ``t``, ns.
+        omega : sequence of 3 float
+            Angular velocity of the body, rad/s, body frame.
+        now : int
+            The caller's clock, ns: the increment this sample completes gets
+            the deadline ``now + timeout``.
+
+        Returns
+        -------
+        outcome : str or None
+            As :meth:`add_increment`; also the reason when the *waiting*
+            sample was dropped (``dt_too_large``, or a value reason of the
+            increment it made).
+
+        """
+        self.received['increment'] += 1
+        w0, w1, w2 = omega
+        if not (math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)):
+            return self._drop('non_finite_increment')
+        pending = self._pending
+        if pending is None:
+            outcome = self._check_stamp(stamp, self._increments, 'increment')
+            if outcome is not None and outcome != BACKWARD_JUMP:
+                return self._drop(outcome)
+            self._pending = (stamp, omega)
+            return outcome
+        start, (v0, v1, v2) = pending
+        if stamp <= start:
+            if stamp <= 0:
+                return self._drop('zero_stamp_increment')
+            if stamp == start:
+                return self._drop('duplicate_increment')
+            if start - stamp > self.backward_jump:
+                self.restart()
+                self.events['backward_jumps'] += 1
+                self._pending = (stamp, omega)
+                return BACKWARD_JUMP
+            return self._drop('stale_increment')
+        self._pending = (stamp, omega)
+        span = stamp - start
+        if span > self.max_dt:
+            return self._drop('dt_too_large')
+        dt = self.constant_dt if self.constant_dt > 0.0 else span * 1e-9
+        half = 0.5 * dt
+        theta = ((v0 + w0) * half, (v1 + w1) * half, (v2 + w2) * half)
+        reason = check_increment(theta, self.max_increment)
+        if reason is not None:
+            return self._drop(_VALUE_REASONS['increment'][reason])
+        self._increments[start] = (theta, now + self.timeout, stamp)
+        return None
+
+    def reject(self, kind, reason):
+        """Count an input of ``kind`` that the caller dropped for ``reason``."""
+        self.received[kind] += 1
+        return self._drop(reason)
 
     def add_measurement(self, stamp, measurement):
         """
@@ -261,6 +357,9 @@ class StepPairer:
                 self.events['backward_jumps'] += 1
                 return BACKWARD_JUMP
             return f'stale_{kind}'
+        if kind == 'measurement' and self._last_end is not None and stamp < self._last_end:
+            # Within the interval of a step already released.
+            return 'stale_measurement'
         return None
 
     def restart(self):
@@ -273,12 +372,15 @@ class StepPairer:
             Inputs discarded (counted as ``discarded_*``).
 
         """
-        discarded = len(self._increments) + len(self._measurements)
-        self.drops['discarded_increment'] += len(self._increments)
+        pending = self._pending is not None
+        discarded = len(self._increments) + pending + len(self._measurements)
+        self.drops['discarded_increment'] += len(self._increments) + pending
         self.drops['discarded_measurement'] += len(self._measurements)
         self._increments.clear()
         self._measurements.clear()
+        self._pending = None
         self._last_stamp = None
+        self._last_end = None
         self._last_corrected = False
         return discarded
 
@@ -301,39 +403,54 @@ class StepPairer:
         steps = []
         while self._increments:
             stamp = min(self._increments)
-            increment, deadline = self._increments[stamp]
-            measurement = self._take_measurement(stamp)
+            increment, deadline, end = self._increments[stamp]
+            measurement = self._take_measurement(stamp, increment, end)
             early = False
             if measurement is None:
+                # A measurement at or after this one's limit shows that this
+                # step's is not coming (a publisher sends in stamp order).
+                limit = stamp + 1 if end is None else end
                 if len(self._increments) > self.depth:
                     early = True
                     self.events['early_releases'] += 1
                 elif now < deadline and not (self._measurements
-                                             and max(self._measurements) > stamp):
+                                             and max(self._measurements) >= limit):
                     break
             del self._increments[stamp]
-            steps.append(self._release(stamp, increment, measurement, early))
+            steps.append(self._release(stamp, increment, measurement, early, end))
         return steps
 
-    def _take_measurement(self, stamp):
-        """Return the measurement of the step stamped ``stamp`` (removed), or None."""
-        return self._measurements.pop(stamp, None)
+    def _take_measurement(self, stamp, increment, end):
+        """Return the measurement of the step (removed; carried to ``stamp``), or None."""
+        if end is None:
+            return self._measurements.pop(stamp, None)
+        inside = [t for t in self._measurements if stamp <= t < end]
+        if not inside:
+            return None
+        first = min(inside)
+        y = self._measurements.pop(first)
+        if first == stamp:
+            return y
+        f = -(first - stamp) / (end - stamp)
+        return carried(y, (f * increment[0], f * increment[1], f * increment[2]))
 
-    def _release(self, stamp, increment, measurement, early):
+    def _release(self, stamp, increment, measurement, early, end=None):
         previous = self._last_stamp
         gap = previous is not None and stamp - previous > self.forward_gap
         if gap:
             self.events['forward_gaps'] += 1
         self._last_stamp = stamp
+        self._last_end = end
         self._last_corrected = measurement is not None
         self.processed['increment'] += 1
         if measurement is not None:
             self.processed['measurement'] += 1
         if self._measurements:
-            for old in [t for t in self._measurements if t <= stamp]:
+            limit = stamp if end is None else end - 1
+            for old in [t for t in self._measurements if t <= limit]:
                 del self._measurements[old]
                 self.drops['unpaired_measurement'] += 1
-        return Step(stamp, increment, measurement, previous, gap, early)
+        return Step(stamp, increment, measurement, previous, gap, early, end)
 
     # Accounting -------------------------------------------------------------
 
@@ -343,8 +460,10 @@ class StepPairer:
         return self._last_stamp
 
     def waiting(self, kind):
-        """Return how many inputs of ``kind`` wait for their pair."""
-        return len(self._increments if kind == 'increment' else self._measurements)
+        """Return how many inputs of ``kind`` wait (for their pair, or the next sample)."""
+        if kind == 'increment':
+            return len(self._increments) + (self._pending is not None)
+        return len(self._measurements)
 
     def dropped(self, kind):
         """Return how many inputs of ``kind`` were dropped, all reasons."""

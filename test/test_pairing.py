@@ -278,3 +278,123 @@ def test_validated_and_guarded_steps_stay_finite(variant, gain_mode, initial, in
             # Checked, or reinitialized (a unit measurement or the initial estimate).
             assert abs(sum(v * v for v in state) - 1.0) <= 3.0 + 1e-12
             assert sum(v * v for v in state) >= 1e-12
+
+
+# Angular velocities (an IMU) and measurements between the samples ------------------
+
+def test_imu_samples_make_trapezoid_increments_the_first_only_initializes():
+    pairer = make(timeout=0)
+    assert pairer.add_angular_velocity(1 * S, (1.0, 0.0, -2.0), 0) is None
+    assert pairer.pop_ready(0) == [] and pairer.waiting('increment') == 1
+    pairer.add_angular_velocity(1 * S + 10 * MS, (3.0, 0.0, 2.0), 0)
+    [step] = pairer.pop_ready(0)
+    assert (step.stamp, step.end) == (1 * S, 1 * S + 10 * MS)
+    assert step.increment == pytest.approx((0.02, 0.0, 0.0))
+    # constant_dt replaces the stamps' interval in θ = ½ (ω_k + ω_{k+1}) Δt.
+    pairer.configure(constant_dt=0.005)
+    pairer.add_angular_velocity(1 * S + 30 * MS, (3.0, 0.0, 2.0), 0)
+    [step] = pairer.pop_ready(0)
+    assert step.increment == pytest.approx((0.015, 0.0, 0.01))
+    assert pairer.received['increment'] == 3 and pairer.processed['increment'] == 2
+    assert_accounted(pairer)
+
+
+def test_imu_non_positive_and_too_large_intervals_are_dropped():
+    pairer = make(timeout=0, max_dt=50 * MS)
+    pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0)
+    assert pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0) == 'duplicate_increment'
+    assert pairer.add_angular_velocity(2 * S - MS, (0.1, 0.0, 0.0), 0) == 'stale_increment'
+    assert pairer.add_angular_velocity(2 * S + MS, (nan, 0.0, 0.0), 0) == 'non_finite_increment'
+    # A gap: the waiting sample is dropped; the new one starts over.
+    assert pairer.add_angular_velocity(3 * S, (0.1, 0.0, 0.0), 0) == 'dt_too_large'
+    assert pairer.pop_ready(0) == []
+    pairer.add_angular_velocity(3 * S + 10 * MS, (0.1, 0.0, 0.0), 0)
+    [step] = pairer.pop_ready(0)
+    assert step.stamp == 3 * S
+    # Far older: a new time line.
+    assert pairer.add_angular_velocity(1 * S, (0.1, 0.0, 0.0), 0) == BACKWARD_JUMP
+    assert pairer.drops['discarded_increment'] == 1
+    assert_accounted(pairer)
+
+
+def rotate(q, theta):
+    from ext_observer.guard import carried
+    return carried(q, theta)
+
+
+def test_measurement_between_samples_corrects_its_interval_carried_back():
+    pairer = make(timeout=100 * MS)
+    omega = (2.0, -1.0, 0.5)
+    q0 = (0.5, 0.5, -0.5, 0.5)
+    t0, dt = 1 * S, 10 * MS
+    pairer.add_angular_velocity(t0, omega, 0)
+    pairer.add_angular_velocity(t0 + dt, omega, 0)
+    # The attitude at t_m = t_0 + 0.4 Δt under the constant rate: q0 ⊗ exp(0.4 θ/2).
+    theta = tuple(0.01 * w for w in omega)
+    y = rotate(q0, tuple(0.4 * v for v in theta))
+    pairer.add_measurement(t0 + 4 * MS, y)
+    [step] = pairer.pop_ready(0)
+    assert step.measurement == pytest.approx(q0, abs=1e-12)
+    # The measurement of an interval already released is stale.
+    assert pairer.add_measurement(t0 + 5 * MS, y) == 'stale_measurement'
+    assert_accounted(pairer)
+
+
+def test_lower_rate_measurements_steps_between_propagate():
+    pairer = make(depth=50, timeout=20 * MS)
+    t0, dt = 1 * S, 5 * MS
+    corrected, now = [], 0
+    for k in range(41):
+        t = t0 + k * dt
+        now = k * dt
+        pairer.add_angular_velocity(t, (0.1, 0.2, 0.3), now)
+        if k % 20 == 3:
+            pairer.add_measurement(t + 2 * MS, Y)
+        corrected += [s.stamp for s in pairer.pop_ready(now) if s.measurement is not None]
+    corrected += [s.stamp for s in pairer.pop_ready(now + S) if s.measurement is not None]
+    assert corrected == [t0 + 3 * dt, t0 + 23 * dt]
+    assert pairer.processed['increment'] == 40
+    assert not any(pairer.drops.values())
+    assert_accounted(pairer)
+
+
+imu_operations = st.lists(st.one_of(
+    st.tuples(st.just('imu'), stamps, increments),
+    st.tuples(st.just('measurement'), stamps, measurements),
+    st.tuples(st.just('tick'), st.integers(0, 300 * MS), st.none()),
+    st.tuples(st.just('restart'), st.none(), st.none())), max_size=60)
+
+
+@settings(max_examples=400, deadline=None)
+@given(imu_operations, st.integers(1, 5), st.sampled_from([0.0, 0.01]))
+def test_every_imu_sample_is_accounted_for_and_steps_are_valid(ops, depth, constant_dt):
+    pairer = make(depth=depth, max_increment=2.0, norm_tolerance=0.1,
+                  max_dt=200 * MS, constant_dt=constant_dt)
+    now = 0
+    last = last_end = None
+    for op, stamp, value in ops:
+        if op == 'imu':
+            outcome = pairer.add_angular_velocity(stamp, value, now)
+        elif op == 'measurement':
+            outcome = pairer.add_measurement(stamp, value)
+        elif op == 'tick':
+            now += stamp
+            outcome = None
+        else:
+            pairer.restart()
+            outcome = BACKWARD_JUMP
+        assert outcome is None or outcome == BACKWARD_JUMP or outcome in DROP_REASONS
+        if outcome == BACKWARD_JUMP:
+            last = last_end = None
+        for step in pairer.pop_ready(now):
+            assert step.previous == last
+            assert last_end is None or step.stamp >= last_end
+            assert 0 < step.stamp < step.end <= step.stamp + 200 * MS
+            assert all(map(math.isfinite, step.increment))
+            assert math.hypot(*step.increment) <= 2.0
+            if step.measurement is not None:
+                assert math.hypot(*step.measurement) == pytest.approx(1.0)
+            last, last_end = step.stamp, step.end
+        assert pairer.waiting('increment') <= depth + 1
+        assert pairer.waiting('measurement') <= depth
+        assert_accounted(pairer)

@@ -1,0 +1,255 @@
+"""
+Real sensors through real topics: sensor_msgs/Imu increments, measurements
+at a lower rate from sensor_msgs/Imu or geometry_msgs/PoseStamped, sign
+flips, best-effort publishers, the imu/data output.
+
+The replay test plays a generated IMU stream at 200 Hz and an attitude
+source at 10 Hz (:mod:`imu_replay`), paced in real time, from best-effort
+publishers into an ObserverNode on the test's executor, and compares the
+published ``imu/data`` orientation with the truth at its stamp.
+"""
+
+import math
+import time
+
+import pytest
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu
+
+from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
+                                      stamp_from_nanoseconds, vector_from_msg)
+from ext_observer.node_common import ParameterError
+from ext_observer.observer_node import ObserverNode
+from imu_replay import angle, generate, SECOND
+from ros_helpers import overrides, values_of
+
+BEST_EFFORT = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+COVARIANCE = [0.0004, 0.0, 0.0, 0.0, 0.0004, 0.0, 0.0, 0.0, 0.0009]
+
+# Measured with the stream of imu_replay.generate (6 s, seed 0; the same
+# inputs through StepPairer and GuardedObserver without ROS): the mean
+# error over the last 2 s is 0.039 rad with the paper's constant gain and
+# align_sign on (0.058 at most); 0.006 rad with gain_mode scheduled,
+# kappa_min 0.05. Without align_sign the constant gain ends 2.0 rad off.
+# The bounds leave a margin of about 2× for timing on a loaded machine.
+BOUNDS = {'constant': (0.08, 0.15), 'scheduled': (0.02, 0.05)}
+
+
+class Driver(Node):
+    """Publish the generated stream; record imu/data."""
+
+    def __init__(self, context, measurement_source, qos):
+        super().__init__('imu_driver', context=context)
+        self.imu_publisher = self.create_publisher(Imu, 'imu/data_raw', qos)
+        if measurement_source == 'imu':
+            self.measurement_publisher = self.create_publisher(Imu, 'attitude/imu', qos)
+        else:
+            self.measurement_publisher = self.create_publisher(
+                PoseStamped, 'attitude/pose', qos)
+        self.measurement_source = measurement_source
+        self.outputs = {}
+        self.other = {}
+        self.create_subscription(Imu, 'imu/data', self._keep(self.outputs), 1000)
+        self.create_subscription(Imu, 'unaligned/imu/data', self._keep(self.other), 1000)
+
+    @staticmethod
+    def _keep(store):
+        def callback(msg):
+            store[nanoseconds_from_stamp(msg.header.stamp)] = msg
+        return callback
+
+    def send_imu(self, stamp, omega):
+        msg = Imu()
+        msg.header.stamp = stamp_from_nanoseconds(stamp)
+        msg.header.frame_id = 'imu_link'
+        msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = omega
+        msg.linear_acceleration.z = 9.81
+        msg.angular_velocity_covariance[0] = 1e-6
+        # A raw IMU has no orientation.
+        msg.orientation_covariance[0] = -1.0
+        self.imu_publisher.publish(msg)
+
+    def send_measurement(self, stamp, y):
+        w, x, yy, z = y
+        if self.measurement_source == 'imu':
+            msg = Imu()
+            orientation = msg.orientation
+            msg.orientation_covariance[0] = 4e-4
+        else:
+            msg = PoseStamped()
+            orientation = msg.pose.orientation
+        msg.header.stamp = stamp_from_nanoseconds(stamp)
+        msg.header.frame_id = 'world'
+        orientation.w, orientation.x, orientation.y, orientation.z = w, x, yy, z
+        self.measurement_publisher.publish(msg)
+
+
+def spin_until_time(spinner, deadline):
+    while time.monotonic() < deadline:
+        spinner.executor.spin_once(timeout_sec=max(0.0, min(0.001, deadline - time.monotonic())))
+
+
+def replay(spinner, driver, imu, measurements):
+    """Publish every sample at its time (stamps are 1:1 with wall time from now)."""
+    events = sorted([(stamp, 0, value) for stamp, value in imu]
+                    + [(stamp, 1, value) for stamp, value, _ in measurements],
+                    key=lambda e: (e[0], e[1]))
+    start, first = time.monotonic(), events[0][0]
+    for stamp, kind, value in events:
+        spin_until_time(spinner, start + (stamp - first) * 1e-9)
+        if kind == 0:
+            driver.send_imu(stamp, value)
+        else:
+            driver.send_measurement(stamp, value)
+    spin_until_time(spinner, time.monotonic() + 0.3)
+
+
+@pytest.mark.parametrize('measurement_source, gain_mode', [
+    ('imu', 'constant'), ('pose', 'scheduled')])
+def test_replay_imu_and_flipping_measurements_converge(ros_context, spinner,
+                                                       measurement_source, gain_mode):
+    imu, measurements, truth = generate(seconds=6.0, seed=0)
+    assert 10 < sum(flipped for _, _, flipped in measurements) < len(measurements) - 10
+    settings = dict(increment_source='imu', measurement_source=measurement_source,
+                    gain_mode=gain_mode, kappa_min=0.05, measurement_timeout=0.02,
+                    orientation_covariance=COVARIANCE, diagnostic_period=0.2)
+    observer = spinner.add(ObserverNode(context=ros_context,
+                                        parameter_overrides=overrides(**settings)))
+    # align_sign is on by default for a real measurement source.
+    assert observer.observer.config.align_sign
+    unaligned = None
+    if gain_mode == 'constant':
+        # The same observer without sign alignment, outputs under unaligned/.
+        unaligned = spinner.add(ObserverNode(
+            node_name='unaligned', context=ros_context,
+            parameter_overrides=overrides(align_sign=False, **settings),
+            cli_args=['--ros-args', '-r', 'imu/data:=unaligned/imu/data',
+                      '-r', 'attitude_estimate:=unaligned/attitude_estimate',
+                      '-r', 'attitude_estimate/unit:=unaligned/attitude_estimate/unit']))
+    driver = spinner.add(Driver(ros_context, measurement_source, BEST_EFFORT))
+    nodes = 2 if unaligned else 1
+    spinner.spin_until(
+        lambda: (driver.imu_publisher.get_subscription_count() == nodes
+                 and driver.measurement_publisher.get_subscription_count() == nodes
+                 and observer._publish_imu and (unaligned is None or unaligned._publish_imu)),
+        10.0, 'the subscriptions')
+    replay(spinner, driver, imu, measurements)
+
+    # Every IMU sample but the last made a step; the measurements corrected
+    # steps (a few may be lost or late on a loaded machine: counted).
+    counts = observer.counts
+    assert counts['increments'] >= len(imu) - 5
+    assert counts['steps_corrected'] >= len(measurements) - 5
+    assert observer.pairer.received['increment'] == observer.pairer.accounted('increment')
+    assert observer.pairer.received['measurement'] == observer.pairer.accounted('measurement')
+
+    # imu/data: stamped t_{k+1} (an IMU stamp), the normalized estimate, the
+    # sample's angular velocity and acceleration, the parameter's covariance.
+    sent = dict(imu)
+    assert len(driver.outputs) >= len(imu) - 10
+    for stamp, msg in driver.outputs.items():
+        assert stamp in sent
+        assert vector_from_msg(msg.angular_velocity) == sent[stamp]
+        assert msg.linear_acceleration.z == 9.81
+        assert msg.header.frame_id == 'imu_link'
+        assert list(msg.orientation_covariance) == COVARIANCE
+        assert math.hypot(*quaternion_from_msg(msg.orientation)) == pytest.approx(1.0)
+
+    def errors(outputs, since):
+        return [angle(quaternion_from_msg(msg.orientation), truth[stamp])
+                for stamp, msg in sorted(outputs.items()) if stamp > since]
+
+    last = max(driver.outputs)
+    late = errors(driver.outputs, last - 2 * SECOND)
+    mean_bound, max_bound = BOUNDS[gain_mode]
+    print(f'{measurement_source}/{gain_mode}: mean error over the last 2 s '
+          f'{sum(late) / len(late):.4f} rad, max {max(late):.4f} rad')
+    assert sum(late) / len(late) < mean_bound
+    assert max(late) < max_bound
+    if unaligned is not None:
+        other = errors(driver.other, last - 2 * SECOND)
+        assert sum(other) / len(other) > 10 * mean_bound
+
+
+def test_reliable_publishers_connect_to_the_sensor_streams_too(ros_context, spinner):
+    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
+        increment_source='imu', measurement_source='imu')))
+    driver = spinner.add(Driver(ros_context, 'imu', RELIABLE))
+    spinner.spin_until(lambda: driver.imu_publisher.get_subscription_count() == 1
+                       and driver.measurement_publisher.get_subscription_count() == 1,
+                       10.0, 'reliable publishers matched')
+    for k in range(5):
+        driver.send_imu(10 * SECOND + k * SECOND // 100, (0.1, 0.0, 0.0))
+    spinner.spin_until(lambda: observer.counts['increments'] == 5, 5.0, 'the samples')
+    infos = observer.get_subscriptions_info_by_topic('/imu/data_raw')
+    assert [i.qos_profile.reliability for i in infos] == [ReliabilityPolicy.BEST_EFFORT]
+
+
+def test_qos_overrides_make_a_sensor_stream_reliable_and_incompatibility_is_reported(
+        ros_context, spinner):
+    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
+        increment_source='imu', **{
+            'qos_overrides./imu/data_raw.subscription.reliability': 'reliable'})))
+    infos = observer.get_subscriptions_info_by_topic('/imu/data_raw')
+    assert [i.qos_profile.reliability for i in infos] == [ReliabilityPolicy.RELIABLE]
+    driver = spinner.add(Driver(ros_context, 'pose', BEST_EFFORT))
+    spinner.spin_until(lambda: '/imu/data_raw' in observer.qos.problems, 10.0,
+                       'the incompatible QoS reported')
+    text = observer.qos.problems['/imu/data_raw']
+    assert 'publisher /imu_driver on /imu/data_raw' in text
+    assert 'publisher is BEST_EFFORT, subscription is RELIABLE' in text
+    assert 'qos_overrides./imu/data_raw.subscription.reliability to best_effort' in text
+    status = observer.status()
+    assert 'incompatible QoS on /imu/data_raw' in status.message
+    assert int(values_of(status)['qos_incompatible_events']) >= 1
+    del driver
+
+
+def test_imu_measurement_without_orientation_is_dropped_and_counted(ros_context, spinner):
+    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
+        measurement_source='imu')))
+    driver = spinner.add(Driver(ros_context, 'imu', RELIABLE))
+    spinner.spin_until(lambda: driver.measurement_publisher.get_subscription_count() == 1,
+                       10.0, 'the subscription')
+    msg = Imu()
+    msg.header.stamp = stamp_from_nanoseconds(5 * SECOND)
+    msg.orientation_covariance[0] = -1.0
+    driver.measurement_publisher.publish(msg)
+    spinner.spin_until(lambda: observer.drops['no_orientation'] == 1, 5.0, 'the drop')
+    assert observer.pairer.received['measurement'] == 1
+
+
+@pytest.mark.parametrize('values, reason', [
+    (dict(increment_source='gyro'), 'increment_source must be one of'),
+    (dict(measurement_source='mocap'), 'measurement_source must be one of'),
+    (dict(orientation_covariance=[0.0] * 9), 'positive diagonal'),
+    (dict(orientation_covariance=[0.1] * 8), '9 finite numbers'),
+    (dict(orientation_covariance=[0.1, 0.0, 0.0, 0.0, math.nan, 0.0, 0.0, 0.0, 0.1]),
+     '9 finite numbers'),
+    (dict(max_dt=0.0), 'out of range'),
+    (dict(constant_dt=-0.1), 'out of range'),
+])
+def test_invalid_sensor_parameters_are_refused(ros_context, values, reason):
+    with pytest.raises(ParameterError, match=reason):
+        ObserverNode(context=ros_context, parameter_overrides=overrides(**values))
+
+
+@pytest.mark.parametrize('source, expected', [('quaternion', False), ('imu', True),
+                                              ('pose', True)])
+def test_align_sign_defaults_by_measurement_source(ros_context, source, expected):
+    node = ObserverNode(context=ros_context, parameter_overrides=overrides(
+        measurement_source=source))
+    try:
+        assert node.observer.config.align_sign is expected
+        assert node.parameters.values['align_sign'] is None
+    finally:
+        node.destroy_node()
+    node = ObserverNode(context=ros_context, parameter_overrides=overrides(
+        measurement_source=source, align_sign=not expected))
+    try:
+        assert node.observer.config.align_sign is (not expected)
+    finally:
+        node.destroy_node()
