@@ -35,6 +35,7 @@ from . import quaternion as quat
 
 __all__ = [
     'GAIN_MODES',
+    'component_major',
     'LuenbergerObserver',
     'ObserverConfig',
     'PAPER_ALPHA',
@@ -273,6 +274,26 @@ class LuenbergerObserver:
         self._q = np.ascontiguousarray(np.broadcast_to(
             new, (4,) + self.batch_shape))
         return self.state
+
+
+def component_major(a):
+    """
+    Return ``a`` (shape ``(..., 4)``) backed by contiguous components.
+
+    The values and shape are those of ``a``; the memory is laid out as
+    ``(4, ...)``. :meth:`LuenbergerObserver.step` takes such arrays without
+    copying them, which pays when several observers share one input.
+
+    Parameters
+    ----------
+    a : array_like, shape (..., n)
+
+    Returns
+    -------
+    view : ndarray, shape (..., n)
+
+    """
+    return np.moveaxis(_components(a), 0, -1)
 
 
 def _components(a, ndim=0):

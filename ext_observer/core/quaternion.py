@@ -352,10 +352,13 @@ def attitude_error(p, q):
     # p̄ ⊗ q = (p·q, p_w q_v − q_w p_v − p_v × q_v); both parts scale with
     # ‖p‖‖q‖, so the angle needs no normalization. atan2 stays accurate at
     # small angles, unlike acos.
-    dot = np.einsum('...i,...i->...', p, q)
-    v = (p[..., :1] * q[..., 1:] - q[..., :1] * p[..., 1:]
-         - np.cross(p[..., 1:], q[..., 1:]))
-    vn = np.sqrt(np.einsum('...i,...i->...', v, v))
+    pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    dot = pw * qw + px * qx + py * qy + pz * qz
+    vx = pw * qx - qw * px - (py * qz - pz * qy)
+    vy = pw * qy - qw * py - (pz * qx - px * qz)
+    vz = pw * qz - qw * pz - (px * qy - py * qx)
+    vn = np.sqrt(vx * vx + vy * vy + vz * vz)
     return 2.0 * np.arctan2(vn, np.abs(dot))
 
 
