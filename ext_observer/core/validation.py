@@ -75,18 +75,20 @@ def check_measurement(measurement, norm_tolerance):
     reason : str or None
 
     """
-    if not all(map(math.isfinite, measurement)):
-        return None, 'non_finite'
-    # Scaled norm: no overflow for huge finite components.
-    scale = max(abs(v) for v in measurement)
-    if scale < MIN_NORM:
-        return None, 'zero_quaternion'
-    n = scale * math.sqrt(sum((v / scale) ** 2 for v in measurement))
+    w, x, y, z = measurement
+    n2 = w * w + x * x + y * y + z * z
+    if not math.isfinite(n2):
+        if not (math.isfinite(w) and math.isfinite(x) and math.isfinite(y)
+                and math.isfinite(z)):
+            return None, 'non_finite'
+        # Finite but huge components: their norm is surely out of tolerance.
+        return None, 'norm_out_of_tolerance'
+    n = math.sqrt(n2)
     if n < MIN_NORM:
         return None, 'zero_quaternion'
     if abs(n - 1.0) > norm_tolerance:
         return None, 'norm_out_of_tolerance'
-    return tuple(v / n for v in measurement), None
+    return (w / n, x / n, y / n, z / n), None
 
 
 def check_state(state, innovation_norm=None, max_residual=math.inf,
@@ -111,7 +113,8 @@ def check_state(state, innovation_norm=None, max_residual=math.inf,
         ``innovation_too_large`` or None.
 
     """
-    n2 = sum(v * v for v in state)
+    w, x, y, z = state
+    n2 = w * w + x * x + y * y + z * z
     if not math.isfinite(n2):
         return 'state_non_finite'
     if abs(n2 - 1.0) > max_residual:
