@@ -113,7 +113,8 @@ OBSERVER_PARAMETERS = (
     ParameterSpec('alpha', PAPER_ALPHA,
                   'Gain α of the extension term (the paper: 0.01).', (0.0, 1.0),
                   constraints=f'Must lie in (0, certified_alpha_max({CERTIFIED_EPSILON}))'
-                  ' ≈ (0, 0.078) unless allow_uncertified_alpha is true.'),
+                  f' ≈ (0, {certified_alpha_max(CERTIFIED_EPSILON):.4f}) unless '
+                  'allow_uncertified_alpha is true.'),
     ParameterSpec('gain', list(PAPER_GAIN),
                   "The paper's gain quaternion L as w, x, y, z (constant mode).",
                   constraints='4 finite numbers.'),
