@@ -16,7 +16,9 @@ the core's ``manifold_distance`` and ``attitude_error``.
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import time
 
 from ext_observer.core import VARIANTS
@@ -127,6 +129,14 @@ def run_demo(steps=150, rate=30.0, seed=7, variant='extended', increment_max=10.
     rclpy.init(args=[], context=context, **init_kwargs)
     nodes = []
     executor = SingleThreadedExecutor(context=context)
+    # Ctrl-C stops the loop between two spins. A KeyboardInterrupt raised
+    # wherever the interpreter happens to be can cut an rclpy object in half
+    # (Task.__del__ then prints a traceback at exit).
+    interrupted = []
+    previous_handler = None
+    if threading.current_thread() is threading.main_thread():
+        previous_handler = signal.signal(
+            signal.SIGINT, lambda signum, frame: interrupted.append(signum))
     try:
         period = 1.0 / rate
         nodes.append(ObserverNode(context=context, parameter_overrides=[
@@ -160,6 +170,8 @@ def run_demo(steps=150, rate=30.0, seed=7, variant='extended', increment_max=10.
             return observer.counts['steps_corrected'] + observer.counts['steps_propagated']
 
         while time.monotonic() < deadline:
+            if interrupted:
+                raise KeyboardInterrupt
             executor.spin_once(timeout_sec=0.05)
             if progress is not None:
                 while reported < len(recorder.statuses):
@@ -192,6 +204,8 @@ def run_demo(steps=150, rate=30.0, seed=7, variant='extended', increment_max=10.
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown(context=context)
+        if previous_handler is not None:
+            signal.signal(signal.SIGINT, previous_handler)
 
 
 def _pair_by_stamp(estimates, truths, tolerance):
