@@ -54,9 +54,9 @@ $(BENCH_STAMP): requirements-bench.txt $(TEST_STAMP)
 bench: $(BENCH_STAMP)
 	$(PY) -m bench $(BENCH_ARGS)
 
-# The soak (test/test_soak.py): gyro and observer processes at 1 kHz for 60 s;
-# memory flat, every input accounted for. Figures in out/soak.json.
-# EXT_OBSERVER_SOAK_SECONDS, _RATE, _DEPTH and _MONITOR=1 change the setup.
+# The soak (test/test_soak.py): gyro, observer and monitor processes at 1 kHz
+# for 60 s; memory flat, every input accounted for. Figures in out/soak.json.
+# EXT_OBSERVER_SOAK_SECONDS, _RATE, _DEPTH and _MONITOR=0 change the setup.
 soak: $(TEST_STAMP)
 	$(PY) -m pytest -m soak -s $(PYTEST_ARGS) test/test_soak.py
 

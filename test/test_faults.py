@@ -448,3 +448,29 @@ def test_monitor_drops_non_finite_estimates_and_counts_them(ros_context, spinner
                 '5', '2', '3', '2')
     assert float(values['attitude_error_max']) == pytest.approx(0.0, abs=1e-9)
     assert fresh_status(spinner, probe, STATUS_NAME).level == DiagnosticStatus.OK
+
+
+def test_monitor_drops_the_oldest_unpaired_ground_truth(ros_context, spinner):
+    # queue_depth 1: at most 4 · max(1, 10) = 40 ground truths wait for an estimate.
+    monitor = spinner.add(MonitorNode(context=ros_context, parameter_overrides=overrides(
+        diagnostic_period=0.1, queue_depth=1)))
+    probe = spinner.add(Probe(ros_context))
+    # Two subscribers each: the probe's own and the monitor's.
+    wait_for_subscribers(spinner, probe.truth_publisher, 2)
+    wait_for_subscribers(spinner, probe.estimate_publisher, 2)
+    for k in range(1, 46):
+        probe.truth_publisher.publish(quaternion_stamped((1.0, 0.0, 0.0, 0.0), k * SECOND,
+                                                         'world'))
+        spinner.spin_until(lambda: monitor.truths_received == k, 5.0, f'truth {k}')
+    assert monitor.drops['unpaired_ground_truth'] == 5
+    values = values_of(fresh_status(spinner, probe, STATUS_NAME))
+    assert (values['ground_truth_received'], values['dropped_unpaired_ground_truth'],
+            values['waiting_ground_truth'], values['ground_truth_paired']) == (
+                '45', '5', '40', '0')
+    # The oldest went: the truth of stamp 6 s still pairs, that of 5 s not.
+    # (One at a time: the monitor's reader history holds one message.)
+    for k in (5, 6):
+        probe.estimate_publisher.publish(quaternion_stamped((1.0, 0.0, 0.0, 0.0),
+                                                            k * SECOND, 'world'))
+        spinner.spin_until(lambda: monitor.estimates_received == k - 4, 5.0, 'an estimate')
+    assert monitor.truths_paired == 1
