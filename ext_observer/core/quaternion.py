@@ -67,11 +67,15 @@ def check_quaternions(q, name='q'):
         If the last dimension is not 4.
 
     """
-    q = np.asarray(q, dtype=float)
-    if q.ndim == 0 or q.shape[-1] != 4:
+    return _check_last_axis(q, 4, name)
+
+
+def _check_last_axis(a, size, name):
+    a = np.asarray(a, dtype=float)
+    if a.ndim == 0 or a.shape[-1] != size:
         raise ValueError(
-            f'Expected `{name}` to have shape (..., 4), got {q.shape}')
-    return q
+            f'Expected `{name}` to have shape (..., {size}), got {a.shape}')
+    return a
 
 
 def check_vectors(v, name='v'):
@@ -84,11 +88,7 @@ def check_vectors(v, name='v'):
         If the last dimension is not 3.
 
     """
-    v = np.asarray(v, dtype=float)
-    if v.ndim == 0 or v.shape[-1] != 3:
-        raise ValueError(
-            f'Expected `{name}` to have shape (..., 3), got {v.shape}')
-    return v
+    return _check_last_axis(v, 3, name)
 
 
 def multiply(p, q):
