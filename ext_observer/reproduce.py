@@ -9,6 +9,7 @@ with gyro noise, next to the accuracy limit. All maths comes from
 """
 
 import argparse
+import concurrent.futures
 import json
 import os
 import sys
@@ -48,9 +49,9 @@ class Progress:
         self.tty = stream.isatty()
         self.start = time.perf_counter()
 
-    def advance(self, label):
-        """Mark one unit done and show ``label``."""
-        self.done += 1
+    def advance(self, label, units=1):
+        """Mark ``units`` done and show ``label``."""
+        self.done += units
         if not self.enabled:
             return
         elapsed = time.perf_counter() - self.start
@@ -132,11 +133,42 @@ def markdown_table(table, spread=None, rows=None, columns=COLUMNS,
     return '\n'.join(lines)
 
 
+def _run_seed(seed, runs, epochs, alpha, gyro_noise, modes, progress=None,
+              histories=False):
+    """Run the three experiments of one seed; return their summaries."""
+    specs = observer_specs(alpha, modes)
+    fig1 = manifold_convergence(runs=runs, epochs=epochs, alpha=alpha,
+                                seed=seed)
+    if progress:
+        progress.advance(f'seed {seed}: Figure 1')
+    exact = observer_runs(specs, runs=runs, epochs=epochs, seed=seed)
+    if progress:
+        progress.advance(f'seed {seed}: Table 1, exact increments')
+    noisy = observer_runs(specs, runs=runs, epochs=epochs, seed=seed,
+                          gyro_noise_std=gyro_noise)
+    if progress:
+        progress.advance(f'seed {seed}: gyro noise {gyro_noise} rad')
+    result = {
+        'seed': seed,
+        'fitted_factor': fig1['fitted_factor'],
+        'fitted_residual_factor': fig1['fitted_residual_factor'],
+        'certificate': fig1['certificate'],
+        'table': {name: error_table(h) for name, h in exact.items()},
+        'noisy_table': {name: error_table(h) for name, h in noisy.items()},
+    }
+    if histories:
+        result['histories'] = {'figure1': fig1, 'exact': exact, 'noisy': noisy}
+    return result
+
+
 def run(runs=1000, epochs=100, seed=0, seeds=1, alpha=0.01,
         gyro_noise=DEFAULT_GYRO_NOISE, modes=GAIN_MODES, progress=None,
-        keep_histories=True):
+        keep_histories=True, on_histories=None):
     """
     Run every experiment over ``seeds`` consecutive seeds.
+
+    ``on_histories``, if given, is called with the first seed's histories
+    (in the form :func:`plot` takes) while the other seeds still run.
 
     Returns
     -------
@@ -146,32 +178,47 @@ def run(runs=1000, epochs=100, seed=0, seeds=1, alpha=0.01,
 
     """
     start = time.perf_counter()
-    specs = observer_specs(alpha, modes)
-    fig1_factors, fig1_residual_factors = [], []
-    tables, noisy_tables = [], []
-    histories = {}
-    for index, s in enumerate(range(seed, seed + seeds)):
-        fig1 = manifold_convergence(runs=runs, epochs=epochs, alpha=alpha,
-                                    seed=s)
-        fig1_factors.append(fig1['fitted_factor'])
-        fig1_residual_factors.append(fig1['fitted_residual_factor'])
-        if progress:
-            progress.advance(f'seed {s}: Figure 1')
-        exact = observer_runs(specs, runs=runs, epochs=epochs, seed=s)
-        tables.append({name: error_table(h) for name, h in exact.items()})
-        if progress:
-            progress.advance(f'seed {s}: Table 1, exact increments')
-        noisy = observer_runs(specs, runs=runs, epochs=epochs, seed=s,
-                              gyro_noise_std=gyro_noise)
-        noisy_tables.append({name: error_table(h) for name, h in noisy.items()})
-        if progress:
-            progress.advance(f'seed {s}: gyro noise {gyro_noise} rad')
-        if index == 0 and keep_histories:
-            histories = {'figure1': fig1, 'exact': exact, 'noisy': noisy}
+    settings = dict(runs=runs, epochs=epochs, alpha=alpha,
+                    gyro_noise=gyro_noise, modes=modes)
+    all_seeds = list(range(seed, seed + seeds))
+    # The first seed runs here (its histories feed the figures); the others
+    # run in worker processes, one per core, and return only their tables.
+    results = []
+    pool = None
+    if seeds > 1 and (os.cpu_count() or 1) > 1:
+        pool = concurrent.futures.ProcessPoolExecutor(
+            max_workers=min(seeds - 1, os.cpu_count()))
+    try:
+        futures = ([pool.submit(_run_seed, s, **settings) for s in all_seeds[1:]]
+                   if pool else [])
+        results.append(_run_seed(all_seeds[0], progress=progress,
+                                 histories=keep_histories, **settings))
+        if on_histories and keep_histories:
+            on_histories({'_histories': results[0]['histories'],
+                          'epochs': epochs, 'gyro_noise_std': gyro_noise,
+                          'limit': accuracy_limit(0.1, epochs)})
+        if pool:
+            for future in concurrent.futures.as_completed(futures):
+                results.append(future.result())
+                if progress:
+                    progress.advance(f'seed {results[-1]["seed"]}: all tables',
+                                     units=3)
+        else:
+            for s in all_seeds[1:]:
+                results.append(_run_seed(s, progress=progress, **settings))
+    finally:
+        if pool:
+            pool.shutdown(cancel_futures=True)
+    results.sort(key=lambda r: r['seed'])
+    histories = results[0].pop('histories', {})
+    fig1_factors = [r['fitted_factor'] for r in results]
+    fig1_residual_factors = [r['fitted_residual_factor'] for r in results]
+    tables = [r['table'] for r in results]
+    noisy_tables = [r['noisy_table'] for r in results]
     table, spread = _aggregate(tables)
     noisy_table, noisy_spread = _aggregate(noisy_tables)
     limit = accuracy_limit(0.1, epochs)
-    cert = fig1['certificate']
+    cert = results[0]['certificate']
     result = {
         'runs': runs, 'epochs': epochs, 'seeds': list(range(seed, seed + seeds)),
         'alpha': alpha,
@@ -347,7 +394,8 @@ def docs_markdown(result, figures, command, docs_dir='docs'):
         '',
         f"({result['runs']} runs × {result['epochs']} epochs, seeds "
         f"{result['seeds'][0]}–{result['seeds'][-1]}, α = {result['alpha']}; "
-        f"{result['seconds']:.1f} s for the simulations on this machine). "
+        f"{result['seconds']:.1f} s for the simulations and figures on this "
+        'machine). '
         'Where a value reads `a ± b`, `a` is the mean over the seeds and `b` '
         'their standard deviation. The figures show the first seed.',
         '',
@@ -507,17 +555,22 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     progress = Progress(3 * args.seeds, enabled=not args.quiet)
+    if args.docs:
+        args.out = os.path.join(args.docs, 'figures')
+    want_plots = not args.no_plots or bool(args.docs)
+    figures = []
     try:
+        # The figures are drawn while the worker processes run the other seeds.
         result = run(args.runs, args.epochs, args.seed, args.seeds, args.alpha,
                      args.gyro_noise, progress=progress,
-                     keep_histories=not args.no_plots or bool(args.docs))
+                     keep_histories=want_plots,
+                     on_histories=lambda partial: figures.extend(
+                         plot(partial, args.out)))
     except ValueError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
-    if args.docs:
-        args.out = os.path.join(args.docs, 'figures')
-    if not args.no_plots or args.docs:
-        result['figures'] = plot(result, args.out)
+    if want_plots:
+        result['figures'] = figures
     if args.docs:
         command = 'python -m ext_observer reproduce ' + ' '.join(
             sys.argv[2:] if argv is None else argv)
