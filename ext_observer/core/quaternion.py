@@ -243,13 +243,14 @@ def exp(q):
 
     """
     q = check_quaternions(q)
-    w = q[..., 0]
-    v = q[..., 1:]
+    return np.exp(q[..., 0])[..., np.newaxis] * _exp_vector(q[..., 1:])
+
+
+def _exp_vector(v):
+    """``exp((0, v))`` for vectors ``v`` of shape (..., 3), with the Taylor branch."""
     a = np.sqrt(np.einsum('...i,...i->...', v, v))
-    scale = np.exp(w)
     return np.concatenate(
-        ((scale * np.cos(a))[..., np.newaxis],
-         (scale * _sinc(a))[..., np.newaxis] * v), axis=-1)
+        (np.cos(a)[..., np.newaxis], _sinc(a)[..., np.newaxis] * v), axis=-1)
 
 
 def log(q):
@@ -298,12 +299,7 @@ def quaternion_from_rotation_vector(r):
     q : ndarray, shape (..., 4)
 
     """
-    r = check_vectors(r, 'r')
-    half = 0.5 * r
-    a = np.sqrt(np.einsum('...i,...i->...', half, half))
-    return np.concatenate(
-        (np.cos(a)[..., np.newaxis], _sinc(a)[..., np.newaxis] * half),
-        axis=-1)
+    return _exp_vector(0.5 * check_vectors(r, 'r'))
 
 
 def rotation_vector_from_quaternion(q):
