@@ -9,6 +9,8 @@ reproduce
     The paper's Figure 1, Figure 2 and Table 1.
 demo
     The gyro → observer → monitor pipeline in one process.
+docs
+    Regenerate the parameter tables of docs/parameters.md.
 """
 
 import argparse
@@ -75,6 +77,10 @@ def build_parser():
         'demo', add_help=False,
         help='gyro → observer → monitor pipeline (see demo -h)')
     demo.set_defaults(func=None, module='ext_observer.demo')
+    docs = sub.add_parser(
+        'docs', add_help=False,
+        help='regenerate the parameter tables of docs/parameters.md (see docs -h)')
+    docs.set_defaults(func=None, module='ext_observer.docs')
     return parser
 
 
@@ -84,7 +90,7 @@ def main(argv=None):
     parser = build_parser()
     args, rest = parser.parse_known_args(argv)
     if args.func is None:
-        # reproduce and demo parse their own options.
+        # reproduce, demo and docs parse their own options.
         import importlib
         return importlib.import_module(args.module).main(rest)
     if rest:
