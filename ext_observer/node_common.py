@@ -3,7 +3,8 @@ What the three nodes share: declared parameters, validation, ``main``.
 
 Each node lists its parameters once, as :class:`ParameterSpec` rows; from
 them come the ``ParameterDescriptor`` (description, range, read-only), the
-README's tables (:func:`markdown_table`) and the YAML in ``config/``.
+tables of ``docs/parameters.md`` (:func:`markdown_table`, written by
+``python -m ext_observer docs``) and the YAML in ``config/``.
 
 Validation has one entry point per node, a function from the dict of all
 parameter values to the node's settings that raises ``ValueError`` with the
@@ -64,7 +65,7 @@ class ParameterSpec:
         The default value; its Python type is the parameter's type. A
         ``Parameter.Type`` declares a parameter with no default (unset).
     description : str
-        Shown by ``ros2 param describe`` and in the README; states the unit.
+        Shown by ``ros2 param describe`` and in ``docs/parameters.md``; states the unit.
     range : tuple of 2 numbers, optional
         Inclusive ``(from, to)`` for an int or float parameter.
     read_only : bool
@@ -108,7 +109,7 @@ class ParameterSpec:
 
     @property
     def default_text(self):
-        """Return the default as written in the README and the YAML."""
+        """Return the default as written in docs/parameters.md and the YAML."""
         if isinstance(self.default, Parameter.Type):
             return '[]' if self.default.name.endswith('_ARRAY') else 'unset'
         return _yaml_value(self.default)
@@ -224,7 +225,7 @@ class NodeParameters:
 
 def markdown_table(specs):
     """
-    Return the README table of a node's parameters.
+    Return the table of a node's parameters in ``docs/parameters.md``.
 
     Parameters
     ----------
