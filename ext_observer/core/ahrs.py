@@ -1,0 +1,623 @@
+"""
+Attitude from a raw IMU: gyro + accelerometer (+ magnetometer), ambient form.
+
+The estimate ``q̂`` lives in R⁴ as in the paper's observer; nothing here
+renormalizes it. Each sample runs three steps, each a short function:
+
+``update_gyr``
+    Propagation with the bias-corrected body-frame increment,
+    ``p = q̂ ⊗ exp((ω − b̂) dt / 2)``, then the extension term of
+    Corollary 1, ``p − α ∇V(p)`` with ``V(x) = (x̄x − 1)²``, which pulls the
+    estimate back towards S³ (``|exp(·)| = 1``, so the gyro step preserves
+    ``V`` and the theorem applies with the S³ certificate).
+``update_acc``
+    Inclination. The specific force is rotated into the world frame with the
+    current estimate and low-pass filtered there (second-order Butterworth,
+    time constant ``tau_acc``); the filter's states are rotated along with
+    every correction, so they live in a frame that only the gyro moves and
+    translational accelerations average out. The measurement is
+    ``y = δ ⊗ q̂``, with ``δ`` the rotation that makes the filtered vector
+    vertical, and the update is the paper's Luenberger form with a scalar
+    gain, ``q̂ + κ_a (y − q̂)``.
+``update_mag``
+    Heading only. The field is rotated into the world frame and its
+    horizontal direction gives the heading error ``ψ``; the measurement is
+    ``y = R_z(ψ) ⊗ q̂`` (a rotation about the world vertical, so a disturbed
+    magnetometer can never tilt the estimate), with gain ``κ_m`` from
+    ``tau_mag``. A field whose norm or dip angle leaves its learned reference
+    is rejected; a new field that stays consistent while the body moves is
+    accepted after ``mag_new_time``.
+
+The gyro bias is learned at rest (rest detected from the gyro and the
+accelerometer) and, in motion, from the corrections: a constant bias makes
+the estimate drift, so the body-frame correction averages ``−(b − b̂) dt``.
+
+Conventions: quaternions scalar first ``(w, x, y, z)``, sensor → world; the
+world frame is ENU (x east, y north, z up, REP-103); at rest the
+accelerometer reads about ``+9.81`` along the world vertical. Angular rate in
+rad/s, acceleration in m/s², the magnetic field in any unit (only its
+direction and its norm relative to the reference are used), time in s.
+
+One code path serves one estimate and a batch: every quantity is a Python
+float or a numpy array of shape ``(B,)``; :class:`AhrsObserver` picks the
+operations (``math`` or ``numpy``) once. The ROS node runs it on floats;
+:func:`estimate_batch` runs many recordings at once on arrays.
+"""
+
+import math
+
+import numpy as np
+
+__all__ = [
+    'AhrsObserver',
+    'AhrsParams',
+    'MODES',
+    'WORLD_FRAMES',
+    'estimate_batch',
+    'initial_attitude',
+    'world_from_enu',
+]
+
+MODES = ('6D', '9D')
+
+_H = math.sqrt(0.5)
+# Left factor C with q_frame = C ⊗ q_enu (C maps ENU coordinates to the frame's).
+WORLD_FRAMES = {
+    'enu': (1.0, 0.0, 0.0, 0.0),
+    'nwu': (_H, 0.0, 0.0, -_H),
+    'ned': (0.0, _H, _H, 0.0),
+}
+
+
+class AhrsParams:
+    """
+    What a user tunes, in physical units (seconds, rad/s, m/s²).
+
+    Parameters
+    ----------
+    alpha : float
+        Gain of the extension term, in (0, 0.0762): the certified range of
+        Theorem 1 on S³ (ε = 0.5, best δ; ``python -m ext_observer gains``).
+    tau_acc : float
+        Time constant (s) of the world-frame low-pass of the accelerometer.
+    tau_acc_gain : float
+        Time constant (s) of the Luenberger gain ``κ_a`` on the inclination
+        measurement.
+    tau_mag : float
+        Time constant (s) of the heading correction (``κ_m``).
+    tau_bias : float
+        Time constant (s) of the bias estimate in motion; 0 turns it off.
+    bias_max : float
+        Largest bias estimate (rad/s), per axis.
+    rest_gyr : float
+        Rest threshold on the angular rate (rad/s).
+    rest_acc : float
+        Rest threshold on the deviation of the specific force (m/s²).
+    rest_time : float
+        Time (s) below both thresholds before rest is declared.
+    tau_rest : float
+        Time constant (s) of the low-pass filters of rest detection and of
+        the bias estimate at rest.
+    mag_norm_th : float
+        Relative deviation of the field norm from its reference that counts
+        as a disturbance.
+    mag_dip_th : float
+        Deviation (rad) of the dip angle from its reference that counts as a
+        disturbance.
+    mag_new_time : float
+        Time (s) a new, consistent field must last before it is accepted.
+    mag_new_gyr : float
+        Angular rate (rad/s) the body must turn at for that time to count.
+    tau_mag_ref : float
+        Time constant (s) of the learned field norm and dip references.
+
+    Raises
+    ------
+    ValueError
+        With the name and the reason, for any invalid value.
+
+    """
+
+    DEFAULTS = dict(
+        alpha=0.05,
+        tau_acc=3.0,
+        tau_acc_gain=0.05,
+        tau_mag=9.0,
+        tau_bias=100.0,
+        bias_max=math.radians(2.0),
+        rest_gyr=math.radians(2.0),
+        rest_acc=0.5,
+        rest_time=1.5,
+        tau_rest=0.5,
+        mag_norm_th=0.1,
+        mag_dip_th=math.radians(10.0),
+        mag_new_time=20.0,
+        mag_new_gyr=math.radians(20.0),
+        tau_mag_ref=20.0,
+    )
+
+    def __init__(self, **values):
+        unknown = set(values) - set(self.DEFAULTS)
+        if unknown:
+            raise ValueError(f'unknown parameters: {sorted(unknown)}')
+        merged = dict(self.DEFAULTS, **values)
+        for name, value in merged.items():
+            value = float(value)
+            if not math.isfinite(value):
+                raise ValueError(f'{name} must be finite, got {value}')
+            if name == 'tau_bias':
+                if value < 0.0:
+                    raise ValueError(f'tau_bias must be >= 0 (0: off), got {value}')
+            elif not value > 0.0:
+                raise ValueError(f'{name} must be positive, got {value}')
+            setattr(self, name, value)
+        if not self.alpha < 0.0762:
+            raise ValueError(
+                f'alpha must be below the certified 0.0762, got {self.alpha}')
+
+    def as_dict(self):
+        """Return the parameters as a dict."""
+        return {name: getattr(self, name) for name in self.DEFAULTS}
+
+    def __repr__(self):
+        items = ', '.join(f'{k}={v:g}' for k, v in self.as_dict().items())
+        return f'AhrsParams({items})'
+
+
+class _FloatOps:
+    sqrt = staticmethod(math.sqrt)
+    atan2 = staticmethod(math.atan2)
+    cos = staticmethod(math.cos)
+    sin = staticmethod(math.sin)
+
+    @staticmethod
+    def where(cond, a, b):
+        return a if cond else b
+
+    @staticmethod
+    def clip(v, lo, hi):
+        return lo if v < lo else hi if v > hi else v
+
+    @staticmethod
+    def logical_not(v):
+        return not v
+
+    @staticmethod
+    def zeros(like):
+        return 0.0
+
+    @staticmethod
+    def full(like, value):
+        return float(value)
+
+
+class _ArrayOps:
+    sqrt = staticmethod(np.sqrt)
+    atan2 = staticmethod(np.arctan2)
+    cos = staticmethod(np.cos)
+    sin = staticmethod(np.sin)
+    where = staticmethod(np.where)
+    clip = staticmethod(np.clip)
+    logical_not = staticmethod(np.logical_not)
+
+    @staticmethod
+    def zeros(like):
+        return np.zeros_like(like, dtype=float)
+
+    @staticmethod
+    def full(like, value):
+        return np.full(np.shape(like), value, dtype=float)
+
+
+def _rotate(w, x, y, z, vx, vy, vz):
+    """``q v q̄ / |q|²``: vector ``v`` rotated by the rotation of ``q ≠ 0``."""
+    # v(w² − |u|²) + 2(u·v)u + 2w(u × v), over |q|².
+    n2 = w * w + x * x + y * y + z * z
+    s = (w * w - x * x - y * y - z * z)
+    d = 2.0 * (x * vx + y * vy + z * vz)
+    cx = y * vz - z * vy
+    cy = z * vx - x * vz
+    cz = x * vy - y * vx
+    return ((s * vx + d * x + 2.0 * w * cx) / n2,
+            (s * vy + d * y + 2.0 * w * cy) / n2,
+            (s * vz + d * z + 2.0 * w * cz) / n2)
+
+
+def _butterworth(tau, dt):
+    """Second-order Butterworth low-pass (bilinear, prewarped), cutoff 1/(2π τ)."""
+    wc = math.tan(math.pi * (1.0 / (2.0 * math.pi * tau)) * dt)
+    k = math.sqrt(2.0) * wc
+    a0 = 1.0 + k + wc * wc
+    b0 = wc * wc / a0
+    return (b0, 2.0 * b0, b0, 2.0 * (wc * wc - 1.0) / a0, (1.0 - k + wc * wc) / a0)
+
+
+def _gain(tau, dt):
+    """Per-sample gain of a first-order filter with time constant ``tau``."""
+    return 1.0 - math.exp(-dt / tau)
+
+
+class AhrsObserver:
+    """
+    The raw-IMU estimator on floats (one estimate) or on ``(B,)`` arrays.
+
+    Parameters
+    ----------
+    params : AhrsParams, optional
+    use_mag : bool or ndarray of bool, shape (B,)
+        9D (heading from the magnetometer) where true, 6D elsewhere.
+    batch : int, optional
+        ``None`` for one estimate on floats; ``B`` for arrays of shape (B,).
+    variant : {'extended', 'plain'}
+        ``plain`` drops the extension term (for comparison only).
+
+    Attributes
+    ----------
+    q : tuple of 4
+        The ambient estimate ``(w, x, y, z)``, sensor → ENU; ``None`` until
+        the first accelerometer sample initializes it.
+    bias : tuple of 3
+        The gyro bias estimate (rad/s), body frame.
+    rest : bool or ndarray
+        Whether rest is detected.
+    mag_disturbed : bool or ndarray
+        Whether the last magnetometer sample was rejected.
+
+    """
+
+    def __init__(self, params=None, use_mag=True, batch=None, variant='extended'):
+        if variant not in ('extended', 'plain'):
+            raise ValueError(f"variant must be 'extended' or 'plain', got {variant!r}")
+        self.params = params if params is not None else AhrsParams()
+        self.batch = batch
+        self.variant = variant
+        if batch is None:
+            self._o = _FloatOps
+            self._proto = 0.0
+            self.use_mag = bool(use_mag)
+        else:
+            self._o = _ArrayOps
+            self._proto = np.zeros(int(batch))
+            self.use_mag = np.broadcast_to(np.asarray(use_mag, dtype=bool),
+                                           (int(batch),)).copy()
+        self._dt = None
+        self.reset()
+
+    # --- state -------------------------------------------------------------
+
+    def reset(self):
+        """Forget everything: the next accelerometer sample initializes."""
+        z = self._o.zeros(self._proto)
+        self.q = None
+        self.bias = (z, z, z)
+        self.rest = False if self.batch is None else np.zeros(self.batch, dtype=bool)
+        self.rest_time = z
+        self._rest_gyr = None
+        self._rest_acc = None
+        self._lp = None  # six Butterworth states: s1 (3) and s2 (3)
+        self.mag_disturbed = self.rest
+        self._mag_ref = None  # (norm, dip)
+        self._mag_cand = None  # (norm, dip) of a new field
+        self._mag_cand_time = z
+        self._mag_used = z  # samples used since start (initial averaging)
+
+    def _coefficients(self, dt):
+        if self._dt == dt:
+            return
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise ValueError(f'dt must be positive and finite, got {dt}')
+        p = self.params
+        self._dt = dt
+        self._bw = _butterworth(p.tau_acc, dt)
+        self._k_acc = _gain(p.tau_acc_gain, dt)
+        self._k_mag = _gain(p.tau_mag, dt)
+        self._k_rest = _gain(p.tau_rest, dt)
+        self._k_bias = dt / p.tau_bias if p.tau_bias > 0.0 else 0.0
+        self._k_ref = _gain(p.tau_mag_ref, dt)
+
+    # --- the three steps ---------------------------------------------------
+
+    def update(self, gyr, acc, mag=None, dt=None):
+        """
+        One IMU sample: gyro, then accelerometer, then magnetometer.
+
+        Parameters
+        ----------
+        gyr, acc, mag : sequence of 3 floats or of 3 arrays (B,)
+            rad/s, m/s², field (``mag`` ignored where ``use_mag`` is false).
+        dt : float
+            Time since the previous sample (s).
+
+        """
+        self._coefficients(dt)
+        if self.q is None:
+            self.q = initial_attitude(acc, mag if self._any_mag() else None,
+                                      self._o, self.use_mag)
+            self._init_filters(acc, gyr)
+        else:
+            self.update_gyr(gyr)
+        self.update_acc(acc)
+        if mag is not None and self._any_mag():
+            self.update_mag(mag)
+        return self.q
+
+    def _any_mag(self):
+        return bool(np.any(self.use_mag))
+
+    def _init_filters(self, acc, gyr):
+        ax, ay, az = _rotate(*self.q, *acc)
+        b0, b1, b2, a1, a2 = self._bw
+        # Steady state of the transposed direct form II for a constant input.
+        s2 = tuple((b2 - a2) * v for v in (ax, ay, az))
+        s1 = tuple((b1 - a1) * v + s for v, s in zip((ax, ay, az), s2))
+        self._lp = s1 + s2
+        self._rest_gyr = tuple(gyr)
+        self._rest_acc = tuple(acc)
+
+    def update_gyr(self, gyr):
+        """Propagate with ``exp((ω − b̂) dt / 2)`` and apply the extension term."""
+        o = self._o
+        dt = self._dt
+        bx, by, bz = self.bias
+        ux = (gyr[0] - bx) * dt
+        uy = (gyr[1] - by) * dt
+        uz = (gyr[2] - bz) * dt
+        t2 = ux * ux + uy * uy + uz * uz
+        # exp of the half increment; Taylor below 1e-4 rad (error < 1e-18).
+        big = t2 > 1e-8
+        t = o.sqrt(t2)
+        th = o.where(big, t, 1.0)
+        c = o.where(big, o.cos(0.5 * th), 1.0 - t2 / 8.0)
+        s = o.where(big, o.sin(0.5 * th) / th, 0.5 - t2 / 48.0)
+        ex, ey, ez = ux * s, uy * s, uz * s
+        w, x, y, z = self.q
+        pw = w * c - x * ex - y * ey - z * ez
+        px = w * ex + x * c + y * ez - z * ey
+        py = w * ey - x * ez + y * c + z * ex
+        pz = w * ez + x * ey - y * ex + z * c
+        if self.variant == 'extended':
+            # p − α ∇V(p), ∇V(p) = 4 p (p̄p − 1).
+            f = 1.0 - 4.0 * self.params.alpha * (pw * pw + px * px + py * py + pz * pz - 1.0)
+            pw, px, py, pz = pw * f, px * f, py * f, pz * f
+        self.q = (pw, px, py, pz)
+        self._detect_rest(gyr)
+
+    def _detect_rest(self, gyr):
+        o = self._o
+        p = self.params
+        k = self._k_rest
+        gx, gy, gz = (g + k * (v - g) for g, v in zip(self._rest_gyr, gyr))
+        self._rest_gyr = (gx, gy, gz)
+        bx, by, bz = self.bias
+        dev = ((gyr[0] - gx) ** 2 + (gyr[1] - gy) ** 2 + (gyr[2] - gz) ** 2)
+        mean = (gx - bx) ** 2 + (gy - by) ** 2 + (gz - bz) ** 2
+        still = (dev < p.rest_gyr ** 2) & (mean < p.rest_gyr ** 2) & self._acc_still
+        self.rest_time = o.where(still, self.rest_time + self._dt, 0.0)
+        self.rest = self.rest_time >= p.rest_time
+        # At rest the bias is the low-passed rate.
+        kr = o.where(self.rest, k, 0.0)
+        self.bias = (bx + kr * (gx - bx), by + kr * (gy - by), bz + kr * (gz - bz))
+
+    _acc_still = True
+
+    def update_acc(self, acc):
+        """Correct the inclination from the world-frame filtered specific force."""
+        o = self._o
+        p = self.params
+        ax, ay, az = acc
+        # Rest detection needs the accelerometer's deviation from its mean.
+        k = self._k_rest
+        rx, ry, rz = (r + k * (v - r) for r, v in zip(self._rest_acc, acc))
+        self._rest_acc = (rx, ry, rz)
+        self._acc_still = ((ax - rx) ** 2 + (ay - ry) ** 2 + (az - rz) ** 2) < p.rest_acc ** 2
+
+        w, x, y, z = self.q
+        vx, vy, vz = _rotate(w, x, y, z, ax, ay, az)
+        b0, b1, b2, a1, a2 = self._bw
+        s1x, s1y, s1z, s2x, s2y, s2z = self._lp
+        fx, fy, fz = b0 * vx + s1x, b0 * vy + s1y, b0 * vz + s1z
+        s1x, s1y, s1z = (b1 * vx - a1 * fx + s2x, b1 * vy - a1 * fy + s2y,
+                         b1 * vz - a1 * fz + s2z)
+        s2x, s2y, s2z = b2 * vx - a2 * fx, b2 * vy - a2 * fy, b2 * vz - a2 * fz
+
+        # δ: the rotation taking f/|f| to the vertical, [1 + u_z, u_y, −u_x, 0].
+        n = o.sqrt(fx * fx + fy * fy + fz * fz)
+        n = o.where(n > 0.0, n, 1.0)
+        dw, dx, dy = 1.0 + fz / n, fy / n, -fx / n
+        dn = o.sqrt(dw * dw + dx * dx + dy * dy)
+        ok = dn > 1e-9
+        dn = o.where(ok, dn, 1.0)
+        dw, dx, dy = o.where(ok, dw / dn, 1.0), o.where(ok, dx / dn, 0.0), o.where(ok, dy / dn, 0.0)
+        # q̂ + κ (δ ⊗ q̂ − q̂) = r ⊗ q̂ with r = (1 − κ) + κ δ.
+        kap = self._k_acc
+        rw, rx, ry = 1.0 - kap + kap * dw, kap * dx, kap * dy
+        self.q = (rw * w - rx * x - ry * y,
+                  rw * x + rx * w - ry * z,
+                  rw * y + ry * w + rx * z,
+                  rw * z + rx * y - ry * x)
+        # The filter's states follow the applied rotation r/|r|.
+        rn = o.sqrt(rw * rw + rx * rx + ry * ry)
+        rw, rx, ry = rw / rn, rx / rn, ry / rn
+        s1x, s1y, s1z = _rotate(rw, rx, ry, 0.0, s1x, s1y, s1z)
+        s2x, s2y, s2z = _rotate(rw, rx, ry, 0.0, s2x, s2y, s2z)
+        self._lp = (s1x, s1y, s1z, s2x, s2y, s2z)
+        self._learn_bias(rw, rx, ry, 0.0)
+
+    def _learn_bias(self, rw, rx, ry, rz):
+        """In motion: the correction ``r`` (world) averages ``−(b − b̂) dt`` (body)."""
+        if self._k_bias == 0.0:
+            return
+        o = self._o
+        # Small-angle rotation vector of r, in the body frame.
+        cx, cy, cz = 2.0 * rx / rw, 2.0 * ry / rw, 2.0 * rz / rw
+        w, x, y, z = self.q
+        cx, cy, cz = _rotate(w, -x, -y, -z, cx, cy, cz)
+        k = o.where(self.rest, 0.0, 1.0 / self.params.tau_bias)
+        m = self.params.bias_max
+        bx, by, bz = self.bias
+        self.bias = (o.clip(bx - k * cx, -m, m), o.clip(by - k * cy, -m, m),
+                     o.clip(bz - k * cz, -m, m))
+
+    def update_mag(self, mag):
+        """Correct the heading from the magnetometer, rejecting disturbed fields."""
+        o = self._o
+        p = self.params
+        w, x, y, z = self.q
+        mx, my, mz = _rotate(w, x, y, z, *mag)
+        h = o.sqrt(mx * mx + my * my)
+        norm = o.sqrt(h * h + mz * mz)
+        valid = (h > 0.0) & (norm > 0.0)
+        dip = o.atan2(mz, h)
+        psi = o.atan2(mx, my)
+
+        if self._mag_ref is None:
+            self._mag_ref = (norm, dip)
+            self._mag_cand = (norm, dip)
+        ref_n, ref_d = self._mag_ref
+        disturbed = ((o.where(ref_n > 0.0, abs(norm - ref_n) / o.where(ref_n > 0.0, ref_n, 1.0), 1.0)
+                      > p.mag_norm_th) | (abs(dip - ref_d) > p.mag_dip_th))
+        # A new field: consistent with the candidate while the body turns.
+        cand_n, cand_d = self._mag_cand
+        consistent = ((abs(norm - cand_n) < p.mag_norm_th * o.where(cand_n > 0.0, cand_n, 1.0))
+                      & (abs(dip - cand_d) < p.mag_dip_th))
+        turning = (self._rest_gyr[0] ** 2 + self._rest_gyr[1] ** 2
+                   + self._rest_gyr[2] ** 2) > p.mag_new_gyr ** 2
+        self._mag_cand_time = o.where(disturbed & consistent,
+                                      self._mag_cand_time + o.where(turning, self._dt, 0.0), 0.0)
+        kr = self._k_ref
+        self._mag_cand = (o.where(consistent, cand_n + kr * (norm - cand_n), norm),
+                          o.where(consistent, cand_d + kr * (dip - cand_d), dip))
+        accept_new = disturbed & (self._mag_cand_time >= p.mag_new_time)
+        ref_n = o.where(accept_new, self._mag_cand[0], ref_n)
+        ref_d = o.where(accept_new, self._mag_cand[1], ref_d)
+        disturbed = disturbed & o.logical_not(accept_new)
+        use = valid & o.logical_not(disturbed) & self.use_mag
+        self._mag_ref = (o.where(use, ref_n + kr * (norm - ref_n), ref_n),
+                         o.where(use, ref_d + kr * (dip - ref_d), ref_d))
+        self.mag_disturbed = disturbed
+
+        # Heading measurement y = R_z(ψ) ⊗ q̂; gain κ_m, a running average at first.
+        self._mag_used = self._mag_used + o.where(use, 1.0, 0.0)
+        kap = o.where(use, o.clip(1.0 / o.where(use, self._mag_used, 1.0), self._k_mag, 1.0), 0.0)
+        half = 0.5 * o.where(use, psi, 0.0)
+        rw, rz = 1.0 - kap + kap * o.cos(half), kap * o.sin(half)
+        self.q = (rw * w - rz * z, rw * x - rz * y, rw * y + rz * x, rw * z + rz * w)
+        rn = o.sqrt(rw * rw + rz * rz)
+        rw, rz = rw / rn, rz / rn
+        s1x, s1y, s1z, s2x, s2y, s2z = self._lp
+        s1x, s1y, s1z = _rotate(rw, 0.0, 0.0, rz, s1x, s1y, s1z)
+        s2x, s2y, s2z = _rotate(rw, 0.0, 0.0, rz, s2x, s2y, s2z)
+        self._lp = (s1x, s1y, s1z, s2x, s2y, s2z)
+        # Only corrections of the steady phase teach the bias.
+        steady = self._mag_used * self._k_mag > 1.0
+        rz = o.where(steady, rz, 0.0)
+        self._learn_bias(rw, 0.0, 0.0, rz)
+
+
+def initial_attitude(acc, mag=None, ops=_FloatOps, use_mag=True):
+    """
+    A first attitude from gravity (and the field's heading), ENU.
+
+    Parameters
+    ----------
+    acc : sequence of 3
+        Specific force, body frame (points up at rest).
+    mag : sequence of 3, optional
+        Magnetic field, body frame; without it the heading is that of the
+        smallest rotation taking the accelerometer's axis to the vertical.
+    ops : operations (floats or arrays)
+    use_mag : bool or ndarray
+
+    Returns
+    -------
+    tuple of 4
+        Unit quaternion ``(w, x, y, z)``, sensor → ENU.
+
+    """
+    o = ops
+    ax, ay, az = acc
+    n = o.sqrt(ax * ax + ay * ay + az * az)
+    n = o.where(n > 0.0, n, 1.0)
+    ax, ay, az = ax / n, ay / n, az / n
+    w, x, y = 1.0 + az, ay, -ax
+    d = o.sqrt(w * w + x * x + y * y)
+    flip = d < 1e-9
+    d = o.where(flip, 1.0, d)
+    w, x, y = o.where(flip, 0.0, w / d), o.where(flip, 1.0, x / d), o.where(flip, 0.0, y / d)
+    z = 0.0 * w
+    if mag is None:
+        return (w, x, y, z)
+    mx, my, _ = _rotate(w, x, y, z, *mag)
+    psi = o.where(use_mag, o.atan2(mx, my), 0.0)
+    c, s = o.cos(0.5 * psi), o.sin(0.5 * psi)
+    return (c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w)
+
+
+def world_from_enu(q, frame):
+    """
+    Express an ENU attitude in another world frame.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+    frame : {'enu', 'nwu', 'ned'}
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+
+    """
+    if frame not in WORLD_FRAMES:
+        raise ValueError(f'frame must be one of {tuple(WORLD_FRAMES)}, got {frame!r}')
+    from .quaternion import multiply
+    return multiply(np.asarray(WORLD_FRAMES[frame], dtype=float), np.asarray(q, dtype=float))
+
+
+def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extended'):
+    """
+    Run many recordings at once (one estimator each, same parameters).
+
+    Parameters
+    ----------
+    gyr, acc, mag : list of ndarray, shape (N_i, 3)
+        rad/s, m/s², field (any unit). ``mag`` entries may be ``None`` where
+        ``use_mag`` is false.
+    rate_hz : list of float
+        Sampling rate of each recording (all must be equal).
+    use_mag : list of bool
+        9D where true, 6D elsewhere.
+    params : AhrsParams, optional
+    variant : {'extended', 'plain'}
+
+    Returns
+    -------
+    list of ndarray, shape (N_i, 4)
+        The ambient estimates ``q̂_k`` (not normalized), sensor → ENU.
+
+    """
+    count = len(gyr)
+    if not (len(acc) == len(mag) == len(rate_hz) == len(use_mag) == count):
+        raise ValueError('gyr, acc, mag, rate_hz and use_mag must have one entry per recording')
+    rates = {float(r) for r in rate_hz}
+    if len(rates) != 1:
+        raise ValueError(f'all recordings must share one sampling rate, got {sorted(rates)}')
+    dt = 1.0 / rates.pop()
+    lengths = [len(g) for g in gyr]
+    n_max = max(lengths)
+
+    def stack(arrays):
+        out = np.empty((n_max, 3, count))
+        for i, a in enumerate(arrays):
+            a = np.zeros((lengths[i], 3)) if a is None else np.asarray(a, dtype=float)
+            out[:len(a), :, i] = a
+            out[len(a):, :, i] = a[-1]  # hold the last sample past the end
+        return out
+
+    g_all, a_all, m_all = stack(gyr), stack(acc), stack(mag)
+    est = AhrsObserver(params, use_mag=np.asarray(use_mag, dtype=bool), batch=count,
+                       variant=variant)
+    out = np.empty((n_max, 4, count))
+    for k in range(n_max):
+        q = est.update(g_all[k], a_all[k], m_all[k], dt)
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = q
+    return [np.ascontiguousarray(out[:n, :, i]) for i, n in enumerate(lengths)]
