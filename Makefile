@@ -13,7 +13,7 @@ BENCH_STAMP := $(VENV)/.ext_observer-bench
 # Every process that starts a ROS node stays on this machine.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-.PHONY: all venv demo test reproduce bench docs clean
+.PHONY: all venv demo test reproduce bench broad docs clean
 
 all: test
 
@@ -58,6 +58,17 @@ $(BENCH_STAMP): requirements-bench.txt $(TEST_STAMP)
 # Benchmarks print figures and write docs/performance.md; never a pass/fail.
 bench: $(BENCH_STAMP)
 	$(PY) -m bench $(BENCH_ARGS)
+
+# The raw-IMU estimator and its anchors (VQF, BasicVQF, Madgwick, Mahony,
+# Fusion) on the BROAD recordings, into docs/broad.md, docs/figures/broad_*.png
+# and out/broad.json. Separate from `make bench`, which does not run it (it
+# takes minutes and needs the data). BROAD_DATA: a folder with BROAD's HDF5
+# files, directly or under data_hdf5/ (a clone of BROAD works as it is).
+BROAD_DATA ?= ../shared/broad
+BROAD_ARGS ?=
+
+broad: $(BENCH_STAMP)
+	$(PY) -m ext_observer broad --data $(BROAD_DATA) --mode both --json out/broad.json --docs docs $(BROAD_ARGS)
 
 # The soak (test/test_soak.py): gyro, observer and monitor processes at 1 kHz
 # for 60 s; memory flat, every input accounted for. Figures in out/soak.json.

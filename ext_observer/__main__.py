@@ -11,6 +11,8 @@ demo
     The gyro → observer → monitor pipeline in one process.
 docs
     Regenerate the parameter tables of docs/parameters.md.
+broad
+    The raw-IMU estimator and the anchors on the BROAD recordings.
 """
 
 import argparse
@@ -81,6 +83,10 @@ def build_parser():
         'docs', add_help=False,
         help='regenerate the parameter tables of docs/parameters.md (see docs -h)')
     docs.set_defaults(func=None, module='ext_observer.docs')
+    broad = sub.add_parser(
+        'broad', add_help=False,
+        help='the raw-IMU estimator and the anchors on BROAD (see broad -h)')
+    broad.set_defaults(func=None, module='ext_observer.broad')
     return parser
 
 
@@ -90,7 +96,7 @@ def main(argv=None):
     parser = build_parser()
     args, rest = parser.parse_known_args(argv)
     if args.func is None:
-        # reproduce, demo and docs parse their own options.
+        # reproduce, demo, docs and broad parse their own options.
         import importlib
         return importlib.import_module(args.module).main(rest)
     if rest:
