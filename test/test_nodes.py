@@ -4,7 +4,6 @@ SingleThreadedExecutor with their own context, through real topics.
 """
 
 import math
-import os
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
@@ -13,17 +12,16 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
-from conftest import CONFIG, REPO
+from conftest import CONFIG
 from ext_observer.conversions import quaternion_stamped
 from ext_observer.core import (attitude_error, certified_alpha_max, manifold_distance,
                                multiply, norm, quaternion_from_rotation_vector,
                                SingleObserver)
 from ext_observer.gyro_node import GYRO_PARAMETERS, GyroNode
-from ext_observer.monitor_node import (COUNTER_KEYS, DIAGNOSTIC_KEYS, ERROR_KEYS,
-                                       MONITOR_PARAMETERS, MonitorNode, STATUS_NAME)
-from ext_observer.node_common import markdown_table, ParameterError
-from ext_observer.observer_node import (DROP_REASONS, GUARD_REASONS, OBSERVER_PARAMETERS,
-                                        ObserverNode, RESET_CAUSES)
+from ext_observer.monitor_node import (DIAGNOSTIC_KEYS, ERROR_KEYS, MONITOR_PARAMETERS,
+                                       MonitorNode, STATUS_NAME)
+from ext_observer.node_common import ParameterError
+from ext_observer.observer_node import DROP_REASONS, OBSERVER_PARAMETERS, ObserverNode
 from ros_helpers import overrides, Probe, SECOND, unit, values_of, wait_for_subscribers
 
 
@@ -515,25 +513,10 @@ def test_every_parameter_has_a_descriptor(ros_context):
             node.destroy_node()
 
 
-# The docs match the code ------------------------------------------------------
+# The params file matches the code (the docs: test_docs.py) ----------------------
 
 ALL_SPECS = (('gyro', GYRO_PARAMETERS), ('observer', OBSERVER_PARAMETERS),
              ('monitor', MONITOR_PARAMETERS))
-
-
-def test_readme_tables_match_the_code():
-    with open(os.path.join(REPO, 'README.md'), encoding='utf-8') as readme:
-        text = readme.read()
-    for name, specs in ALL_SPECS:
-        table = markdown_table(specs)
-        assert f'### {name}\n\n{table}' in text, (
-            f'the README table of {name} differs from the code; it should read:\n{table}')
-    for key in DIAGNOSTIC_KEYS + ERROR_KEYS + COUNTER_KEYS:
-        assert f'`{key}`' in text, key
-    for reason in DROP_REASONS:
-        assert f'`{reason}`' in text, reason
-    for reason in GUARD_REASONS + RESET_CAUSES:
-        assert f'`{reason}`' in text, reason
 
 
 def test_params_file_has_every_parameter_with_a_comment():
