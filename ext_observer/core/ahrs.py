@@ -225,7 +225,7 @@ def _rotate(w, x, y, z, vx, vy, vz):
 
 def _butterworth(tau, dt):
     """Second-order Butterworth low-pass (bilinear, prewarped), cutoff 1/(2π τ)."""
-    wc = math.tan(math.pi * (1.0 / (2.0 * math.pi * tau)) * dt)
+    wc = np.tan(0.5 * dt / tau)
     k = math.sqrt(2.0) * wc
     a0 = 1.0 + k + wc * wc
     b0 = wc * wc / a0
@@ -234,7 +234,7 @@ def _butterworth(tau, dt):
 
 def _gain(tau, dt):
     """Per-sample gain of a first-order filter with time constant ``tau``."""
-    return 1.0 - math.exp(-dt / tau)
+    return 1.0 - np.exp(-dt / tau)
 
 
 class AhrsObserver:
@@ -312,8 +312,11 @@ class AhrsObserver:
         self._k_acc = _gain(p.tau_acc_gain, dt)
         self._k_mag = _gain(p.tau_mag, dt)
         self._k_rest = _gain(p.tau_rest, dt)
-        self._k_bias = dt / p.tau_bias if p.tau_bias > 0.0 else 0.0
         self._k_ref = _gain(p.tau_mag_ref, dt)
+        if self.batch is None:
+            for name in ('_k_acc', '_k_mag', '_k_rest', '_k_ref'):
+                setattr(self, name, float(getattr(self, name)))
+            self._bw = tuple(float(v) for v in self._bw)
 
     # --- the three steps ---------------------------------------------------
 
@@ -432,8 +435,8 @@ class AhrsObserver:
         kap = self._k_acc
         rw, rx, ry = 1.0 - kap + kap * dw, kap * dx, kap * dy
         self.q = (rw * w - rx * x - ry * y,
-                  rw * x + rx * w - ry * z,
-                  rw * y + ry * w + rx * z,
+                  rw * x + rx * w + ry * z,
+                  rw * y + ry * w - rx * z,
                   rw * z + rx * y - ry * x)
         # The filter's states follow the applied rotation r/|r|.
         rn = o.sqrt(rw * rw + rx * rx + ry * ry)
@@ -445,14 +448,13 @@ class AhrsObserver:
 
     def _learn_bias(self, rw, rx, ry, rz):
         """In motion: the correction ``r`` (world) averages ``−(b − b̂) dt`` (body)."""
-        if self._k_bias == 0.0:
-            return
         o = self._o
         # Small-angle rotation vector of r, in the body frame.
         cx, cy, cz = 2.0 * rx / rw, 2.0 * ry / rw, 2.0 * rz / rw
         w, x, y, z = self.q
         cx, cy, cz = _rotate(w, -x, -y, -z, cx, cy, cz)
-        k = o.where(self.rest, 0.0, 1.0 / self.params.tau_bias)
+        tb = self.params.tau_bias
+        k = o.where(self.rest | (tb <= 0.0), 0.0, 1.0 / o.where(tb > 0.0, tb, 1.0))
         m = self.params.bias_max
         bx, by, bz = self.bias
         self.bias = (o.clip(bx - k * cx, -m, m), o.clip(by - k * cy, -m, m),
