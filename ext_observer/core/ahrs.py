@@ -86,7 +86,10 @@ class AhrsParams:
     tau_mag : float
         Time constant (s) of the heading correction (``κ_m``).
     tau_bias : float
-        Time constant (s) of the bias estimate in motion; 0 turns it off.
+        Time constant (s) of the bias estimate in motion; 0 (the default)
+        turns it off: under rotation the filtered corrections average the
+        bias over many body orientations, and on the tuning trials it did
+        not help (docs/broad_tuning.md). The bias is then learned at rest.
     bias_max : float
         Largest bias estimate (rad/s), per axis.
     rest_gyr : float
@@ -120,16 +123,16 @@ class AhrsParams:
 
     DEFAULTS = dict(
         alpha=0.05,
-        tau_acc=3.0,
+        tau_acc=2.0,
         tau_acc_gain=0.05,
-        tau_mag=9.0,
-        tau_bias=100.0,
+        tau_mag=15.0,
+        tau_bias=0.0,
         bias_max=math.radians(2.0),
         rest_gyr=math.radians(2.0),
         rest_acc=0.5,
         rest_time=1.5,
         tau_rest=0.5,
-        mag_norm_th=0.1,
+        mag_norm_th=0.05,
         mag_dip_th=math.radians(10.0),
         mag_new_time=20.0,
         mag_new_gyr=math.radians(20.0),
@@ -182,6 +185,8 @@ class _FloatOps:
     def logical_not(v):
         return not v
 
+    maximum = staticmethod(max)
+
     @staticmethod
     def zeros(like):
         return 0.0
@@ -199,6 +204,7 @@ class _ArrayOps:
     where = staticmethod(np.where)
     clip = staticmethod(np.clip)
     logical_not = staticmethod(np.logical_not)
+    maximum = staticmethod(np.maximum)
 
     @staticmethod
     def zeros(like):
@@ -438,9 +444,7 @@ class AhrsObserver:
                   rw * x + rx * w + ry * z,
                   rw * y + ry * w - rx * z,
                   rw * z + rx * y - ry * x)
-        # The filter's states follow the applied rotation r/|r|.
-        rn = o.sqrt(rw * rw + rx * rx + ry * ry)
-        rw, rx, ry = rw / rn, rx / rn, ry / rn
+        # The filter's states follow the applied rotation (r need not be unit).
         s1x, s1y, s1z = _rotate(rw, rx, ry, 0.0, s1x, s1y, s1z)
         s2x, s2y, s2z = _rotate(rw, rx, ry, 0.0, s2x, s2y, s2z)
         self._lp = (s1x, s1y, s1z, s2x, s2y, s2z)
@@ -448,12 +452,14 @@ class AhrsObserver:
 
     def _learn_bias(self, rw, rx, ry, rz):
         """In motion: the correction ``r`` (world) averages ``−(b − b̂) dt`` (body)."""
+        tb = self.params.tau_bias
+        if not np.any(tb > 0.0):
+            return
         o = self._o
         # Small-angle rotation vector of r, in the body frame.
         cx, cy, cz = 2.0 * rx / rw, 2.0 * ry / rw, 2.0 * rz / rw
         w, x, y, z = self.q
         cx, cy, cz = _rotate(w, -x, -y, -z, cx, cy, cz)
-        tb = self.params.tau_bias
         k = o.where(self.rest | (tb <= 0.0), 0.0, 1.0 / o.where(tb > 0.0, tb, 1.0))
         m = self.params.bias_max
         bx, by, bz = self.bias
@@ -476,16 +482,15 @@ class AhrsObserver:
             self._mag_ref = (norm, dip)
             self._mag_cand = (norm, dip)
         ref_n, ref_d = self._mag_ref
-        disturbed = ((o.where(ref_n > 0.0, abs(norm - ref_n) / o.where(ref_n > 0.0, ref_n, 1.0), 1.0)
-                      > p.mag_norm_th) | (abs(dip - ref_d) > p.mag_dip_th))
+        th_n, th_d = p.mag_norm_th, p.mag_dip_th
+        disturbed = (abs(norm - ref_n) > th_n * ref_n) | (abs(dip - ref_d) > th_d)
         # A new field: consistent with the candidate while the body turns.
         cand_n, cand_d = self._mag_cand
-        consistent = ((abs(norm - cand_n) < p.mag_norm_th * o.where(cand_n > 0.0, cand_n, 1.0))
-                      & (abs(dip - cand_d) < p.mag_dip_th))
-        turning = (self._rest_gyr[0] ** 2 + self._rest_gyr[1] ** 2
-                   + self._rest_gyr[2] ** 2) > p.mag_new_gyr ** 2
-        self._mag_cand_time = o.where(disturbed & consistent,
-                                      self._mag_cand_time + o.where(turning, self._dt, 0.0), 0.0)
+        consistent = (abs(norm - cand_n) < th_n * cand_n) & (abs(dip - cand_d) < th_d)
+        gx, gy, gz = self._rest_gyr
+        turning = gx * gx + gy * gy + gz * gz > p.mag_new_gyr ** 2
+        self._mag_cand_time = o.where(disturbed & consistent & turning,
+                                      self._mag_cand_time + self._dt, 0.0)
         kr = self._k_ref
         self._mag_cand = (o.where(consistent, cand_n + kr * (norm - cand_n), norm),
                           o.where(consistent, cand_d + kr * (dip - cand_d), dip))
@@ -499,21 +504,20 @@ class AhrsObserver:
         self.mag_disturbed = disturbed
 
         # Heading measurement y = R_z(ψ) ⊗ q̂; gain κ_m, a running average at first.
-        self._mag_used = self._mag_used + o.where(use, 1.0, 0.0)
-        kap = o.where(use, o.clip(1.0 / o.where(use, self._mag_used, 1.0), self._k_mag, 1.0), 0.0)
-        half = 0.5 * o.where(use, psi, 0.0)
+        used = self._mag_used + o.where(use, 1.0, 0.0)
+        self._mag_used = used
+        kap = o.where(use, o.maximum(self._k_mag, 1.0 / o.maximum(used, 1.0)), 0.0)
+        half = 0.5 * psi
         rw, rz = 1.0 - kap + kap * o.cos(half), kap * o.sin(half)
         self.q = (rw * w - rz * z, rw * x - rz * y, rw * y + rz * x, rw * z + rz * w)
-        rn = o.sqrt(rw * rw + rz * rz)
-        rw, rz = rw / rn, rz / rn
+        # The filter's states turn with it about the vertical: (c, s) of 2θ.
+        n2 = rw * rw + rz * rz
+        c, s = (rw * rw - rz * rz) / n2, 2.0 * rw * rz / n2
         s1x, s1y, s1z, s2x, s2y, s2z = self._lp
-        s1x, s1y, s1z = _rotate(rw, 0.0, 0.0, rz, s1x, s1y, s1z)
-        s2x, s2y, s2z = _rotate(rw, 0.0, 0.0, rz, s2x, s2y, s2z)
-        self._lp = (s1x, s1y, s1z, s2x, s2y, s2z)
+        self._lp = (c * s1x - s * s1y, s * s1x + c * s1y, s1z,
+                    c * s2x - s * s2y, s * s2x + c * s2y, s2z)
         # Only corrections of the steady phase teach the bias.
-        steady = self._mag_used * self._k_mag > 1.0
-        rz = o.where(steady, rz, 0.0)
-        self._learn_bias(rw, 0.0, 0.0, rz)
+        self._learn_bias(rw, 0.0, 0.0, o.where(used * self._k_mag > 1.0, rz, 0.0))
 
 
 def initial_attitude(acc, mag=None, ops=_FloatOps, use_mag=True):

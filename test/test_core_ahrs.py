@@ -1,0 +1,202 @@
+"""The raw-IMU estimator (core/ahrs.py) on synthetic motion with known truth."""
+
+import math
+
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+from ext_observer.core import quaternion as quat
+from ext_observer.core.ahrs import (AhrsObserver, AhrsParams, estimate_batch,
+                                    initial_attitude, world_from_enu)
+
+G = 9.81
+# A field of 50 µT pointing north and 60° down (ENU).
+FIELD = 50.0 * np.array([0.0, math.cos(math.radians(60)), -math.sin(math.radians(60))])
+RATE = 200.0
+
+
+def rotate(q, v):
+    """World coordinates of body vectors ``v`` for unit ``q`` (sensor → world)."""
+    v4 = np.concatenate([np.zeros(np.shape(v)[:-1] + (1,)), v], axis=-1)
+    return quat.multiply(quat.multiply(q, v4), quat.conjugate(q))[..., 1:]
+
+
+def synthetic(seconds=60.0, rest=5.0, bias=(0.01, -0.015, 0.008), seed=0,
+              accel=0.0, disturb=None):
+    """
+    Truth and IMU samples: rest, then smooth rotation about changing axes.
+
+    Returns truth (N, 4) and gyr, acc, mag (N, 3); the gyro has a constant
+    ``bias`` and small noise, ``accel`` m/s² of oscillating translation, and
+    ``disturb = (t0, t1, degrees)`` turns the field by that angle about the
+    east axis between t0 and t1 (norm and dip change: a nearby magnet).
+    """
+    rng = np.random.default_rng(seed)
+    n = int(seconds * RATE)
+    t = np.arange(n) / RATE
+    moving = t >= rest
+    omega = np.stack([0.8 * np.sin(0.7 * t), 0.6 * np.cos(0.45 * t + 1.0),
+                      0.9 * np.sin(0.3 * t + 2.0)], axis=1) * moving[:, None]
+    truth = np.empty((n, 4))
+    truth[0] = quat.normalize(np.array([0.9, 0.1, -0.2, 0.3]))
+    for k in range(1, n):
+        truth[k] = quat.multiply(truth[k - 1], quat.exp(np.r_[0.0, omega[k] / (2 * RATE)]))
+    conj = quat.conjugate(truth)
+    lin = accel * np.stack([np.sin(6.9 * t), np.cos(5.3 * t), np.sin(8.2 * t)],
+                           axis=1) * moving[:, None]
+    acc = rotate(conj, np.array([0.0, 0.0, G]) + lin) + rng.normal(0, 0.02, (n, 3))
+    field = np.broadcast_to(FIELD, (n, 3)).copy()
+    if disturb is not None:
+        t0, t1, degrees = disturb
+        a = math.radians(degrees)
+        rot = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+        inside = (t >= t0) & (t < t1)
+        field[inside] = 1.5 * field[inside] @ rot.T
+    mag = rotate(conj, field) + rng.normal(0, 0.2, (n, 3))
+    gyr = omega + np.asarray(bias) + rng.normal(0, 0.002, (n, 3))
+    return truth, gyr, acc, mag
+
+
+def run_float(gyr, acc, mag, use_mag=True, params=None, variant='extended'):
+    est = AhrsObserver(params, use_mag=use_mag, variant=variant)
+    out = np.empty((len(gyr), 4))
+    for k in range(len(gyr)):
+        out[k] = est.update(tuple(gyr[k]), tuple(acc[k]), tuple(mag[k]), 1.0 / RATE)
+    return out, est
+
+
+def errors_deg(q, truth):
+    """Total, heading and inclination error (degrees) as BROAD scores them."""
+    d = quat.multiply(quat.normalize(q), quat.conjugate(truth))
+    w, z = np.abs(d[..., 0]), d[..., 3]
+    total = 2 * np.arccos(np.clip(w, 0, 1))
+    heading = 2 * np.arctan(np.abs(z / d[..., 0]))
+    incl = 2 * np.arccos(np.clip(np.sqrt(d[..., 0] ** 2 + z ** 2), 0, 1))
+    return np.degrees(total), np.degrees(heading), np.degrees(incl)
+
+
+@pytest.fixture(scope='module')
+def motion():
+    return synthetic()
+
+
+def test_9d_tracks_the_truth_and_learns_the_bias(motion):
+    truth, gyr, acc, mag = motion
+    q, est = run_float(gyr, acc, mag)
+    total, _, _ = errors_deg(q, truth)
+    after = int(10 * RATE)
+    assert np.sqrt(np.mean(total[after:] ** 2)) < 1.0
+    # The bias at rest (first 5 s) is learned to within the noise.
+    assert_allclose(est.bias, (0.01, -0.015, 0.008), atol=3e-3)
+
+
+def test_6d_keeps_the_inclination(motion):
+    truth, gyr, acc, mag = motion
+    q, _ = run_float(gyr, acc, mag, use_mag=False)
+    _, _, incl = errors_deg(q, truth)
+    assert np.sqrt(np.mean(incl[int(10 * RATE):] ** 2)) < 1.0
+
+
+def test_translation_is_filtered_out():
+    truth, gyr, acc, mag = synthetic(seed=1, accel=3.0)
+    q, _ = run_float(gyr, acc, mag)
+    _, _, incl = errors_deg(q, truth)
+    # 3 m/s² of translation tilts a raw accelerometer by up to 17°.
+    assert np.sqrt(np.mean(incl[int(10 * RATE):] ** 2)) < 2.0
+
+
+def test_a_disturbed_field_is_rejected_and_never_tilts():
+    truth, gyr, acc, mag = synthetic(seed=2, disturb=(20.0, 35.0, 40.0))
+    q9, est = run_float(gyr, acc, mag)
+    q6, _ = run_float(gyr, acc, mag, use_mag=False)
+    total, heading, incl9 = errors_deg(q9, truth)
+    _, _, incl6 = errors_deg(q6, truth)
+    inside = slice(int(21 * RATE), int(35 * RATE))
+    assert np.max(heading[inside]) < 3.0
+    # Heading corrections are rotations about the vertical: the inclination
+    # is the 6D one up to the coupling through the estimate.
+    assert np.max(np.abs(incl9 - incl6)) < 0.5
+
+
+def test_each_correction_turns_about_the_axis_it_should(motion):
+    truth, gyr, acc, mag = motion
+    est = AhrsObserver()
+    for k in range(400):
+        est.update(tuple(gyr[k]), tuple(acc[k]), tuple(mag[k]), 1.0 / RATE)
+    est.q = tuple(quat.multiply(quat.exp(np.r_[0.0, 0.05, -0.04, 0.3]), np.asarray(est.q)))
+    before = np.asarray(est.q)
+    est.update_acc(tuple(acc[400]))
+    after_acc = np.asarray(est.q)
+    est.update_mag(tuple(mag[400]))
+    after_mag = np.asarray(est.q)
+    # δ ⊗ q̂: the inclination step turns about a horizontal world axis ...
+    r = quat.multiply(after_acc, quat.conjugate(before))
+    assert abs(r[3]) < 1e-12 and np.linalg.norm(r[1:3]) > 1e-6
+    # ... and the heading step about the world vertical.
+    r = quat.multiply(after_mag, quat.conjugate(after_acc))
+    assert np.linalg.norm(r[1:3]) < 1e-12 and abs(r[3]) > 1e-6
+
+
+def test_float_and_batch_paths_agree():
+    runs = [synthetic(seconds=12.0, seed=s) for s in (3, 4)]
+    gyr = [r[1] for r in runs]
+    acc = [r[2] for r in runs]
+    mag = [r[3] for r in runs]
+    gyr[1], acc[1], mag[1] = gyr[1][:1800], acc[1][:1800], mag[1][:1800]
+    batch = estimate_batch(gyr, acc, mag, [RATE, RATE], [True, False])
+    assert [b.shape for b in batch] == [(2400, 4), (1800, 4)]
+    for i, use_mag in enumerate((True, False)):
+        single, _ = run_float(gyr[i], acc[i], mag[i], use_mag=use_mag)
+        assert_allclose(batch[i], single, rtol=0, atol=1e-12)
+
+
+def test_the_extension_term_holds_the_estimate_near_s3(motion):
+    truth, gyr, acc, mag = motion
+    for variant, check in (('extended', lambda d: max(d[-500:]) < 1e-5),
+                           ('plain', lambda d: d[-1] > 0.1)):
+        est = AhrsObserver(variant=variant)
+        est.update(tuple(gyr[0]), tuple(acc[0]), tuple(mag[0]), 1.0 / RATE)
+        est.q = tuple(1.3 * v for v in est.q)  # start off S³
+        defect = []
+        for k in range(1, 2000):
+            q = est.update(tuple(gyr[k]), tuple(acc[k]), tuple(mag[k]), 1.0 / RATE)
+            defect.append(abs(sum(v * v for v in q) - 1.0))
+        assert check(defect), (variant, defect[-1])
+
+
+def test_initial_attitude_from_gravity_and_field(motion):
+    truth, gyr, acc, mag = motion
+    q = np.asarray(initial_attitude(tuple(acc[0]), tuple(mag[0])))
+    total, _, _ = errors_deg(q, truth[0])
+    assert total < 1.0
+    q6 = np.asarray(initial_attitude(tuple(acc[0])))
+    _, _, incl = errors_deg(q6, truth[0])
+    assert incl < 1.0
+
+
+@pytest.mark.parametrize('frame, east', [('enu', (1, 0, 0)), ('nwu', (0, -1, 0)),
+                                         ('ned', (0, 1, 0))])
+def test_world_frames_name_east_as_rep_103_does(frame, east):
+    q = world_from_enu(np.array([1.0, 0.0, 0.0, 0.0]), frame)
+    assert_allclose(rotate(q, np.array([1.0, 0.0, 0.0])), east, atol=1e-15)
+    up = {'enu': (0, 0, 1), 'nwu': (0, 0, 1), 'ned': (0, 0, -1)}[frame]
+    assert_allclose(rotate(q, np.array([0.0, 0.0, 1.0])), up, atol=1e-15)
+
+
+@pytest.mark.parametrize('name, value, match', [
+    ('tau_acc', 0.0, 'tau_acc must be positive'),
+    ('tau_bias', -1.0, 'tau_bias must be >= 0'),
+    ('alpha', 0.08, 'certified'),
+    ('rest_gyr', float('nan'), 'rest_gyr must be finite'),
+    ('tau_magg', 1.0, 'unknown parameters'),
+])
+def test_invalid_parameters_are_refused(name, value, match):
+    with pytest.raises(ValueError, match=match):
+        AhrsParams(**{name: value})
+
+
+def test_recordings_must_share_a_rate():
+    z = np.zeros((10, 3))
+    with pytest.raises(ValueError, match='one sampling rate'):
+        estimate_batch([z, z], [z, z], [z, z], [100.0, 200.0], [True, True])
