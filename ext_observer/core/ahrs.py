@@ -45,6 +45,7 @@ operations (``math`` or ``numpy``) once. The ROS node runs it on floats;
 """
 
 import math
+import multiprocessing
 
 import numpy as np
 
@@ -59,6 +60,7 @@ __all__ = [
 ]
 
 MODES = ('6D', '9D')
+_TINY = 1e-300
 
 _H = math.sqrt(0.5)
 # Left factor C with q_frame = C ⊗ q_enu (C maps ENU coordinates to the frame's).
@@ -286,6 +288,7 @@ class AhrsObserver:
             self._proto = np.zeros(int(batch))
             self.use_mag = np.broadcast_to(np.asarray(use_mag, dtype=bool),
                                            (int(batch),)).copy()
+        self._any_mag = bool(np.any(self.use_mag))
         self._dt = None
         self.reset()
 
@@ -338,20 +341,18 @@ class AhrsObserver:
             Time since the previous sample (s).
 
         """
-        self._coefficients(dt)
+        if dt != self._dt:
+            self._coefficients(dt)
         if self.q is None:
-            self.q = initial_attitude(acc, mag if self._any_mag() else None,
+            self.q = initial_attitude(acc, mag if self._any_mag else None,
                                       self._o, self.use_mag)
             self._init_filters(acc, gyr)
         else:
             self.update_gyr(gyr)
         self.update_acc(acc)
-        if mag is not None and self._any_mag():
+        if mag is not None and self._any_mag:
             self.update_mag(mag)
         return self.q
-
-    def _any_mag(self):
-        return bool(np.any(self.use_mag))
 
     def _init_filters(self, acc, gyr):
         ax, ay, az = _rotate(*self.q, *acc)
@@ -371,13 +372,11 @@ class AhrsObserver:
         ux = (gyr[0] - bx) * dt
         uy = (gyr[1] - by) * dt
         uz = (gyr[2] - bz) * dt
-        t2 = ux * ux + uy * uy + uz * uz
-        # exp of the half increment; Taylor below 1e-4 rad (error < 1e-18).
-        big = t2 > 1e-8
-        t = o.sqrt(t2)
-        th = o.where(big, t, 1.0)
-        c = o.where(big, o.cos(0.5 * th), 1.0 - t2 / 8.0)
-        s = o.where(big, o.sin(0.5 * th) / th, 0.5 - t2 / 48.0)
+        # exp of the half increment: (cos(θ/2), sin(θ/2)/θ · u), θ = |u|; the
+        # tiny term only keeps θ = 0 (then u = 0) from dividing by zero.
+        t = o.sqrt(ux * ux + uy * uy + uz * uz)
+        c = o.cos(0.5 * t)
+        s = o.sin(0.5 * t) / (t + _TINY)
         ex, ey, ez = ux * s, uy * s, uz * s
         w, x, y, z = self.q
         pw = w * c - x * ex - y * ey - z * ez
@@ -395,16 +394,17 @@ class AhrsObserver:
         o = self._o
         p = self.params
         k = self._k_rest
-        gx, gy, gz = (g + k * (v - g) for g, v in zip(self._rest_gyr, gyr))
+        gx, gy, gz = self._rest_gyr
+        gx, gy, gz = gx + k * (gyr[0] - gx), gy + k * (gyr[1] - gy), gz + k * (gyr[2] - gz)
         self._rest_gyr = (gx, gy, gz)
         bx, by, bz = self.bias
         dev = ((gyr[0] - gx) ** 2 + (gyr[1] - gy) ** 2 + (gyr[2] - gz) ** 2)
         mean = (gx - bx) ** 2 + (gy - by) ** 2 + (gz - bz) ** 2
         still = (dev < p.rest_gyr ** 2) & (mean < p.rest_gyr ** 2) & self._acc_still
-        self.rest_time = o.where(still, self.rest_time + self._dt, 0.0)
+        self.rest_time = (self.rest_time + self._dt) * still
         self.rest = self.rest_time >= p.rest_time
         # At rest the bias is the low-passed rate.
-        kr = o.where(self.rest, k, 0.0)
+        kr = k * self.rest
         self.bias = (bx + kr * (gx - bx), by + kr * (gy - by), bz + kr * (gz - bz))
 
     _acc_still = True
@@ -416,7 +416,8 @@ class AhrsObserver:
         ax, ay, az = acc
         # Rest detection needs the accelerometer's deviation from its mean.
         k = self._k_rest
-        rx, ry, rz = (r + k * (v - r) for r, v in zip(self._rest_acc, acc))
+        rx, ry, rz = self._rest_acc
+        rx, ry, rz = rx + k * (ax - rx), ry + k * (ay - ry), rz + k * (az - rz)
         self._rest_acc = (rx, ry, rz)
         self._acc_still = ((ax - rx) ** 2 + (ay - ry) ** 2 + (az - rz) ** 2) < p.rest_acc ** 2
 
@@ -430,13 +431,12 @@ class AhrsObserver:
         s2x, s2y, s2z = b2 * vx - a2 * fx, b2 * vy - a2 * fy, b2 * vz - a2 * fz
 
         # δ: the rotation taking f/|f| to the vertical, [1 + u_z, u_y, −u_x, 0].
-        n = o.sqrt(fx * fx + fy * fy + fz * fz)
-        n = o.where(n > 0.0, n, 1.0)
+        # (A filtered vector pointing straight down, |δ| = 0, only shrinks the
+        # estimate; the extension term restores it.)
+        n = o.sqrt(fx * fx + fy * fy + fz * fz) + _TINY
         dw, dx, dy = 1.0 + fz / n, fy / n, -fx / n
-        dn = o.sqrt(dw * dw + dx * dx + dy * dy)
-        ok = dn > 1e-9
-        dn = o.where(ok, dn, 1.0)
-        dw, dx, dy = o.where(ok, dw / dn, 1.0), o.where(ok, dx / dn, 0.0), o.where(ok, dy / dn, 0.0)
+        dn = o.sqrt(dw * dw + dx * dx + dy * dy) + _TINY
+        dw, dx, dy = dw / dn, dx / dn, dy / dn
         # q̂ + κ (δ ⊗ q̂ − q̂) = r ⊗ q̂ with r = (1 − κ) + κ δ.
         kap = self._k_acc
         rw, rx, ry = 1.0 - kap + kap * dw, kap * dx, kap * dy
@@ -489,8 +489,7 @@ class AhrsObserver:
         consistent = (abs(norm - cand_n) < th_n * cand_n) & (abs(dip - cand_d) < th_d)
         gx, gy, gz = self._rest_gyr
         turning = gx * gx + gy * gy + gz * gz > p.mag_new_gyr ** 2
-        self._mag_cand_time = o.where(disturbed & consistent & turning,
-                                      self._mag_cand_time + self._dt, 0.0)
+        self._mag_cand_time = (self._mag_cand_time + self._dt) * (disturbed & consistent & turning)
         kr = self._k_ref
         self._mag_cand = (o.where(consistent, cand_n + kr * (norm - cand_n), norm),
                           o.where(consistent, cand_d + kr * (dip - cand_d), dip))
@@ -504,9 +503,9 @@ class AhrsObserver:
         self.mag_disturbed = disturbed
 
         # Heading measurement y = R_z(ψ) ⊗ q̂; gain κ_m, a running average at first.
-        used = self._mag_used + o.where(use, 1.0, 0.0)
+        used = self._mag_used + use
         self._mag_used = used
-        kap = o.where(use, o.maximum(self._k_mag, 1.0 / o.maximum(used, 1.0)), 0.0)
+        kap = o.maximum(self._k_mag, 1.0 / o.maximum(used, 1.0)) * use
         half = 0.5 * psi
         rw, rz = 1.0 - kap + kap * o.cos(half), kap * o.sin(half)
         self.q = (rw * w - rz * z, rw * x - rz * y, rw * y + rz * x, rw * z + rz * w)
@@ -517,7 +516,7 @@ class AhrsObserver:
         self._lp = (c * s1x - s * s1y, s * s1x + c * s1y, s1z,
                     c * s2x - s * s2y, s * s2x + c * s2y, s2z)
         # Only corrections of the steady phase teach the bias.
-        self._learn_bias(rw, 0.0, 0.0, o.where(used * self._k_mag > 1.0, rz, 0.0))
+        self._learn_bias(rw, 0.0, 0.0, rz * (used * self._k_mag > 1.0))
 
 
 def initial_attitude(acc, mag=None, ops=_FloatOps, use_mag=True):
@@ -579,7 +578,8 @@ def world_from_enu(q, frame):
     return multiply(np.asarray(WORLD_FRAMES[frame], dtype=float), np.asarray(q, dtype=float))
 
 
-def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extended'):
+def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extended',
+                   workers=1):
     """
     Run many recordings at once (one estimator each, same parameters).
 
@@ -594,6 +594,8 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
         9D where true, 6D elsewhere.
     params : AhrsParams, optional
     variant : {'extended', 'plain'}
+    workers : int
+        Processes to share the recordings among (forked; Linux and macOS).
 
     Returns
     -------
@@ -619,11 +621,48 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
             out[len(a):, :, i] = a[-1]  # hold the last sample past the end
         return out
 
-    g_all, a_all, m_all = stack(gyr), stack(acc), stack(mag)
-    est = AhrsObserver(params, use_mag=np.asarray(use_mag, dtype=bool), batch=count,
-                       variant=variant)
-    out = np.empty((n_max, 4, count))
-    for k in range(n_max):
-        q = est.update(g_all[k], a_all[k], m_all[k], dt)
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = q
+    job = (stack(gyr), stack(acc), stack(mag), np.asarray(use_mag, dtype=bool), dt,
+           params, variant)
+    workers = max(1, min(int(workers), count))
+    if workers == 1:
+        out = _run_streams(job, np.arange(count))
+    else:
+        # Forked workers read the inputs from this module (no copies); each
+        # takes every workers-th stream, so 9D and 6D streams mix evenly.
+        global _JOB
+        _JOB = job
+        parts = [np.arange(i, count, workers) for i in range(workers)]
+        try:
+            with multiprocessing.get_context('fork').Pool(workers) as pool:
+                results = pool.map(_run_job_streams, parts)
+        finally:
+            _JOB = None
+        out = np.empty((n_max, 4, count))
+        for part, result in zip(parts, results):
+            out[:, :, part] = result
     return [np.ascontiguousarray(out[:n, :, i]) for i, n in enumerate(lengths)]
+
+
+_JOB = None
+
+
+def _run_job_streams(streams):
+    return _run_streams(_JOB, streams)
+
+
+def _run_streams(job, streams):
+    g_all, a_all, m_all, use_mag, dt, params, variant = job
+    if len(streams) < g_all.shape[2]:
+        g_all, a_all, m_all = (a[:, :, streams] for a in (g_all, a_all, m_all))
+        use_mag = use_mag[streams]
+        if params is not None and any(np.ndim(v) for v in params.as_dict().values()):
+            sub = AhrsParams()
+            for name, value in params.as_dict().items():
+                setattr(sub, name, value[streams] if np.ndim(value) else value)
+            params = sub
+    est = AhrsObserver(params, use_mag=use_mag, batch=len(streams), variant=variant)
+    out = np.empty((len(g_all), 4, len(streams)))
+    update = est.update
+    for k in range(len(g_all)):
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = update(g_all[k], a_all[k], m_all[k], dt)
+    return out
