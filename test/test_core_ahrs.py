@@ -200,3 +200,22 @@ def test_recordings_must_share_a_rate():
     z = np.zeros((10, 3))
     with pytest.raises(ValueError, match='one sampling rate'):
         estimate_batch([z, z], [z, z], [z, z], [100.0, 200.0], [True, True])
+
+
+def test_a_field_at_its_own_rate_corrects_on_its_own_time_constant(motion):
+    truth, gyr, acc, mag = motion
+    # The same heading error, fields at every sample or at one in ten with
+    # their own interval: after 20 s both have corrected about as much.
+    finals = []
+    for every in (1, 10):
+        est = AhrsObserver()
+        est.update(tuple(gyr[0]), tuple(acc[0]), tuple(mag[0]), 1.0 / RATE)
+        est.q = tuple(quat.multiply(quat.exp(np.r_[0.0, 0.0, 0.0, 0.3]), np.asarray(est.q)))
+        est._mag_used = 1e9  # past the initial averaging: the steady gain
+        for k in range(1, int(20 * RATE)):
+            est.update(tuple(gyr[k]), tuple(acc[k]), None, 1.0 / RATE)
+            if k % every == 0:
+                est.update_mag(tuple(mag[k]), dt=every / RATE)
+        _, heading, _ = errors_deg(np.asarray(est.q), truth[int(20 * RATE) - 1])
+        finals.append(heading)
+    assert finals[0] < 0.5 * 34.4 and abs(finals[0] - finals[1]) < 0.5, finals

@@ -290,6 +290,7 @@ class AhrsObserver:
                                            (int(batch),)).copy()
         self._any_mag = bool(np.any(self.use_mag))
         self._dt = None
+        self._mag_dt = None
         self.reset()
 
     # --- state -------------------------------------------------------------
@@ -319,11 +320,9 @@ class AhrsObserver:
         self._dt = dt
         self._bw = _butterworth(p.tau_acc, dt)
         self._k_acc = _gain(p.tau_acc_gain, dt)
-        self._k_mag = _gain(p.tau_mag, dt)
         self._k_rest = _gain(p.tau_rest, dt)
-        self._k_ref = _gain(p.tau_mag_ref, dt)
         if self.batch is None:
-            for name in ('_k_acc', '_k_mag', '_k_rest', '_k_ref'):
+            for name in ('_k_acc', '_k_rest'):
                 setattr(self, name, float(getattr(self, name)))
             self._bw = tuple(float(v) for v in self._bw)
 
@@ -466,8 +465,33 @@ class AhrsObserver:
         self.bias = (o.clip(bx - k * cx, -m, m), o.clip(by - k * cy, -m, m),
                      o.clip(bz - k * cz, -m, m))
 
-    def update_mag(self, mag):
-        """Correct the heading from the magnetometer, rejecting disturbed fields."""
+    def _mag_coefficients(self, dt):
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise ValueError(f'dt must be positive and finite, got {dt}')
+        p = self.params
+        self._mag_dt = dt
+        self._k_mag = _gain(p.tau_mag, dt)
+        self._k_ref = _gain(p.tau_mag_ref, dt)
+        if self.batch is None:
+            self._k_mag, self._k_ref = float(self._k_mag), float(self._k_ref)
+
+    def update_mag(self, mag, dt=None):
+        """
+        Correct the heading from the magnetometer, rejecting disturbed fields.
+
+        Parameters
+        ----------
+        mag : sequence of 3 floats or of 3 arrays (B,)
+            The field, body frame, any unit.
+        dt : float, optional
+            Time since the previous field (s); default: the IMU's ``dt``
+            (a field with every sample). The gains of a field that arrives
+            at its own rate follow from its own interval.
+
+        """
+        dt = self._dt if dt is None else dt
+        if dt != self._mag_dt:
+            self._mag_coefficients(dt)
         o = self._o
         p = self.params
         w, x, y, z = self.q
@@ -489,7 +513,7 @@ class AhrsObserver:
         consistent = (abs(norm - cand_n) < th_n * cand_n) & (abs(dip - cand_d) < th_d)
         gx, gy, gz = self._rest_gyr
         turning = gx * gx + gy * gy + gz * gz > p.mag_new_gyr ** 2
-        self._mag_cand_time = (self._mag_cand_time + self._dt) * (disturbed & consistent & turning)
+        self._mag_cand_time = (self._mag_cand_time + dt) * (disturbed & consistent & turning)
         kr = self._k_ref
         self._mag_cand = (o.where(consistent, cand_n + kr * (norm - cand_n), norm),
                           o.where(consistent, cand_d + kr * (dip - cand_d), dip))
