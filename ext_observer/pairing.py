@@ -56,6 +56,18 @@ Angular velocities (an IMU)
     or ``duplicate``, or a backward jump as above); when ``Δt`` exceeds
     ``max_dt`` (ns) the waiting sample is dropped (``dt_too_large``) and the
     new one starts over: the first sample of a time line only initializes.
+    Given the sample's specific force too (the raw-IMU estimator uses it), a
+    sample whose acceleration is not finite or zero is dropped as a whole
+    (``non_finite_acceleration``, ``zero_acceleration``) before its stamp is
+    looked at.
+
+Magnetic fields (a magnetometer at its own rate)
+    :meth:`StepPairer.add_field` checks a field (finite, nonzero:
+    ``non_finite_measurement``, ``zero_field``) and its stamp against the
+    previous field's only (zero, ``duplicate``, ``stale``; a jump back by
+    more than ``backward_jump`` starts the field's time line over); the
+    caller uses an accepted field at once, so it never waits and is never
+    paired. Fields count as measurements.
 
 Measurements of a step with an interval (bracketing)
     A step made from angular velocities knows its interval ``[t_k, t_{k+1})``.
@@ -76,10 +88,11 @@ from collections import namedtuple
 
 import math
 
-from ext_observer.core.validation import check_increment, check_measurement
+from ext_observer.core.validation import check_increment, check_measurement, check_vector
 from ext_observer.guard import carried
 
-__all__ = ['BACKWARD_JUMP', 'DROP_REASONS', 'KINDS', 'Step', 'StepPairer']
+__all__ = ['BACKWARD_JUMP', 'DROP_REASONS', 'KINDS', 'MIN_ACCELERATION', 'MIN_FIELD', 'Step',
+           'StepPairer']
 
 KINDS = ('increment', 'measurement')
 
@@ -92,6 +105,8 @@ INCREMENT_DROP_REASONS = (
     'duplicate_increment',      # the stamp of a step done or waiting
     'discarded_increment',      # waiting when the time line restarted
     'dt_too_large',             # IMU sample: the next one more than max_dt later
+    'non_finite_acceleration',  # IMU sample for the raw-IMU estimator: a NaN or an infinity
+    'zero_acceleration',        # ... or no specific force (norm below MIN_ACCELERATION)
 )
 MEASUREMENT_DROP_REASONS = (
     'non_finite_measurement',   # a NaN or an infinity
@@ -103,8 +118,14 @@ MEASUREMENT_DROP_REASONS = (
     'unpaired_measurement',     # no increment of its stamp came in time
     'discarded_measurement',
     'no_orientation',           # sensor_msgs/Imu without orientation (covariance[0] = −1)
+    'zero_field',               # magnetic field with norm below MIN_FIELD
 )
 DROP_REASONS = INCREMENT_DROP_REASONS + MEASUREMENT_DROP_REASONS
+
+# Smallest accepted specific force (m/s²) and magnetic field (T): below,
+# the vector has no direction (a driver that leaves the field at zero).
+MIN_ACCELERATION = 1e-6
+MIN_FIELD = 1e-9
 
 # Counted events that drop nothing.
 EVENTS = ('backward_jumps', 'forward_gaps', 'early_releases')
@@ -196,6 +217,7 @@ class StepPairer:
         self._last_stamp = None
         self._last_end = None
         self._last_corrected = False
+        self._last_field = None
 
     def configure(self, **settings):
         """
@@ -247,7 +269,7 @@ class StepPairer:
         self._increments[stamp] = (tuple(increment), now + self.timeout, None)
         return outcome
 
-    def add_angular_velocity(self, stamp, omega, now):
+    def add_angular_velocity(self, stamp, omega, now, acceleration=None):
         """
         Take an IMU sample ``ω`` (rad/s) stamped ``t``; see the module docstring.
 
@@ -260,6 +282,10 @@ class StepPairer:
         now : int
             The caller's clock, ns: the increment this sample completes gets
             the deadline ``now + timeout``.
+        acceleration : sequence of 3 float, optional
+            The sample's specific force, m/s², when the caller uses it (the
+            raw-IMU estimator): a sample whose acceleration is not finite or
+            is zero (:data:`MIN_ACCELERATION`) is dropped as a whole.
 
         Returns
         -------
@@ -273,6 +299,11 @@ class StepPairer:
         w0, w1, w2 = omega
         if not (math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)):
             return self._drop('non_finite_increment')
+        if acceleration is not None:
+            reason = check_vector(acceleration, MIN_ACCELERATION)
+            if reason is not None:
+                return self._drop('non_finite_acceleration' if reason == 'non_finite'
+                                  else 'zero_acceleration')
         pending = self._pending
         if pending is None:
             outcome = self._check_stamp(stamp, self._increments, 'increment')
@@ -303,6 +334,48 @@ class StepPairer:
         if reason is not None:
             return self._drop(_VALUE_REASONS['increment'][reason])
         self._increments[start] = (theta, now + self.timeout, stamp)
+        return None
+
+    def add_field(self, stamp, field):
+        """
+        Take a magnetometer sample, used at once by the caller (never paired).
+
+        The field is validated (finite, norm at least :data:`MIN_FIELD`) and
+        its stamp checked against the previous field's: zero or negative,
+        equal (``duplicate``) or older (``stale``) stamps are dropped, except
+        one older by more than ``backward_jump`` (the field's time line
+        restarted; accepted). An accepted field counts as a processed
+        measurement.
+
+        Parameters
+        ----------
+        stamp : int
+            ns.
+        field : sequence of 3 float
+            Magnetic field, T (any unit: only its direction and relative norm
+            matter; :data:`MIN_FIELD` assumes tesla).
+
+        Returns
+        -------
+        outcome : str or None
+            None when accepted, else the drop reason.
+
+        """
+        self.received['measurement'] += 1
+        reason = check_vector(field, MIN_FIELD)
+        if reason is not None:
+            return self._drop('non_finite_measurement' if reason == 'non_finite'
+                              else 'zero_field')
+        if stamp <= 0:
+            return self._drop('zero_stamp_measurement')
+        last = self._last_field
+        if last is not None and stamp <= last:
+            if stamp == last:
+                return self._drop('duplicate_measurement')
+            if last - stamp <= self.backward_jump:
+                return self._drop('stale_measurement')
+        self._last_field = stamp
+        self.processed['measurement'] += 1
         return None
 
     def reject(self, kind, reason):
@@ -382,6 +455,7 @@ class StepPairer:
         self._last_stamp = None
         self._last_end = None
         self._last_corrected = False
+        self._last_field = None
         return discarded
 
     # Steps ------------------------------------------------------------------
@@ -453,6 +527,16 @@ class StepPairer:
         return Step(stamp, increment, measurement, previous, gap, early, end)
 
     # Accounting -------------------------------------------------------------
+
+    @property
+    def field_stamp(self):
+        """Stamp of the last field accepted (None at the start of its time line)."""
+        return self._last_field
+
+    @property
+    def pending_stamp(self):
+        """Stamp of the IMU sample waiting for the next one (None if none waits)."""
+        return None if self._pending is None else self._pending[0]
 
     @property
     def last_stamp(self):

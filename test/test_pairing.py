@@ -317,6 +317,50 @@ def test_imu_non_positive_and_too_large_intervals_are_dropped():
     assert_accounted(pairer)
 
 
+def test_imu_sample_with_a_bad_acceleration_is_dropped_whole():
+    pairer = make(timeout=0)
+    g = (0.1, 0.0, 0.0)
+    pairer.add_angular_velocity(2 * S, g, 0, (0.0, 0.0, 9.8))
+    for acc, reason in (((nan, 0.0, 9.8), 'non_finite_acceleration'),
+                        ((0.0, -inf, 9.8), 'non_finite_acceleration'),
+                        ((0.0, 0.0, 0.0), 'zero_acceleration'),
+                        ((1e-300, 0.0, 0.0), 'zero_acceleration')):
+        # Checked before the stamp: a bad sample never becomes the waiting one.
+        assert pairer.add_angular_velocity(2 * S + MS, g, 0, acc) == reason
+        assert pairer.pending_stamp == 2 * S
+    assert pairer.add_angular_velocity(2 * S + MS, g, 0, (5e-324, 0.0, 9.8)) is None
+    assert pairer.pending_stamp == 2 * S + MS
+    [step] = pairer.pop_ready(0)
+    assert (step.stamp, step.end) == (2 * S, 2 * S + MS)
+    assert_accounted(pairer)
+
+
+def test_fields_are_checked_against_the_previous_field_only():
+    pairer = make()
+    field = (2e-5, 0.0, -4e-5)  # T
+    assert pairer.field_stamp is None
+    assert pairer.add_field(2 * S, field) is None
+    for stamp, value, reason in ((3 * S, (nan, 0.0, 0.0), 'non_finite_measurement'),
+                                 (3 * S, (0.0, 0.0, 0.0), 'zero_field'),
+                                 (0, field, 'zero_stamp_measurement'),
+                                 (2 * S, field, 'duplicate_measurement'),
+                                 (2 * S - MS, field, 'stale_measurement')):
+        assert pairer.add_field(stamp, value) == reason
+        assert pairer.field_stamp == 2 * S
+    # Fields are not paired with steps: an older IMU stamp does not matter.
+    pairer.add_angular_velocity(5 * S, THETA, 0)
+    assert pairer.add_field(3 * S, field) is None
+    # Far older: the field's time line starts over.
+    assert pairer.add_field(1 * S, field) is None
+    assert pairer.field_stamp == 1 * S
+    # A restart of the time line forgets the last field.
+    pairer.restart()
+    assert pairer.field_stamp is None
+    assert pairer.processed['measurement'] == 3
+    assert pairer.waiting('measurement') == 0
+    assert_accounted(pairer)
+
+
 def rotate(q, theta):
     from ext_observer.guard import carried
     return carried(q, theta)
@@ -397,4 +441,46 @@ def test_every_imu_sample_is_accounted_for_and_steps_are_valid(ops, depth, const
             last, last_end = step.stamp, step.end
         assert pairer.waiting('increment') <= depth + 1
         assert pairer.waiting('measurement') <= depth
+        assert_accounted(pairer)
+
+
+raw_imu_operations = st.lists(st.one_of(
+    st.tuples(st.just('imu'), stamps, st.tuples(increments, increments)),
+    st.tuples(st.just('field'), stamps, increments),
+    st.tuples(st.just('restart'), st.none(), st.none())), max_size=60)
+
+
+@settings(max_examples=400, deadline=None)
+@given(raw_imu_operations, st.integers(1, 5))
+def test_raw_imu_samples_and_fields_are_accounted_for(ops, depth):
+    # The raw IMU: samples with their acceleration, fields used at once,
+    # nothing waits for a measurement (timeout 0).
+    pairer = make(depth=depth, timeout=0, max_increment=2.0, max_dt=200 * MS)
+    for op, stamp, value in ops:
+        if op == 'imu':
+            omega, acceleration = value
+            outcome = pairer.add_angular_velocity(stamp, omega, 0, acceleration)
+            if pairer.pending_stamp == stamp and outcome in (None, BACKWARD_JUMP):
+                # Taken: finite, with a direction.
+                assert all(map(math.isfinite, omega + acceleration))
+                assert math.hypot(*acceleration) > 0.0
+        elif op == 'field':
+            before = pairer.field_stamp
+            outcome = pairer.add_field(stamp, value)
+            if outcome is None:
+                assert all(map(math.isfinite, value)) and math.hypot(*value) > 0.0
+                assert pairer.field_stamp == stamp > 0
+                assert before is None or stamp > before or before - stamp > S
+            else:
+                assert pairer.field_stamp == before
+        else:
+            pairer.restart()
+            outcome = None
+        assert outcome is None or outcome == BACKWARD_JUMP or outcome in DROP_REASONS
+        for step in pairer.pop_ready(0):
+            assert step.measurement is None
+            assert 0 < step.stamp < step.end <= step.stamp + 200 * MS
+        # Steps wait for nothing; fields never wait.
+        assert pairer.waiting('increment') <= 1
+        assert pairer.waiting('measurement') == 0
         assert_accounted(pairer)

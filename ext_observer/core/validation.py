@@ -15,6 +15,9 @@ norm_out_of_tolerance
     A measurement with ``|‖y‖ − 1|`` above the tolerance (an absurd norm).
 increment_too_large
     An increment whose angle ``‖θ‖`` exceeds the bound (rad).
+zero_vector
+    A direction (specific force, magnetic field) whose norm is below the
+    bound: no direction.
 state_non_finite, residual_too_large, innovation_too_large
     The divergence guard on the estimate (see :func:`check_state`).
 """
@@ -26,6 +29,7 @@ __all__ = [
     'check_increment',
     'check_measurement',
     'check_state',
+    'check_vector',
 ]
 
 MIN_NORM = 1e-6
@@ -89,6 +93,32 @@ def check_measurement(measurement, norm_tolerance):
     if abs(n - 1.0) > norm_tolerance:
         return None, 'norm_out_of_tolerance'
     return (w / n, x / n, y / n, z / n), None
+
+
+def check_vector(vector, min_norm):
+    """
+    Check a measured direction: a specific force or a magnetic field.
+
+    Parameters
+    ----------
+    vector : sequence of 3 float
+        In its own unit (m/s², T, ...).
+    min_norm : float
+        Smallest accepted norm, in the same unit.
+
+    Returns
+    -------
+    reason : str or None
+        ``non_finite``, ``zero_vector`` or None.
+
+    """
+    x, y, z = vector
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        return 'non_finite'
+    # hypot neither underflows nor overflows on finite components.
+    if math.hypot(x, y, z) < min_norm:
+        return 'zero_vector'
+    return None
 
 
 def check_state(state, innovation_norm=None, max_residual=math.inf,
