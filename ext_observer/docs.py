@@ -9,6 +9,11 @@ prose around them is written by hand and left as it is. After a change to a
 node's parameters, run ``python -m ext_observer docs`` (or ``make docs``);
 ``test/test_docs.py`` fails while the page and the specs differ.
 
+The same command rewrites the node sections of ``config/ext_observer.yaml``
+(every parameter with its default and a comment,
+:func:`~ext_observer.node_common.yaml_section`; the header comment is left
+as it is); ``test/test_nodes.py`` loads that file and checks it.
+
 The other generated pages have their own commands: ``docs/reproduction.md``
 and its figures ``make reproduce``, ``docs/performance.md`` ``make bench``,
 ``docs/figures/demo.png``
@@ -21,9 +26,11 @@ import os
 import re
 import sys
 
-__all__ = ['NODES', 'PAGE', 'main', 'parameter_tables', 'render']
+__all__ = ['CONFIG', 'NODES', 'PAGE', 'main', 'parameter_tables', 'render', 'render_config']
 
 PAGE = 'parameters.md'
+# The params file, relative to the parent of the docs folder.
+CONFIG = os.path.join('config', 'ext_observer.yaml')
 
 # (node name, module, specs): one generated table each, in this order.
 NODES = (
@@ -88,20 +95,41 @@ def render(text):
     return text
 
 
-def main(argv=None):
-    """Regenerate (or, with ``--check``, compare) the page; return the exit code."""
-    parser = argparse.ArgumentParser(
-        prog='python -m ext_observer docs',
-        description=f'Regenerate the parameter tables of DIR/{PAGE} from the '
-                    'parameter specs of the nodes.')
-    parser.add_argument('--docs', default='docs', metavar='DIR',
-                        help='the docs folder (default docs)')
-    parser.add_argument('--check', action='store_true',
-                        help='write nothing; exit 1 if the page differs from the specs')
-    args = parser.parse_args(argv)
-    path = os.path.join(args.docs, PAGE)
-    with open(path, encoding='utf-8') as page:
-        text = page.read()
+def render_config(text):
+    """
+    Return the params file with every node's section regenerated from its specs.
+
+    Parameters
+    ----------
+    text : str
+        ``config/ext_observer.yaml``, with a ``/**/<node>:`` section per node.
+
+    Returns
+    -------
+    text : str
+
+    Raises
+    ------
+    ValueError
+        If the section of a node is missing.
+
+    """
+    from ext_observer.node_common import yaml_section
+
+    for name, module, specs in NODES:
+        rows = getattr(importlib.import_module(module), specs)
+        pattern = re.compile(rf'^/\*\*/{re.escape(name)}:\n(?:  .*\n)*', re.MULTILINE)
+        if not pattern.search(text):
+            raise ValueError(f'no section /**/{name}:')
+        section = yaml_section(name, rows)
+        text = pattern.sub(lambda _: section, text, count=1)
+    return text
+
+
+def _update(path, render, check):
+    """Regenerate (or compare) one file; return the exit code."""
+    with open(path, encoding='utf-8') as file:
+        text = file.read()
     try:
         new = render(text)
     except ValueError as error:
@@ -110,14 +138,34 @@ def main(argv=None):
     if new == text:
         print(f'{path}: up to date')
         return 0
-    if args.check:
+    if check:
         print(f'{path}: differs from the parameter specs; run python -m ext_observer docs',
               file=sys.stderr)
         return 1
-    with open(path, 'w', encoding='utf-8') as page:
-        page.write(new)
+    with open(path, 'w', encoding='utf-8') as file:
+        file.write(new)
     print(f'{path}: regenerated')
     return 0
+
+
+def main(argv=None):
+    """Regenerate (or, with ``--check``, compare) the page; return the exit code."""
+    parser = argparse.ArgumentParser(
+        prog='python -m ext_observer docs',
+        description=f'Regenerate the parameter tables of DIR/{PAGE} and the node '
+                    f'sections of the params file from the parameter specs of the nodes.')
+    parser.add_argument('--docs', default='docs', metavar='DIR',
+                        help='the docs folder (default docs)')
+    parser.add_argument('--check', action='store_true',
+                        help='write nothing; exit 1 if the page differs from the specs')
+    parser.add_argument('--config', metavar='PATH',
+                        help=f'the params file (default DIR/../{CONFIG}; skipped if absent)')
+    args = parser.parse_args(argv)
+    code = _update(os.path.join(args.docs, PAGE), render, args.check)
+    config = args.config or os.path.join(os.path.dirname(os.path.abspath(args.docs)), CONFIG)
+    if code != 2 and (args.config or os.path.exists(config)):
+        code = max(code, _update(config, render_config, args.check))
+    return code
 
 
 if __name__ == '__main__':

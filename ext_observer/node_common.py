@@ -19,6 +19,7 @@ core's ``ValueError``.
 
 import dataclasses
 import sys
+import textwrap
 from typing import Any, Callable, Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -46,6 +47,7 @@ __all__ = [
     'key_values',
     'markdown_table',
     'run_node',
+    'yaml_section',
 ]
 
 
@@ -72,6 +74,9 @@ class ParameterSpec:
         Structural: set at start-up only.
     constraints : str
         Further rules, in words (``ParameterDescriptor.additional_constraints``).
+    example : bool, int, float, str or list, optional
+        For a parameter unset by default: the value the params file shows,
+        commented out.
 
     """
 
@@ -81,6 +86,7 @@ class ParameterSpec:
     range: Optional[Tuple[float, float]] = None
     read_only: bool = False
     constraints: str = ''
+    example: Any = None
 
     def descriptor(self):
         """Return the ``ParameterDescriptor`` of this parameter."""
@@ -249,6 +255,49 @@ def markdown_table(specs):
         rows.append(f'| `{spec.name}` | {spec.type_name} | `{spec.default_text}` | '
                     f'{bounds} | {runtime} | {description} |')
     return '\n'.join(rows) + '\n'
+
+
+def yaml_section(node_name, specs):
+    """
+    Return a node's section of ``config/ext_observer.yaml``.
+
+    Every parameter with its default (one unset by default commented out,
+    with its ``example``), under a comment made of its description,
+    constraints, range and whether it is start-up only, wrapped at 78
+    columns.
+
+    Parameters
+    ----------
+    node_name : str
+        The section is ``/**/<node_name>``.
+    specs : sequence of ParameterSpec
+
+    Returns
+    -------
+    section : str
+        YAML, ending with a newline.
+
+    """
+    lines = [f'/**/{node_name}:', '  ros__parameters:']
+    for spec in specs:
+        text = spec.description
+        if spec.constraints:
+            text += f' {spec.constraints}'
+        if spec.range is not None:
+            text += f' Range [{spec.range[0]}, {spec.range[1]}].'
+        if spec.read_only:
+            text += ' Start-up only.'
+        unset = (isinstance(spec.default, Parameter.Type)
+                 and not spec.default.name.endswith('_ARRAY'))
+        if unset:
+            text += ' Unset here: uncomment the next line to set it.'
+        lines += textwrap.wrap(text, width=78, initial_indent='    # ',
+                               subsequent_indent='    # ', break_on_hyphens=False)
+        if unset:
+            lines.append(f'    # {spec.name}: {_yaml_value(spec.example)}')
+        else:
+            lines.append(f'    {spec.name}: {spec.default_text}')
+    return '\n'.join(lines) + '\n'
 
 
 def key_values(pairs):

@@ -17,8 +17,16 @@ from the angular velocity of ``sensor_msgs/Imu`` on ``imu/data_raw``
 through), the measurements from the orientation of ``sensor_msgs/Imu`` on
 ``attitude/imu`` or of ``geometry_msgs/PoseStamped`` on ``attitude/pose``,
 at their own rate: a measurement corrects the step whose interval contains
-its stamp. These sensor streams are subscribed best effort (the sensor-data
-QoS at ``queue_depth``), overridable with ``qos_overrides``.
+its stamp. Every input but ``gyro/increment`` (``input_reliability``) is
+subscribed best effort (the sensor-data QoS at ``queue_depth``), so that
+reliable and best-effort publishers both connect, overridable with
+``qos_overrides``.
+
+Raw IMU (``measurement_source: accel``, the drop-in for
+``imu_filter_madgwick_node``): the raw-IMU estimator of ``core/ahrs.py`` on
+``imu/data_raw`` and ``imu/mag`` instead of the paper's observer, with
+``use_mag``, ``world_frame`` and the ``ahrs.*`` gains; see
+:mod:`ext_observer.raw_imu` and ``docs/raw_imu.md``.
 
 Inputs
     Every input goes through :class:`~ext_observer.pairing.StepPairer`:
@@ -60,7 +68,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, MagneticField
 from std_srvs.srv import Trigger
 
 from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
@@ -72,6 +80,8 @@ from ext_observer.node_common import (CounterDeltas, diagnostic_array, key_value
                                       NodeParameters, ParameterError, ParameterSpec,
                                       QosWatch, run_node)
 from ext_observer.pairing import BACKWARD_JUMP, DROP_REASONS, KINDS, StepPairer
+from ext_observer.raw_imu import (imu_vectors, RAW_IMU_PARAMETERS, raw_imu_settings,
+                                  RawImuEstimator)
 
 __all__ = ['CERTIFIED_EPSILON', 'DROP_REASONS', 'GUARD_REASONS', 'OBSERVER_PARAMETERS',
            'RESET_CAUSES', 'STATUS_SUFFIX', 'ObserverNode', 'main', 'observer_settings']
@@ -84,15 +94,22 @@ RESET_CAUSES = ('backward_jump', 'clock_jump', 'forward_gap', 'service')
 
 FORWARD_GAP_ACTIONS = ('propagate', 'reset')
 INCREMENT_SOURCES = ('increment', 'imu')
-MEASUREMENT_SOURCES = ('quaternion', 'imu', 'pose')
-# Input topic of each source (relative names).
+MEASUREMENT_SOURCES = ('quaternion', 'imu', 'pose', 'accel')
+# Input topic of each source (relative names); 'accel' takes its
+# measurements from the increments' own sensor_msgs/Imu, and the field from
+# MAG_TOPIC.
 INCREMENT_TOPICS = {'increment': 'gyro/increment', 'imu': 'imu/data_raw'}
 MEASUREMENT_TOPICS = {'quaternion': 'attitude/measurement', 'imu': 'attitude/imu',
-                      'pose': 'attitude/pose'}
-# The paper's sources keep input_reliability; the sensor streams are
-# subscribed with these, the sensor-data QoS (qos_profile_sensor_data) at
-# queue_depth, overridable by qos_overrides.<topic>.subscription.<policy>.
-SENSOR_SOURCES = {'imu', 'pose'}
+                      'pose': 'attitude/pose', 'accel': 'imu/data_raw'}
+MAG_TOPIC = 'imu/mag'
+# gyro/increment keeps input_reliability; every other input is subscribed
+# with the sensor-data QoS (qos_profile_sensor_data: best effort, volatile)
+# at queue_depth, which takes reliable and best-effort publishers alike,
+# overridable by qos_overrides.<topic>.subscription.<policy>.
+SENSOR_SOURCES = {'imu', 'pose', 'quaternion', 'accel'}
+# The paper's simulated setup (gyro_node): the only one without align_sign
+# by default.
+PAPER_SOURCES = ('increment', 'quaternion')
 RELIABILITIES = {'reliable': ReliabilityPolicy.RELIABLE,
                  'best_effort': ReliabilityPolicy.BEST_EFFORT}
 
@@ -129,8 +146,10 @@ OBSERVER_PARAMETERS = (
     ParameterSpec('align_sign', Parameter.Type.BOOL,
                   'Flip each measurement y to the hemisphere of the estimate (y and −y '
                   'are the same rotation); for sources that publish w ≥ 0 or flip sign. '
-                  'Unset: on when measurement_source is imu or pose (real sources), off '
-                  'for quaternion (the paper\'s setup, exact).'),
+                  'Unset: on for every real source; off only for the paper\'s simulated '
+                  'setup (increment_source increment with measurement_source quaternion, '
+                  'what gyro_node publishes), which keeps the paper\'s exact, unaligned '
+                  'update. Not used by measurement_source accel.', example=True),
     ParameterSpec('initial_estimate', [1.0, 0.0, 0.0, 0.0],
                   'Initial estimate q̂_0 as w, x, y, z (ambient, need not be unit); '
                   'also the estimate after a reset.',
@@ -170,35 +189,41 @@ OBSERVER_PARAMETERS = (
                   'Divergence guard: reinitialize from the latest measurement when the '
                   'innovation ‖y − q̂‖ exceeds this (at most 1 + ‖q̂‖; the paper\'s setup '
                   'peaks at 3.6).', (0.01, 1000.0)),
-    ParameterSpec('increment_source', 'increment',
+    ParameterSpec('increment_source', Parameter.Type.STRING,
                   "Where the increments come from: 'increment' (θ_k on gyro/increment, "
                   "geometry_msgs/Vector3Stamped) or 'imu' (sensor_msgs/Imu on "
-                  'imu/data_raw: θ_k = ½ (ω_k + ω_{k+1}) Δt between consecutive samples).',
-                  read_only=True, constraints=f'One of {", ".join(INCREMENT_SOURCES)}.'),
+                  'imu/data_raw: θ_k = ½ (ω_k + ω_{k+1}) Δt between consecutive samples). '
+                  "Unset: 'imu' with measurement_source accel, else 'increment'.",
+                  read_only=True, constraints=f'One of {", ".join(INCREMENT_SOURCES)}; imu '
+                  'with measurement_source accel.', example='imu'),
     ParameterSpec('measurement_source', 'quaternion',
                   "Where the measurements come from: 'quaternion' "
                   '(geometry_msgs/QuaternionStamped on attitude/measurement), '
-                  "'imu' (the orientation of sensor_msgs/Imu on attitude/imu) or 'pose' "
-                  '(the orientation of geometry_msgs/PoseStamped on attitude/pose).',
+                  "'imu' (the orientation of sensor_msgs/Imu on attitude/imu), 'pose' "
+                  "(the orientation of geometry_msgs/PoseStamped on attitude/pose) or 'accel' "
+                  '(raw IMU, the drop-in for imu_filter_madgwick: gyro and accelerometer of '
+                  'sensor_msgs/Imu on imu/data_raw, the field of sensor_msgs/MagneticField on '
+                  'imu/mag, the ahrs.* estimator of core/ahrs.py; see docs/raw_imu.md).',
                   read_only=True, constraints=f'One of {", ".join(MEASUREMENT_SOURCES)}.'),
     ParameterSpec('max_dt', 0.1,
                   'increment_source imu: largest interval between two IMU samples, s; '
                   'after a longer one the integration starts over from the new sample '
                   '(dropped: dt_too_large).', (0.0001, 10.0)),
     ParameterSpec('constant_dt', 0.0,
-                  'increment_source imu: Δt of every increment, s, instead of the '
-                  'interval between the stamps; 0 = from the stamps.', (0.0, 10.0)),
+                  'increment_source imu: Δt of every increment (measurement_source accel: '
+                  'of every sample), s, instead of the interval between the stamps; 0 = from '
+                  'the stamps (as imu_filter_madgwick).', (0.0, 10.0)),
     ParameterSpec('orientation_covariance', [0.0025, 0.0, 0.0, 0.0, 0.0025, 0.0,
                                              0.0, 0.0, 0.0025],
                   'orientation_covariance of imu/data, row-major 3×3 about x, y, z, '
                   'rad² (default: 0.05 rad standard deviation per axis).',
                   constraints='9 finite numbers with a positive diagonal.'),
     ParameterSpec('input_reliability', 'reliable',
-                  "Reliability of the subscriptions to gyro/increment and "
-                  "attitude/measurement: 'reliable' or 'best_effort' (which also accepts "
-                  'BEST_EFFORT publishers, e.g. sensor drivers). The sensor streams '
-                  '(imu/data_raw, attitude/imu, attitude/pose) are best effort, see '
-                  'qos_overrides.',
+                  "Reliability of the subscription to gyro/increment: 'reliable' or "
+                  "'best_effort' (which also accepts BEST_EFFORT publishers). Every other "
+                  'input (attitude/measurement, imu/data_raw, imu/mag, attitude/imu, '
+                  'attitude/pose) is subscribed best effort, the sensor-data QoS, so that '
+                  'reliable and best-effort publishers both connect; see qos_overrides.',
                   read_only=True, constraints=f'One of {", ".join(RELIABILITIES)}.'),
     ParameterSpec('queue_depth', 100,
                   'History depth of every subscription and publisher (keep last), and '
@@ -206,7 +231,7 @@ OBSERVER_PARAMETERS = (
                   read_only=True),
     ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.', (0.01, 3600.0),
                   read_only=True),
-)
+) + RAW_IMU_PARAMETERS
 
 
 def observer_settings(values):
@@ -239,7 +264,6 @@ def observer_settings(values):
                 'allow_uncertified_alpha to true to use it anyway')
     for name, choices in (('forward_gap_action', FORWARD_GAP_ACTIONS),
                           ('input_reliability', tuple(RELIABILITIES)),
-                          ('increment_source', INCREMENT_SOURCES),
                           ('measurement_source', MEASUREMENT_SOURCES)):
         if values[name] not in choices:
             raise ValueError(f'{name} must be one of {choices}, got {values[name]!r}')
@@ -252,8 +276,21 @@ def observer_settings(values):
                          'zeros means "unknown" in sensor_msgs/Imu), got '
                          f'{covariance}')
     values = dict(values)
+    if values['increment_source'] is None:
+        values['increment_source'] = 'imu' if values['measurement_source'] == 'accel' \
+            else 'increment'
+    if values['increment_source'] not in INCREMENT_SOURCES:
+        raise ValueError(f'increment_source must be one of {INCREMENT_SOURCES}, got '
+                         f'{values["increment_source"]!r}')
+    if values['measurement_source'] == 'accel':
+        if values['increment_source'] != 'imu':
+            raise ValueError('measurement_source accel takes the increments from the same '
+                             'sensor_msgs/Imu: increment_source must be imu (or unset), got '
+                             f'{values["increment_source"]!r}')
+        raw_imu_settings(values)
     if values['align_sign'] is None:
-        values['align_sign'] = values['measurement_source'] in SENSOR_SOURCES
+        values['align_sign'] = PAPER_SOURCES != (values['increment_source'],
+                                                 values['measurement_source'])
     if not values['max_increment'] > 0.0:
         raise ValueError(f'max_increment must be positive, got {values["max_increment"]}')
     try:
@@ -278,7 +315,11 @@ def _make_observer(settings, initial=None):
 
 
 def _pairing_settings(settings):
-    return dict(timeout=round(settings['measurement_timeout'] * SECOND),
+    # The raw IMU's steps wait for nothing: the accelerometer comes with the
+    # increment, the field is used when it arrives.
+    timeout = 0 if settings['measurement_source'] == 'accel' else round(
+        settings['measurement_timeout'] * SECOND)
+    return dict(timeout=timeout,
                 max_increment=settings['max_increment'],
                 norm_tolerance=settings['measurement_norm_tolerance'],
                 backward_jump=round(settings['backward_jump_threshold'] * SECOND),
@@ -331,13 +372,22 @@ class ObserverNode(Node):
             raise
         settings = self.parameters.settings
         depth = settings['queue_depth']
-        self.guarded = GuardedObserver(_make_observer(settings),
-                                       settings['divergence_max_residual'],
-                                       settings['divergence_max_innovation'])
+        self.increment_source = settings['increment_source']
+        self.measurement_source = settings['measurement_source']
+        # One estimator: the paper's observer with its divergence guard, or
+        # the raw-IMU estimator (measurement_source accel).
+        self.guarded = self.raw = None
+        if self.measurement_source == 'accel':
+            self.raw = RawImuEstimator(settings)
+        else:
+            self.guarded = GuardedObserver(_make_observer(settings),
+                                           settings['divergence_max_residual'],
+                                           settings['divergence_max_innovation'])
         self.pairer = StepPairer(depth=depth, **_pairing_settings(settings))
         self.resets = dict.fromkeys(RESET_CAUSES, 0)
         self.reinitializations = dict.fromkeys(GUARD_REASONS, 0)
         self._deltas = CounterDeltas()
+        self._status_steps = self._status_fields = 0
         self._last_interval = None
         self.qos = QosWatch(self)
         output_qos = QoSProfile(depth=depth)
@@ -360,23 +410,31 @@ class ObserverNode(Node):
             Imu, 'imu/data', output_qos,
             event_callbacks=self.qos.publisher('imu/data', output_qos,
                                                matched=self.imu_matched_callback))
-        # Both sources are subscribed through one place: the paper's topics
-        # with input_reliability, the sensor streams best effort (overridable).
-        self.increment_source = settings['increment_source']
-        self.measurement_source = settings['measurement_source']
+        # Every source is subscribed through one place: gyro/increment with
+        # input_reliability, the others best effort (overridable).
         increment_type, increment_callback = {
             'increment': (Vector3Stamped, self.increment_callback),
             'imu': (Imu, self.imu_data_raw_callback)}[self.increment_source]
-        measurement_type, measurement_callback = {
-            'quaternion': (QuaternionStamped, self.measurement_callback),
-            'imu': (Imu, self.attitude_imu_callback),
-            'pose': (PoseStamped, self.attitude_pose_callback)}[self.measurement_source]
         self.increment_subscription = self._subscribe(
             increment_type, INCREMENT_TOPICS[self.increment_source], increment_callback,
             self.increment_source in SENSOR_SOURCES, input_qos, hint)
-        self.measurement_subscription = self._subscribe(
-            measurement_type, MEASUREMENT_TOPICS[self.measurement_source],
-            measurement_callback, self.measurement_source in SENSOR_SOURCES, input_qos, hint)
+        if self.raw is None:
+            measurement_type, measurement_topic, measurement_callback = (
+                {'quaternion': QuaternionStamped, 'imu': Imu,
+                 'pose': PoseStamped}[self.measurement_source],
+                MEASUREMENT_TOPICS[self.measurement_source],
+                {'quaternion': self.measurement_callback,
+                 'imu': self.attitude_imu_callback,
+                 'pose': self.attitude_pose_callback}[self.measurement_source])
+        elif settings['use_mag']:
+            # The accelerometer comes with the increments; the field on its own.
+            measurement_type, measurement_topic, measurement_callback = (
+                MagneticField, MAG_TOPIC, self.imu_mag_callback)
+        else:
+            measurement_type = None
+        self.measurement_subscription = None if measurement_type is None else \
+            self._subscribe(measurement_type, measurement_topic, measurement_callback,
+                            True, input_qos, hint)
         self.reset_service = self.create_service(Trigger, '~/reset', self.reset_callback)
         # The per-step path reads no parameter and builds no message: the
         # settings it needs are cached (_cache_settings), the outputs are
@@ -402,14 +460,31 @@ class ObserverNode(Node):
         self._start_timeout_timer(settings)
         self.diagnostic_timer = self.create_timer(
             settings['diagnostic_period'], self.diagnostic_callback)
-        self.get_logger().info(
-            f'{settings["variant"]} observer, alpha {settings["alpha"]:g}, '
-            f'{settings["gain_mode"]} gain {self._gain_text(settings)}')
+        if self.raw is not None:
+            self.get_logger().info(
+                f'raw IMU on {self.resolve_topic_name(INCREMENT_TOPICS["imu"])}'
+                + (f' and {self.resolve_topic_name(MAG_TOPIC)}' if settings['use_mag']
+                   else ' (use_mag false: heading free)')
+                + f', world frame {settings["world_frame"]}, {self.raw.core.params}')
+        else:
+            self.get_logger().info(
+                f'{settings["variant"]} observer, alpha {settings["alpha"]:g}, '
+                f'{settings["gain_mode"]} gain {self._gain_text(settings)}')
 
     @property
     def observer(self):
-        """The core's observer (:class:`~ext_observer.core.SingleObserver`)."""
-        return self.guarded.observer
+        """
+        The core's estimator.
+
+        :class:`~ext_observer.core.SingleObserver`, or with ``measurement_source
+        accel`` :class:`~ext_observer.core.ahrs.AhrsObserver`.
+        """
+        return self.guarded.observer if self.raw is None else self.raw.core
+
+    @property
+    def state(self):
+        """The current estimate (ambient, w, x, y, z; None before the raw IMU's first step)."""
+        return self.guarded.state if self.raw is None else self.raw.state
 
     @property
     def drops(self):
@@ -418,8 +493,17 @@ class ObserverNode(Node):
 
     @property
     def counts(self):
-        """``increments``, ``measurements`` received; ``steps_corrected``, ``steps_propagated``."""
+        """
+        The inputs and what came of them.
+
+        ``increments``, ``measurements`` received; ``steps_corrected``,
+        ``steps_propagated``. Raw IMU: ``imu_samples`` and ``fields``
+        received, ``fields_used``.
+        """
         received, processed = self.pairer.received, self.pairer.processed
+        if self.raw is not None:
+            return {'imu_samples': received['increment'], 'fields': received['measurement'],
+                    'fields_used': processed['measurement']}
         return {'increments': received['increment'],
                 'measurements': received['measurement'],
                 'steps_corrected': processed['measurement'],
@@ -477,16 +561,32 @@ class ObserverNode(Node):
         """Take an IMU sample ``ω`` (rad/s); its successor makes the increment."""
         now = self._now = self._clock.now().nanoseconds
         stamp = nanoseconds_from_stamp(msg.header.stamp)
-        outcome = self.pairer.add_angular_velocity(
-            stamp, vector_from_msg(msg.angular_velocity), now)
-        if outcome == BACKWARD_JUMP:
+        if self.raw is None:
+            omega, acceleration = vector_from_msg(msg.angular_velocity), None
+        else:
+            # Raw IMU: the acceleration is checked with the sample.
+            omega, acceleration = imu_vectors(msg)
+        pairer = self.pairer
+        if pairer.add_angular_velocity(stamp, omega, now, acceleration) == BACKWARD_JUMP:
             self._imu_samples.clear()
             self._backward_jump(stamp)
-        samples = self._imu_samples
-        samples[stamp] = msg
-        if len(samples) > 2 * self._depth + 2:
-            del samples[next(iter(samples))]
+        if pairer.pending_stamp == stamp:
+            # Taken (a dropped sample is never kept, nor replaces one).
+            samples = self._imu_samples
+            samples[stamp] = msg
+            if len(samples) > 2 * self._depth + 2:
+                del samples[next(iter(samples))]
         self._process(now)
+
+    def imu_mag_callback(self, msg):
+        """Raw IMU: take a magnetic field (T) and correct the heading with it at once."""
+        field = self.raw.field_from_msg(msg)
+        stamp = nanoseconds_from_stamp(msg.header.stamp)
+        previous = self.pairer.field_stamp
+        if self.pairer.add_field(stamp, field) is None:
+            # The first field of a time line (or after a jump back) has no interval.
+            self.raw.field(field, None if previous is None or stamp <= previous
+                           else (stamp - previous) * 1e-9)
 
     def attitude_imu_callback(self, msg):
         """Take ``y`` from the orientation of a ``sensor_msgs/Imu``."""
@@ -573,13 +673,15 @@ class ObserverNode(Node):
         """Service ``~/reset``: restart the observer from its initial estimate."""
         self._reset_observer('service')
         response.success = True
-        response.message = (f'observer reset to the initial estimate '
-                            f'{list(self.observer.state)}')
+        response.message = (
+            f'observer reset to the initial estimate {list(self.guarded.state)}'
+            if self.raw is None else
+            'raw-IMU estimator reset: the next sample initializes it from gravity')
         self.get_logger().info(response.message)
         return response
 
     def _reset_observer(self, cause):
-        self.guarded.reset()
+        (self.guarded or self.raw).reset()
         self.resets[cause] += 1
 
     # Steps ----------------------------------------------------------------
@@ -600,12 +702,24 @@ class ObserverNode(Node):
                    else 'propagating'), throttle_duration_sec=LOG_THROTTLE)
         elif step.previous is not None:
             self._last_interval = step.stamp - step.previous
-        state, reason = self.guarded.step(step.increment, step.measurement)
+        # The sample stamped t_{k+1} closed the step: it goes out with q̂_{k+1}
+        # (the raw IMU: the step runs on it).
+        sample = None if step.end is None else self._take_imu_sample(step.end)
+        if self.raw is None:
+            state, reason = self.guarded.step(step.increment, step.measurement)
+        elif sample is None:
+            # Cannot happen: the sample that closed a step is kept until then.
+            return
+        else:
+            state, reason = self.raw.step(
+                sample, self._constant_dt or (step.end - step.stamp) * 1e-9)
         if reason is not None:
             self.reinitializations[reason] += 1
             self.get_logger().warning(
                 f'divergence guard ({reason}) at stamp {step.stamp} ns: observer '
-                'reinitialized from the latest measurement', throttle_duration_sec=LOG_THROTTLE)
+                'reinitialized from ' + ('the latest measurement' if self.raw is None
+                                         else 'the sample'),
+                throttle_duration_sec=LOG_THROTTLE)
         if step.early:
             self.get_logger().warning(
                 f'{self.parameters.settings["queue_depth"]} increments waiting: stepping '
@@ -629,9 +743,6 @@ class ObserverNode(Node):
             q = msg.quaternion
             q.w, q.x, q.y, q.z = w, x, y, z
             self.unit_publisher.publish(msg)
-        if step.end is not None:
-            # The sample stamped t_{k+1} closed the step: it goes out with q̂_{k+1}.
-            sample = self._take_imu_sample(step.end)
         if self._publish_imu:
             msg = self._imu_msg
             msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
@@ -662,6 +773,7 @@ class ObserverNode(Node):
         # step_period in ns (0: the interval between the two last steps).
         self._period = round(settings['step_period'] * SECOND)
         self._depth = settings['queue_depth']
+        self._constant_dt = settings['constant_dt']
         self._imu_msg.orientation_covariance = [
             float(v) for v in settings['orientation_covariance']]
         self._estimate_msg.header.frame_id = settings['frame_id']
@@ -682,7 +794,9 @@ class ObserverNode(Node):
     def _apply_parameters(self, settings, changed):
         structural = {'variant', 'alpha', 'gain', 'gain_mode', 'kappa', 'kappa_min',
                       'align_sign'}
-        if changed & structural:
+        if self.raw is not None:
+            self.raw.configure(settings)
+        elif changed & structural:
             # Keep the current estimate: a new gain acts from the next step on.
             observer = _make_observer(settings, initial=self.observer.state)
             observer.measurements_used = self.observer.measurements_used
@@ -691,8 +805,9 @@ class ObserverNode(Node):
                 f'now {settings["variant"]} observer, alpha {settings["alpha"]:g}, '
                 f'{settings["gain_mode"]} gain {self._gain_text(settings)}')
         self._cache_settings(settings)
-        self.guarded.max_residual = settings['divergence_max_residual']
-        self.guarded.max_innovation = settings['divergence_max_innovation']
+        if self.guarded is not None:
+            self.guarded.max_residual = settings['divergence_max_residual']
+            self.guarded.max_innovation = settings['divergence_max_innovation']
         self.pairer.configure(**_pairing_settings(settings))
         if 'measurement_timeout' in changed:
             self._start_timeout_timer(settings)
@@ -750,6 +865,12 @@ class ObserverNode(Node):
             parts.append(', '.join(f'{key} (+{rose[key]})' for key in others))
         if self.qos.problems:
             parts.append('incompatible QoS on ' + ', '.join(sorted(self.qos.problems)))
+        fields = pairer.processed['measurement']
+        if (self.raw is not None and self.measurement_subscription is not None
+                and steps > self._status_steps and fields == self._status_fields):
+            parts.append(f'no magnetic field on {self.measurement_subscription.topic_name} '
+                         'since the last status: heading not corrected')
+        self._status_steps, self._status_fields = steps, fields
         if parts:
             status.level = DiagnosticStatus.WARN
             status.message = '; '.join(parts)
@@ -761,12 +882,15 @@ class ObserverNode(Node):
         processed = sum(pairer.processed.values())
         dropped = sum(pairer.dropped(kind) for kind in KINDS)
         waiting = sum(pairer.waiting(kind) for kind in KINDS)
-        state = self.observer.state
+        state = self.state
+        estimator = (self.raw.key_values() if self.raw is not None else
+                     [('variant', settings['variant']), ('alpha', settings['alpha']),
+                      ('gain_mode', settings['gain_mode']),
+                      ('align_sign', settings['align_sign'])])
         status.values = key_values(
-            [('variant', settings['variant']), ('alpha', settings['alpha']),
-             ('gain_mode', settings['gain_mode']), ('align_sign', settings['align_sign']),
-             ('increment_source', self.increment_source),
-             ('measurement_source', self.measurement_source), ('steps', steps)]
+            estimator
+            + [('increment_source', self.increment_source),
+               ('measurement_source', self.measurement_source), ('steps', steps)]
             + list(self.counts.items())
             + [('inputs_received', received), ('inputs_processed', processed),
                ('inputs_dropped', dropped), ('inputs_waiting', waiting),
@@ -774,7 +898,8 @@ class ObserverNode(Node):
                ('waiting_measurements', pairer.waiting('measurement'))]
             + list(faults.items())
             + self.qos.key_values()
-            + [('estimate_norm', math.sqrt(sum(v * v for v in state)))])
+            + [('estimate_norm', math.nan if state is None
+                else math.sqrt(sum(v * v for v in state)))])
         return status
 
     def diagnostic_callback(self):

@@ -521,10 +521,15 @@ ALL_SPECS = (('gyro', GYRO_PARAMETERS), ('observer', OBSERVER_PARAMETERS),
 
 def test_params_file_has_every_parameter_with_a_comment():
     import yaml
+
+    from ext_observer.docs import render_config
     with open(CONFIG, encoding='utf-8') as config:
-        lines = config.read().splitlines()
+        text = config.read()
+        lines = text.splitlines()
         config.seek(0)
         sections = yaml.safe_load(config)
+    assert render_config(text) == text, (
+        'config/ext_observer.yaml differs from the parameter specs: run  make docs')
     for name, specs in ALL_SPECS:
         values = sections[f'/**/{name}']['ros__parameters']
         assert list(values) == [spec.name for spec in specs if not unset_scalar(spec)]

@@ -1,0 +1,446 @@
+"""
+The raw-IMU mode of observer_node (``measurement_source: accel``) through
+real topics: real BROAD data, bad samples, world frames, parameters, and the
+installed console script as a drop-in for imu_filter_madgwick_node.
+
+The BROAD replay plays the two excerpts of ``test/data/`` (60 s each at
+285.7 Hz; see ``test/data/README.md``) as ``sensor_msgs/Imu`` on
+``imu/data_raw`` and ``sensor_msgs/MagneticField`` (T) on ``imu/mag`` for
+every third sample, from best-effort publishers, into an ObserverNode on the
+test's executor. The field of sample k is published once the node has taken
+sample k, and sample k + 1 once it has taken the field, so that the node
+sees the same sequence as the offline run of the core
+(:func:`broad_replay.offline`), whatever the scheduling; within one topic
+DDS keeps the order. Faster than real time: the stamps, not the clock, give
+``dt``.
+"""
+
+import math
+import os
+import time
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+import pytest
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu, MagneticField
+from geometry_msgs.msg import QuaternionStamped
+
+from broad_replay import (errors_deg, fields_tesla, load, offline, rmse, stamps, START,
+                          TRIALS)
+from conftest import REPO, Spinner
+from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
+                                      stamp_from_nanoseconds)
+from ext_observer.core.ahrs import AhrsParams, world_from_enu
+from ext_observer.node_common import ParameterError
+from ext_observer.observer_node import ObserverNode
+from ext_observer.raw_imu import AHRS_PREFIX, RAW_IMU_PARAMETERS, RawImuEstimator
+from ros_helpers import installed, overrides, SECOND, values_of
+
+BEST_EFFORT = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+RAW = dict(measurement_source='accel')
+
+# imu/data and attitude_estimate against the core run offline on the same
+# samples in the same order: the node runs the same float code on the same
+# float64 values, so they agree to rounding; measured: 0 (bit for bit).
+TOLERANCE = 1e-12
+# Total attitude error against the optical reference over the movement
+# samples, deg. The core offline on these excerpts (defaults of core/ahrs.py
+# at the time of writing, the field every third sample): RMSE 2.19 and 2.18,
+# max 3.53 and 4.73 (undisturbed, disturbed). The bounds leave about 2× for
+# the tuning of the defaults.
+RMSE_BOUND = 4.5
+MAX_BOUND = 10.0
+# |q̂̄q̂ − 1| on the estimator's path, nothing renormalizing it: measured
+# max 3.7e-4 and 6.2e-4.
+RESIDUAL_BOUND = 1e-2
+MAG_EVERY = 3
+
+
+@pytest.fixture
+def events_spinner(ros_context):
+    """A :class:`~conftest.Spinner` on rclpy's EventsExecutor (the nodes' default)."""
+    from rclpy.experimental import EventsExecutor
+
+    spinner = Spinner(ros_context)
+    spinner.executor = EventsExecutor(context=ros_context)
+    try:
+        yield spinner
+    finally:
+        spinner.close()
+
+
+class Driver(Node):
+    """A raw IMU driver: imu/data_raw and imu/mag, best effort; records the outputs."""
+
+    def __init__(self, context, imu_topic='imu/data_raw', mag_topic='imu/mag'):
+        super().__init__('raw_imu_driver', context=context)
+        self.imu_publisher = self.create_publisher(Imu, imu_topic, BEST_EFFORT)
+        self.mag_publisher = self.create_publisher(MagneticField, mag_topic, BEST_EFFORT)
+        self.outputs = {}
+        self.estimates = {}
+        self.create_subscription(Imu, 'imu/data', self._keep(self.outputs), 1000)
+        self.create_subscription(QuaternionStamped, 'attitude_estimate',
+                                 self._keep(self.estimates), 1000)
+
+    @staticmethod
+    def _keep(store):
+        def callback(msg):
+            store[nanoseconds_from_stamp(msg.header.stamp)] = msg
+        return callback
+
+    def send_imu(self, stamp, gyr, acc, frame_id='imu_link'):
+        msg = Imu()
+        msg.header.stamp = stamp_from_nanoseconds(stamp)
+        msg.header.frame_id = frame_id
+        v = msg.angular_velocity
+        v.x, v.y, v.z = (float(a) for a in gyr)
+        a = msg.linear_acceleration
+        a.x, a.y, a.z = (float(b) for b in acc)
+        msg.angular_velocity_covariance[0] = 1e-6
+        msg.linear_acceleration_covariance[0] = 1e-3
+        # A raw IMU has no orientation.
+        msg.orientation_covariance[0] = -1.0
+        self.imu_publisher.publish(msg)
+
+    def send_field(self, stamp, field):
+        msg = MagneticField()
+        msg.header.stamp = stamp_from_nanoseconds(stamp)
+        msg.header.frame_id = 'imu_link'
+        f = msg.magnetic_field
+        f.x, f.y, f.z = (float(b) for b in field)
+        self.mag_publisher.publish(msg)
+
+
+def connect(spinner, driver, *observers):
+    spinner.spin_until(
+        lambda: (driver.imu_publisher.get_subscription_count() == len(observers)
+                 and all(o._publish_imu for o in observers)),
+        10.0, 'the subscriptions')
+
+
+def replay_lockstep(spinner, driver, observer, data, count=None, mag_every=MAG_EVERY):
+    """Publish the excerpt; the field of sample k between samples k and k + 1."""
+    gyr, acc, mag = data['gyr'], data['acc'], fields_tesla(data)
+    count = len(gyr) if count is None else count
+    times = stamps(count, float(data['rate']))
+    received = observer.pairer.received
+    imu0, mag0 = received['increment'], received['measurement']
+    fields = 0
+    deadline = time.monotonic() + 120.0
+    for k in range(count):
+        driver.send_imu(times[k], gyr[k], acc[k])
+        if k % mag_every:
+            continue
+        while received['increment'] < imu0 + k + 1:
+            spinner.executor.spin_once(timeout_sec=0.01)
+            assert time.monotonic() < deadline, f'sample {k} never arrived'
+        driver.send_field(times[k], mag[k])
+        fields += 1
+        while received['measurement'] < mag0 + fields:
+            spinner.executor.spin_once(timeout_sec=0.01)
+            assert time.monotonic() < deadline, f'the field of sample {k} never arrived'
+    spinner.spin_until(lambda: len(driver.outputs) >= count - 1
+                       and len(driver.estimates) >= count - 1, 20.0, 'the last outputs')
+    return times
+
+
+def published(store, times):
+    """The published quaternions at ``times[1:]`` as an array (N, 4), NaN for sample 0."""
+    out = np.full((len(times), 4), np.nan)
+    for k, t in enumerate(times[1:], 1):
+        msg = store[t]
+        out[k] = quaternion_from_msg(msg.orientation if isinstance(msg, Imu)
+                                     else msg.quaternion)
+    return out
+
+
+@pytest.mark.parametrize('trial', TRIALS)
+def test_broad_excerpt_through_dds_equals_the_core_and_tracks_the_reference(
+        ros_context, events_spinner, trial):
+    data = load(trial)
+    spinner = events_spinner
+    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
+        diagnostic_period=0.5, **RAW)))
+    driver = spinner.add(Driver(ros_context))
+    connect(spinner, driver, observer)
+    started = time.monotonic()
+    times = replay_lockstep(spinner, driver, observer, data)
+    seconds = time.monotonic() - started
+
+    # Every input taken, nothing dropped; the last sample waits for a next one.
+    n = len(times)
+    assert observer.counts == {'imu_samples': n, 'fields': len(range(0, n, MAG_EVERY)),
+                               'fields_used': len(range(0, n, MAG_EVERY))}
+    assert not any(observer.drops.values())
+    assert observer.pairer.accounted('increment') == n
+
+    # The same as the core offline on the same samples, in the same order.
+    expected = offline(data, mag_every=MAG_EVERY)
+    estimates = published(driver.estimates, times)
+    outputs = published(driver.outputs, times)
+    unit = expected / np.linalg.norm(expected, axis=1, keepdims=True)
+    difference = max(np.nanmax(np.abs(estimates - expected)),
+                     np.nanmax(np.abs(outputs - unit)))
+    # imu/data: the input's stamp, frame, rates and acceleration.
+    for k in (1, n // 2, n - 1):
+        msg = driver.outputs[times[k]]
+        assert msg.header.frame_id == 'imu_link'
+        assert (msg.angular_velocity.x, msg.linear_acceleration.z) == (
+            data['gyr'][k][0], data['acc'][k][2])
+        assert msg.linear_acceleration_covariance[0] == 1e-3
+    norms = np.linalg.norm(outputs[1:], axis=1)
+    residual = np.abs(np.sum(np.square(estimates[1:]), axis=1) - 1.0)
+
+    # Against the optical reference.
+    angles = errors_deg(outputs, data)
+    print(f'{trial}: {n} samples through DDS in {seconds:.1f} s; max |node − core| '
+          f'{difference:.3g}; error RMSE {rmse(angles):.3f}° max {angles.max():.3f}° over '
+          f'{len(angles)} samples; |q̂̄q̂ − 1| mean {residual.mean():.3g} max '
+          f'{residual.max():.3g}')
+    assert difference <= TOLERANCE
+    assert np.allclose(norms, 1.0, atol=1e-12)
+    assert len(angles) > 10000
+    assert rmse(angles) < RMSE_BOUND
+    assert angles.max() < MAX_BOUND
+    assert residual.max() < RESIDUAL_BOUND
+
+    # The diagnostics show the estimator's state.
+    values = values_of(observer.status())
+    assert values['measurement_source'] == 'accel'
+    assert values['world_frame'] == 'enu' and values['use_mag'] == 'true'
+    core = observer.observer
+    assert [float(values[f'bias_{axis}']) for axis in 'xyz'] == pytest.approx(
+        [float(b) for b in core.bias], rel=1e-5, abs=1e-12)
+    assert values['rest'] == ('true' if core.rest else 'false')
+    assert values['mag_disturbed'] == ('true' if core.mag_disturbed else 'false')
+    q = core.q
+    assert float(values['residual']) == pytest.approx(abs(sum(v * v for v in q) - 1.0),
+                                                      rel=1e-5, abs=1e-15)
+    assert values['steps'] == str(n - 1)
+
+
+def test_world_frames_rotate_the_enu_estimate(ros_context, spinner):
+    data = load(TRIALS[0])
+    count = 600
+    nodes = {}
+    for frame in ('enu', 'ned', 'nwu'):
+        remap = [] if frame == 'enu' else [
+            '--ros-args', '-r', f'imu/data:={frame}/imu/data',
+            '-r', f'attitude_estimate:={frame}/attitude_estimate',
+            '-r', f'attitude_estimate/unit:={frame}/attitude_estimate/unit']
+        nodes[frame] = spinner.add(ObserverNode(
+            node_name=f'observer_{frame}', context=ros_context, cli_args=remap,
+            parameter_overrides=overrides(world_frame=frame, **RAW)))
+    driver = spinner.add(Driver(ros_context))
+    others = {frame: {} for frame in ('ned', 'nwu')}
+    for frame, store in others.items():
+        driver.create_subscription(QuaternionStamped, f'{frame}/attitude_estimate',
+                                   Driver._keep(store), 1000)
+    spinner.spin_until(lambda: driver.imu_publisher.get_subscription_count() == 3
+                       and driver.mag_publisher.get_subscription_count() == 3
+                       and nodes['enu']._publish_imu, 10.0, 'the subscriptions')
+    gyr, acc, mag = data['gyr'], data['acc'], fields_tesla(data)
+    times = stamps(count, float(data['rate']))
+    # All three nodes must take the field between the same two samples.
+    for k in range(count):
+        driver.send_imu(times[k], gyr[k], acc[k])
+        if k % 50 == 0:
+            spinner.spin_until(lambda: all(
+                o.pairer.received['increment'] == k + 1 for o in nodes.values()), 5.0,
+                f'sample {k}')
+            driver.send_field(times[k], mag[k])
+            spinner.spin_until(lambda: all(
+                o.pairer.received['measurement'] == k // 50 + 1 for o in nodes.values()),
+                5.0, f'field {k}')
+    spinner.spin_until(lambda: len(driver.estimates) == count - 1 and all(
+        len(store) == count - 1 for store in others.values()), 10.0, 'the estimates')
+    enu = published(driver.estimates, times)[1:]
+    assert np.abs(enu - offline(data, mag_every=50)[1:count]).max() <= TOLERANCE
+    for frame, store in others.items():
+        assert np.abs(published(store, times)[1:] - world_from_enu(enu, frame)).max() < 1e-12
+
+
+def test_bad_samples_are_refused_counted_and_never_reach_the_estimate(ros_context, spinner):
+    data = load(TRIALS[0])
+    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
+        diagnostic_period=0.1, **RAW)))
+    driver = spinner.add(Driver(ros_context))
+    connect(spinner, driver, observer)
+    gyr, acc, mag = data['gyr'], data['acc'], fields_tesla(data)
+    times = stamps(40, float(data['rate']))
+    nan = math.nan
+    # (what is sent after good sample k, the reason it is dropped)
+    bad_imu = {
+        3: ((nan, 0.0, 0.0), acc[3], 'non_finite_increment'),
+        5: (gyr[5], (0.0, nan, 9.8), 'non_finite_acceleration'),
+        7: (gyr[7], (0.0, 0.0, 0.0), 'zero_acceleration'),
+        9: (gyr[9], (math.inf, 0.0, 9.8), 'non_finite_acceleration'),
+    }
+    bad_stamps = {11: (times[11], 'duplicate_increment'),
+                  13: (times[12], 'stale_increment'),
+                  15: (0, 'zero_stamp_increment')}
+    bad_fields = {6: ((nan, 1e-5, 1e-5), 'non_finite_measurement'),
+                  12: ((0.0, 0.0, 0.0), 'zero_field'),
+                  18: ('stale', 'stale_measurement'),
+                  24: ('duplicate', 'duplicate_measurement')}
+    received = observer.pairer.received
+    sent_fields = 0
+
+    def sent(kind, count):
+        spinner.spin_until(lambda: received[kind] == count, 5.0, f'{kind} {count}')
+
+    imu_count = 0
+    for k in range(40):
+        driver.send_imu(times[k], gyr[k], acc[k])
+        imu_count += 1
+        sent('increment', imu_count)
+        if k in bad_imu:
+            g, a, _ = bad_imu[k]
+            driver.send_imu(times[k] + SECOND // 1000, g, a)
+            imu_count += 1
+            sent('increment', imu_count)
+        if k in bad_stamps:
+            stamp, _ = bad_stamps[k]
+            driver.send_imu(stamp, (5.0, 5.0, 5.0), (0.0, 9.8, 0.0))
+            imu_count += 1
+            sent('increment', imu_count)
+        if k % 3 == 0:
+            driver.send_field(times[k], mag[k])
+            sent_fields += 1
+            sent('measurement', sent_fields)
+        if k in bad_fields:
+            field, _ = bad_fields[k]
+            stamp = times[k] + SECOND // 1000
+            if field == 'stale':
+                field, stamp = (1e-5, 0.0, 0.0), times[k - 1]
+            elif field == 'duplicate':
+                field, stamp = (1e-5, 0.0, 0.0), times[k]
+            driver.send_field(stamp, field)
+            sent_fields += 1
+            sent('measurement', sent_fields)
+    spinner.spin_until(lambda: len(driver.estimates) >= 39, 5.0, 'the estimates')
+
+    reasons = [r for *_, r in bad_imu.values()] + [r for _, r in bad_stamps.values()] + [
+        r for _, r in bad_fields.values()]
+    expected_drops = {reason: reasons.count(reason) for reason in reasons}
+    assert {r: c for r, c in observer.drops.items() if c} == expected_drops
+    for kind in ('increment', 'measurement'):
+        assert observer.pairer.accounted(kind) == received[kind]
+    # Only the good samples made the estimate: the core offline on them alone.
+    good = offline(data, mag_every=3)[1:40]
+    assert np.abs(published(driver.estimates, times)[1:] - good).max() <= TOLERANCE
+    # Counted in /diagnostics, with the WARN while it happens.
+    values = values_of(observer.status())
+    for reason, count in expected_drops.items():
+        assert values[f'dropped_{reason}'] == str(count)
+    assert int(values['inputs_dropped']) == len(reasons)
+
+
+def test_a_missing_magnetometer_warns_and_runs_6d(ros_context, spinner):
+    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
+        **RAW)))
+    driver = spinner.add(Driver(ros_context))
+    connect(spinner, driver, observer)
+    observer.status()
+    for k in range(20):
+        driver.send_imu(START + k * SECOND // 100, (0.0, 0.0, 0.1), (0.0, 0.0, 9.81))
+    spinner.spin_until(lambda: len(driver.outputs) == 19, 5.0, 'the estimates')
+    status = observer.status()
+    assert status.level == DiagnosticStatus.WARN
+    assert 'no magnetic field on /imu/mag' in status.message
+    # use_mag false: no imu/mag subscription, no warning.
+    quiet = spinner.add(ObserverNode(node_name='quiet', context=ros_context,
+                                     parameter_overrides=overrides(use_mag=False, **RAW)))
+    assert quiet.measurement_subscription is None
+    assert quiet.status().level == DiagnosticStatus.OK
+
+
+@pytest.mark.parametrize('values, reason', [
+    (dict(world_frame='nue'), 'world_frame must be one of'),
+    ({'ahrs.alpha': 0.2}, 'certified'),
+    ({'ahrs.tau_acc': 0.0}, 'tau_acc must be positive'),
+    (dict(increment_source='increment'), 'increment_source must be imu'),
+    # imu_filter_madgwick's gain is a number; ours is the paper's quaternion.
+    (dict(gain=0.1), 'gain'),
+])
+def test_invalid_raw_imu_parameters_are_refused(ros_context, values, reason):
+    with pytest.raises(ParameterError, match=reason):
+        ObserverNode(context=ros_context, parameter_overrides=overrides(**RAW, **values))
+
+
+def test_raw_imu_divergence_guard_reinitializes_from_the_sample():
+    settings = {spec.name: spec.default for spec in RAW_IMU_PARAMETERS}
+    settings['divergence_max_residual'] = 15.0
+    estimator = RawImuEstimator(settings)
+    msg = Imu()
+    msg.angular_velocity.z = 0.1
+    msg.linear_acceleration.x, msg.linear_acceleration.z = 1.0, 9.7
+    estimator.field((2e-5, 0.0, -4e-5))
+    state, reason = estimator.step(msg, 0.01)
+    assert reason is None and abs(math.hypot(*state) - 1.0) < 1e-9
+    for poison, expected in (((10.0, 0.0, 0.0, 0.0), 'residual_too_large'),
+                             ((math.nan, 0.0, 0.0, 0.0), 'state_non_finite')):
+        estimator.core.q = poison
+        state, reason = estimator.step(msg, 0.01)
+        assert reason == expected
+        # From gravity and the latest field again: unit, finite.
+        assert abs(math.hypot(*state) - 1.0) < 1e-9
+
+
+def test_every_core_parameter_is_a_node_parameter():
+    names = {spec.name for spec in RAW_IMU_PARAMETERS}
+    for name, default in AhrsParams.DEFAULTS.items():
+        assert AHRS_PREFIX + name in names, name
+    for spec in RAW_IMU_PARAMETERS:
+        if spec.name.startswith(AHRS_PREFIX):
+            assert spec.default == AhrsParams.DEFAULTS[spec.name[len(AHRS_PREFIX):]]
+            assert not spec.description.startswith('AhrsParams.'), (
+                f'{spec.name} needs a description in raw_imu._AHRS_DOCS')
+
+
+def test_drop_in_for_imu_filter_madgwick_as_a_process(ros_processes, ros_context, spinner):
+    """The console script with config/raw_imu.yaml, a camera's topics remapped."""
+    data = load(TRIALS[0])
+    count = 1500
+    observer = ros_processes([
+        installed('observer_node'), '--ros-args',
+        '--params-file', os.path.join(REPO, 'config', 'raw_imu.yaml'),
+        '-r', '__node:=imu_filter', '-r', 'imu/data_raw:=/camera/imu',
+        '-r', 'imu/mag:=/camera/mag', '-p', 'diagnostic_period:=0.2'])
+    driver = spinner.add(Driver(ros_context, '/camera/imu', '/camera/mag'))
+    spinner.spin_until(lambda: driver.imu_publisher.get_subscription_count() == 1
+                       and driver.mag_publisher.get_subscription_count() == 1
+                       and driver.count_publishers('/imu/data') == 1
+                       and observer.process.poll() is None, 20.0, 'the observer process')
+    spinner.spin_for(0.5)
+    gyr, acc, mag = data['gyr'], data['acc'], fields_tesla(data)
+    times = stamps(count, float(data['rate']))
+    # Four times real time; the field of sample k right after it.
+    start = time.monotonic()
+    for k in range(count):
+        target = start + (times[k] - times[0]) * 1e-9 / 4
+        while time.monotonic() < target:
+            spinner.executor.spin_once(timeout_sec=max(0.0, target - time.monotonic()))
+        driver.send_imu(times[k], gyr[k], acc[k])
+        if k % MAG_EVERY == 0:
+            driver.send_field(times[k], mag[k])
+    spinner.spin_until(lambda: times[-1] in driver.outputs, 10.0, 'the last estimate')
+    assert len(driver.outputs) >= 0.95 * (count - 1)
+    assert all(msg.header.frame_id == 'imu_link' for msg in driver.outputs.values())
+    ours = published({t: m for t, m in driver.outputs.items()}, [times[0]] + sorted(
+        driver.outputs))
+    expected = offline(data, mag_every=MAG_EVERY)
+    index = {t: k for k, t in enumerate(times)}
+    got = {index[t]: q for t, q in zip(sorted(driver.outputs), ours[1:])}
+    difference = max(
+        min(np.abs(q - e).max(), np.abs(q + e).max())
+        for k, q in got.items()
+        for e in [expected[k] / np.linalg.norm(expected[k])])
+    print(f'process: {len(got)} of {count - 1} estimates, max |node − core| {difference:.3g}')
+    # Without lockstep a field may be taken one sample early or late: close,
+    # not equal.
+    assert difference < 1e-3
+    assert observer.process.poll() is None, observer.output
+    assert 'raw IMU on /camera/imu and /camera/mag' in observer.output
