@@ -566,13 +566,15 @@ def _anchor_task(task):
 
 # --- the run ---------------------------------------------------------------
 
-def _estimate_ours(trials, modes, variant):
+def _estimate_ours(trials, modes, variant, workers=1):
     from ext_observer.core.ahrs import estimate_batch
     streams = [(t, m) for m in modes for t in trials]
+    extra = {'workers': workers} if workers != 1 else {}
     start = time.perf_counter()
     out = estimate_batch([t.gyr for t, _ in streams], [t.acc for t, _ in streams],
                          [t.mag for t, _ in streams], [t.rate for t, _ in streams],
-                         [m == '9D' for _, m in streams], params=None, variant=variant)
+                         [m == '9D' for _, m in streams], params=None, variant=variant,
+                         **extra)
     seconds = time.perf_counter() - start
     estimates = {m: {} for m in modes}
     for (t, m), q in zip(streams, out):
@@ -580,7 +582,7 @@ def _estimate_ours(trials, modes, variant):
     return estimates, seconds
 
 
-def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1,
+def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
         plot_trial=None, progress=_log):
     """
     Score the estimator (and the anchors) on the trials.
@@ -595,6 +597,9 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1,
         Also run ``variant='plain'`` (no extension term), for comparison.
     jobs : int
         Processes for the anchors.
+    workers : int
+        Processes of our estimator's batched call (``estimate_batch``'s
+        ``workers``; 1 runs it in this process).
     plot_trial : str, optional
         Keep the per-sample errors of this trial (for :func:`plot`).
     progress : callable
@@ -624,7 +629,7 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1,
     for variant, algorithm in variants:
         progress(f'{algorithm}: {len(trials)} trials × {len(modes)} modes in one batch '
                  f'({samples} samples each mode) ...')
-        estimates, seconds = _estimate_ours(trials, modes, variant)
+        estimates, seconds = _estimate_ours(trials, modes, variant, workers)
         result['seconds'][algorithm] = seconds
         progress(f'{algorithm}: {seconds:.1f} s')
         norms = {m: norm_deviation(list(estimates[m].values())) for m in modes}
@@ -708,6 +713,42 @@ def summary(result, groups):
     return out
 
 
+def _criteria(summ):
+    """The issue's done-criteria, read off the averages, as Markdown lines."""
+    ours = summ.get(OURS, {})
+    vqf = summ.get('VQF', {})
+    others = [a for a in ('BasicVQF', 'Madgwick', 'Mahony', 'Fusion') if a in summ]
+    lines = []
+    for group in ('undisturbed', 'disturbed'):
+        value = ours.get('9D', {}).get(group, {}).get('total_rmse_deg')
+        if value is None:
+            continue
+        beaten = [a for a in others
+                  if summ[a].get('9D', {}).get(group, {}).get('total_rmse_deg', -1.0) > value]
+        text = f'- 9D, {group} average: {value:.2f}°; below ' + (
+            ', '.join(beaten) if beaten else 'none of the others')
+        if others:
+            text += (': **all four**' if len(beaten) == len(others) == 4 else
+                     f' ({len(beaten)} of {len(others)})')
+        reference = vqf.get('9D', {}).get(group, {}).get('total_rmse_deg')
+        if reference:
+            ratio = value / reference
+            text += (f'; {ratio:.2f}× VQF (goal ≤ 1.1×: '
+                     + ('met' if ratio <= 1.1 else 'not met')
+                     + ('; below VQF' if ratio < 1.0 else '') + ')')
+        lines.append(text + '.')
+    value = ours.get('6D', {}).get('all_trials', {}).get('inclination_rmse_deg')
+    reference = vqf.get('6D', {}).get('all_trials', {}).get('inclination_rmse_deg')
+    if value is not None:
+        text = f'- 6D, inclination over all trials: {value:.2f}°'
+        if reference:
+            ratio = value / reference
+            text += (f'; {ratio:.2f}× VQF ({reference:.2f}°; criterion ≤ 1.1×: '
+                     + ('met' if ratio <= 1.1 else 'not met') + ')')
+        lines.append(text + '.')
+    return (['At this run:', ''] + lines + ['']) if lines else []
+
+
 def markdown(result, groups, meta, figures, docs_dir, tuning=None):
     """
     Return the page ``broad.md``.
@@ -725,8 +766,9 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
     docs_dir : str
         The folder of the page (links are relative to it).
     tuning : str, optional
-        Markdown of ``broad_tuning.md``, placed under "How the defaults were
-        chosen".
+        Path of the page on the tuning (``broad_tuning.md``), linked under
+        "How the defaults were chosen"; without it the section says that the
+        tuning fills it.
 
     """
     algorithms = _algorithms(result)
@@ -779,7 +821,8 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
         '(`vqf`, causal `updateBatch`), Madgwick (`ahrs`, β = '
         f'{MADGWICK_BETA}) and Mahony (`ahrs`, Kp = {MAHONY_KP}, Ki = {MAHONY_KI}), '
         "BROAD's trial-agnostic best, started from the first sample's gravity and field "
-        "as BROAD's example does, and Fusion (`imufusion`, package defaults). "
+        "(gravity alone in 6D) as BROAD's example does, and Fusion (`imufusion`, package "
+        "defaults). "
         'Versions: ' + ', '.join(f'{k} {v}' for k, v in meta['versions'].items()) + '.',
         '',
         '**Scoring**, as BROAD does: both quaternions normalized, e = q̂ ⊗ q_ref⁻¹ '
@@ -822,6 +865,7 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
               'and Fusion on the undisturbed and on the disturbed 9D averages, at most '
               '1.1× VQF (goal), and at most 1.1× VQF in 6D inclination.', '']
     lines += _table(header, rows) + ['']
+    lines += _criteria(summary(result, groups))
     if 'groups' in figures:
         lines += [f'![Mean RMSE per group and algorithm]({link(figures["groups"])})', '']
 
@@ -885,12 +929,17 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
                       '']
 
     secs = result['seconds']
+    load = meta.get('load') or (None, None)
     lines += ['## Run time', '',
-              f'Wall clock on {meta["machine"]}:', '']
+              f'Wall clock on {meta["machine"]}'
+              + (f' (1-minute load average {load[0]} at the start, {load[1]} at the end: '
+                 'the machine is shared)' if load[0] is not None else '') + ':', '']
     rows = []
     if OURS in secs:
+        workers = meta.get('workers') or 1
         rows.append([OURS, f'{secs[OURS]:.1f} s',
-                     f'{n_trials} trials × {len(modes)} modes, one batched call'])
+                     f'{n_trials} trials × {len(modes)} modes, one batched call'
+                     + (f' ({workers} processes)' if workers > 1 else ' (one process)')])
     if OURS_PLAIN in secs:
         rows.append([OURS_PLAIN, f'{secs[OURS_PLAIN]:.1f} s', 'the same, no extension term'])
     for anchor in ANCHORS:
@@ -933,9 +982,11 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
 
     lines += ['## How the defaults were chosen', '']
     if tuning:
-        lines += [tuning.strip(), '']
+        lines += ['The defaults were chosen on part of these trials and checked on the '
+                  'others (held out); the split, every setting tried and the figures of '
+                  f'both halves: [{os.path.basename(tuning)}]({link(tuning)}).', '']
     else:
-        lines += ['*Filled by the tuning: when `docs/broad_tuning.md` exists, its text is '
+        lines += ['*Filled by the tuning: when `docs/broad_tuning.md` exists, a link to it is '
                   'placed here by the page generator.*', '']
 
     lines += ['## Reproduce', '',
@@ -944,7 +995,9 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
               'out/broad.json --docs docs` (`BROAD_DATA=DIR` for another copy of BROAD: its '
               'HDF5 files directly in DIR or under `DIR/data_hdf5/`, as in a clone of BROAD). '
               '`make bench` does not run it. Options: `--mode 6D|9D|both`, `--no-anchors`, '
-              '`--plain`, `--trials NAME...`, `--jobs N` (processes for the anchors).', '']
+              '`--plain` (also without the extension term), `--trials NAME...`, `--jobs N` '
+              '(processes for the anchors), `--workers N` (for our batched call); '
+              '`make broad BROAD_ARGS="--plain --jobs 2"` passes them on.', '']
     return '\n'.join(lines)
 
 
@@ -1052,6 +1105,14 @@ def _git(*args):
     return done.stdout.strip() if done.returncode == 0 else None
 
 
+def _load():
+    """The 1-minute load average (other work on the machine skews the times)."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except OSError:
+        return None
+
+
 def _machine():
     cpu = platform.processor() or 'unknown CPU'
     try:
@@ -1092,6 +1153,9 @@ def build_parser():
                              'not BROAD figures)')
     parser.add_argument('--jobs', type=int, default=1,
                         help='processes for the anchors (default 1)')
+    parser.add_argument('--workers', type=int, default=1,
+                        help="processes of our estimator's one batched call "
+                             '(estimate_batch(workers=N); default 1)')
     parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
     return parser
 
@@ -1102,8 +1166,8 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     progress = (lambda text: None) if args.quiet else _log
     modes = MODES if args.mode == 'both' else (args.mode,)
-    if args.jobs < 1:
-        print('error: --jobs must be at least 1', file=sys.stderr)
+    if args.jobs < 1 or args.workers < 1:
+        print('error: --jobs and --workers must be at least 1', file=sys.stderr)
         return 2
     if args.head is not None and not args.head > 0.0:
         print('error: --head must be positive', file=sys.stderr)
@@ -1126,8 +1190,11 @@ def main(argv=None):
         groups = find_groups(args.data, names, os.path.dirname(found[0][1]))
         plot_trial = PLOT_TRIAL if PLOT_TRIAL in names else next(
             (n for n in names if 'magnet' in n), names[0])
+        load = _load()
         result = run(trials, modes, anchors, plain=args.plain, jobs=args.jobs,
-                     plot_trial=plot_trial if args.docs else None, progress=progress)
+                     workers=args.workers, plot_trial=plot_trial if args.docs else None,
+                     progress=progress)
+        result['load'] = (load, _load())
     except (ValueError, RuntimeError) as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
@@ -1150,6 +1217,8 @@ def main(argv=None):
         'plot_trial': plot_trial,
         'rate': trials[0].rate,
         'head': args.head,
+        'load': result.get('load'),
+        'workers': args.workers,
     }
     by_name = {t.name: t for t in trials}
 
@@ -1159,11 +1228,8 @@ def main(argv=None):
     if args.docs:
         meta['plot_movement'] = by_name[plot_trial].movement
         figures = plot(result, groups, meta, os.path.join(args.docs, 'figures'))
-        tuning_path = os.path.join(args.docs, 'broad_tuning.md')
-        tuning = None
-        if os.path.isfile(tuning_path):
-            with open(tuning_path, encoding='utf-8') as f:
-                tuning = f.read()
+        tuning = os.path.join(args.docs, 'broad_tuning.md')
+        tuning = tuning if os.path.isfile(tuning) else None
         page = os.path.join(args.docs, 'broad.md')
         with open(page, 'w', encoding='utf-8') as f:
             f.write(markdown(result, groups, meta, figures, args.docs, tuning))
