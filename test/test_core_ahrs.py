@@ -219,3 +219,16 @@ def test_a_field_at_its_own_rate_corrects_on_its_own_time_constant(motion):
         _, heading, _ = errors_deg(np.asarray(est.q), truth[int(20 * RATE) - 1])
         finals.append(heading)
     assert finals[0] < 0.5 * 34.4 and abs(finals[0] - finals[1]) < 0.5, finals
+
+
+def test_non_finite_samples_of_a_recording_are_held(motion):
+    truth, gyr, acc, mag = motion
+    gyr, acc, mag = gyr[:2000].copy(), acc[:2000].copy(), mag[:2000].copy()
+    clean = estimate_batch([gyr], [acc], [mag], [RATE], [True])[0]
+    acc[0] = np.nan  # the very first sample too
+    gyr[700, 1] = np.inf
+    mag[900:905] = np.nan
+    held = estimate_batch([gyr], [acc], [mag], [RATE], [True])[0]
+    assert np.all(np.isfinite(held))
+    total, _, _ = errors_deg(held[1000:], clean[1000:])
+    assert np.max(total) < 0.5

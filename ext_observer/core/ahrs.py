@@ -611,7 +611,8 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
     ----------
     gyr, acc, mag : list of ndarray, shape (N_i, 3)
         rad/s, m/s², field (any unit). ``mag`` entries may be ``None`` where
-        ``use_mag`` is false.
+        ``use_mag`` is false. A sample with a non-finite value is replaced
+        by the last finite one of its sensor (held), as a node would drop it.
     rate_hz : list of float
         Sampling rate of each recording (all must be equal).
     use_mag : list of bool
@@ -641,8 +642,8 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
         out = np.empty((n_max, 3, count))
         for i, a in enumerate(arrays):
             a = np.zeros((lengths[i], 3)) if a is None else np.asarray(a, dtype=float)
-            out[:len(a), :, i] = a
-            out[len(a):, :, i] = a[-1]  # hold the last sample past the end
+            out[:len(a), :, i] = _hold_finite(a)
+            out[len(a):, :, i] = out[len(a) - 1, :, i]  # hold the last sample past the end
         return out
 
     job = (stack(gyr), stack(acc), stack(mag), np.asarray(use_mag, dtype=bool), dt,
@@ -668,6 +669,20 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
 
 
 _JOB = None
+
+
+def _hold_finite(a):
+    """A recording with every non-finite sample replaced by the last finite one."""
+    bad = ~np.isfinite(a).all(axis=1)
+    if not bad.any():
+        return a
+    if bad.all():
+        raise ValueError('a recording has no finite sample')
+    index = np.where(bad, 0, np.arange(len(a)))
+    np.maximum.accumulate(index, out=index)
+    first = np.argmax(~bad)
+    index[:first] = first  # before the first finite sample: that sample
+    return a[index]
 
 
 def _run_job_streams(streams):
