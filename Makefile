@@ -13,7 +13,7 @@ BENCH_STAMP := $(VENV)/.ext_observer-bench
 # Every process that starts a ROS node stays on this machine.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-.PHONY: all venv demo test reproduce bench broad docs clean
+.PHONY: all venv demo test reproduce bench broad docs test-hosts hosts-report clean
 
 all: test
 
@@ -75,6 +75,20 @@ broad: $(BENCH_STAMP)
 # EXT_OBSERVER_SOAK_SECONDS, _RATE, _DEPTH and _MONITOR=0 change the setup.
 soak: $(TEST_STAMP)
 	$(PY) -m pytest -m soak -s $(PYTEST_ARGS) test/test_soak.py
+
+# Two hosts over DDS (test/test_hosts.py, docs/across_machines.md): two
+# network namespaces joined by a veth pair, loss and a partition with
+# nftables, at 200 Hz; about 4 minutes. Root only: the first line checks
+# (and as root installs iproute2 and nftables if missing), and fails with
+# one line saying what is missing. Figures in out/hosts.json; make
+# hosts-report draws them into docs/.
+test-hosts:
+	@$(PYTHON) test/netns.py check
+	@$(MAKE) --no-print-directory $(TEST_STAMP)
+	$(PY) -m pytest -m hosts -s $(PYTEST_ARGS) test/test_hosts.py
+
+hosts-report: $(RUNTIME_STAMP)
+	$(PY) test/hosts_report.py
 
 clean:
 	rm -rf $(VENV) build install log out .pytest_cache .hypothesis *.egg-info
