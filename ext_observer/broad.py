@@ -696,9 +696,9 @@ def summary(result, groups):
     """
     Return the averages the issue's done-criteria use.
 
-    ``{algorithm: {'9D': {group: {total, heading, inclination}}, '6D':
-    {...}}}`` for the groups ``all_trials``, ``undisturbed`` and
-    ``disturbed``, plus ratios to VQF where VQF ran.
+    ``{algorithm: {mode: {group: {total_rmse_deg, heading_rmse_deg,
+    inclination_rmse_deg}}}}`` for the groups ``all_trials``,
+    ``undisturbed`` and ``disturbed``.
     """
     out = {}
     for algorithm in _algorithms(result):
@@ -775,6 +775,9 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
     scores = result['scores']
     modes = [m for m in MODES if any(m in scores[a] for a in algorithms)]
     n_trials = len(meta['trials'])
+    # The plain variant scores like ours (it differs in |q̂| only): in the
+    # summary and the |q̂̄q̂ − 1| table, not in the detailed tables.
+    detailed = [a for a in algorithms if a != OURS_PLAIN]
 
     def means(algorithm, mode, key):
         per_trial = scores.get(algorithm, {}).get(mode)
@@ -876,13 +879,13 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
         lines += [f'## {title}', '',
                   'Mean over the trials of each group, degrees; (n) is the number of '
                   'trials.', '']
-        table = {a: means(a, mode, key) for a in algorithms}
+        table = {a: means(a, mode, key) for a in detailed}
         rows = []
         for group, level in groups['order']:
             n = len([t for t in groups['members'][group] if t in meta['trials']])
             rows.append([f'{_group_label(group, level)} ({n})']
-                        + [_fmt(table[a].get(group)) for a in algorithms])
-        lines += _table(['group (n)'] + algorithms, rows) + ['']
+                        + [_fmt(table[a].get(group)) for a in detailed])
+        lines += _table(['group (n)'] + detailed, rows) + ['']
 
     if have9:
         lines += ['## 9D: heading and inclination', '',
@@ -893,12 +896,12 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
             if level > 1:
                 continue
             row = [_group_label(group, level)]
-            for a in algorithms:
+            for a in detailed:
                 h = means(a, '9D', 'heading_rmse_deg').get(group)
                 i = means(a, '9D', 'inclination_rmse_deg').get(group)
                 row.append(f'{_fmt(h)} / {_fmt(i)}')
             rows.append(row)
-        lines += _table(['group'] + algorithms, rows) + ['']
+        lines += _table(['group'] + detailed, rows) + ['']
 
     if 'trial' in figures:
         lines += ['## Error over time on a magnetically disturbed trial', '',
@@ -947,6 +950,11 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
             rows.append([anchor, f'{secs[anchor]:.1f} s',
                          'compiled' if anchor in ('VQF', 'BasicVQF', 'Fusion')
                          else 'pure Python (`ahrs`), one call per sample'])
+    if 'anchors_wall' in secs:
+        jobs = meta.get('jobs') or 1
+        rows.append(['all anchors', f'{secs["anchors_wall"]:.1f} s',
+                     f'wall clock, {jobs} process{"es" if jobs > 1 else ""}; the anchor rows above '
+                     'add up the time of each run in its process'])
     lines += _table(['algorithm', 'time', 'note'], rows, numeric=False) + ['']
 
     lines += ['## Per trial', '',
@@ -956,7 +964,7 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
     for mode, key, short in (('9D', 'total_rmse_deg', '9D'), ('6D', 'inclination_rmse_deg',
                                                                '6D incl.')):
         if mode in modes:
-            for a in algorithms:
+            for a in detailed:
                 if mode in scores[a]:
                     header.append(f'{a} {short}')
                     cols.append((a, mode, key))
@@ -1179,6 +1187,16 @@ def main(argv=None):
               'requirements-bench.txt (or make bench), or run with --no-anchors',
               file=sys.stderr)
         return 2
+    # What runs is what is on disk now: commit, changes and parameters are
+    # read before the run (others may commit while it runs).
+    from ext_observer.core.ahrs import AhrsParams
+    estimator_files = ['ext_observer/core/ahrs.py', 'ext_observer/broad.py']
+    source = {
+        'commit': _git('rev-parse', '--short', 'HEAD') or 'unknown',
+        'dirty': bool(_git('status', '--porcelain', '--', *estimator_files)),
+        'date': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
+        'params': AhrsParams().as_dict(),
+    }
     try:
         found = find_trials(args.data, args.trials)
         start = time.perf_counter()
@@ -1199,27 +1217,22 @@ def main(argv=None):
         print(f'error: {error}', file=sys.stderr)
         return 2
 
-    from ext_observer.core.ahrs import AhrsParams
-    estimator_files = ['ext_observer/core/ahrs.py', 'ext_observer/broad.py']
-    status = _git('status', '--porcelain', '--', *estimator_files)
     command = 'python -m ext_observer broad ' + ' '.join(argv)
-    meta = {
-        'command': command.strip(),
-        'commit': _git('rev-parse', '--short', 'HEAD') or 'unknown',
-        'dirty': bool(status),
-        'date': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
-        'machine': _machine(),
-        'versions': _versions(),
-        'params': AhrsParams().as_dict(),
-        'trials': names,
-        'groups_source': ('trials.json' if groups['source'] != 'file names'
-                          else 'the file names'),
-        'plot_trial': plot_trial,
-        'rate': trials[0].rate,
-        'head': args.head,
-        'load': result.get('load'),
-        'workers': args.workers,
-    }
+    meta = dict(
+        source,
+        command=command.strip(),
+        machine=_machine(),
+        versions=_versions(),
+        trials=names,
+        groups_source=('trials.json' if groups['source'] != 'file names'
+                       else 'the file names'),
+        plot_trial=plot_trial,
+        rate=trials[0].rate,
+        head=args.head,
+        load=result.get('load'),
+        workers=args.workers,
+        jobs=args.jobs,
+    )
     by_name = {t.name: t for t in trials}
 
     print(text_report(result, groups, meta))
