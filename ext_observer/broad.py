@@ -953,8 +953,8 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
     if 'anchors_wall' in secs:
         jobs = meta.get('jobs') or 1
         rows.append(['all anchors', f'{secs["anchors_wall"]:.1f} s',
-                     f'wall clock, {jobs} process{"es" if jobs > 1 else ""}; the anchor rows above '
-                     'add up the time of each run in its process'])
+                     f'wall clock, {jobs} process{"es" if jobs > 1 else ""}; the anchor rows '
+                     'above add up the time of each run in its process'])
     lines += _table(['algorithm', 'time', 'note'], rows, numeric=False) + ['']
 
     lines += ['## Per trial', '',
