@@ -10,7 +10,8 @@ process writes. Each line of the output file is a JSON array:
   ``received`` the reader's reception timestamp (both from the middleware's
   message info), ``now`` this process's clock in the callback; all ns since
   the epoch (the namespaces share the machine's clock);
-- ``["t", stamp, w, x, y, z]``: an ``attitude/ground_truth``;
+- ``["t", stamp, source, w, x, y, z]``: an ``attitude/ground_truth`` (``source``:
+  when the gyro published step k, with its increment and measurement);
 - ``["d", now, name, level, message, {key: value}]``: a ``/diagnostics`` status.
 
 Usage: ``hosts_recorder.py OUT [--estimates reliable|best_effort|none]
@@ -61,9 +62,10 @@ class Recorder(Node):
         self.lines.append(['e', nanoseconds(msg.header.stamp), info['source_timestamp'],
                            info['received_timestamp'], time.time_ns(), q.w, q.x, q.y, q.z])
 
-    def truth_callback(self, msg):
+    def truth_callback(self, msg, info):
         q = msg.quaternion
-        self.lines.append(['t', nanoseconds(msg.header.stamp), q.w, q.x, q.y, q.z])
+        self.lines.append(['t', nanoseconds(msg.header.stamp), info['source_timestamp'],
+                           q.w, q.x, q.y, q.z])
 
     def diagnostics_callback(self, msg):
         now = time.time_ns()

@@ -19,9 +19,11 @@ PAGE = os.path.join(REPO, 'docs', 'across_machines.md')
 FIGURES = os.path.join(REPO, 'docs', 'figures')
 LAYOUTS = {'gyro_monitor_on_a': 'gyro, monitor on A; observer on B',
            'gyro_monitor_on_b': 'observer on A; gyro, monitor on B'}
-INPUTS = {'qos_best_effort_inputs': 'best effort, depth 100',
-          'gyro_monitor_on_a': 'reliable, depth 100 (default)',
-          'qos_reliable_inputs_depth_1000': 'reliable, depth 1000'}
+# The observer's increments (input_reliability, queue_depth); its
+# measurements are best effort in every case (the sensor-data QoS).
+INPUTS = {'qos_best_effort_inputs': 'increments best effort, depth 100',
+          'gyro_monitor_on_a': 'increments reliable, depth 100 (default)',
+          'qos_reliable_inputs_depth_1000': 'increments reliable, depth 1000'}
 
 
 def fmt(value, digits=2, unit=''):
@@ -53,6 +55,15 @@ def block_run(results):
             'baseline before the first fault.')
 
 
+def steps_cells(phase):
+    steps = phase.get('steps_during') or {}
+    delay = steps.get('delay_ms') or {}
+    return [percent(steps.get('estimated_fraction')),
+            f'{fmt(delay.get("p50"), 0)} / {fmt(delay.get("p99"), 0)}'
+            if delay.get('p50') is not None else '–',
+            fmt(steps.get('error_mean'), 2)]
+
+
 def block_faults(results):
     setup = results['setup']
     bounds = setup['recovery_bound_s']
@@ -64,9 +75,8 @@ def block_faults(results):
         for phase in run['phases']:
             if phase['kind'] == 'none':
                 rows.append([label, f'none (band {run["band_rad"]:.2f} rad)', '–',
-                             fmt(phase['estimates_per_s_during'], 0),
-                             percent(phase.get('steps_estimated_fraction')), 'OK',
-                             fmt(phase['error_mean_during'], 2), '–', '–'])
+                             fmt(phase['estimates_per_s_during'], 0)] + steps_cells(phase)
+                            + ['OK', '–', '–'])
                 continue
             monitor = ('STALE after {} s, OK {} s after'.format(
                 fmt(phase['monitor_stale_after_s']), fmt(phase['monitor_ok_after_s']))
@@ -75,13 +85,13 @@ def block_faults(results):
                                  if phase['monitor_ok_after_s'] is not None else ''))
             rows.append([
                 label, phase['name'], percent(phase.get('packet_loss_measured')),
-                fmt(phase['estimates_per_s_during'], 0),
-                percent(phase.get('steps_estimated_fraction')), monitor,
-                fmt(phase['error_mean_during'], 2),
-                fmt(phase['peak_error_rolling'], 2),
+                fmt(phase['estimates_per_s_during'], 0)] + (
+                    steps_cells(phase) if phase['kind'] != 'restart' else ['–', '–', '–']) + [
+                monitor, fmt(phase['peak_error_rolling'], 2),
                 f'**{fmt(phase["recovery_s"], 2)} s** (≤ {bounds[phase["kind"]]:g})'])
     return table(['hosts', 'fault', 'packets lost', 'estimates/s during',
-                  'steps with an estimate', 'monitor (other host)', 'error during (rad)',
+                  'its steps with an estimate', 'their delay p50 / p99 (ms)',
+                  'their error (rad)', 'monitor (other host)',
                   'peak 0.25 s error (rad)', 'back in band after'], rows)
 
 
@@ -141,15 +151,15 @@ def block_inputs(results):
             loss = phase.get('loss_percent')
             if 'reliable' not in phase:
                 continue
-            error = phase.get('error_mean', phase.get('error_mean_during'))
             propagated = phase.get('propagated_fraction')
             if propagated is None and phase.get('observer_steps'):
                 propagated = phase['observer_steps_propagated'] / phase['observer_steps']
-            rows.append([inputs, f'{loss or 0} %', percent(phase.get('packet_loss_measured')),
-                         percent(phase.get('steps_estimated_fraction')), percent(propagated),
-                         fmt(error, 2)])
+            gap = phase.get('longest_gap_s', phase.get('longest_gap_during_s'))
+            rows.append([inputs, f'{loss or 0} %', percent(phase.get('packet_loss_measured'))]
+                        + steps_cells(phase) + [percent(propagated), fmt(gap, 2)])
     return table(['observer inputs', 'loss set', 'packets lost', 'steps with an estimate',
-                  'steps without a measurement', 'attitude error mean (rad)'], rows)
+                  'estimate delay p50 / p99 (ms)', 'attitude error (rad)',
+                  'steps without a measurement', 'longest pause in publishing (s)'], rows)
 
 
 # Figures ---------------------------------------------------------------------------
@@ -175,8 +185,9 @@ def figures(results, folder):
     def loss_of(phase):
         return 100 * (phase.get('packet_loss_measured') or 0)
 
-    # 1. Loss rate -> delivered fraction; the observer's steps; its error.
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    # 1. Loss rate -> delivered fraction; the observer's steps, their delay, error.
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+    axes = axes.ravel()
     phases = sweep(results, 'qos_best_effort_inputs')
     for subscription, color in (('reliable', 'tab:blue'), ('best_effort', 'tab:red')):
         axes[0].plot([loss_of(p) for p in phases],
@@ -189,20 +200,24 @@ def figures(results, folder):
     for key, label in INPUTS.items():
         phases = sweep(results, key)
         color, marker = styles[key]
-        axes[1].plot([loss_of(p) for p in phases],
-                     [100 * (p.get('steps_estimated_fraction') or 0) for p in phases],
+        steps = [p.get('steps_during') or {} for p in phases]
+        losses = [loss_of(p) for p in phases]
+        axes[1].plot(losses, [100 * (s.get('estimated_fraction') or 0) for s in steps],
                      marker=marker, color=color, label=label)
-        axes[2].plot([loss_of(p) for p in phases],
-                     [p.get('error_mean', p.get('error_mean_during')) for p in phases],
-                     marker=marker, color=color, label=label)
-    axes[1].set(title="the observer's inputs across the link", xlabel='packets lost (%)',
+        axes[2].plot(losses, [max((s.get('delay_ms') or {}).get('p99') or 0, 0.1)
+                              for s in steps], marker=marker, color=color, label=label)
+        axes[3].plot(losses, [s.get('error_mean') for s in steps], marker=marker,
+                     color=color, label=label)
+    axes[1].set(title="the observer's increments across the link", xlabel='packets lost (%)',
                 ylabel='gyro steps with an estimate (%)', ylim=(40, 102))
-    axes[1].legend(title='observer inputs', fontsize=8)
-    axes[2].set(title='attitude error while losing', xlabel='packets lost (%)',
+    axes[2].set(title='delay of the estimate after the step (p99)', xlabel='packets lost (%)',
+                ylabel='ms', yscale='log')
+    axes[3].set(title="the estimates' attitude error", xlabel='packets lost (%)',
                 ylabel='mean attitude error (rad)', ylim=(0, None))
-    axes[2].legend(title='observer inputs', fontsize=8)
+    for axis in axes[1:]:
+        axis.legend(fontsize=7)
     for axis in axes:
-        axis.grid(alpha=0.3)
+        axis.grid(alpha=0.3, which='both')
     fig.tight_layout()
     path = os.path.join(folder, 'hosts_delivery.png')
     fig.savefig(path, dpi=110)
@@ -233,8 +248,15 @@ def figures(results, folder):
             if layout in results['runs']]
     fig, axes = plt.subplots(len(runs), 1, figsize=(12, 3.2 * len(runs)), squeeze=False)
     for axis, (layout, run) in zip(axes[:, 0], runs):
-        axis.plot(run['series']['t'], run['series']['rolling_error'], lw=0.8,
-                  color='tab:blue', label='attitude error, 0.25 s mean')
+        # No line across a time without estimates (a partition, a restart).
+        t, error = [], []
+        for time_s, value in zip(run['series']['t'], run['series']['rolling_error']):
+            if t and time_s - t[-1] > 0.25:
+                t.append(time_s)
+                error.append(float('nan'))
+            t.append(time_s)
+            error.append(value)
+        axis.plot(t, error, lw=0.8, color='tab:blue', label='attitude error, 0.25 s mean')
         axis.axhline(run['band_rad'], color='tab:green', ls='--', lw=1,
                      label=f'no-fault band {run["band_rad"]:.2f} rad')
         for span, phase in zip(run['timeline_s'][1:], run['phases'][1:]):
