@@ -234,7 +234,7 @@ def figures(results, folder):
                        for p in phases], marker='o', color=color, ls=style,
                       label=f'{subscription.replace("_", " ")} {quantile}')
     axis.set(yscale='log', xlabel='packets lost (%)', ylabel='latency (ms)',
-             title='attitude_estimate latency across the link')
+             title='attitude_estimate latency across the link\n(the sweep with best-effort increments)')
     axis.grid(alpha=0.3, which='both')
     axis.legend(fontsize=8)
     fig.tight_layout()
