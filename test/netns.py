@@ -143,13 +143,12 @@ def kill_namespace_processes(namespace, timeout=5.0):
 
 
 def _alive(pid):
+    """Whether process ``pid`` runs (a zombie, killed but not reaped, does not)."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
+        with open(f'/proc/{pid}/stat') as stat:
+            return stat.read().rsplit(')', 1)[1].split()[0] not in ('Z', 'X')
+    except (FileNotFoundError, ProcessLookupError, IndexError):
         return False
-    except PermissionError:
-        return True
-    return True
 
 
 def cleanup_leftovers():
