@@ -460,13 +460,18 @@ def _run_madgwick(gyr, acc, mag, rate, use_mag):
     q0 = attitude_from_acc_mag(acc[0], mag[0] if use_mag else None)
     q = np.empty((len(gyr), 4))
     q[0] = multiply(conjugate(np.asarray(NWU_TO_ENU)), q0)
+    _run_ahrs_filter(f, q, gyr, acc, mag, use_mag)
+    return _to_enu(q, NWU_TO_ENU)
+
+
+def _run_ahrs_filter(f, q, gyr, acc, mag, use_mag):
+    """One ``ahrs`` update per sample from ``q[0]`` on (MARG in 9D, IMU in 6D)."""
     if use_mag:
         for k in range(1, len(gyr)):
             q[k] = f.updateMARG(q[k - 1], gyr[k], acc[k], mag[k])
     else:
         for k in range(1, len(gyr)):
             q[k] = f.updateIMU(q[k - 1], gyr[k], acc[k])
-    return _to_enu(q, NWU_TO_ENU)
 
 
 def _run_mahony(gyr, acc, mag, rate, use_mag):
@@ -478,12 +483,7 @@ def _run_mahony(gyr, acc, mag, rate, use_mag):
     f = Mahony(frequency=rate, k_P=MAHONY_KP, k_I=MAHONY_KI)
     q = np.empty((len(gyr), 4))
     q[0] = attitude_from_acc_mag(acc[0], mag[0] if use_mag else None)
-    if use_mag:
-        for k in range(1, len(gyr)):
-            q[k] = f.updateMARG(q[k - 1], gyr[k], acc[k], mag[k])
-    else:
-        for k in range(1, len(gyr)):
-            q[k] = f.updateIMU(q[k - 1], gyr[k], acc[k])
+    _run_ahrs_filter(f, q, gyr, acc, mag, use_mag)
     return _to_enu(q, IDENTITY)
 
 

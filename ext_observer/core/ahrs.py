@@ -240,6 +240,11 @@ def _butterworth(tau, dt):
     return (b0, 2.0 * b0, b0, 2.0 * (wc * wc - 1.0) / a0, (1.0 - k + wc * wc) / a0)
 
 
+def _check_dt(dt):
+    if not (math.isfinite(dt) and dt > 0.0):
+        raise ValueError(f'dt must be positive and finite, got {dt}')
+
+
 def _gain(tau, dt):
     """Per-sample gain of a first-order filter with time constant ``tau``."""
     return 1.0 - np.exp(-dt / tau)
@@ -314,8 +319,7 @@ class AhrsObserver:
     def _coefficients(self, dt):
         if self._dt == dt:
             return
-        if not (math.isfinite(dt) and dt > 0.0):
-            raise ValueError(f'dt must be positive and finite, got {dt}')
+        _check_dt(dt)
         p = self.params
         self._dt = dt
         self._bw = _butterworth(p.tau_acc, dt)
@@ -466,8 +470,7 @@ class AhrsObserver:
                      o.clip(bz - k * cz, -m, m))
 
     def _mag_coefficients(self, dt):
-        if not (math.isfinite(dt) and dt > 0.0):
-            raise ValueError(f'dt must be positive and finite, got {dt}')
+        _check_dt(dt)
         p = self.params
         self._mag_dt = dt
         self._k_mag = _gain(p.tau_mag, dt)
