@@ -29,8 +29,9 @@ renormalizes it. Each sample runs three steps, each a short function:
     accepted after ``mag_new_time``.
 
 The gyro bias is learned at rest (rest detected from the gyro and the
-accelerometer) and, in motion, from the corrections: a constant bias makes
-the estimate drift, so the body-frame correction averages ``−(b − b̂) dt``.
+accelerometer) and, with ``tau_bias > 0`` (off by default), in motion from
+the corrections: a constant bias makes the estimate drift, so the body-frame
+correction averages ``−(b − b̂) dt``.
 
 Conventions: quaternions scalar first ``(w, x, y, z)``, sensor → world; the
 world frame is ENU (x east, y north, z up, REP-103); at rest the
@@ -294,6 +295,7 @@ class AhrsObserver:
             self.use_mag = np.broadcast_to(np.asarray(use_mag, dtype=bool),
                                            (int(batch),)).copy()
         self._any_mag = bool(np.any(self.use_mag))
+        self._motion_bias = bool(np.any(np.asarray(self.params.tau_bias) > 0.0))
         self._dt = None
         self._mag_dt = None
         self.reset()
@@ -394,7 +396,6 @@ class AhrsObserver:
         self._detect_rest(gyr)
 
     def _detect_rest(self, gyr):
-        o = self._o
         p = self.params
         k = self._k_rest
         gx, gy, gz = self._rest_gyr
@@ -455,10 +456,10 @@ class AhrsObserver:
 
     def _learn_bias(self, rw, rx, ry, rz):
         """In motion: the correction ``r`` (world) averages ``−(b − b̂) dt`` (body)."""
-        tb = self.params.tau_bias
-        if not np.any(tb > 0.0):
+        if not self._motion_bias:
             return
         o = self._o
+        tb = self.params.tau_bias
         # Small-angle rotation vector of r, in the body frame.
         cx, cy, cz = 2.0 * rx / rw, 2.0 * ry / rw, 2.0 * rz / rw
         w, x, y, z = self.q
