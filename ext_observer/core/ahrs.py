@@ -172,6 +172,8 @@ class AhrsParams:
 
 class _FloatOps:
     sqrt = staticmethod(math.sqrt)
+    tan = staticmethod(math.tan)
+    exp = staticmethod(math.exp)
     atan2 = staticmethod(math.atan2)
     cos = staticmethod(math.cos)
     sin = staticmethod(math.sin)
@@ -201,6 +203,8 @@ class _FloatOps:
 
 class _ArrayOps:
     sqrt = staticmethod(np.sqrt)
+    tan = staticmethod(np.tan)
+    exp = staticmethod(np.exp)
     atan2 = staticmethod(np.arctan2)
     cos = staticmethod(np.cos)
     sin = staticmethod(np.sin)
@@ -224,17 +228,35 @@ def _rotate(w, x, y, z, vx, vy, vz):
     n2 = w * w + x * x + y * y + z * z
     s = (w * w - x * x - y * y - z * z)
     d = 2.0 * (x * vx + y * vy + z * vz)
+    w2 = 2.0 * w
     cx = y * vz - z * vy
     cy = z * vx - x * vz
     cz = x * vy - y * vx
-    return ((s * vx + d * x + 2.0 * w * cx) / n2,
-            (s * vy + d * y + 2.0 * w * cy) / n2,
-            (s * vz + d * z + 2.0 * w * cz) / n2)
+    return ((s * vx + d * x + w2 * cx) / n2,
+            (s * vy + d * y + w2 * cy) / n2,
+            (s * vz + d * z + w2 * cz) / n2)
 
 
-def _butterworth(tau, dt):
+def _rotate_two(w, x, y, z, v, u):
+    """:func:`_rotate` of two vectors ``v`` and ``u`` by the same ``q``."""
+    n2 = w * w + x * x + y * y + z * z
+    s = (w * w - x * x - y * y - z * z)
+    w2 = 2.0 * w
+    out = []
+    for vx, vy, vz in (v, u):
+        d = 2.0 * (x * vx + y * vy + z * vz)
+        cx = y * vz - z * vy
+        cy = z * vx - x * vz
+        cz = x * vy - y * vx
+        out += ((s * vx + d * x + w2 * cx) / n2,
+                (s * vy + d * y + w2 * cy) / n2,
+                (s * vz + d * z + w2 * cz) / n2)
+    return out
+
+
+def _butterworth(tau, dt, o):
     """Second-order Butterworth low-pass (bilinear, prewarped), cutoff 1/(2π τ)."""
-    wc = np.tan(0.5 * dt / tau)
+    wc = o.tan(0.5 * dt / tau)
     k = math.sqrt(2.0) * wc
     a0 = 1.0 + k + wc * wc
     b0 = wc * wc / a0
@@ -246,9 +268,9 @@ def _check_dt(dt):
         raise ValueError(f'dt must be positive and finite, got {dt}')
 
 
-def _gain(tau, dt):
+def _gain(tau, dt, o):
     """Per-sample gain of a first-order filter with time constant ``tau``."""
-    return 1.0 - np.exp(-dt / tau)
+    return 1.0 - o.exp(-dt / tau)
 
 
 class AhrsObserver:
@@ -319,18 +341,15 @@ class AhrsObserver:
         self._mag_used = z  # samples used since start (initial averaging)
 
     def _coefficients(self, dt):
-        if self._dt == dt:
-            return
+        # Every sample when the stamps jitter: math on the float path.
         _check_dt(dt)
         p = self.params
+        o = self._o
+        dt = float(dt)  # a numpy scalar would make every later quantity one
         self._dt = dt
-        self._bw = _butterworth(p.tau_acc, dt)
-        self._k_acc = _gain(p.tau_acc_gain, dt)
-        self._k_rest = _gain(p.tau_rest, dt)
-        if self.batch is None:
-            for name in ('_k_acc', '_k_rest'):
-                setattr(self, name, float(getattr(self, name)))
-            self._bw = tuple(float(v) for v in self._bw)
+        self._bw = _butterworth(p.tau_acc, dt, o)
+        self._k_acc = _gain(p.tau_acc_gain, dt, o)
+        self._k_rest = _gain(p.tau_rest, dt, o)
 
     # --- the three steps ---------------------------------------------------
 
@@ -402,14 +421,17 @@ class AhrsObserver:
         gx, gy, gz = gx + k * (gyr[0] - gx), gy + k * (gyr[1] - gy), gz + k * (gyr[2] - gz)
         self._rest_gyr = (gx, gy, gz)
         bx, by, bz = self.bias
-        dev = ((gyr[0] - gx) ** 2 + (gyr[1] - gy) ** 2 + (gyr[2] - gz) ** 2)
-        mean = (gx - bx) ** 2 + (gy - by) ** 2 + (gz - bz) ** 2
-        still = (dev < p.rest_gyr ** 2) & (mean < p.rest_gyr ** 2) & self._acc_still
+        ex, ey, ez = gyr[0] - gx, gyr[1] - gy, gyr[2] - gz
+        dev = ex * ex + ey * ey + ez * ez
+        mx, my, mz = gx - bx, gy - by, gz - bz
+        mean = mx * mx + my * my + mz * mz
+        th = p.rest_gyr * p.rest_gyr
+        still = (dev < th) & (mean < th) & self._acc_still
         self.rest_time = (self.rest_time + self._dt) * still
         self.rest = self.rest_time >= p.rest_time
         # At rest the bias is the low-passed rate.
         kr = k * self.rest
-        self.bias = (bx + kr * (gx - bx), by + kr * (gy - by), bz + kr * (gz - bz))
+        self.bias = (bx + kr * mx, by + kr * my, bz + kr * mz)
 
     _acc_still = True
 
@@ -423,7 +445,8 @@ class AhrsObserver:
         rx, ry, rz = self._rest_acc
         rx, ry, rz = rx + k * (ax - rx), ry + k * (ay - ry), rz + k * (az - rz)
         self._rest_acc = (rx, ry, rz)
-        self._acc_still = ((ax - rx) ** 2 + (ay - ry) ** 2 + (az - rz) ** 2) < p.rest_acc ** 2
+        ex, ey, ez = ax - rx, ay - ry, az - rz
+        self._acc_still = (ex * ex + ey * ey + ez * ez) < p.rest_acc * p.rest_acc
 
         w, x, y, z = self.q
         vx, vy, vz = _rotate(w, x, y, z, ax, ay, az)
@@ -449,15 +472,12 @@ class AhrsObserver:
                   rw * y + ry * w - rx * z,
                   rw * z + rx * y - ry * x)
         # The filter's states follow the applied rotation (r need not be unit).
-        s1x, s1y, s1z = _rotate(rw, rx, ry, 0.0, s1x, s1y, s1z)
-        s2x, s2y, s2z = _rotate(rw, rx, ry, 0.0, s2x, s2y, s2z)
-        self._lp = (s1x, s1y, s1z, s2x, s2y, s2z)
-        self._learn_bias(rw, rx, ry, 0.0)
+        self._lp = _rotate_two(rw, rx, ry, 0.0, (s1x, s1y, s1z), (s2x, s2y, s2z))
+        if self._motion_bias:
+            self._learn_bias(rw, rx, ry, 0.0)
 
     def _learn_bias(self, rw, rx, ry, rz):
         """In motion: the correction ``r`` (world) averages ``−(b − b̂) dt`` (body)."""
-        if not self._motion_bias:
-            return
         o = self._o
         tb = self.params.tau_bias
         # Small-angle rotation vector of r, in the body frame.
@@ -473,11 +493,10 @@ class AhrsObserver:
     def _mag_coefficients(self, dt):
         _check_dt(dt)
         p = self.params
+        dt = float(dt)
         self._mag_dt = dt
-        self._k_mag = _gain(p.tau_mag, dt)
-        self._k_ref = _gain(p.tau_mag_ref, dt)
-        if self.batch is None:
-            self._k_mag, self._k_ref = float(self._k_mag), float(self._k_ref)
+        self._k_mag = _gain(p.tau_mag, dt, self._o)
+        self._k_ref = _gain(p.tau_mag_ref, dt, self._o)
 
     def update_mag(self, mag, dt=None):
         """
@@ -543,8 +562,9 @@ class AhrsObserver:
         s1x, s1y, s1z, s2x, s2y, s2z = self._lp
         self._lp = (c * s1x - s * s1y, s * s1x + c * s1y, s1z,
                     c * s2x - s * s2y, s * s2x + c * s2y, s2z)
-        # Only corrections of the steady phase teach the bias.
-        self._learn_bias(rw, 0.0, 0.0, rz * (used * self._k_mag > 1.0))
+        if self._motion_bias:
+            # Only corrections of the steady phase teach the bias.
+            self._learn_bias(rw, 0.0, 0.0, rz * (used * self._k_mag > 1.0))
 
 
 def initial_attitude(acc, mag=None, ops=_FloatOps, use_mag=True):
