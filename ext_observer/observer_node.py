@@ -60,6 +60,7 @@ Faults
 
 import math
 
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, QuaternionStamped, Vector3Stamped
 from rclpy.clock import ClockChange, JumpThreshold
@@ -442,14 +443,16 @@ class ObserverNode(Node):
         self._clock = self.get_clock()
         self._now = self._clock.now().nanoseconds
         self._estimate_msg = QuaternionStamped()
+        self._stamp = Time()  # of a step with no sample of its own
         self._unit_msg = QuaternionStamped()
         self._imu_msg = Imu()
         if self.increment_source != 'imu':
             # Not measured: -1 in the first element (sensor_msgs/Imu).
             self._imu_msg.angular_velocity_covariance[0] = -1.0
             self._imu_msg.linear_acceleration_covariance[0] = -1.0
-        # IMU samples by stamp, until the step their stamp ends is published
-        # (its angular velocity and acceleration go out on imu/data).
+        # IMU samples by stamp, (message, ω, specific force or None), until
+        # the step their stamp ends is published (the message goes out on
+        # imu/data with the estimate).
         self._imu_samples = {}
         self._body_frame_id = ''
         self._cache_settings(settings)
@@ -559,12 +562,15 @@ class ObserverNode(Node):
 
     def imu_data_raw_callback(self, msg):
         """Take an IMU sample ``ω`` (rad/s); its successor makes the increment."""
-        now = self._now = self._clock.now().nanoseconds
         stamp = nanoseconds_from_stamp(msg.header.stamp)
         if self.raw is None:
+            now = self._now = self._clock.now().nanoseconds
             omega, acceleration = vector_from_msg(msg.angular_velocity), None
         else:
-            # Raw IMU: the acceleration is checked with the sample.
+            # Raw IMU: its steps wait for nothing (no deadline, timeout 0), so
+            # the clock is not read; the acceleration is checked with the
+            # sample.
+            now = 0
             omega, acceleration = imu_vectors(msg)
         pairer = self.pairer
         if pairer.add_angular_velocity(stamp, omega, now, acceleration) == BACKWARD_JUMP:
@@ -573,7 +579,7 @@ class ObserverNode(Node):
         if pairer.pending_stamp == stamp:
             # Taken (a dropped sample is never kept, nor replaces one).
             samples = self._imu_samples
-            samples[stamp] = msg
+            samples[stamp] = (msg, omega, acceleration)
             if len(samples) > 2 * self._depth + 2:
                 del samples[next(iter(samples))]
         self._process(now)
@@ -704,7 +710,8 @@ class ObserverNode(Node):
             self._last_interval = step.stamp - step.previous
         # The sample stamped t_{k+1} closed the step: it goes out with q̂_{k+1}
         # (the raw IMU: the step runs on it).
-        sample = None if step.end is None else self._take_imu_sample(step.end)
+        taken = None if step.end is None else self._take_imu_sample(step.end)
+        sample = None if taken is None else taken[0]
         if self.raw is None:
             state, reason = self.guarded.step(step.increment, step.measurement)
         elif sample is None:
@@ -712,7 +719,7 @@ class ObserverNode(Node):
             return
         else:
             state, reason = self.raw.step(
-                sample, self._constant_dt or (step.end - step.stamp) * 1e-9)
+                taken[1], taken[2], self._constant_dt or (step.end - step.stamp) * 1e-9)
         if reason is not None:
             self.reinitializations[reason] += 1
             self.get_logger().warning(
@@ -724,13 +731,18 @@ class ObserverNode(Node):
             self.get_logger().warning(
                 f'{self.parameters.settings["queue_depth"]} increments waiting: stepping '
                 'without waiting for measurements', throttle_duration_sec=LOG_THROTTLE)
-        end = step.end
-        if end is None:
-            end = min(step.stamp + (self._period or self._last_interval or 0), STAMP_MAX)
-        sec, nanosec = divmod(end, SECOND)
-        w, x, y, z = state
         msg = self._estimate_msg
-        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+        if sample is not None:
+            # Stamped t_{k+1}, the sample's own stamp.
+            stamp = msg.header.stamp = sample.header.stamp
+        else:
+            end = step.end
+            if end is None:
+                end = min(step.stamp + (self._period or self._last_interval or 0), STAMP_MAX)
+            stamp = self._stamp
+            stamp.sec, stamp.nanosec = divmod(end, SECOND)
+            msg.header.stamp = stamp
+        w, x, y, z = state
         q = msg.quaternion
         q.w, q.x, q.y, q.z = w, x, y, z
         self.estimate_publisher.publish(msg)
@@ -739,26 +751,27 @@ class ObserverNode(Node):
             w, x, y, z = w / n, x / n, y / n, z / n
         if self._publish_unit:
             msg = self._unit_msg
-            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+            msg.header.stamp = stamp
             q = msg.quaternion
             q.w, q.x, q.y, q.z = w, x, y, z
             self.unit_publisher.publish(msg)
         if self._publish_imu:
-            msg = self._imu_msg
-            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+            if sample is not None:
+                # The sample itself goes out, its header, rates and
+                # covariances passed through (as imu_filter_madgwick does):
+                # the message is this node's once its callback has run.
+                msg = sample
+                msg.orientation_covariance = self._orientation_covariance
+            else:
+                msg = self._imu_msg
+                msg.header.stamp = stamp
+                msg.header.frame_id = self._body_frame_id
             q = msg.orientation
             q.w, q.x, q.y, q.z = w, x, y, z
-            if step.end is None:
-                msg.header.frame_id = self._body_frame_id
-            elif sample is not None:
-                msg.header.frame_id = sample.header.frame_id
-                msg.angular_velocity = sample.angular_velocity
-                msg.angular_velocity_covariance = sample.angular_velocity_covariance
-                msg.linear_acceleration = sample.linear_acceleration
-                msg.linear_acceleration_covariance = sample.linear_acceleration_covariance
             self.imu_publisher.publish(msg)
 
     def _take_imu_sample(self, stamp):
+        """Remove and return the kept sample stamped ``stamp`` (and older ones), or None."""
         samples = self._imu_samples
         while samples:
             first = next(iter(samples))
@@ -776,6 +789,8 @@ class ObserverNode(Node):
         self._constant_dt = settings['constant_dt']
         self._imu_msg.orientation_covariance = [
             float(v) for v in settings['orientation_covariance']]
+        # The same (numpy) array goes into every sample passed through.
+        self._orientation_covariance = self._imu_msg.orientation_covariance
         self._estimate_msg.header.frame_id = settings['frame_id']
         self._unit_msg.header.frame_id = settings['frame_id']
 

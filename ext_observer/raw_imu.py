@@ -193,7 +193,8 @@ class RawImuEstimator:
     def __init__(self, settings):
         self.core = AhrsObserver(params=ahrs_params(settings), use_mag=settings['use_mag'])
         self.world_frame = settings['world_frame']
-        self._frame = WORLD_FRAMES[self.world_frame]
+        # The left factor into world_frame; None for ENU, the core's own.
+        self._frame = None if self.world_frame == 'enu' else WORLD_FRAMES[self.world_frame]
         self.latest_field = None
         self.configure(settings)
 
@@ -227,14 +228,16 @@ class RawImuEstimator:
         if self.core.q is not None:
             self.core.update_mag(field, dt)
 
-    def step(self, msg, dt):
+    def step(self, gyr, acc, dt):
         """
         Run one IMU sample.
 
         Parameters
         ----------
-        msg : sensor_msgs.msg.Imu
-            Validated by the caller (finite, nonzero acceleration).
+        gyr, acc : sequence of 3 float
+            Angular velocity (rad/s) and specific force (m/s²) of the sample
+            (:func:`imu_vectors`), validated by the caller (finite, nonzero
+            acceleration).
         dt : float
             Time since the previous sample, s.
 
@@ -247,7 +250,6 @@ class RawImuEstimator:
             (:data:`~ext_observer.guard.GUARD_REASONS`), else None.
 
         """
-        gyr, acc = imu_vectors(msg)
         core = self.core
         try:
             q = core.update(gyr, acc, self.latest_field if core.q is None else None, dt)
@@ -264,8 +266,8 @@ class RawImuEstimator:
     def state(self):
         """The estimate in ``world_frame`` (ambient), or None before the first step."""
         q = self.core.q
-        if q is None:
-            return None
+        if q is None or self._frame is None:
+            return q
         cw, cx, cy, cz = self._frame
         w, x, y, z = q
         return (cw * w - cx * x - cy * y - cz * z,

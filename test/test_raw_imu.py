@@ -35,7 +35,8 @@ from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_ms
 from ext_observer.core.ahrs import AhrsParams, world_from_enu
 from ext_observer.node_common import ParameterError
 from ext_observer.observer_node import ObserverNode
-from ext_observer.raw_imu import AHRS_PREFIX, RAW_IMU_PARAMETERS, RawImuEstimator
+from ext_observer.raw_imu import (AHRS_PREFIX, imu_vectors, RAW_IMU_PARAMETERS,
+                                  RawImuEstimator)
 from ros_helpers import installed, overrides, SECOND, values_of
 
 BEST_EFFORT = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -378,12 +379,12 @@ def test_raw_imu_divergence_guard_reinitializes_from_the_sample():
     msg.angular_velocity.z = 0.1
     msg.linear_acceleration.x, msg.linear_acceleration.z = 1.0, 9.7
     estimator.field((2e-5, 0.0, -4e-5))
-    state, reason = estimator.step(msg, 0.01)
+    state, reason = estimator.step(*imu_vectors(msg), 0.01)
     assert reason is None and abs(math.hypot(*state) - 1.0) < 1e-9
     for poison, expected in (((10.0, 0.0, 0.0, 0.0), 'residual_too_large'),
                              ((math.nan, 0.0, 0.0, 0.0), 'state_non_finite')):
         estimator.core.q = poison
-        state, reason = estimator.step(msg, 0.01)
+        state, reason = estimator.step(*imu_vectors(msg), 0.01)
         assert reason == expected
         # From gravity and the latest field again: unit, finite.
         assert abs(math.hypot(*state) - 1.0) < 1e-9
