@@ -450,9 +450,9 @@ class ObserverNode(Node):
             # Not measured: -1 in the first element (sensor_msgs/Imu).
             self._imu_msg.angular_velocity_covariance[0] = -1.0
             self._imu_msg.linear_acceleration_covariance[0] = -1.0
-        # IMU samples by stamp, (message, ω, specific force or None), until
-        # the step their stamp ends is published (the message goes out on
-        # imu/data with the estimate).
+        # IMU samples by stamp, (message, ω, None), until the step their
+        # stamp ends is published (the message goes out on imu/data with the
+        # estimate). The raw IMU keeps none: its steps run at once.
         self._imu_samples = {}
         self._body_frame_id = ''
         self._cache_settings(settings)
@@ -563,23 +563,27 @@ class ObserverNode(Node):
     def imu_data_raw_callback(self, msg):
         """Take an IMU sample ``ω`` (rad/s); its successor makes the increment."""
         stamp = nanoseconds_from_stamp(msg.header.stamp)
-        if self.raw is None:
-            now = self._now = self._clock.now().nanoseconds
-            omega, acceleration = vector_from_msg(msg.angular_velocity), None
-        else:
-            # Raw IMU: its steps wait for nothing (no deadline, timeout 0), so
-            # the clock is not read; the acceleration is checked with the
-            # sample.
-            now = 0
-            omega, acceleration = imu_vectors(msg)
         pairer = self.pairer
-        if pairer.add_angular_velocity(stamp, omega, now, acceleration) == BACKWARD_JUMP:
+        if self.raw is not None:
+            # Raw IMU: the acceleration is checked with the sample. Its steps
+            # wait for nothing (timeout 0, no deadline, so the clock is not
+            # read): the step this sample closes is released at once and runs
+            # on it.
+            omega, acceleration = imu_vectors(msg)
+            if pairer.add_angular_velocity(stamp, omega, 0, acceleration) == BACKWARD_JUMP:
+                self._backward_jump(stamp)
+            for step in pairer.pop_ready(0):
+                self._step(step, (msg, omega, acceleration) if step.end == stamp else None)
+            return
+        now = self._now = self._clock.now().nanoseconds
+        omega = vector_from_msg(msg.angular_velocity)
+        if pairer.add_angular_velocity(stamp, omega, now) == BACKWARD_JUMP:
             self._imu_samples.clear()
             self._backward_jump(stamp)
         if pairer.pending_stamp == stamp:
             # Taken (a dropped sample is never kept, nor replaces one).
             samples = self._imu_samples
-            samples[stamp] = (msg, omega, acceleration)
+            samples[stamp] = (msg, omega, None)
             if len(samples) > 2 * self._depth + 2:
                 del samples[next(iter(samples))]
         self._process(now)
@@ -696,7 +700,8 @@ class ObserverNode(Node):
         for step in self.pairer.pop_ready(now):
             self._step(step)
 
-    def _step(self, step):
+    def _step(self, step, taken=None):
+        """Run one released step; ``taken``: the IMU sample that closed it, if known."""
         if step.gap:
             settings = self.parameters.settings
             gap = (step.stamp - step.previous) * 1e-9
@@ -710,12 +715,13 @@ class ObserverNode(Node):
             self._last_interval = step.stamp - step.previous
         # The sample stamped t_{k+1} closed the step: it goes out with q̂_{k+1}
         # (the raw IMU: the step runs on it).
-        taken = None if step.end is None else self._take_imu_sample(step.end)
+        if taken is None and step.end is not None and self.raw is None:
+            taken = self._take_imu_sample(step.end)
         sample = None if taken is None else taken[0]
         if self.raw is None:
             state, reason = self.guarded.step(step.increment, step.measurement)
         elif sample is None:
-            # Cannot happen: the sample that closed a step is kept until then.
+            # Cannot happen: a raw step is released by the sample that closes it.
             return
         else:
             state, reason = self.raw.step(

@@ -496,6 +496,8 @@ class StepPairer:
 
     def _take_measurement(self, stamp, increment, end):
         """Return the measurement of the step (removed; carried to ``stamp``), or None."""
+        if not self._measurements:
+            return None
         if end is None:
             return self._measurements.pop(stamp, None)
         inside = [t for t in self._measurements if stamp <= t < end]
