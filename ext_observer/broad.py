@@ -569,12 +569,11 @@ def _anchor_task(task):
 def _estimate_ours(trials, modes, variant, workers=1):
     from ext_observer.core.ahrs import estimate_batch
     streams = [(t, m) for m in modes for t in trials]
-    extra = {'workers': workers} if workers != 1 else {}
     start = time.perf_counter()
     out = estimate_batch([t.gyr for t, _ in streams], [t.acc for t, _ in streams],
                          [t.mag for t, _ in streams], [t.rate for t, _ in streams],
                          [m == '9D' for _, m in streams], params=None, variant=variant,
-                         **extra)
+                         workers=workers)
     seconds = time.perf_counter() - start
     estimates = {m: {} for m in modes}
     for (t, m), q in zip(streams, out):
@@ -599,7 +598,7 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
         Processes for the anchors.
     workers : int
         Processes of our estimator's batched call (``estimate_batch``'s
-        ``workers``; 1 runs it in this process).
+        ``workers``; 1: vectorized in this process).
     plot_trial : str, optional
         Keep the per-sample errors of this trial (for :func:`plot`).
     progress : callable
@@ -627,7 +626,8 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
 
     variants = [('extended', OURS)] + ([('plain', OURS_PLAIN)] if plain else [])
     for variant, algorithm in variants:
-        progress(f'{algorithm}: {len(trials)} trials × {len(modes)} modes in one batch '
+        progress(f'{algorithm}: {len(trials)} trials × {len(modes)} modes in one batched call, '
+                 f'{workers} process{"es" if workers > 1 else ""} '
                  f'({samples} samples each mode) ...')
         estimates, seconds = _estimate_ours(trials, modes, variant, workers)
         result['seconds'][algorithm] = seconds
@@ -942,7 +942,8 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
         workers = meta.get('workers') or 1
         rows.append([OURS, f'{secs[OURS]:.1f} s',
                      f'{n_trials} trials × {len(modes)} modes, one batched call'
-                     + (f' ({workers} processes)' if workers > 1 else ' (one process)')])
+                     + (f' ({workers} processes, each recording on floats)' if workers > 1
+                        else ' (vectorized, one process)')])
     if OURS_PLAIN in secs:
         rows.append([OURS_PLAIN, f'{secs[OURS_PLAIN]:.1f} s', 'the same, no extension term'])
     for anchor in ANCHORS:
@@ -1161,9 +1162,10 @@ def build_parser():
                              'not BROAD figures)')
     parser.add_argument('--jobs', type=int, default=1,
                         help='processes for the anchors (default 1)')
-    parser.add_argument('--workers', type=int, default=1,
+    parser.add_argument('--workers', type=int, default=os.cpu_count() or 1,
                         help="processes of our estimator's one batched call "
-                             '(estimate_batch(workers=N); default 1)')
+                             '(estimate_batch(workers=N); default: the CPUs, '
+                             f'{os.cpu_count() or 1} here; 1: vectorized in this process)')
     parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
     return parser
 
