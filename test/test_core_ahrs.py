@@ -151,6 +151,17 @@ def test_float_and_batch_paths_agree():
         assert_allclose(batch[i], single, rtol=0, atol=1e-12)
 
 
+def test_the_float_path_stays_on_floats_whatever_dt_is():
+    # A numpy dt (1 / a numpy rate) once made every quantity a numpy scalar
+    # and the node's step 3× slower; jittering stamps change dt every sample.
+    est = AhrsObserver()
+    for dt in (np.float64(0.005), 0.0051, np.float64(0.0049)):
+        q = est.update((0.1, 0.0, -0.02), (0.3, 0.1, 9.8), (20.0, 1.0, -40.0), dt)
+        est.update_mag((20.0, 1.0, -40.0), np.float64(0.01))
+        assert all(type(v) is float for v in q + est.bias + est._lp), q
+        assert type(est._k_acc) is float and type(est._k_mag) is float
+
+
 def test_workers_give_the_vectorized_estimates():
     # workers=2: each recording on floats in a forked process, longest first;
     # per-recording parameters and held non-finite samples included.
