@@ -445,11 +445,13 @@ class ObserverNode(Node):
         self._estimate_msg = QuaternionStamped()
         self._stamp = Time()  # of a step with no sample of its own
         self._unit_msg = QuaternionStamped()
+        # imu/data of a step without an IMU sample at hand (the increments
+        # come from gyro/increment, or the sample was pushed out of the
+        # queue): its rates are not known, -1 in the first element of their
+        # covariances (sensor_msgs/Imu).
         self._imu_msg = Imu()
-        if self.increment_source != 'imu':
-            # Not measured: -1 in the first element (sensor_msgs/Imu).
-            self._imu_msg.angular_velocity_covariance[0] = -1.0
-            self._imu_msg.linear_acceleration_covariance[0] = -1.0
+        self._imu_msg.angular_velocity_covariance[0] = -1.0
+        self._imu_msg.linear_acceleration_covariance[0] = -1.0
         # IMU samples by stamp, (message, ω, None), until the step their
         # stamp ends is published (the message goes out on imu/data with the
         # estimate). The raw IMU keeps none: its steps run at once.
@@ -576,6 +578,7 @@ class ObserverNode(Node):
                 self._step(step, (msg, omega, acceleration) if step.end == stamp else None)
             return
         now = self._now = self._clock.now().nanoseconds
+        self._body_frame_id = msg.header.frame_id
         omega = vector_from_msg(msg.angular_velocity)
         if pairer.add_angular_velocity(stamp, omega, now) == BACKWARD_JUMP:
             self._imu_samples.clear()
