@@ -68,7 +68,7 @@ BROAD_DATA ?= ../shared/broad
 BROAD_ARGS ?=
 
 broad: $(BENCH_STAMP)
-	$(PY) -m ext_observer broad --data $(BROAD_DATA) --mode both --json out/broad.json --docs docs $(BROAD_ARGS)
+	$(PY) -m ext_observer broad --data $(BROAD_DATA) --mode both --plain --json out/broad.json --docs docs $(BROAD_ARGS)
 
 # The soak (test/test_soak.py): gyro, observer and monitor processes at 1 kHz
 # for 60 s; memory flat, every input accounted for. Figures in out/soak.json.

@@ -1000,13 +1000,14 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
 
     lines += ['## Reproduce', '',
               '```', 'make broad', '```', '',
-              'runs `python -m ext_observer broad --data ../shared/broad --mode both --json '
-              'out/broad.json --docs docs` (`BROAD_DATA=DIR` for another copy of BROAD: its '
-              'HDF5 files directly in DIR or under `DIR/data_hdf5/`, as in a clone of BROAD). '
-              '`make bench` does not run it. Options: `--mode 6D|9D|both`, `--no-anchors`, '
-              '`--plain` (also without the extension term), `--trials NAME...`, `--jobs N` '
-              '(processes for the anchors), `--workers N` (for our batched call); '
-              '`make broad BROAD_ARGS="--plain --jobs 2"` passes them on.', '']
+              'runs `python -m ext_observer broad --data ../shared/broad --mode both --plain '
+              '--json out/broad.json --docs docs` (`BROAD_DATA=DIR` for another copy of BROAD: '
+              'its HDF5 files directly in DIR or under `DIR/data_hdf5/`, as in a clone of '
+              'BROAD). `make bench` does not run it. Options: `--mode 6D|9D|both`, '
+              '`--no-anchors`, `--plain` (also without the extension term), '
+              '`--trials NAME...`, `--jobs N` (processes for the anchors) and `--workers N` '
+              '(for our batched call; 1: vectorized in one process), both by default the '
+              'CPUs; `make broad BROAD_ARGS="--jobs 1"` passes them on.', '']
     return '\n'.join(lines)
 
 
@@ -1160,8 +1161,9 @@ def build_parser():
     parser.add_argument('--head', type=float, metavar='SECONDS',
                         help='cut each trial to its first SECONDS (quick checks only; '
                              'not BROAD figures)')
-    parser.add_argument('--jobs', type=int, default=1,
-                        help='processes for the anchors (default 1)')
+    parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1,
+                        help=f'processes for the anchors (default: the CPUs, {os.cpu_count() or 1} '
+                             'here)')
     parser.add_argument('--workers', type=int, default=os.cpu_count() or 1,
                         help="processes of our estimator's one batched call "
                              '(estimate_batch(workers=N); default: the CPUs, '
