@@ -237,23 +237,6 @@ def _rotate(w, x, y, z, vx, vy, vz):
             (s * vz + d * z + w2 * cz) / n2)
 
 
-def _rotate_two(w, x, y, z, v, u):
-    """:func:`_rotate` of two vectors ``v`` and ``u`` by the same ``q``."""
-    n2 = w * w + x * x + y * y + z * z
-    s = (w * w - x * x - y * y - z * z)
-    w2 = 2.0 * w
-    out = []
-    for vx, vy, vz in (v, u):
-        d = 2.0 * (x * vx + y * vy + z * vz)
-        cx = y * vz - z * vy
-        cy = z * vx - x * vz
-        cz = x * vy - y * vx
-        out += ((s * vx + d * x + w2 * cx) / n2,
-                (s * vy + d * y + w2 * cy) / n2,
-                (s * vz + d * z + w2 * cz) / n2)
-    return out
-
-
 def _butterworth(tau, dt, o):
     """Second-order Butterworth low-pass (bilinear, prewarped), cutoff 1/(2π τ)."""
     wc = o.tan(0.5 * dt / tau)
@@ -472,7 +455,8 @@ class AhrsObserver:
                   rw * y + ry * w - rx * z,
                   rw * z + rx * y - ry * x)
         # The filter's states follow the applied rotation (r need not be unit).
-        self._lp = _rotate_two(rw, rx, ry, 0.0, (s1x, s1y, s1z), (s2x, s2y, s2z))
+        self._lp = (_rotate(rw, rx, ry, 0.0, s1x, s1y, s1z)
+                    + _rotate(rw, rx, ry, 0.0, s2x, s2y, s2z))
         if self._motion_bias:
             self._learn_bias(rw, rx, ry, 0.0)
 
