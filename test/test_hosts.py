@@ -696,13 +696,17 @@ def test_qos_across_the_link(bed, ros_domain_id, tmp_path, case):
     # No loss: everything arrives, either way.
     assert by_loss[0]['best_effort']['delivered_fraction'] >= 0.99, by_loss[0]
     assert by_loss[0]['reliable']['delivered_fraction'] >= 0.99, by_loss[0]
-    # 20 %: best effort loses about a fifth of the estimates; reliable more
-    # of them arrive, later.
+    # 20 %: reliable gets every estimate, later than best effort.
     lossy = by_loss[20]
-    assert 0.7 <= lossy['best_effort']['delivered_fraction'] <= 0.9, lossy
-    assert lossy['reliable']['delivered_fraction'] > lossy['best_effort']['delivered_fraction']
+    assert lossy['reliable']['delivered_fraction'] >= 0.98, lossy
     assert lossy['reliable']['latency_ms']['p50'] > lossy['best_effort']['latency_ms']['p50']
     if config['input_reliability'] == 'best_effort':
+        # Estimates go out steadily, one per step: best effort loses about
+        # a fifth of them. (With reliable inputs they go out in bursts
+        # after each repair, several to a datagram, and on 2 shared cores a
+        # burst can also overflow the subscriber: best effort delivered 67 %
+        # of them once, 80 % another time; no band is asserted there.)
+        assert 0.7 <= lossy['best_effort']['delivered_fraction'] <= 0.9, lossy
         # A lost increment is a step without an estimate; the others at once.
         assert 0.7 <= lossy['steps_during']['estimated_fraction'] <= 0.9, lossy
         assert lossy['steps_during']['delay_ms']['p50'] < 100, lossy
