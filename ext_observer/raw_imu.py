@@ -37,6 +37,7 @@ import math
 
 from ext_observer.conversions import vector_from_msg
 from ext_observer.core.ahrs import AhrsObserver, AhrsParams, WORLD_FRAMES
+from ext_observer.core.quaternion import multiply_floats
 from ext_observer.core.validation import check_state
 from ext_observer.node_common import ParameterSpec
 
@@ -268,12 +269,7 @@ class RawImuEstimator:
         q = self.core.q
         if q is None or self._frame is None:
             return q
-        cw, cx, cy, cz = self._frame
-        w, x, y, z = q
-        return (cw * w - cx * x - cy * y - cz * z,
-                cw * x + cx * w + cy * z - cz * y,
-                cw * y - cx * z + cy * w + cz * x,
-                cw * z + cx * y - cy * x + cz * w)
+        return multiply_floats(self._frame, q)
 
     def reset(self):
         """Forget the estimate: the next step initializes it again."""

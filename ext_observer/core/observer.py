@@ -341,15 +341,6 @@ def _multiply_components(p, q, out):
     return out
 
 
-def _multiply(p, q):
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return (pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw)
-
-
 def _quaternion_from_rotation_vector(r):
     hx, hy, hz = 0.5 * r[0], 0.5 * r[1], 0.5 * r[2]
     a = math.sqrt(hx * hx + hy * hy + hz * hz)
@@ -425,7 +416,7 @@ class SingleObserver:
         cfg = self.config
         q = self.state
         E = _quaternion_from_rotation_vector(increment)
-        new = _multiply(q, E)
+        new = quat.multiply_floats(q, E)
         propagated = new
         if measurement is not None:
             y0, y1, y2, y3 = measurement
@@ -434,10 +425,10 @@ class SingleObserver:
                 y0, y1, y2, y3 = -y0, -y1, -y2, -y3
             innovation = (y0 - q[0], y1 - q[1], y2 - q[2], y3 - q[3])
             if cfg.gain_mode == 'constant':
-                c = _multiply(innovation, cfg.gain)
+                c = quat.multiply_floats(innovation, cfg.gain)
             else:
                 kappa = cfg.kappa_at(self.measurements_used)
-                c = tuple(kappa * v for v in _multiply(innovation, E))
+                c = tuple(kappa * v for v in quat.multiply_floats(innovation, E))
             new = (new[0] + c[0], new[1] + c[1], new[2] + c[2], new[3] + c[3])
             self.measurements_used += 1
         if cfg.variant == 'extended':

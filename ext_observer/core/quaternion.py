@@ -30,6 +30,7 @@ __all__ = [
     'log',
     'manifold_distance',
     'multiply',
+    'multiply_floats',
     'norm',
     'normalize',
     'quaternion_from_rotation_vector',
@@ -115,6 +116,29 @@ def multiply(p, q):
     out[..., 2] = pw * qy - px * qz + py * qw + pz * qx
     out[..., 3] = pw * qz + px * qy - py * qx + pz * qw
     return out
+
+
+def multiply_floats(p, q):
+    """
+    Hamilton product ``p ⊗ q`` of two quaternions given as 4 Python floats.
+
+    The single-estimate paths (the nodes') use it: no numpy call per step.
+
+    Parameters
+    ----------
+    p, q : sequence of 4 float
+
+    Returns
+    -------
+    pq : tuple of 4 float
+
+    """
+    pw, px, py, pz = p
+    qw, qx, qy, qz = q
+    return (pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw)
 
 
 def right_matrix(q):
