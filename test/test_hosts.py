@@ -696,11 +696,16 @@ def test_qos_across_the_link(bed, ros_domain_id, tmp_path, case):
     # No loss: everything arrives, either way.
     assert by_loss[0]['best_effort']['delivered_fraction'] >= 0.99, by_loss[0]
     assert by_loss[0]['reliable']['delivered_fraction'] >= 0.99, by_loss[0]
-    # 20 %: reliable gets (nearly) every estimate, later than best effort.
+    # 20 %: reliable gets (nearly) every estimate.
     lossy = by_loss[20]
     assert lossy['reliable']['delivered_fraction'] >= 0.98, lossy
-    assert lossy['reliable']['latency_ms']['p50'] > lossy['best_effort']['latency_ms']['p50']
     if config['input_reliability'] == 'best_effort':
+        # Estimates go out steadily: reliable waits for repairs, best
+        # effort does not. (With reliable inputs they go out in bursts and
+        # the subscriber's queue sets the latency of both: best effort's
+        # p50 was 219 ms against reliable's 153 ms once.)
+        assert (lossy['reliable']['latency_ms']['p50']
+                > lossy['best_effort']['latency_ms']['p50']), lossy
         # Estimates go out steadily, one per step: best effort loses about
         # a fifth of them. (With reliable inputs they go out in bursts
         # after each repair, several to a datagram, and on 2 shared cores a
