@@ -27,7 +27,7 @@ import time
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped
@@ -46,12 +46,19 @@ class Recorder(Node):
         if estimates != 'none':
             reliability = {'reliable': ReliabilityPolicy.RELIABLE,
                            'best_effort': ReliabilityPolicy.BEST_EFFORT}[estimates]
+            # Keep all: after a stall the observer publishes a burst of
+            # estimates faster than this process reads them, and a kept-last
+            # history would drop the oldest unread in this reader (with depth
+            # 1000, 37 % of a burst of 1180 once), which is not what the
+            # link did.
             self.create_subscription(QuaternionStamped, 'attitude_estimate',
                                      self.estimate_callback,
-                                     QoSProfile(depth=1000, reliability=reliability))
+                                     QoSProfile(history=HistoryPolicy.KEEP_ALL,
+                                                reliability=reliability))
         if truth:
             self.create_subscription(QuaternionStamped, 'attitude/ground_truth',
-                                     self.truth_callback, QoSProfile(depth=1000))
+                                     self.truth_callback,
+                                     QoSProfile(history=HistoryPolicy.KEEP_ALL))
         if diagnostics:
             self.create_subscription(DiagnosticArray, '/diagnostics',
                                      self.diagnostics_callback, QoSProfile(depth=100))
