@@ -47,7 +47,9 @@ Faults
     estimate (``divergence_max_residual``, ``divergence_max_innovation``)
     and reinitializes it from the latest valid measurement when it diverged.
     Nothing non-finite is ever published. Every reset is counted by cause
-    and logged (throttled).
+    and logged (throttled). A silent input (none for ``input_timeout``: a
+    stopped driver, a wrong topic, a network partition) is a WARN status
+    that names the topic, and is logged when it starts and ends.
 
 ``t_{k+1}``
     The increment covers ``[t_k, t_{k+1})`` but carries only ``t_k``. The
@@ -232,6 +234,11 @@ OBSERVER_PARAMETERS = (
                   read_only=True),
     ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.', (0.01, 3600.0),
                   read_only=True),
+    ParameterSpec('input_timeout', 2.0,
+                  'WARN when no increment has arrived for this long (after the first), '
+                  'or no measurement while increments come (not with measurement_source '
+                  'accel), s; checked at each status, by the node clock; 0 = never.',
+                  (0.0, 3600.0)),
 ) + RAW_IMU_PARAMETERS
 
 
@@ -389,6 +396,11 @@ class ObserverNode(Node):
         self.reinitializations = dict.fromkeys(GUARD_REASONS, 0)
         self._deltas = CounterDeltas()
         self._status_steps = self._status_fields = 0
+        # Per kind: (inputs received, node clock at the first status that
+        # saw that count). Nothing came since then, so the input has been
+        # silent for at least now minus that time.
+        self._heard = dict.fromkeys(KINDS, (0, self.get_clock().now().nanoseconds))
+        self._quiet = set()     # the kinds reported silent at the last status
         self._last_interval = None
         self.qos = QosWatch(self)
         output_qos = QoSProfile(depth=depth)
@@ -895,6 +907,26 @@ class ObserverNode(Node):
             parts.append(f'no magnetic field on {self.measurement_subscription.topic_name} '
                          'since the last status: heading not corrected')
         self._status_steps, self._status_fields = steps, fields
+        silent = self._silence()
+        timeout = self.parameters.settings['input_timeout']
+        quiet = {}
+        if timeout > 0 and pairer.received['increment'] > 0:
+            if silent['increment'] >= timeout:
+                quiet['increment'] = (f'no increments on '
+                                      f'{self.increment_subscription.topic_name} for '
+                                      f'{silent["increment"]:.3g} s or more')
+            elif self.raw is None and silent['measurement'] >= timeout:
+                quiet['measurement'] = (f'no measurements on '
+                                        f'{self.measurement_subscription.topic_name} for '
+                                        f'{silent["measurement"]:.3g} s or more: steps '
+                                        'propagate')
+        logger = self.get_logger()
+        for kind in quiet.keys() - self._quiet:
+            logger.warning(quiet[kind])
+        for kind in self._quiet - quiet.keys():
+            logger.info(f'{kind}s arriving again')
+        self._quiet = set(quiet)
+        parts.extend(quiet.values())
         if parts:
             status.level = DiagnosticStatus.WARN
             status.message = '; '.join(parts)
@@ -919,12 +951,34 @@ class ObserverNode(Node):
             + [('inputs_received', received), ('inputs_processed', processed),
                ('inputs_dropped', dropped), ('inputs_waiting', waiting),
                ('waiting_increments', pairer.waiting('increment')),
-               ('waiting_measurements', pairer.waiting('measurement'))]
+               ('waiting_measurements', pairer.waiting('measurement')),
+               ('increments_silent_s', silent['increment']),
+               ('measurements_silent_s', silent['measurement'])]
             + list(faults.items())
             + self.qos.key_values()
             + [('estimate_norm', math.nan if state is None
                 else math.sqrt(sum(v * v for v in state)))])
         return status
+
+    def _silence(self):
+        """
+        Return, per kind, how long no input of it arrived, s (a lower bound).
+
+        Counted at each status, so that no input callback reads a clock: an
+        input counted at the status of time T arrived by T. 0 while they
+        come; a backward jump of the node clock starts the count over.
+        """
+        now = self._clock.now().nanoseconds
+        silent = {}
+        for kind in KINDS:
+            count = self.pairer.received[kind]
+            heard, since = self._heard[kind]
+            if count != heard or now < since:
+                self._heard[kind] = (count, now)
+                silent[kind] = 0.0
+            else:
+                silent[kind] = (now - since) * 1e-9
+        return silent
 
     def diagnostic_callback(self):
         """Publish :meth:`status` on ``/diagnostics``."""

@@ -76,22 +76,29 @@ def block_faults(results):
             if phase['kind'] == 'none':
                 rows.append([label, f'none (band {run["band_rad"]:.2f} rad)', '–',
                              fmt(phase['estimates_per_s_during'], 0)] + steps_cells(phase)
-                            + ['OK', '–', '–'])
+                            + ['–', 'OK', '–', '–'])
                 continue
             monitor = ('STALE after {} s, OK {} s after'.format(
                 fmt(phase['monitor_stale_after_s']), fmt(phase['monitor_ok_after_s']))
                 if phase['monitor_stale'] else
                 'never STALE' + (f', OK {fmt(phase["monitor_ok_after_s"])} s after'
                                  if phase['monitor_ok_after_s'] is not None else ''))
+            if phase['kind'] == 'restart':
+                observer = 'started again'
+            elif phase.get('observer_silent'):
+                observer = 'silent (WARN) after {} s, cleared {} s after'.format(
+                    fmt(phase['observer_silent_after_s']), fmt(phase['observer_back_after_s']))
+            else:
+                observer = 'never silent' if 'observer_silent' in phase else '–'
             rows.append([
                 label, phase['name'], percent(phase.get('packet_loss_measured')),
                 fmt(phase['estimates_per_s_during'], 0)] + (
                     steps_cells(phase) if phase['kind'] != 'restart' else ['–', '–', '–']) + [
-                monitor, fmt(phase['peak_error_rolling'], 2),
+                observer, monitor, fmt(phase['peak_error_rolling'], 2),
                 f'**{fmt(phase["recovery_s"], 2)} s** (≤ {bounds[phase["kind"]]:g})'])
     return table(['hosts', 'fault', 'packets lost', 'estimates/s during',
                   'its steps with an estimate', 'their delay p50 / p99 (ms)',
-                  'their error (rad)', 'monitor (other host)',
+                  'their error (rad)', 'observer (own host)', 'monitor (other host)',
                   'peak 0.25 s error (rad)', 'back in band after'], rows)
 
 

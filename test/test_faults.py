@@ -262,6 +262,49 @@ def test_jumps_gaps_and_the_reset_service(ros_context, spinner):
     assert_all_finite(probe)
 
 
+def test_a_silent_input_warns_with_its_topic_and_clears(ros_context, spinner):
+    observer, probe = observer_and_probe(spinner, ros_context, input_timeout=0.3,
+                                         measurement_timeout=0.02)
+    driver = Driver(spinner, probe, observer)
+    # Before the first increment the node is only waiting: no warning.
+    status = fresh_status(spinner, probe, OBSERVER_STATUS)
+    assert status.level == DiagnosticStatus.OK, status.message
+    driver.run(20)
+
+    def silent(kind, at_least):
+        return lambda v: float(v[f'{kind}s_silent_s']) >= at_least
+
+    # The gyro stops: WARN, naming the topic, once 0.3 s have passed.
+    status = fresh_status(spinner, probe, OBSERVER_STATUS, silent('increment', 0.3))
+    assert status.level == DiagnosticStatus.WARN
+    assert 'no increments on /gyro/increment for' in status.message, status.message
+    assert 'no measurements' not in status.message, status.message
+    # It comes back: OK, the silence 0 again.
+    driver.run(5)
+    status = fresh_status(spinner, probe, OBSERVER_STATUS,
+                          lambda v: v['steps'] == str(driver.steps_done()))
+    assert status.level == DiagnosticStatus.OK, status.message
+    assert float(values_of(status)['increments_silent_s']) < 0.3
+
+    # Increments without measurements: the steps propagate, and say why.
+    corrected = observer.counts['steps_corrected']
+
+    def warned():
+        probe.send_increment(driver.stamp, (0.01, 0.0, 0.0))
+        driver.stamp += PERIOD
+        spinner.spin_for(0.05)
+        last = probe.last_status(OBSERVER_STATUS)
+        return last.level == DiagnosticStatus.WARN and 'no measurements' in last.message
+    spinner.spin_until(warned, 5.0, 'a warning about the measurements')
+    status = probe.last_status(OBSERVER_STATUS)
+    assert ('no measurements on /attitude/measurement for' in status.message
+            and 'steps propagate' in status.message), status.message
+    assert float(values_of(status)['measurements_silent_s']) >= 0.3
+    assert observer.counts['steps_corrected'] == corrected
+    assert observer.counts['steps_propagated'] > 0
+    assert accounted(values_of(status))
+
+
 def test_clock_jump_resets_observer_and_monitor(ros_context, spinner):
     observer, probe = observer_and_probe(spinner, ros_context, use_sim_time=True,
                                          measurement_timeout=30.0)

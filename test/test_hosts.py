@@ -52,6 +52,8 @@ SMOOTHING_S = 0.25
 BAND_FACTOR = 1.25
 BASELINE_S = 5.0
 MONITOR_STALE_TIMEOUT = 1.0
+# The observer's input_timeout: WARN "no increments on ..." after this.
+OBSERVER_INPUT_TIMEOUT = 1.0
 # (name, kind, loss %, duration s, time given to recover s); the restart:
 # the observer's host down for 2 s (every process killed), then started.
 FAULTS = (
@@ -72,7 +74,7 @@ RECORDER = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'hosts_recor
 OBSERVER_STATUS = 'observer: inputs'
 MONITOR_STATUS = 'monitor: attitude estimate'
 GYRO_STATUS = 'gyro: outputs'
-STALE, OK = 3, 0
+STALE, WARN, OK = 3, 1, 0
 
 
 def installed(name):
@@ -213,6 +215,7 @@ class Pipeline:
         self.start(self.observer_host, 'observer', [
             installed('observer_node'), '--ros-args', '--params-file', CONFIG,
             '-p', f'step_period:={STEP_PERIOD!r}', '-p', 'diagnostic_period:=0.25',
+            '-p', f'input_timeout:={OBSERVER_INPUT_TIMEOUT}',
             '-p', f'input_reliability:={self.input_reliability}',
             '-p', f'queue_depth:={self.queue_depth}'])
 
@@ -532,6 +535,17 @@ def analyse_faults(pipeline, timeline):
             oks = [s for s in monitor if s[0] >= max(end, stale[-1][0] if stale else 0)
                    and s[2] == OK]
             row['monitor_ok_after_s'] = round((oks[0][0] - end) / SECOND, 2) if oks else None
+            # The observer's own status (its host): a silent input during
+            # the fault, and when its statuses stop saying so.
+            silent = [s for s in observer if start <= s[0] <= stale_until and s[2] == WARN
+                      and 'no increments on ' in s[3]]
+            row['observer_silent'] = bool(silent)
+            row['observer_silent_after_s'] = round((silent[0][0] - start) / SECOND, 2) \
+                if silent else None
+            back = [s for s in observer if s[0] >= max(end, silent[-1][0] if silent else 0)
+                    and 'no increments on ' not in s[3]]
+            row['observer_back_after_s'] = round((back[0][0] - end) / SECOND, 2) \
+                if back else None
         # Estimates published per second through the fault (the observer keeps going).
         during = times[(times >= start) & (times < end)]
         row['estimates_per_s_during'] = (round(len(during) / ((end - start) / SECOND), 1)
@@ -615,6 +629,14 @@ def test_faults(bed, ros_domain_id, tmp_path, layout):
             assert phase['monitor_ok_after_s'] is not None, phase
             assert phase['monitor_ok_after_s'] <= MONITOR_OK_BOUND_S + (
                 RECOVERY_BOUND_S['restart'] if kind == 'restart' else 0), phase
+        if kind == 'partition':
+            # The observer's own host sees its increments stop, then come back.
+            assert phase['observer_silent'], phase
+            # (Not before input_timeout: the last increment came at the
+            # partition's start at the latest, give or take a step.)
+            assert phase['observer_silent_after_s'] >= 0.9 * OBSERVER_INPUT_TIMEOUT, phase
+            assert phase['observer_back_after_s'] is not None, phase
+            assert phase['observer_back_after_s'] <= MONITOR_OK_BOUND_S, phase
 
 
 # QoS across the link ----------------------------------------------------------------
