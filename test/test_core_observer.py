@@ -6,7 +6,7 @@ import sys
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
 from ext_observer.core import (LuenbergerObserver, PAPER_GAIN, SimulatedGyro,
@@ -212,14 +212,29 @@ def test_batch_broadcasts_a_shared_increment_and_measurement():
     theta = rng.uniform(0, 1, 3)
     y = quat.random_unit_quaternions(rng, (5,))
     obs = LuenbergerObserver('extended', batch_shape=(3, 5))
+    inputs = dict(q0=q0, theta=theta, y=y)
+    copies = {name: a.copy() for name, a in inputs.items()}
     obs.reset(q0)
     new = obs.step(theta, y)
     assert new.shape == (3, 5, 4)
     single = SingleObserver('extended', initial=tuple(q0[2, 4]))
     assert_allclose(new[2, 4], single.step(tuple(theta), tuple(y[4])),
                     rtol=1e-12)
-    # The caller's arrays are never modified.
-    assert_allclose(obs.step(theta, y, rotation=None).shape, (3, 5, 4))
-    theta_copy = theta.copy()
-    obs.step(theta)
-    assert_allclose(theta, theta_copy)
+    # The caller's arrays are never modified: the inputs (also a shared
+    # rotation and a measurement whose sign is flipped), and an estimate
+    # returned earlier.
+    returned = new.copy()
+    rotation = quat.quaternion_from_rotation_vector(theta)
+    flipped = -y
+    for name, a in (('rotation', rotation), ('flipped', flipped)):
+        inputs[name], copies[name] = a, a.copy()
+    flipping = LuenbergerObserver('extended', batch_shape=(3, 5), gain_mode='rotating',
+                                  align_sign=True)
+    flipping.reset(q0)
+    for observer in (obs, flipping):
+        observer.step(theta, flipped)
+        observer.step(None, y, rotation=rotation)
+        observer.step(theta)
+    for name, a in inputs.items():
+        assert_array_equal(a, copies[name], err_msg=name)
+    assert_array_equal(new, returned)
