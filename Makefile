@@ -62,13 +62,22 @@ bench: $(BENCH_STAMP)
 # The raw-IMU estimator and its anchors (VQF, BasicVQF, Madgwick, Mahony,
 # Fusion) on the BROAD recordings, into docs/broad.md, docs/figures/broad_*.png
 # and out/broad.json. Separate from `make bench`, which does not run it (it
-# takes minutes and needs the data). BROAD_DATA: a folder with BROAD's HDF5
-# files, directly or under data_hdf5/ (a clone of BROAD works as it is).
-BROAD_DATA ?= ../shared/broad
+# takes minutes and needs the data). The data: BROAD_DATA if given (a folder
+# with BROAD's HDF5 files, directly or under data_hdf5/, as in a clone of
+# BROAD), else $EXT_OBSERVER_BROAD_DATA, else data/broad (make broad-data),
+# else ../shared/broad; with none, the command says so in one line.
+BROAD_DATA ?=
 BROAD_ARGS ?=
 
 broad: $(BENCH_STAMP)
-	$(PY) -m ext_observer broad --data $(BROAD_DATA) --mode both --plain --json out/broad.json --docs docs $(BROAD_ARGS)
+	$(PY) -m ext_observer broad $(if $(BROAD_DATA),--data $(BROAD_DATA)) --mode both --plain --json out/broad.json --docs docs $(BROAD_ARGS)
+
+# BROAD (Laidig et al. 2021, CC BY 4.0) into data/broad/ (git-ignored): a
+# shallow, sparse git clone of its HDF5 files, with trials.json and
+# CREDIT.md (the citation and the licence). Needs git and github.com; a
+# second run does nothing.
+broad-data:
+	$(PYTHON) ext_observer/broad/fetch.py data/broad
 
 # The soak (test/test_soak.py): gyro, observer and monitor processes at 1 kHz
 # for 60 s; memory flat, every input accounted for. Figures in out/soak.json.

@@ -3,25 +3,28 @@ Tests of the BROAD benchmark (``python -m ext_observer broad``).
 
 The scoring, the grouping and the page run on synthetic arrays (no h5py, no
 data). The anchors' frame conversions run on a synthetic static sensor when
-their packages are installed (``make bench``); the command end to end runs
-on two short trials when h5py and ``../shared/broad`` are there.
+their packages are installed (``make bench``). Where the data is looked for,
+and ``make broad-data``'s fetch from a local stand-in for BROAD's
+repository, run on temporary folders. The command end to end runs on two
+short trials of BROAD (see broad_data.py: without the data it fails, or
+skips with EXT_OBSERVER_ALLOW_NO_BROAD=1).
 """
 
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
+from broad_data import broad_data_dir
 from conftest import REPO
 from ext_observer import broad
+from ext_observer.broad import data, fetch
 from ext_observer.core.quaternion import conjugate, multiply
-
-DATA = os.environ.get('EXT_OBSERVER_BROAD_DATA',
-                      os.path.join(os.path.dirname(REPO), 'shared', 'broad'))
 
 
 def rotation(axis, angle):
@@ -235,68 +238,146 @@ def test_figures_are_written(tmp_path):
 
 def test_missing_h5py_names_the_fix(monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, 'h5py', None)
-    with pytest.raises(RuntimeError, match=r'pip install h5py.*make bench'):
+    with pytest.raises(RuntimeError, match=r'pip install h5py.*make test'):
         broad.load_trial(str(tmp_path / 'x.hdf5'))
 
 
 def test_missing_data_is_an_error_not_a_traceback(tmp_path, capsys):
     assert broad.main(['--data', str(tmp_path), '--no-anchors']) == 2
-    assert 'no HDF5 files' in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert 'no HDF5 files' in err and 'make broad-data' in err
 
 
-# --- the anchors' frames ---------------------------------------------------
+# --- where the data is -----------------------------------------------------
 
-@pytest.mark.parametrize('anchor', broad.ANCHORS)
-@pytest.mark.parametrize('mode', broad.MODES)
-def test_anchor_frames_on_a_static_sensor(anchor, mode):
-    """
-    A static sensor, tilted and turned: each anchor's converted output is q.
+@pytest.fixture
+def tree(tmp_path, monkeypatch):
+    """A source tree of its own, without BROAD beside it nor in the environment."""
+    folder = tmp_path / 'work' / 'main'
+    folder.mkdir(parents=True)
+    monkeypatch.setattr(data, 'TREE', str(folder))
+    monkeypatch.delenv(broad.ENV_VAR, raising=False)
+    return folder
 
-    The specific force points up, the field north and down (ENU); after 20 s
-    at 100 Hz each anchor, brought to ENU by its fixed factor, must give the
-    attitude (9D) or its inclination (6D). A wrong world frame (NWU read as
-    ENU) gives 90° of heading, a conjugate or a scalar-last reading tens of
-    degrees of inclination.
-    """
-    pytest.importorskip(broad.ANCHOR_PACKAGES[anchor])
-    q = multiply(rotation((0, 0, 1), math.radians(30.0)),
-                 multiply(rotation((1, 0, 0), math.radians(10.0)),
-                          rotation((0, 1, 0), math.radians(-15.0))))
-    rate, n = 100.0, 2000
-    rng = np.random.default_rng(0)
-    acc = in_sensor_frame(q, (0.0, 0.0, 9.81)) + 0.01 * rng.standard_normal((n, 3))
-    mag = in_sensor_frame(q, (0.0, 20.0, -40.0)) + 0.1 * rng.standard_normal((n, 3))
-    # Some gyro noise: Madgwick and Mahony skip samples with a zero rate.
-    gyr = 1e-3 * rng.standard_normal((n, 3))
-    est = broad.anchor_estimates(anchor, gyr, acc, mag, rate, mode == '9D')
-    assert est.shape == (n, 4)
-    total, _, inclination = broad.error_angles(est[-200:], np.tile(q, (200, 1)))
-    assert np.degrees(inclination).max() < 1.0
-    if mode == '9D':
-        assert np.degrees(total).max() < 1.0
+
+def _put_trial(folder, name=NAMES[0]):
+    (folder / 'data_hdf5').mkdir(parents=True)
+    (folder / 'data_hdf5' / f'{name}.hdf5').write_bytes(b'')
+
+
+def test_data_folder_is_the_option_then_the_environment_then_the_defaults(tree, monkeypatch):
+    shared = tree.parent / 'shared' / 'broad'
+    fetched = tree / 'data' / 'broad'
+    _put_trial(shared)
+    assert broad.data_dir() == str(shared)
+    _put_trial(fetched)
+    assert broad.data_dir() == str(fetched)
+    # Named on purpose: kept even without files (the error then names it).
+    monkeypatch.setenv(broad.ENV_VAR, str(tree / 'elsewhere'))
+    assert broad.data_dir() == str(tree / 'elsewhere')
+    assert broad.data_dir('given') == 'given'
+    assert broad.shown_path(str(shared)) == '../shared/broad'
+    assert broad.shown_path(str(fetched)) == 'data/broad'
+
+
+def test_without_data_the_command_says_how_to_get_it_in_one_line(tree, capsys):
+    (tree / 'data' / 'broad').mkdir(parents=True)  # a folder without files is not data
+    assert broad.main(['--no-anchors']) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('error: no BROAD data in ')
+    for needed in ('data/broad', '../shared/broad', 'make broad-data', '--data',
+                   broad.ENV_VAR):
+        assert needed in err
+
+
+def test_groups_come_from_data_mat_as_in_a_clone_of_broad(tmp_path):
+    spec = {'groups': [{'name': 'all_trials', 'level': 0}, {'name': 'special', 'level': 1}],
+            'trials': {NAMES[0]: {'groups': ['all_trials', 'special']}}}
+    _put_trial(tmp_path)
+    (tmp_path / 'data_mat').mkdir()
+    (tmp_path / 'data_mat' / 'trials.json').write_text(json.dumps(spec))
+    groups = broad.find_groups(str(tmp_path), [NAMES[0]], str(tmp_path / 'data_hdf5'))
+    assert groups['members']['special'] == [NAMES[0]]
+
+
+def _git(*args, cwd):
+    subprocess.run(['git', '-c', 'user.name=t', '-c', 'user.email=t@t', *args], cwd=cwd,
+                   check=True, capture_output=True)
+
+
+@pytest.mark.skipif(shutil.which('git') is None, reason='needs git')
+def test_fetch_takes_the_hdf5_files_and_credits_broad(tmp_path, capsys):
+    # A stand-in for BROAD's repository, laid out like it.
+    upstream = tmp_path / 'upstream'
+    for folder in ('data_hdf5', 'data_mat', 'animations'):
+        (upstream / folder).mkdir(parents=True)
+    (upstream / 'data_hdf5' / f'{NAMES[0]}.hdf5').write_bytes(b'hdf5')
+    (upstream / 'data_mat' / f'{NAMES[0]}.mat').write_bytes(b'mat')
+    (upstream / 'data_mat' / 'trials.json').write_text('{"groups": [], "trials": {}}')
+    (upstream / 'animations' / 'trial.mp4').write_bytes(b'video')
+    (upstream / 'README.md').write_text('# BROAD\n')
+    _git('init', '-q', cwd=upstream)
+    _git('add', '.', cwd=upstream)
+    _git('commit', '-qm', 'data', cwd=upstream)
+    dest = tmp_path / 'data' / 'broad'
+
+    assert fetch.main([str(dest), '--url', upstream.as_uri()]) == 0
+    files = sorted(str(p.relative_to(dest)) for p in dest.rglob('*') if p.is_file())
+    assert files == ['CREDIT.md', 'README.md', f'data_hdf5/{NAMES[0]}.hdf5', 'trials.json']
+    credit = (dest / 'CREDIT.md').read_text()
+    for needed in ('Laidig', 'doi:10.3390/data6070072', 'CC BY 4.0', upstream.as_uri()):
+        assert needed in credit
+    assert broad.has_trials(str(dest)) and not (tmp_path / 'data' / 'broad.partial').exists()
+    # A second run leaves the folder as it is.
+    assert fetch.main([str(dest), '--url', str(tmp_path / 'nowhere')]) == 0
+    assert 'nothing to do' in capsys.readouterr().out
+
+
+def test_fetch_failure_is_one_error_and_no_folder(tmp_path, capsys):
+    dest = tmp_path / 'broad'
+    assert fetch.main([str(dest), '--url', str(tmp_path / 'nowhere')]) == 1
+    assert capsys.readouterr().err.startswith('error: ')
+    assert not dest.exists()
+
+
+# Every public name of the module ext_observer/broad.py had, before it became
+# a package.
+FORMER_NAMES = (
+    'ALGORITHMS', 'ANCHORS', 'ANCHOR_PACKAGES', 'IDENTITY', 'MADGWICK_BETA', 'MAHONY_KI',
+    'MAHONY_KP', 'MODES', 'NWU_TO_ENU', 'OURS', 'OURS_PLAIN', 'PLOT_TRIAL',
+    'STANDARD_GRAVITY', 'Trial', 'anchor_estimates', 'attitude_from_acc_mag', 'build_parser',
+    'error_angles', 'find_groups', 'find_trials', 'group_means', 'groups_from_name',
+    'load_trial', 'main', 'markdown', 'missing_anchor_packages', 'norm_deviation', 'plot',
+    'rmse_deg', 'run', 'score', 'summary', 'text_report')
+
+
+def test_every_public_name_is_importable_from_the_package():
+    import importlib
+    import inspect
+    missing = [n for n in FORMER_NAMES if not hasattr(broad, n)]
+    for module in ('names', 'data', 'scoring', 'anchors', 'run', 'report', 'page', 'plots',
+                   'cli'):
+        found = importlib.import_module(f'ext_observer.broad.{module}')
+        missing += [f'{module}.{name}' for name, value in vars(found).items()
+                    if not name.startswith('_') and (inspect.isfunction(value)
+                                                     or inspect.isclass(value))
+                    and value.__module__ == found.__name__ and not hasattr(broad, name)]
+    assert not missing, f'not importable from ext_observer.broad: {missing}'
+    assert set(broad.__all__) <= set(vars(broad))
 
 
 # --- end to end ------------------------------------------------------------
 
-def _broad_data_ready():
-    try:
-        import h5py  # noqa: F401
-    except ImportError:
-        return False
-    return os.path.isdir(os.path.join(DATA, 'data_hdf5')) or bool(
-        [p for p in os.listdir(DATA) if p.endswith('.hdf5')] if os.path.isdir(DATA) else [])
-
-
 @pytest.mark.timeout(240)
-@pytest.mark.skipif(not _broad_data_ready(), reason=f'needs h5py and BROAD in {DATA}')
 def test_command_end_to_end_on_two_short_trials(tmp_path):
+    folder = broad_data_dir()
     # 60 s: the first 30 to 48 s of each trial are rest, not scored.
     out = tmp_path / 'broad.json'
     docs = tmp_path / 'docs'
     docs.mkdir()
     trials = ['01_undisturbed_slow_rotation_A', '28_disturbed_stationary_magnet_A']
     done = subprocess.run(
-        [sys.executable, '-m', 'ext_observer', 'broad', '--data', DATA, '--trials', *trials,
+        [sys.executable, '-m', 'ext_observer', 'broad', '--data', folder, '--trials', *trials,
          '--head', '60', '--no-anchors', '--json', str(out), '--docs', str(docs), '--quiet'],
         cwd=REPO, capture_output=True, text=True, timeout=230)
     assert done.returncode == 0, done.stderr

@@ -1,0 +1,62 @@
+"""
+The BROAD benchmark: ``python -m ext_observer broad [--data DIR]``.
+
+Runs the raw-IMU estimator of :mod:`ext_observer.core.ahrs` on the recordings
+of BROAD (D. Laidig, M. Caruso, A. Cereatti, T. Seel, "BROAD — A Benchmark
+for Robust Inertial Orientation Estimation", Data 6(7):72, 2021,
+doi:10.3390/data6070072, CC BY 4.0), scores it the way BROAD does, and runs
+the anchors in the same command: VQF and BasicVQF (``vqf``), Madgwick and
+Mahony (``ahrs``) and Fusion (``imufusion``). The anchors are for comparison
+only; the estimator never calls them.
+
+One module per step, each importing only the ones above it in this list:
+
+- :mod:`~ext_observer.broad.names`: the modes and algorithms, in table order;
+- :mod:`~ext_observer.broad.data`: where the data is, the trials, the groups;
+- :mod:`~ext_observer.broad.scoring`: BROAD's error angles, RMSE, averages;
+- :mod:`~ext_observer.broad.anchors`: the other filters, brought to ENU;
+- :mod:`~ext_observer.broad.run`: ours and the anchors on the trials, scored;
+- :mod:`~ext_observer.broad.report`, :mod:`~ext_observer.broad.page`,
+  :mod:`~ext_observer.broad.plots`: stdout and JSON, the page, the figures;
+- :mod:`~ext_observer.broad.cli`: the command;
+- :mod:`~ext_observer.broad.fetch` (standard library only, apart): BROAD from
+  its repository into ``data/broad`` (``make broad-data``).
+
+Conventions: quaternions scalar first ``(w, x, y, z)``, sensor → ENU (BROAD's
+``opt_quat`` and the estimator alike). Angular rate rad/s, specific force
+m/s², field µT (BROAD's units); angles in the report in degrees.
+
+Nothing here imports ROS; h5py is needed only to read the HDF5 files
+(requirements-test.txt) and the anchor packages only for the anchors
+(requirements-bench.txt, ``make bench``). Every public name of the modules
+is importable from here.
+"""
+
+from ext_observer.broad.anchors import (anchor_estimates, ANCHOR_PACKAGES,
+                                        attitude_from_acc_mag, IDENTITY, MADGWICK_BETA,
+                                        MAHONY_KI, MAHONY_KP, missing_anchor_packages,
+                                        NWU_TO_ENU, STANDARD_GRAVITY)
+from ext_observer.broad.cli import build_parser, main, PLOT_TRIAL
+from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_groups,
+                                     find_trials, groups_from_name, has_trials, HOW_TO_GET,
+                                     load_trial, shown_path, Trial)
+from ext_observer.broad.names import (algorithms_in, ALGORITHMS, ANCHORS, MODES, OURS,
+                                      OURS_PLAIN)
+from ext_observer.broad.page import markdown
+from ext_observer.broad.plots import plot
+from ext_observer.broad.report import fmt, text_report, write_json
+from ext_observer.broad.run import estimate_ours, log, run
+from ext_observer.broad.scoring import (criteria, error_angles, group_means,
+                                        norm_deviation, rmse_deg, score, summary,
+                                        VQF_RATIO_GOAL)
+
+__all__ = [
+    'ALGORITHMS', 'ANCHOR_PACKAGES', 'ANCHORS', 'DEFAULT_DIRS', 'ENV_VAR', 'HOW_TO_GET',
+    'IDENTITY', 'MADGWICK_BETA', 'MAHONY_KI', 'MAHONY_KP', 'MODES', 'NWU_TO_ENU', 'OURS',
+    'OURS_PLAIN', 'PLOT_TRIAL', 'STANDARD_GRAVITY', 'Trial', 'VQF_RATIO_GOAL',
+    'algorithms_in', 'anchor_estimates', 'attitude_from_acc_mag', 'build_parser',
+    'criteria', 'data_dir', 'error_angles', 'estimate_ours', 'find_groups', 'find_trials',
+    'fmt', 'group_means', 'groups_from_name', 'has_trials', 'load_trial', 'log', 'main',
+    'markdown', 'missing_anchor_packages', 'norm_deviation', 'plot', 'rmse_deg', 'run',
+    'score', 'shown_path', 'summary', 'text_report', 'write_json',
+]

@@ -1,0 +1,216 @@
+"""
+The command ``python -m ext_observer broad``: options, then read, run, report.
+
+:func:`main` checks the options, notes what runs (commit, parameters) before
+the run, reads the trials, runs them (:func:`~ext_observer.broad.run.run`),
+prints the short report, and writes the JSON files and the page when asked.
+Errors a user can fix (no data, no h5py, a missing anchor package) end with
+one line on stderr and exit code 2.
+"""
+
+import argparse
+import datetime
+import os
+import platform
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from ext_observer.broad.anchors import missing_anchor_packages
+from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_groups,
+                                     find_trials, has_trials, HOW_TO_GET, load_trial,
+                                     shown_path, TREE)
+from ext_observer.broad.names import ANCHORS, MODES
+from ext_observer.broad.page import markdown
+from ext_observer.broad.plots import plot
+from ext_observer.broad.report import text_report, write_json
+from ext_observer.broad.run import log, run
+
+# Trial shown over time in the report: magnetically disturbed.
+PLOT_TRIAL = '28_disturbed_stationary_magnet_A'
+# What the figures depend on, for the "uncommitted changes" note.
+_ESTIMATOR_FILES = ('ext_observer/core/ahrs.py', 'ext_observer/broad')
+
+
+def build_parser():
+    """Return the argument parser of ``broad``."""
+    cpus = os.cpu_count() or 1
+    parser = argparse.ArgumentParser(
+        prog='python -m ext_observer broad',
+        description='The raw-IMU estimator and the anchors (VQF, BasicVQF, Madgwick, '
+                    'Mahony, Fusion) on the BROAD recordings, scored as BROAD does.')
+    parser.add_argument('--data', metavar='DIR',
+                        help="BROAD's HDF5 files, in DIR or DIR/data_hdf5 (default: "
+                             f"${ENV_VAR}, else {' or '.join(DEFAULT_DIRS)} beside the "
+                             'source tree; make broad-data fetches BROAD into data/broad)')
+    parser.add_argument('--mode', choices=('6D', '9D', 'both'), default='both',
+                        help='6D (no magnetometer), 9D or both (default)')
+    parser.add_argument('--json', metavar='OUT',
+                        help='write {algorithm: {mode: {trial: RMSEs}}} to OUT, and the '
+                             'other figures (norms, times, groups) to OUT_details.json')
+    parser.add_argument('--no-anchors', action='store_true',
+                        help='run our estimator only')
+    parser.add_argument('--plain', action='store_true',
+                        help="also run our estimator without the extension term "
+                             "(doubles our run time)")
+    parser.add_argument('--docs', metavar='DOCS_DIR',
+                        help='write DOCS_DIR/broad.md and DOCS_DIR/figures/broad_*.png')
+    parser.add_argument('--trials', nargs='+', metavar='NAME',
+                        help='only these trials (name prefixes or fnmatch patterns)')
+    parser.add_argument('--head', type=float, metavar='SECONDS',
+                        help='cut each trial to its first SECONDS (quick checks only; '
+                             'not BROAD figures)')
+    parser.add_argument('--jobs', type=int, default=cpus,
+                        help=f'processes for the anchors (default: the CPUs, {cpus} here)')
+    parser.add_argument('--workers', type=int, default=cpus,
+                        help="processes of our estimator's one batched call "
+                             '(estimate_batch(workers=N); default: the CPUs, '
+                             f'{cpus} here; 1: vectorized in this process)')
+    parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
+    return parser
+
+
+def main(argv=None):
+    """Run ``broad``; return the exit code."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(argv)
+    progress = (lambda text: None) if args.quiet else log
+    anchors = () if args.no_anchors else ANCHORS
+    problem = _check(args, anchors)
+    if problem:
+        print(f'error: {problem}', file=sys.stderr)
+        return 2
+    # What runs is what is on disk now: commit, changes and parameters are
+    # read before the run (others may commit while it runs).
+    source = _source()
+    try:
+        folder = data_dir(args.data)
+        trials, groups = _read(folder, args, progress)
+        names = [t.name for t in trials]
+        plot_trial = PLOT_TRIAL if PLOT_TRIAL in names else next(
+            (n for n in names if 'magnet' in n), names[0])
+        load = _load()
+        modes = MODES if args.mode == 'both' else (args.mode,)
+        result = run(trials, modes, anchors, plain=args.plain, jobs=args.jobs,
+                     workers=args.workers, plot_trial=plot_trial if args.docs else None,
+                     progress=progress)
+        result['load'] = (load, _load())
+    except (ValueError, RuntimeError) as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    meta = dict(
+        source,
+        command=('python -m ext_observer broad ' + ' '.join(argv)).strip(),
+        data=shown_path(folder),
+        machine=_machine(),
+        versions=_versions(),
+        trials=names,
+        groups_source=('trials.json' if groups['source'] != 'file names'
+                       else 'the file names'),
+        plot_trial=plot_trial,
+        rate=trials[0].rate,
+        head=args.head,
+        load=result.get('load'),
+        workers=args.workers,
+        jobs=args.jobs,
+    )
+    print(text_report(result, groups, meta))
+    if args.json:
+        write_json(args.json, result, groups, meta)
+    if args.docs:
+        meta['plot_movement'] = next(t.movement for t in trials if t.name == plot_trial)
+        _write_page(args.docs, result, groups, meta, progress)
+    return 0
+
+
+def _check(args, anchors):
+    """Return what is wrong with the options before anything runs, or None."""
+    if args.jobs < 1 or args.workers < 1:
+        return '--jobs and --workers must be at least 1'
+    if args.head is not None and not args.head > 0.0:
+        return '--head must be positive'
+    missing = missing_anchor_packages() if anchors else []
+    if missing:
+        return (f'the anchors need {", ".join(missing)}: pip install -r '
+                'requirements-bench.txt (or make bench), or run with --no-anchors')
+    return None
+
+
+def _source():
+    """The commit, whether the estimator has uncommitted changes, the date, the params."""
+    from ext_observer.core.ahrs import AhrsParams
+    return {
+        'commit': _git('rev-parse', '--short', 'HEAD') or 'unknown',
+        'dirty': bool(_git('status', '--porcelain', '--', *_ESTIMATOR_FILES)),
+        'date': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
+        'params': AhrsParams().as_dict(),
+    }
+
+
+def _read(folder, args, progress):
+    """Read the trials of ``folder`` (``--trials``, ``--head``) and their groups."""
+    if not has_trials(folder):
+        raise ValueError(f'no HDF5 files (*.hdf5) in {folder} nor in '
+                         f'{os.path.join(folder, "data_hdf5")}: {HOW_TO_GET}')
+    found = find_trials(folder, args.trials)
+    start = time.perf_counter()
+    trials = [load_trial(path, name) for name, path in found]
+    if args.head:
+        trials = [t.head(args.head) for t in trials]
+    progress(f'{len(trials)} trials read in {time.perf_counter() - start:.1f} s')
+    groups = find_groups(folder, [t.name for t in trials], os.path.dirname(found[0][1]))
+    return trials, groups
+
+
+def _write_page(docs, result, groups, meta, progress):
+    """Write the figures and ``docs/broad.md`` (linking the tuning page if there)."""
+    figures = plot(result, groups, meta, os.path.join(docs, 'figures'))
+    tuning = os.path.join(docs, 'broad_tuning.md')
+    tuning = tuning if os.path.isfile(tuning) else None
+    page = os.path.join(docs, 'broad.md')
+    with open(page, 'w', encoding='utf-8') as f:
+        f.write(markdown(result, groups, meta, figures, docs, tuning))
+    progress(f'wrote {page} and {", ".join(sorted(figures.values()))}')
+
+
+def _versions():
+    from importlib import metadata
+    out = {'numpy': np.__version__}
+    for name in ('vqf', 'ahrs', 'imufusion', 'h5py'):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = 'not installed'
+    return out
+
+
+def _git(*args):
+    try:
+        done = subprocess.run(['git', *args], cwd=TREE, capture_output=True, text=True,
+                              timeout=10)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return done.stdout.strip() if done.returncode == 0 else None
+
+
+def _load():
+    """The 1-minute load average (other work on the machine skews the times)."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except OSError:
+        return None
+
+
+def _machine():
+    cpu = platform.processor() or 'unknown CPU'
+    try:
+        with open('/proc/cpuinfo') as f:
+            for line in f:
+                if line.startswith('model name'):
+                    cpu = line.split(':', 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return f'{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}'

@@ -1,0 +1,19 @@
+"""
+The names the benchmark's results are keyed by, in the order of its tables.
+
+Every result is ``scores[algorithm][mode][trial]``: ``mode`` is one of
+:data:`MODES`, ``algorithm`` one of :data:`ALGORITHMS` (ours, ours without
+the extension term, then the anchors).
+"""
+
+MODES = ('9D', '6D')
+OURS = 'ext_observer'
+OURS_PLAIN = 'ext_observer_plain'
+# The anchors, in the order of the tables.
+ANCHORS = ('VQF', 'BasicVQF', 'Madgwick', 'Mahony', 'Fusion')
+ALGORITHMS = (OURS, OURS_PLAIN) + ANCHORS
+
+
+def algorithms_in(result):
+    """Return the algorithms scored in ``result`` (from ``run``), in table order."""
+    return [a for a in ALGORITHMS if a in result['scores']]

@@ -1,0 +1,161 @@
+"""
+The run: our estimator and the anchors on the trials, each estimate scored.
+
+Our estimator runs as one batched call over every trial and mode
+(``estimate_batch`` of :mod:`ext_observer.core.ahrs`, with its shipped
+defaults); the anchors run one recording per task, in processes when
+``jobs > 1``. Only the scores, the norms of our raw estimates, the times and
+the per-sample errors of one trial (for the figure) are kept.
+"""
+
+import sys
+import time
+
+from ext_observer.broad.anchors import anchor_estimates
+from ext_observer.broad.names import ANCHORS, MODES, OURS, OURS_PLAIN
+from ext_observer.broad.scoring import error_angles, norm_deviation, score
+
+
+def log(text):
+    """Print a progress line on stderr."""
+    print(text, file=sys.stderr, flush=True)
+
+
+def _plural(count, word):
+    return f'{count} {word}{"es" if count > 1 else ""}'
+
+
+def estimate_ours(trials, modes, variant, workers=1):
+    """
+    Run our estimator on every trial in every mode, in one batched call.
+
+    Parameters
+    ----------
+    trials : list of Trial
+    modes : sequence of {'9D', '6D'}
+    variant : {'extended', 'plain'}
+        With the extension term, or without it.
+    workers : int
+        ``estimate_batch``'s processes (1: vectorized in this process).
+
+    Returns
+    -------
+    estimates : dict
+        ``{mode: {trial: ndarray, shape (N, 4)}}``, the raw estimates
+        (``(w, x, y, z)``, sensor → ENU, not normalized).
+    seconds : float
+        Wall clock of the call.
+
+    """
+    from ext_observer.core.ahrs import estimate_batch
+    streams = [(t, m) for m in modes for t in trials]
+    start = time.perf_counter()
+    out = estimate_batch([t.gyr for t, _ in streams], [t.acc for t, _ in streams],
+                         [t.mag for t, _ in streams], [t.rate for t, _ in streams],
+                         [m == '9D' for _, m in streams], params=None, variant=variant,
+                         workers=workers)
+    seconds = time.perf_counter() - start
+    estimates = {m: {} for m in modes}
+    for (t, m), q in zip(streams, out):
+        estimates[m][t.name] = q
+    return estimates, seconds
+
+
+def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
+        plot_trial=None, progress=log):
+    """
+    Score the estimator (and the anchors) on the trials.
+
+    Parameters
+    ----------
+    trials : list of Trial
+    modes : sequence of {'9D', '6D'}
+    anchors : sequence of str
+        Anchors to run (empty: ours only).
+    plain : bool
+        Also run ``variant='plain'`` (no extension term), for comparison.
+    jobs : int
+        Processes for the anchors.
+    workers : int
+        Processes of our estimator's batched call (``estimate_batch``'s
+        ``workers``; 1: vectorized in this process).
+    plot_trial : str, optional
+        Keep the per-sample errors of this trial (for ``plot``).
+    progress : callable
+
+    Returns
+    -------
+    dict
+        ``scores`` (``{algorithm: {mode: {trial: {..._rmse_deg}}}}``),
+        ``norms``, ``seconds``, and ``series`` for ``plot_trial``.
+
+    """
+    rates = {t.rate for t in trials}
+    if len(rates) != 1:
+        raise ValueError(f'all trials must share one sampling rate, got {sorted(rates)}')
+    result = {'scores': {}, 'norms': {}, 'seconds': {}, 'series': {}}
+    by_name = {t.name: t for t in trials}
+
+    def keep(algorithm, mode, name, q):
+        t = by_name[name]
+        result['scores'].setdefault(algorithm, {}).setdefault(mode, {})[name] = score(
+            q, t.quat, t.movement)
+        if name == plot_trial:
+            result['series'].setdefault(algorithm, {})[mode] = error_angles(q, t.quat)
+
+    _run_ours(trials, modes, plain, workers, result, keep, progress)
+    _run_anchors(trials, modes, anchors, jobs, result, keep, progress)
+    return result
+
+
+def _run_ours(trials, modes, plain, workers, result, keep, progress):
+    samples = sum(len(t) for t in trials)
+    variants = [('extended', OURS)] + ([('plain', OURS_PLAIN)] if plain else [])
+    for variant, algorithm in variants:
+        progress(f'{algorithm}: {len(trials)} trials × {len(modes)} modes in one batched call, '
+                 f'{_plural(workers, "process")} ({samples} samples each mode) ...')
+        estimates, seconds = estimate_ours(trials, modes, variant, workers)
+        result['seconds'][algorithm] = seconds
+        progress(f'{algorithm}: {seconds:.1f} s')
+        norms = {m: norm_deviation(list(estimates[m].values())) for m in modes}
+        norms['all'] = norm_deviation([q for m in modes for q in estimates[m].values()])
+        result['norms'][variant] = norms
+        for mode in modes:
+            for name, q in estimates[mode].items():
+                keep(algorithm, mode, name, q)
+
+
+def _anchor_task(task):
+    anchor, trial, mode = task
+    start = time.perf_counter()
+    q = anchor_estimates(anchor, trial.gyr, trial.acc, trial.mag, trial.rate, mode == '9D')
+    return q, time.perf_counter() - start
+
+
+def _run_anchors(trials, modes, anchors, jobs, result, keep, progress):
+    tasks = [(a, t, m) for a in anchors for m in modes for t in trials]
+    if not tasks:
+        return
+    progress(f'anchors: {", ".join(anchors)} ({len(tasks)} runs, '
+             f'{_plural(jobs, "process")}) ...')
+    start = time.perf_counter()
+    if jobs > 1:
+        import concurrent.futures
+        with concurrent.futures.ProcessPoolExecutor(jobs) as pool:
+            outputs = pool.map(_anchor_task, tasks, chunksize=1)
+            done = list(_progress_iter(outputs, tasks, progress))
+    else:
+        done = list(_progress_iter(map(_anchor_task, tasks), tasks, progress))
+    for (anchor, t, mode), (q, seconds) in zip(tasks, done):
+        keep(anchor, mode, t.name, q)
+        result['seconds'][anchor] = result['seconds'].get(anchor, 0.0) + seconds
+    result['seconds']['anchors_wall'] = time.perf_counter() - start
+
+
+def _progress_iter(outputs, tasks, progress):
+    last = None
+    for (anchor, _, mode), out in zip(tasks, outputs):
+        if (anchor, mode) != last:
+            progress(f'  {anchor} {mode} ...')
+            last = (anchor, mode)
+        yield out
