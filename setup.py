@@ -28,6 +28,7 @@ setup(
         'console_scripts': [
             'gyro_node = ext_observer.gyro_node:main',
             'observer_node = ext_observer.observer_node:main',
+            'imu_filter_node = ext_observer.imu_filter_node:main',
             'monitor_node = ext_observer.monitor_node:main',
         ],
     },

@@ -9,8 +9,9 @@ prose around them is written by hand and left as it is. After a change to a
 node's parameters, run ``python -m ext_observer docs`` (or ``make docs``);
 ``test/test_docs.py`` fails while the page and the specs differ.
 
-The same command rewrites the node sections of ``config/ext_observer.yaml``
-(every parameter with its default and a comment,
+The same command rewrites the node sections of the params files,
+``config/ext_observer.yaml`` (gyro, observer, monitor) and
+``config/imu_filter.yaml`` (every parameter with its default and a comment,
 :func:`~ext_observer.node_common.yaml_section`; the header comment is left
 as it is); ``test/test_nodes.py`` loads that file and checks it.
 
@@ -29,14 +30,22 @@ import sys
 __all__ = ['CONFIG', 'NODES', 'PAGE', 'main', 'parameter_tables', 'render', 'render_config']
 
 PAGE = 'parameters.md'
-# The params file, relative to the parent of the docs folder.
+# The params files, relative to the parent of the docs folder.
 CONFIG = os.path.join('config', 'ext_observer.yaml')
+IMU_FILTER_CONFIG = os.path.join('config', 'imu_filter.yaml')
 
-# (node name, module, specs): one generated table each, in this order.
+# (node name, module, specs, params file, specs of its section there): one
+# generated table each, in this order. imu_filter's file leaves out the
+# parameters of imu_filter_madgwick it does not use: given, they are warned
+# about.
 NODES = (
-    ('gyro', 'ext_observer.gyro_node', 'GYRO_PARAMETERS'),
-    ('observer', 'ext_observer.observer_node', 'OBSERVER_PARAMETERS'),
-    ('monitor', 'ext_observer.monitor_node', 'MONITOR_PARAMETERS'),
+    ('gyro', 'ext_observer.gyro_node', 'GYRO_PARAMETERS', CONFIG, 'GYRO_PARAMETERS'),
+    ('observer', 'ext_observer.observer_parameters', 'OBSERVER_PARAMETERS', CONFIG,
+     'OBSERVER_PARAMETERS'),
+    ('monitor', 'ext_observer.monitor_node', 'MONITOR_PARAMETERS', CONFIG,
+     'MONITOR_PARAMETERS'),
+    ('imu_filter', 'ext_observer.imu_filter_parameters', 'IMU_FILTER_PARAMETERS',
+     IMU_FILTER_CONFIG, 'IMU_FILTER_OWN'),
 )
 
 _BEGIN = ('<!-- generated from {specs} in {path} by python -m ext_observer docs; '
@@ -61,7 +70,7 @@ def parameter_tables():
     from ext_observer.node_common import markdown_table
 
     tables = []
-    for name, module, specs in NODES:
+    for name, module, specs, _, _ in NODES:
         rows = getattr(importlib.import_module(module), specs)
         tables.append((name, _begin(module, specs), markdown_table(rows)))
     return tables
@@ -95,14 +104,17 @@ def render(text):
     return text
 
 
-def render_config(text):
+def render_config(text, config=CONFIG):
     """
-    Return the params file with every node's section regenerated from its specs.
+    Return a params file with every node's section regenerated from its specs.
 
     Parameters
     ----------
     text : str
-        ``config/ext_observer.yaml``, with a ``/**/<node>:`` section per node.
+        The file, with a ``/**/<node>:`` section per node of :data:`NODES`
+        whose params file is ``config``.
+    config : str
+        :data:`CONFIG` or :data:`IMU_FILTER_CONFIG`.
 
     Returns
     -------
@@ -116,7 +128,9 @@ def render_config(text):
     """
     from ext_observer.node_common import yaml_section
 
-    for name, module, specs in NODES:
+    for name, module, _, path, specs in NODES:
+        if path != config:
+            continue
         rows = getattr(importlib.import_module(module), specs)
         pattern = re.compile(rf'^/\*\*/{re.escape(name)}:\n(?:  .*\n)*', re.MULTILINE)
         if not pattern.search(text):
@@ -158,13 +172,14 @@ def main(argv=None):
                         help='the docs folder (default docs)')
     parser.add_argument('--check', action='store_true',
                         help='write nothing; exit 1 if the page differs from the specs')
-    parser.add_argument('--config', metavar='PATH',
-                        help=f'the params file (default DIR/../{CONFIG}; skipped if absent)')
     args = parser.parse_args(argv)
     code = _update(os.path.join(args.docs, PAGE), render, args.check)
-    config = args.config or os.path.join(os.path.dirname(os.path.abspath(args.docs)), CONFIG)
-    if code != 2 and (args.config or os.path.exists(config)):
-        code = max(code, _update(config, render_config, args.check))
+    root = os.path.dirname(os.path.abspath(args.docs))
+    for config in (CONFIG, IMU_FILTER_CONFIG):
+        path = os.path.join(root, config)
+        if code != 2 and os.path.exists(path):
+            code = max(code, _update(path, lambda text: render_config(text, config),
+                                     args.check))
     return code
 
 

@@ -25,7 +25,6 @@ subscriber with incompatible QoS (WARN, with the fix).
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 
 from ext_observer.conversions import quaternion_stamped, vector_stamped
@@ -59,10 +58,10 @@ GYRO_PARAMETERS = (
                   'bias).', (0.0, 10.0), read_only=True),
     ParameterSpec('seed', -1, 'Seed of the random stream; -1 = fresh from the OS.',
                   (-1, INT32_MAX), read_only=True),
-    ParameterSpec('initial_attitude', Parameter.Type.DOUBLE_ARRAY,
-                  'True attitude q_0 as w, x, y, z (normalized); empty = uniform '
+    ParameterSpec('initial_attitude', [0.0, 0.0, 0.0, 0.0],
+                  'True attitude q_0 as w, x, y, z (normalized); all zeros = uniform '
                   'random on S³.', read_only=True,
-                  constraints='Empty or 4 finite numbers, not all zero.'),
+                  constraints='4 finite numbers.'),
     ParameterSpec('steps', 0, 'Steps to publish, then stop publishing; 0 = no end.',
                   (0, INT32_MAX), read_only=True),
     ParameterSpec('wait_for_subscribers', 0,
@@ -103,11 +102,11 @@ def gyro_settings(values):
     """
     settings = dict(values)
     initial = values['initial_attitude']
-    if not initial:
+    if len(initial) != 4:
+        raise ValueError('initial_attitude must have 4 elements (w, x, y, z; all zeros: '
+                         f'random), got {len(initial)}')
+    if not any(initial):
         settings['initial_attitude'] = None
-    elif len(initial) != 4:
-        raise ValueError('initial_attitude must be empty or have 4 elements '
-                         f'(w, x, y, z), got {len(initial)}')
     if len(values['gyro_bias']) != 3:
         raise ValueError('gyro_bias must have 3 elements (x, y, z), '
                          f'got {len(values["gyro_bias"])}')

@@ -1,17 +1,19 @@
 """
-The raw-IMU source of the observer node (``measurement_source: accel``).
+The raw-IMU estimator as ``imu_filter_node`` runs it, without ROS.
 
-With it, ``observer_node`` replaces ``imu_filter_madgwick_node``: the same
-topics, ``use_mag`` and ``world_frame``; only the gains are its own
-(``ahrs.*``, the parameters of :class:`~ext_observer.core.ahrs.AhrsParams`).
+:class:`RawImuPipeline` takes the samples of a raw IMU as the node receives
+them, stamped (integer nanoseconds), in any order and of any quality, and
+returns the estimates the node publishes. The node is a thin shell around
+it (messages in, messages out, logs and diagnostics), so that anything else
+that wants the node's exact output (a recording, a bag, a test) calls the
+same code.
 
 Inputs
-    ``imu/data_raw`` (``sensor_msgs/Imu``): the angular velocity (rad/s)
-    and the linear acceleration (m/s², the specific force: about +9.81 up at
-    rest) of one sample; the orientation is ignored. ``imu/mag``
-    (``sensor_msgs/MagneticField``, T), at its own rate, when ``use_mag``.
-    Both go through :class:`~ext_observer.pairing.StepPairer` first (values
-    and stamps checked, every input counted), as every other source.
+    IMU samples: the angular velocity (rad/s) and the linear acceleration
+    (m/s², the specific force: about +9.81 up at rest) of one sample. Fields
+    (T), at their own rate, when ``use_mag``. Both go through
+    :class:`~ext_observer.pairing.StepPairer` first (values and stamps
+    checked, every input counted by what came of it).
 
 Steps
     Sample ``k`` runs :meth:`AhrsObserver.update
@@ -27,86 +29,50 @@ Steps
     estimate on this path: the extension term of the core holds it near S³.
 
 Outputs
-    The core's estimate is sensor → ENU; it goes out in ``world_frame``
-    (``q_frame = C ⊗ q_enu``, :data:`~ext_observer.core.ahrs.WORLD_FRAMES`),
-    ambient on ``attitude_estimate`` and normalized on ``imu/data``, stamped
-    with the sample's stamp.
+    The core's estimate is sensor → ENU (magnetic north). It goes out turned
+    to true north by ``declination`` (rad, east positive), then into
+    ``world_frame`` (``C`` of :data:`~ext_observer.core.ahrs.WORLD_FRAMES`),
+    then turned by ``yaw_offset`` (rad) about that frame's z axis:
+    ``q = R_z(yaw_offset) ⊗ C ⊗ R_up(−declination) ⊗ q_enu``. For ENU and
+    NWU this is imu_filter_madgwick's ``R_z(yaw_offset − declination) ⊗ q``.
+
+Faults
+    A stamp older than the last step by more than ``backward_jump_threshold``
+    restarts the time line and the estimator; a step after a forward gap
+    resets it when ``forward_gap_action`` is ``reset``; an estimate that is
+    not finite or whose residual ``|q̂̄q̂ − 1|`` exceeds
+    ``divergence_max_residual`` is reinitialized from the sample at hand.
+    Each is counted (:attr:`RawImuPipeline.resets`,
+    :attr:`RawImuPipeline.reinitializations`).
 """
 
+from collections import namedtuple
 import math
 
-from ext_observer.conversions import vector_from_msg
 from ext_observer.core.ahrs import AhrsObserver, AhrsParams, WORLD_FRAMES
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.core.validation import check_state
-from ext_observer.node_common import ParameterSpec
+from ext_observer.guard import GUARD_REASONS
+from ext_observer.pairing import BACKWARD_JUMP, StepPairer
+from ext_observer.units import UnitCheck
 
-__all__ = ['AHRS_PREFIX', 'RAW_IMU_PARAMETERS', 'RawImuEstimator', 'ahrs_params',
-           'imu_vectors', 'raw_imu_settings']
+__all__ = ['AHRS_PREFIX', 'Estimate', 'RESET_CAUSES', 'RawImuEstimator', 'RawImuPipeline',
+           'ahrs_params', 'heading_factor', 'pairing_settings']
 
 # The core's parameters are the node's parameters ahrs.<name>.
 AHRS_PREFIX = 'ahrs.'
 
-# What each AhrsParams field means, with its unit; (description, range).
-_AHRS_DOCS = {
-    'alpha': ('gain α of the extension term that holds the estimate near S³.',
-              (0.0, 1.0), 'Must lie in (0, 0.0762), the range certified by Theorem 1.'),
-    'tau_acc': ('time constant of the world-frame low-pass of the accelerometer, s.',
-                (0.0, 1e4), 'Positive.'),
-    'tau_acc_gain': ('time constant of the inclination correction (the gain κ_a), s.',
-                     (0.0, 1e4), 'Positive.'),
-    'tau_mag': ('time constant of the heading correction from the magnetometer (κ_m), s '
-                '(the gain of each field follows from the interval since the previous '
-                'field).', (0.0, 1e4), 'Positive.'),
-    'tau_bias': ('time constant of the gyro bias estimate in motion, s; 0 turns it off.',
-                 (0.0, 1e6), 'At least 0.'),
-    'bias_max': ('largest gyro bias estimate per axis, rad/s.', (0.0, 10.0), 'Positive.'),
-    'rest_gyr': ('rest detection: threshold on the angular rate, rad/s.', (0.0, 10.0),
-                 'Positive.'),
-    'rest_acc': ('rest detection: threshold on the deviation of the specific force, '
-                 'm/s².', (0.0, 100.0), 'Positive.'),
-    'rest_time': ('rest detection: time below both thresholds before rest, s.',
-                  (0.0, 1e4), 'Positive.'),
-    'tau_rest': ('time constant of the rest-detection filters and of the bias estimate '
-                 'at rest, s.', (0.0, 1e4), 'Positive.'),
-    'mag_norm_th': ('magnetic disturbance: relative deviation of the field norm from its '
-                    'reference.', (0.0, 100.0), 'Positive.'),
-    'mag_dip_th': ('magnetic disturbance: deviation of the dip angle from its reference, '
-                   'rad.', (0.0, math.pi), 'Positive.'),
-    'mag_new_time': ('time a new, consistent field must last (while the body turns) '
-                     'before it is accepted, s.', (0.0, 1e4), 'Positive.'),
-    'mag_new_gyr': ('angular rate the body must turn at for that time to count, rad/s.',
-                    (0.0, 100.0), 'Positive.'),
-    'tau_mag_ref': ('time constant of the learned field norm and dip references, s.',
-                    (0.0, 1e6), 'Positive.'),
-}
+# Why the estimator restarted (the same causes as the nodes').
+RESET_CAUSES = ('backward_jump', 'clock_jump', 'forward_gap', 'service')
 
+SECOND = 1_000_000_000
+# Largest accepted ‖θ‖ of one sample interval, rad (StepPairer).
+MAX_INCREMENT = 20.0
 
-def _ahrs_spec(name, default):
-    description, bounds, constraints = _AHRS_DOCS.get(
-        name, (f'AhrsParams.{name} (ext_observer/core/ahrs.py).', None, ''))
-    return ParameterSpec(
-        AHRS_PREFIX + name, float(default),
-        f'measurement_source accel: {description} Default: the core\'s '
-        '(AhrsParams.DEFAULTS).', bounds, read_only=True, constraints=constraints)
-
-
-RAW_IMU_PARAMETERS = (
-    ParameterSpec('use_mag', True,
-                  'measurement_source accel: correct the heading from the magnetometer on '
-                  'imu/mag (sensor_msgs/MagneticField, T), as imu_filter_madgwick; false: '
-                  'gyro and accelerometer only (6D, heading free). With no field yet the '
-                  'estimate runs 6D and /diagnostics warns.', read_only=True),
-    ParameterSpec('world_frame', 'enu',
-                  "measurement_source accel: world frame of the estimate: 'enu' (x east, "
-                  "y north, z up; REP-103), 'nwu' or 'ned', as imu_filter_madgwick.",
-                  read_only=True, constraints=f'One of {", ".join(WORLD_FRAMES)}.'),
-    ParameterSpec('mag_bias_x', 0.0,
-                  'measurement_source accel: hard-iron offset subtracted from the field, x, '
-                  'T (as imu_filter_madgwick).', (-1.0, 1.0)),
-    ParameterSpec('mag_bias_y', 0.0, 'The same, y, T.', (-1.0, 1.0)),
-    ParameterSpec('mag_bias_z', 0.0, 'The same, z, T.', (-1.0, 1.0)),
-) + tuple(_ahrs_spec(name, default) for name, default in AhrsParams.DEFAULTS.items())
+# One estimate: the sample's stamp (ns), the ambient estimate in
+# world_frame (4 floats), the guard's reason if it reinitialized the
+# estimator on this sample (else None), and the released step (its gap flag).
+Estimate = namedtuple('Estimate', 'stamp state reason step')
 
 
 def ahrs_params(values):
@@ -136,52 +102,50 @@ def ahrs_params(values):
         raise ValueError(f'{AHRS_PREFIX}*: {error}') from None
 
 
-def raw_imu_settings(values):
+def _about_z(angle):
+    return (math.cos(0.5 * angle), 0.0, 0.0, math.sin(0.5 * angle))
+
+
+def heading_factor(world_frame, declination=0.0, yaw_offset=0.0):
     """
-    Validate the raw-IMU parameters.
+    Return the left factor from the core's ENU estimate to the published one.
 
-    Parameters
-    ----------
-    values : dict
-        Every parameter of :data:`RAW_IMU_PARAMETERS` by name (and others).
-
-    Raises
-    ------
-    ValueError
-        With the reason.
-
-    """
-    if values['world_frame'] not in WORLD_FRAMES:
-        raise ValueError(f'world_frame must be one of {tuple(WORLD_FRAMES)}, got '
-                         f'{values["world_frame"]!r}')
-    ahrs_params(values)
-
-
-def imu_vectors(msg):
-    """
-    Return the angular velocity (rad/s) and the specific force (m/s²) of an IMU sample.
-
-    Parameters
-    ----------
-    msg : sensor_msgs.msg.Imu
+    ``R_z(yaw_offset) ⊗ C ⊗ R_up(−declination)``, with ``C`` the frame's
+    factor of :data:`~ext_observer.core.ahrs.WORLD_FRAMES`.
 
     Returns
     -------
-    gyr, acc : tuple of 3 float
+    factor : tuple of 4 float or None
+        None when it is the identity (ENU, no offsets): nothing to multiply.
 
     """
-    return vector_from_msg(msg.angular_velocity), vector_from_msg(msg.linear_acceleration)
+    if world_frame == 'enu' and declination == 0.0 and yaw_offset == 0.0:
+        return None
+    factor = multiply_floats(WORLD_FRAMES[world_frame], _about_z(-declination))
+    return multiply_floats(_about_z(yaw_offset), factor)
+
+
+def pairing_settings(settings):
+    """Return the :class:`StepPairer` settings of the raw IMU's parameters."""
+    # The steps wait for nothing: the accelerometer comes with the sample,
+    # the field is used when it arrives.
+    return dict(timeout=0, max_increment=MAX_INCREMENT,
+                norm_tolerance=0.1,
+                backward_jump=round(settings['backward_jump_threshold'] * SECOND),
+                forward_gap=round(settings['forward_gap_threshold'] * SECOND),
+                max_dt=round(settings['max_dt'] * SECOND),
+                constant_dt=settings['constant_dt'])
 
 
 class RawImuEstimator:
     """
-    The core's raw-IMU estimator as the node runs it: one call per sample or field.
+    The core's raw-IMU estimator with the node's frames: one call per sample or field.
 
     Parameters
     ----------
     settings : dict
-        The node's settings (``ahrs.*``, ``use_mag``, ``world_frame``,
-        ``mag_bias_*``, ``divergence_max_residual``).
+        ``ahrs.*``, ``use_mag``, ``world_frame``, ``declination``,
+        ``yaw_offset``, ``mag_bias_*``, ``divergence_max_residual``.
 
     Attributes
     ----------
@@ -194,8 +158,6 @@ class RawImuEstimator:
     def __init__(self, settings):
         self.core = AhrsObserver(params=ahrs_params(settings), use_mag=settings['use_mag'])
         self.world_frame = settings['world_frame']
-        # The left factor into world_frame; None for ENU, the core's own.
-        self._frame = None if self.world_frame == 'enu' else WORLD_FRAMES[self.world_frame]
         self.latest_field = None
         self.configure(settings)
 
@@ -204,10 +166,8 @@ class RawImuEstimator:
         self.max_residual = settings['divergence_max_residual']
         self._mag_bias = (settings['mag_bias_x'], settings['mag_bias_y'],
                           settings['mag_bias_z'])
-
-    def field_from_msg(self, msg):
-        """Return the field of a ``sensor_msgs/MagneticField``, T, as measured."""
-        return vector_from_msg(msg.magnetic_field)
+        self._frame = heading_factor(self.world_frame, settings['declination'],
+                                     settings['yaw_offset'])
 
     def field(self, field, dt=None):
         """
@@ -236,9 +196,8 @@ class RawImuEstimator:
         Parameters
         ----------
         gyr, acc : sequence of 3 float
-            Angular velocity (rad/s) and specific force (m/s²) of the sample
-            (:func:`imu_vectors`), validated by the caller (finite, nonzero
-            acceleration).
+            Angular velocity (rad/s) and specific force (m/s²) of the sample,
+            validated by the caller (finite, nonzero acceleration).
         dt : float
             Time since the previous sample, s.
 
@@ -292,3 +251,116 @@ class RawImuEstimator:
                 ('initialized', q is not None), ('bias_x', float(bx)),
                 ('bias_y', float(by)), ('bias_z', float(bz)), ('rest', bool(core.rest)),
                 ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual)]
+
+
+class RawImuPipeline:
+    """
+    Stamped raw-IMU samples in, the node's estimates out; every input counted.
+
+    Parameters
+    ----------
+    settings : dict
+        The settings of ``imu_filter_node`` (:func:`~ext_observer.imu_filter_parameters.
+        imu_filter_settings`).
+    depth : int
+        Most inputs waiting (the node's ``queue_depth``).
+
+    Attributes
+    ----------
+    estimator : RawImuEstimator
+    pairer : ext_observer.pairing.StepPairer
+        Validation, stamps, and the input counters.
+    units : ext_observer.units.UnitCheck
+        Magnitudes that only a wrong unit explains.
+    resets : dict
+        By cause (:data:`RESET_CAUSES`).
+    reinitializations : dict
+        By the divergence guard, by reason.
+
+    """
+
+    def __init__(self, settings, depth=100):
+        self.estimator = RawImuEstimator(settings)
+        self.pairer = StepPairer(depth=depth, **pairing_settings(settings))
+        self.units = UnitCheck()
+        self.resets = dict.fromkeys(RESET_CAUSES, 0)
+        self.reinitializations = dict.fromkeys(GUARD_REASONS, 0)
+        self._constant_dt = settings['constant_dt']
+        self._gap_resets = settings['forward_gap_action'] == 'reset'
+
+    def configure(self, settings):
+        """Take the settings that may change at runtime."""
+        self.estimator.configure(settings)
+        self.pairer.configure(**pairing_settings(settings))
+        self._constant_dt = settings['constant_dt']
+        self._gap_resets = settings['forward_gap_action'] == 'reset'
+
+    def reset(self, cause):
+        """Restart the estimator (the next sample initializes it), counted as ``cause``."""
+        self.estimator.reset()
+        self.resets[cause] += 1
+
+    def restart(self, cause):
+        """Start a new time line and restart the estimator; return the inputs discarded."""
+        discarded = self.pairer.restart()
+        self.reset(cause)
+        return discarded
+
+    def imu(self, stamp, gyr, acc):
+        """
+        Take one IMU sample and run the step it closes.
+
+        Parameters
+        ----------
+        stamp : int
+            ns.
+        gyr, acc : sequence of 3 float
+            rad/s, m/s².
+
+        Returns
+        -------
+        outcome : str or None
+            As :meth:`StepPairer.add_angular_velocity
+            <ext_observer.pairing.StepPairer.add_angular_velocity>`: None, a
+            drop reason, or ``'backward_jump'`` (the estimator was reset).
+        estimate : Estimate or None
+            The estimate of this sample, when it ran a step.
+
+        """
+        self.units.imu(gyr, acc)
+        pairer = self.pairer
+        outcome = pairer.add_angular_velocity(stamp, gyr, 0, acc)
+        if outcome == BACKWARD_JUMP:
+            self.reset('backward_jump')
+        estimate = None
+        for step in pairer.pop_ready(0):
+            if step.end != stamp:
+                # Cannot happen: a step is released by the sample that closes it.
+                continue
+            if step.gap and self._gap_resets:
+                self.reset('forward_gap')
+            state, reason = self.estimator.step(
+                gyr, acc, self._constant_dt or (step.end - step.stamp) * 1e-9)
+            if reason is not None:
+                self.reinitializations[reason] += 1
+            estimate = Estimate(stamp, state, reason, step)
+        return outcome, estimate
+
+    def field(self, stamp, field):
+        """
+        Take one magnetometer sample (T) and correct the heading with it at once.
+
+        Returns
+        -------
+        outcome : str or None
+            None when used, else the drop reason.
+
+        """
+        self.units.field(field)
+        previous = self.pairer.field_stamp
+        outcome = self.pairer.add_field(stamp, field)
+        if outcome is None:
+            # The first field of a time line (or after a jump back) has no interval.
+            self.estimator.field(field, None if previous is None or stamp <= previous
+                                 else (stamp - previous) * 1e-9)
+        return outcome

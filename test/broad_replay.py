@@ -3,9 +3,8 @@ The BROAD excerpts of test/data/ and what the core makes of them offline.
 
 :func:`load` reads an excerpt (``test/data/broad_<trial>.npz``, see
 ``test/data/README.md``). :func:`offline` runs the core's raw-IMU estimator
-on floats exactly as ``observer_node`` with ``measurement_source: accel``
-runs it on the replayed messages: sample 0 only starts the time line,
-sample ``k ≥ 1`` is one ``update`` with ``dt = t_k − t_{k−1}`` (from the
+on floats exactly as ``imu_filter_node`` runs it on the replayed messages:
+sample 0 only starts the time line, sample ``k ≥ 1`` is one ``update`` with ``dt = t_k − t_{k−1}`` (from the
 integer nanosecond stamps, as the node computes it), and the field of every
 ``mag_every``-th sample (T) arrives after that sample, with the interval
 since the previous field as its ``dt`` (before the first step it is kept

@@ -237,6 +237,7 @@ def test_imu_measurement_without_orientation_is_dropped_and_counted(ros_context,
 
 @pytest.mark.parametrize('values, reason', [
     (dict(increment_source='gyro'), 'increment_source must be one of'),
+    (dict(align_sign='yes'), "align_sign must be true, false or 'auto'"),
     (dict(measurement_source='mocap'), 'measurement_source must be one of'),
     (dict(orientation_covariance=[0.0] * 9), 'positive diagonal'),
     (dict(orientation_covariance=[0.1] * 8), '9 finite numbers'),
@@ -260,7 +261,8 @@ def test_align_sign_defaults_by_source(ros_context, increments, source, expected
         increment_source=increments, measurement_source=source))
     try:
         assert node.observer.config.align_sign is expected
-        assert node.parameters.values['align_sign'] is None
+        assert node.parameters.values['align_sign'] == 'auto'
+        assert node.get_parameter('align_sign').value == 'auto'
         assert ('exact, unaligned' in node.describe_parameter('align_sign').description)
     finally:
         node.destroy_node()

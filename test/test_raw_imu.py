@@ -1,12 +1,12 @@
 """
-The raw-IMU mode of observer_node (``measurement_source: accel``) through
+imu_filter_node, the raw-IMU estimator, through
 real topics: real BROAD data, bad samples, world frames, parameters, and the
 installed console script as a drop-in for imu_filter_madgwick_node.
 
 The BROAD replay plays the two excerpts of ``test/data/`` (60 s each at
 285.7 Hz; see ``test/data/README.md``) as ``sensor_msgs/Imu`` on
 ``imu/data_raw`` and ``sensor_msgs/MagneticField`` (T) on ``imu/mag`` for
-every third sample, from best-effort publishers, into an ObserverNode on the
+every third sample, from best-effort publishers, into an ImuFilterNode on the
 test's executor. The field of sample k is published once the node has taken
 sample k, and sample k + 1 once it has taken the field, so that the node
 sees the same sequence as the offline run of the core
@@ -34,13 +34,13 @@ from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_ms
                                       stamp_from_nanoseconds)
 from ext_observer.core.ahrs import AhrsParams, world_from_enu
 from ext_observer.node_common import ParameterError
+from ext_observer.imu_filter_node import ImuFilterNode
+from ext_observer.imu_filter_parameters import IMU_FILTER_PARAMETERS
 from ext_observer.observer_node import ObserverNode
-from ext_observer.raw_imu import (AHRS_PREFIX, imu_vectors, RAW_IMU_PARAMETERS,
-                                  RawImuEstimator)
+from ext_observer.raw_imu import AHRS_PREFIX, RawImuEstimator
 from ros_helpers import installed, overrides, SECOND, values_of
 
 BEST_EFFORT = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
-RAW = dict(measurement_source='accel')
 
 # imu/data and attitude_estimate against the core run offline on the same
 # samples in the same order: the node runs the same float code on the same
@@ -162,8 +162,8 @@ def test_broad_excerpt_through_dds_equals_the_core_and_tracks_the_reference(
         ros_context, events_spinner, trial):
     data = load(trial)
     spinner = events_spinner
-    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
-        diagnostic_period=0.5, **RAW)))
+    observer = spinner.add(ImuFilterNode(context=ros_context, parameter_overrides=overrides(
+        diagnostic_period=0.5)))
     driver = spinner.add(Driver(ros_context))
     connect(spinner, driver, observer)
     started = time.monotonic()
@@ -209,7 +209,6 @@ def test_broad_excerpt_through_dds_equals_the_core_and_tracks_the_reference(
 
     # The diagnostics show the estimator's state.
     values = values_of(observer.status())
-    assert values['measurement_source'] == 'accel'
     assert values['world_frame'] == 'enu' and values['use_mag'] == 'true'
     core = observer.observer
     assert [float(values[f'bias_{axis}']) for axis in 'xyz'] == pytest.approx(
@@ -231,9 +230,9 @@ def test_world_frames_rotate_the_enu_estimate(ros_context, spinner):
             '--ros-args', '-r', f'imu/data:={frame}/imu/data',
             '-r', f'attitude_estimate:={frame}/attitude_estimate',
             '-r', f'attitude_estimate/unit:={frame}/attitude_estimate/unit']
-        nodes[frame] = spinner.add(ObserverNode(
+        nodes[frame] = spinner.add(ImuFilterNode(
             node_name=f'observer_{frame}', context=ros_context, cli_args=remap,
-            parameter_overrides=overrides(world_frame=frame, **RAW)))
+            parameter_overrides=overrides(world_frame=frame)))
     driver = spinner.add(Driver(ros_context))
     others = {frame: {} for frame in ('ned', 'nwu')}
     for frame, store in others.items():
@@ -265,8 +264,8 @@ def test_world_frames_rotate_the_enu_estimate(ros_context, spinner):
 
 def test_bad_samples_are_refused_counted_and_never_reach_the_estimate(ros_context, spinner):
     data = load(TRIALS[0])
-    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
-        diagnostic_period=0.1, **RAW)))
+    observer = spinner.add(ImuFilterNode(context=ros_context, parameter_overrides=overrides(
+        diagnostic_period=0.1)))
     driver = spinner.add(Driver(ros_context))
     connect(spinner, driver, observer)
     gyr, acc, mag = data['gyr'], data['acc'], fields_tesla(data)
@@ -340,8 +339,7 @@ def test_bad_samples_are_refused_counted_and_never_reach_the_estimate(ros_contex
 
 
 def test_a_missing_magnetometer_warns_and_runs_6d(ros_context, spinner):
-    observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
-        **RAW)))
+    observer = spinner.add(ImuFilterNode(context=ros_context, parameter_overrides=overrides()))
     driver = spinner.add(Driver(ros_context))
     connect(spinner, driver, observer)
     observer.status()
@@ -352,8 +350,8 @@ def test_a_missing_magnetometer_warns_and_runs_6d(ros_context, spinner):
     assert status.level == DiagnosticStatus.WARN
     assert 'no magnetic field on /imu/mag' in status.message
     # use_mag false: no imu/mag subscription, no warning.
-    quiet = spinner.add(ObserverNode(node_name='quiet', context=ros_context,
-                                     parameter_overrides=overrides(use_mag=False, **RAW)))
+    quiet = spinner.add(ImuFilterNode(node_name='quiet', context=ros_context,
+                                     parameter_overrides=overrides(use_mag=False)))
     assert quiet.measurement_subscription is None
     assert quiet.status().level == DiagnosticStatus.OK
 
@@ -362,53 +360,70 @@ def test_a_missing_magnetometer_warns_and_runs_6d(ros_context, spinner):
     (dict(world_frame='nue'), 'world_frame must be one of'),
     ({'ahrs.alpha': 0.2}, 'certified'),
     ({'ahrs.tau_acc': 0.0}, 'tau_acc must be positive'),
-    (dict(increment_source='increment'), 'increment_source must be imu'),
-    # imu_filter_madgwick's gain is a number; ours is the paper's quaternion.
-    (dict(gain=0.1), 'gain'),
+    (dict(forward_gap_action='skip'), 'forward_gap_action must be one of'),
 ])
 def test_invalid_raw_imu_parameters_are_refused(ros_context, values, reason):
     with pytest.raises(ParameterError, match=reason):
-        ObserverNode(context=ros_context, parameter_overrides=overrides(**RAW, **values))
+        ImuFilterNode(context=ros_context, parameter_overrides=overrides(**values))
+
+
+def test_the_observer_refuses_the_raw_imu_mode_and_names_the_node(ros_context):
+    with pytest.raises(ParameterError, match='run imu_filter_node'):
+        ObserverNode(context=ros_context, parameter_overrides=overrides(
+            measurement_source='accel'))
 
 
 def test_raw_imu_divergence_guard_reinitializes_from_the_sample():
-    settings = {spec.name: spec.default for spec in RAW_IMU_PARAMETERS}
-    settings['divergence_max_residual'] = 15.0
+    settings = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
     estimator = RawImuEstimator(settings)
-    msg = Imu()
-    msg.angular_velocity.z = 0.1
-    msg.linear_acceleration.x, msg.linear_acceleration.z = 1.0, 9.7
+    sample = ((0.0, 0.0, 0.1), (1.0, 0.0, 9.7))
     estimator.field((2e-5, 0.0, -4e-5))
-    state, reason = estimator.step(*imu_vectors(msg), 0.01)
+    state, reason = estimator.step(*sample, 0.01)
     assert reason is None and abs(math.hypot(*state) - 1.0) < 1e-9
     for poison, expected in (((10.0, 0.0, 0.0, 0.0), 'residual_too_large'),
                              ((math.nan, 0.0, 0.0, 0.0), 'state_non_finite')):
         estimator.core.q = poison
-        state, reason = estimator.step(*imu_vectors(msg), 0.01)
+        state, reason = estimator.step(*sample, 0.01)
         assert reason == expected
         # From gravity and the latest field again: unit, finite.
         assert abs(math.hypot(*state) - 1.0) < 1e-9
 
 
-def test_every_core_parameter_is_a_node_parameter():
-    names = {spec.name for spec in RAW_IMU_PARAMETERS}
+def test_every_core_parameter_is_a_node_parameter_that_reaches_the_core(ros_context):
+    names = {spec.name for spec in IMU_FILTER_PARAMETERS}
     for name in AhrsParams.DEFAULTS:
         assert AHRS_PREFIX + name in names, name
-    for spec in RAW_IMU_PARAMETERS:
+    for spec in IMU_FILTER_PARAMETERS:
         if spec.name.startswith(AHRS_PREFIX):
-            assert spec.default == AhrsParams.DEFAULTS[spec.name[len(AHRS_PREFIX):]]
-            assert not spec.description.startswith('AhrsParams.'), (
-                f'{spec.name} needs a description in raw_imu._AHRS_DOCS')
+            assert not spec.description.startswith('Estimator: AhrsParams.'), (
+                f'{spec.name} needs a description in imu_filter_parameters._AHRS_DOCS')
+    # Each ahrs.* value given to the node is the core's: 1.5 times the
+    # default (0.5 times for those bounded above near it).
+    given = {}
+    for name, default in AhrsParams.DEFAULTS.items():
+        if isinstance(default, bool):
+            given[AHRS_PREFIX + name] = not default
+        elif default == 0.0:
+            given[AHRS_PREFIX + name] = 1.0
+        else:
+            given[AHRS_PREFIX + name] = float(default) * (0.5 if name == 'alpha' else 1.5)
+    node = ImuFilterNode(context=ros_context, parameter_overrides=overrides(**given))
+    try:
+        params = node.observer.params
+        for name, value in given.items():
+            assert getattr(params, name[len(AHRS_PREFIX):]) == value, name
+    finally:
+        node.destroy_node()
 
 
 def test_drop_in_for_imu_filter_madgwick_as_a_process(ros_processes, ros_context, spinner):
-    """The console script with config/raw_imu.yaml, a camera's topics remapped."""
+    """The console script with config/imu_filter.yaml, a camera's topics remapped."""
     data = load(TRIALS[0])
     count = 1500
     observer = ros_processes([
-        installed('observer_node'), '--ros-args',
-        '--params-file', os.path.join(REPO, 'config', 'raw_imu.yaml'),
-        '-r', '__node:=imu_filter', '-r', 'imu/data_raw:=/camera/imu',
+        installed('imu_filter_node'), '--ros-args',
+        '--params-file', os.path.join(REPO, 'config', 'imu_filter.yaml'),
+        '-r', 'imu/data_raw:=/camera/imu',
         '-r', 'imu/mag:=/camera/mag', '-p', 'diagnostic_period:=0.2'])
     driver = spinner.add(Driver(ros_context, '/camera/imu', '/camera/mag'))
     spinner.spin_until(lambda: driver.imu_publisher.get_subscription_count() == 1

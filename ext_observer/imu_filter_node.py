@@ -1,0 +1,230 @@
+"""
+The ``imu_filter`` node: attitude from a raw IMU, the drop-in for imu_filter_madgwick.
+
+Inputs: ``imu/data_raw`` (``sensor_msgs/Imu``: angular velocity, rad/s, and
+linear acceleration, m/s²; the orientation is ignored) and, with
+``use_mag``, ``imu/mag`` (``sensor_msgs/MagneticField``, T) at its own rate;
+both subscribed with the sensor-data QoS (best effort, volatile: reliable
+and best-effort drivers both connect), overridable with ``qos_overrides``.
+Outputs, one per IMU sample and stamped with it: ``imu/data``
+(``sensor_msgs/Imu``: the sample with its orientation filled in, normalized,
+and ``orientation_covariance`` from ``orientation_stddev``; only while
+subscribed) and ``attitude_estimate`` (``QuaternionStamped``, the ambient
+estimate, not normalized: its distance to S³ is what the extension term
+holds small); ``/diagnostics`` every ``diagnostic_period``; the service
+``~/reset`` (``std_srvs/Trigger``).
+
+The estimator is :class:`~ext_observer.raw_imu.RawImuPipeline` (validation,
+stamps, the core's :class:`~ext_observer.core.ahrs.AhrsObserver`); this node
+turns messages into its inputs and its estimates into messages, and says
+what went wrong: drops, resets, a silent IMU, a missing magnetometer, and
+values that only a wrong unit explains (:mod:`ext_observer.units`). The
+parameters are :data:`~ext_observer.imu_filter_parameters.IMU_FILTER_PARAMETERS`,
+imu_filter_madgwick's among them (``docs/raw_imu.md``).
+"""
+
+from geometry_msgs.msg import QuaternionStamped
+from sensor_msgs.msg import Imu, MagneticField
+
+from ext_observer.conversions import nanoseconds_from_stamp, vector_from_msg
+from ext_observer.estimator_node import EstimatorNode
+from ext_observer.imu_filter_parameters import (IMU_FILTER_PARAMETERS, imu_filter_settings,
+                                                MADGWICK_UNUSED)
+from ext_observer.node_common import run_node
+from ext_observer.pairing import BACKWARD_JUMP
+from ext_observer.raw_imu import RawImuPipeline
+
+__all__ = ['IMU_FILTER_PARAMETERS', 'ImuFilterNode', 'IMU_TOPIC', 'MAG_TOPIC', 'main']
+
+IMU_TOPIC = 'imu/data_raw'
+MAG_TOPIC = 'imu/mag'
+
+
+class ImuFilterNode(EstimatorNode):
+    """
+    Estimate the attitude from a raw IMU (gyro, accelerometer, magnetometer).
+
+    Parameters
+    ----------
+    node_name : str
+        Default ``imu_filter``, as imu_filter_madgwick's.
+    **kwargs
+        Passed to ``rclpy.node.Node``.
+
+    Attributes
+    ----------
+    pipeline : ext_observer.raw_imu.RawImuPipeline
+        The estimator with its input checks and counters.
+    pairer : ext_observer.pairing.StepPairer
+        The pipeline's.
+
+    Raises
+    ------
+    ParameterError
+        If a parameter is refused at start-up.
+
+    """
+
+    NODE_NAME = 'imu_filter'
+    INPUT_WORDS = {'increment': 'IMU samples', 'measurement': 'magnetic fields'}
+
+    def __init__(self, node_name=NODE_NAME, **kwargs):
+        super().__init__(node_name, IMU_FILTER_PARAMETERS, imu_filter_settings, **kwargs)
+        settings = self.parameters.settings
+        self.pipeline = RawImuPipeline(settings, depth=settings['queue_depth'])
+        self.pairer = self.pipeline.pairer
+        # One set of counters: the pipeline counts the resets it makes
+        # itself (stamps), the node those it is told of (clock, service).
+        self.resets = self.pipeline.resets
+        self.reinitializations = self.pipeline.reinitializations
+        self.increment_subscription = self._subscribe(Imu, IMU_TOPIC, self.imu_data_raw_callback)
+        self.measurement_subscription = (
+            self._subscribe(MagneticField, MAG_TOPIC, self.imu_mag_callback)
+            if settings['use_mag'] else None)
+        self._estimate_msg = QuaternionStamped()
+        self._status_steps = self._status_fields = 0
+        self._said = set()
+        self._unit_counts = dict(self.pipeline.units.counts)
+        self._cache_settings(settings)
+        logger = self.get_logger()
+        logger.info(
+            f'raw IMU on {self.increment_subscription.topic_name}'
+            + (f' and {self.measurement_subscription.topic_name}' if settings['use_mag']
+               else ' (use_mag false: heading free)')
+            + f', world frame {settings["world_frame"]}, '
+            f'{self.pipeline.estimator.core.params}')
+        unused = [spec.name for spec in MADGWICK_UNUSED if spec.name in self.parameters.given]
+        if unused:
+            logger.warning(
+                'parameters of imu_filter_madgwick accepted but not used here: '
+                + ', '.join(f'{name}={self.parameters.values[name]!r}' for name in unused)
+                + ' (docs/raw_imu.md says why; the gains are the ahrs.* parameters)')
+
+    @property
+    def state(self):
+        """The current estimate in ``world_frame`` (ambient; None before the first step)."""
+        return self.pipeline.estimator.state
+
+    @property
+    def observer(self):
+        """The core's estimator, :class:`~ext_observer.core.ahrs.AhrsObserver`."""
+        return self.pipeline.estimator.core
+
+    @property
+    def drops(self):
+        """Inputs dropped, by reason."""
+        return self.pairer.drops
+
+    @property
+    def counts(self):
+        """``imu_samples`` and ``fields`` received, ``fields_used``."""
+        received, processed = self.pairer.received, self.pairer.processed
+        return {'imu_samples': received['increment'], 'fields': received['measurement'],
+                'fields_used': processed['measurement']}
+
+    # Inputs ---------------------------------------------------------------
+
+    def imu_data_raw_callback(self, msg):
+        """Take one IMU sample; publish the estimate of the step it closes."""
+        stamp = nanoseconds_from_stamp(msg.header.stamp)
+        # No clock is read: the steps wait for nothing.
+        outcome, estimate = self.pipeline.imu(
+            stamp, vector_from_msg(msg.angular_velocity),
+            vector_from_msg(msg.linear_acceleration))
+        if outcome == BACKWARD_JUMP:
+            self._backward_jump(stamp, reset=False)
+        if estimate is None:
+            return
+        if estimate.step.gap:
+            self._forward_gap(estimate.step, reset=False)
+        if estimate.reason is not None:
+            self._reinitialized(estimate.reason, estimate.step.stamp, 'the sample',
+                                count=False)
+        w, x, y, z = estimate.state
+        out = self._estimate_msg
+        out.header.stamp = msg.header.stamp
+        q = out.quaternion
+        q.w, q.x, q.y, q.z = w, x, y, z
+        self.estimate_publisher.publish(out)
+        if self._publish_imu:
+            # The sample itself goes out, its header, rates and covariances
+            # passed through (as imu_filter_madgwick does): the message is
+            # this node's once its callback has run.
+            n = (w * w + x * x + y * y + z * z) ** 0.5
+            q = msg.orientation
+            q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
+            msg.orientation_covariance = self._orientation_covariance
+            self.imu_publisher.publish(msg)
+
+    def imu_mag_callback(self, msg):
+        """Take a magnetic field (T) and correct the heading with it at once."""
+        self.pipeline.field(nanoseconds_from_stamp(msg.header.stamp),
+                            vector_from_msg(msg.magnetic_field))
+
+    # Resets (EstimatorNode) -------------------------------------------------
+
+    def _reset_estimator(self):
+        self.pipeline.estimator.reset()
+
+    def _reset_message(self):
+        return 'raw-IMU estimator reset: the next sample initializes it from gravity'
+
+    # Parameters -----------------------------------------------------------
+
+    def _cache_settings(self, settings):
+        variance = settings['orientation_stddev'] ** 2
+        self._orientation_covariance = [variance, 0.0, 0.0, 0.0, variance, 0.0,
+                                        0.0, 0.0, variance]
+        self._estimate_msg.header.frame_id = settings['frame_id']
+
+    def _apply_parameters(self, settings, changed):
+        super()._apply_parameters(settings, changed)
+        self.pipeline.configure(settings)
+        self._cache_settings(settings)
+
+    # Diagnostics (EstimatorNode) ------------------------------------------
+
+    def _estimator_values(self):
+        units = self.pipeline.units.counts
+        return (self.pipeline.estimator.key_values()
+                + [(f'implausible_{kind}', count) for kind, count in units.items()])
+
+    def _problems(self, steps):
+        parts = []
+        fields = self.pairer.processed['measurement']
+        if (self.measurement_subscription is not None and steps > self._status_steps
+                and fields == self._status_fields):
+            text = (f'no magnetic field on {self.measurement_subscription.topic_name} '
+                    'since the last status: heading not corrected')
+            parts.append(text)
+            if fields == 0 and 'no_field' not in self._said:
+                # Said once in the log; /diagnostics says it at every status.
+                self._said.add('no_field')
+                self.get_logger().warning(text + ' (use_mag true: is the magnetometer '
+                                          'publishing there?)')
+        self._status_steps, self._status_fields = steps, fields
+        units = self.pipeline.units
+        topics = {'field': MAG_TOPIC, 'acceleration': IMU_TOPIC,
+                  'angular_velocity': IMU_TOPIC}
+        for kind, count in units.counts.items():
+            if count == self._unit_counts[kind]:
+                continue
+            text = f'{self.resolve_topic_name(topics[kind])}: {units.findings[kind]}'
+            parts.append(text)
+            if kind not in self._said:
+                self._said.add(kind)
+                self.get_logger().warning(
+                    text + ' (the samples are used as they are; counted in '
+                    f'/diagnostics as implausible_{kind})')
+        self._unit_counts = dict(units.counts)
+        return parts
+
+
+def main(args=None):
+    """Run the ``imu_filter`` node (``ros2 run ext_observer imu_filter_node``)."""
+    return run_node(ImuFilterNode, args)
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())

@@ -1,0 +1,162 @@
+"""
+The parameters of ``imu_filter_node``: the raw-IMU estimator's, and imu_filter_madgwick's.
+
+A params file or launch file written for ``imu_filter_madgwick_node`` starts
+``imu_filter_node`` unchanged: every parameter of imu_filter_madgwick is
+declared here. Those with the same meaning are honoured (``use_mag``,
+``world_frame``, ``constant_dt``, ``mag_bias_*``, ``orientation_stddev``,
+``declination``, ``yaw_offset``); those of Madgwick's filter or of features
+this node does not have (:data:`MADGWICK_UNUSED`: ``gain``, ``zeta``,
+``publish_tf``, ...) are accepted, and named in one start-up warning when
+given. The estimator's own gains are the ``ahrs.*`` parameters, the fields
+of :class:`~ext_observer.core.ahrs.AhrsParams` in physical units.
+"""
+
+import math
+
+from ext_observer.core.ahrs import AhrsParams, WORLD_FRAMES
+from ext_observer.estimator_node import COMMON_PARAMETERS, common_settings
+from ext_observer.parameters import ParameterSpec
+from ext_observer.raw_imu import AHRS_PREFIX, ahrs_params
+
+__all__ = ['IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'MADGWICK_UNUSED',
+           'imu_filter_settings']
+
+# What each AhrsParams field means, with its unit; (description, range,
+# constraints).
+_AHRS_DOCS = {
+    'alpha': ('gain α of the extension term that holds the estimate near S³.',
+              (0.0, 1.0), 'Must lie in (0, 0.0762), the range certified by Theorem 1.'),
+    'tau_acc': ('time constant of the world-frame low-pass of the accelerometer, s.',
+                (0.0, 1e4), 'Positive.'),
+    'tau_acc_gain': ('time constant of the inclination correction (the gain κ_a), s.',
+                     (0.0, 1e4), 'Positive.'),
+    'tau_mag': ('time constant of the heading correction from the magnetometer (κ_m), s '
+                '(the gain of each field follows from the interval since the previous '
+                'field).', (0.0, 1e4), 'Positive.'),
+    'tau_bias': ('time constant of the gyro bias estimate in motion, s; 0 turns it off.',
+                 (0.0, 1e6), 'At least 0.'),
+    'bias_max': ('largest gyro bias estimate per axis, rad/s.', (0.0, 10.0), 'Positive.'),
+    'rest_gyr': ('rest detection: threshold on the angular rate, rad/s.', (0.0, 10.0),
+                 'Positive.'),
+    'rest_acc': ('rest detection: threshold on the deviation of the specific force, '
+                 'm/s².', (0.0, 100.0), 'Positive.'),
+    'rest_time': ('rest detection: time below both thresholds before rest, s.',
+                  (0.0, 1e4), 'Positive.'),
+    'tau_rest': ('time constant of the rest-detection filters and of the bias estimate '
+                 'at rest, s.', (0.0, 1e4), 'Positive.'),
+    'mag_norm_th': ('magnetic disturbance: relative deviation of the field norm from its '
+                    'reference.', (0.0, 100.0), 'Positive.'),
+    'mag_dip_th': ('magnetic disturbance: deviation of the dip angle from its reference, '
+                   'rad.', (0.0, math.pi), 'Positive.'),
+    'mag_new_time': ('time a new, consistent field must last (while the body turns) '
+                     'before it is accepted, s.', (0.0, 1e4), 'Positive.'),
+    'mag_new_gyr': ('angular rate the body must turn at for that time to count, rad/s.',
+                    (0.0, 100.0), 'Positive.'),
+    'tau_mag_ref': ('time constant of the learned field norm and dip references, s.',
+                    (0.0, 1e6), 'Positive.'),
+}
+
+
+def _ahrs_spec(name, default):
+    description, bounds, constraints = _AHRS_DOCS.get(
+        name, (f'AhrsParams.{name} (ext_observer/core/ahrs.py).', None, ''))
+    return ParameterSpec(
+        AHRS_PREFIX + name, default if isinstance(default, bool) else float(default),
+        f'Estimator: {description} Default: the core\'s (AhrsParams.DEFAULTS).', bounds,
+        read_only=True, constraints=constraints)
+
+
+# imu_filter_madgwick's parameters that this node accepts and does not use,
+# with the value that says what this node does (or Madgwick's default).
+MADGWICK_UNUSED = (
+    ParameterSpec('gain', 0.1, "imu_filter_madgwick's filter gain β: not used (the "
+                  'gains here are the ahrs.* time constants).'),
+    ParameterSpec('zeta', 0.0, "imu_filter_madgwick's gyro drift gain: not used (the bias "
+                  'is learned at rest, ahrs.tau_rest; in motion, ahrs.tau_bias).'),
+    ParameterSpec('publish_tf', False, "imu_filter_madgwick's TF broadcast: not used (no "
+                  'TF is published; orientation only, on imu/data).'),
+    ParameterSpec('reverse_tf', False, "imu_filter_madgwick's TF direction: not used."),
+    ParameterSpec('fixed_frame', 'odom', "imu_filter_madgwick's TF parent frame: not used."),
+    ParameterSpec('publish_debug_topics', False,
+                  "imu_filter_madgwick's roll/pitch/yaw debug topics: not used."),
+    ParameterSpec('stateless', False, "imu_filter_madgwick's stateless mode: not used."),
+    ParameterSpec('remove_gravity_vector', False,
+                  "imu_filter_madgwick's gravity removal from imu/data: not used (the "
+                  'acceleration goes out as measured).'),
+)
+
+# The node's own parameters (config/imu_filter.yaml lists these).
+IMU_FILTER_OWN = (
+    ParameterSpec('use_mag', True,
+                  'Correct the heading from the magnetometer on imu/mag '
+                  '(sensor_msgs/MagneticField, T), as imu_filter_madgwick; false: gyro and '
+                  'accelerometer only (6D, heading free). With no field yet the estimate '
+                  'runs 6D and the node warns.', read_only=True),
+    ParameterSpec('world_frame', 'enu',
+                  "World frame of the estimate: 'enu' (x east, y north, z up; REP-103), "
+                  "'nwu' or 'ned', as imu_filter_madgwick.",
+                  read_only=True, constraints=f'One of {", ".join(WORLD_FRAMES)}.'),
+    ParameterSpec('declination', 0.0,
+                  'Magnetic declination, rad, east positive: the heading is turned from '
+                  'magnetic to true north (as imu_filter_madgwick).', (-3.1416, 3.1416)),
+    ParameterSpec('yaw_offset', 0.0,
+                  'Turn of the published orientation about the world frame\'s z axis, rad '
+                  '(as imu_filter_madgwick: with enu, R_z(yaw_offset − declination) ⊗ q).',
+                  (-6.2832, 6.2832)),
+    ParameterSpec('mag_bias_x', 0.0,
+                  'Hard-iron offset subtracted from the field, x, T (as '
+                  'imu_filter_madgwick).', (-1.0, 1.0)),
+    ParameterSpec('mag_bias_y', 0.0, 'The same, y, T.', (-1.0, 1.0)),
+    ParameterSpec('mag_bias_z', 0.0, 'The same, z, T.', (-1.0, 1.0)),
+    ParameterSpec('orientation_stddev', 0.05,
+                  'Standard deviation of the orientation, rad: orientation_covariance of '
+                  'imu/data is its square on the diagonal (as imu_filter_madgwick; 0 '
+                  'publishes zeros, "unknown" in sensor_msgs/Imu).', (0.0, 10.0)),
+    ParameterSpec('constant_dt', 0.0,
+                  'Δt of every sample, s, instead of the interval between the stamps; 0 = '
+                  'from the stamps (as imu_filter_madgwick).', (0.0, 10.0)),
+    ParameterSpec('max_dt', 0.1,
+                  'Largest interval between two IMU samples, s; after a longer one the '
+                  'estimator goes on from the new sample (dropped: dt_too_large).',
+                  (0.0001, 10.0)),
+    ParameterSpec('frame_id', 'world', 'frame_id of attitude_estimate (imu/data keeps the '
+                  "sample's frame_id)."),
+) + COMMON_PARAMETERS + (
+    ParameterSpec('divergence_max_residual', 15.0,
+                  'Divergence guard: reinitialize from the sample at hand when the '
+                  'residual |q̂̄q̂ − 1| exceeds this after a step.', (0.01, 1000.0)),
+    ParameterSpec('input_timeout', 2.0,
+                  'WARN when no IMU sample has arrived for this long (after the first), s; '
+                  'checked at each status, by the node clock; 0 = never.', (0.0, 3600.0)),
+) + tuple(_ahrs_spec(name, default) for name, default in AhrsParams.DEFAULTS.items())
+
+IMU_FILTER_PARAMETERS = IMU_FILTER_OWN + MADGWICK_UNUSED
+
+
+def imu_filter_settings(values):
+    """
+    Validate the parameters of ``imu_filter_node``.
+
+    Parameters
+    ----------
+    values : dict
+        Every parameter of :data:`IMU_FILTER_PARAMETERS` by name.
+
+    Returns
+    -------
+    settings : dict
+        ``values``, checked.
+
+    Raises
+    ------
+    ValueError
+        With the reason.
+
+    """
+    common_settings(values)
+    if values['world_frame'] not in WORLD_FRAMES:
+        raise ValueError(f'world_frame must be one of {tuple(WORLD_FRAMES)}, got '
+                         f'{values["world_frame"]!r}')
+    ahrs_params(values)
+    return dict(values)
