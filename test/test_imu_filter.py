@@ -1,0 +1,225 @@
+"""
+imu_filter_node as a drop-in for imu_filter_madgwick, and what it says of wrong units.
+
+A params file written for imu_filter_madgwick starts the node unchanged and
+is named in one warning for what it sets that is not used; its
+``yaw_offset``, ``declination`` and ``orientation_stddev`` change the output
+as imu_filter_madgwick's do. A magnetometer in µT, an accelerometer in g and
+a gyro in deg/s each give one WARN naming the topic, the magnitude and the
+unit expected, in the log once and in ``/diagnostics`` while it lasts.
+"""
+
+import math
+import time
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+import pytest
+from sensor_msgs.msg import Imu
+
+from broad_replay import START
+from ext_observer.conversions import nanoseconds_from_stamp, quaternion_from_msg
+from ext_observer.core.ahrs import world_from_enu
+from ext_observer.core.quaternion import multiply_floats
+from ext_observer.imu_filter_node import ImuFilterNode
+from ext_observer.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+from ext_observer.raw_imu import heading_factor, RawImuPipeline
+from ext_observer.units import ACC_WINDOW, UnitCheck
+from ros_helpers import installed, overrides, SECOND, values_of
+from test_raw_imu import connect, Driver
+
+# imu_filter_madgwick's own params file (imu_tools, ROS 2: config/imu_filter.yaml),
+# with three values changed as a user would.
+MADGWICK_PARAMS = """\
+imu_filter:
+  ros__parameters:
+    stateless: false
+    use_mag: true
+    publish_tf: true
+    reverse_tf: false
+    fixed_frame: "odom"
+    constant_dt: 0.0
+    publish_debug_topics: false
+    world_frame: "enu"
+    gain: 0.1
+    zeta: 0.0
+    mag_bias_x: 0.0
+    mag_bias_y: 0.0
+    mag_bias_z: 0.0
+    orientation_stddev: 0.2
+    yaw_offset: 0.3
+    declination: 0.1
+"""
+
+
+def samples(count, gyr=(0.0, 0.0, 0.2), acc=(0.5, -0.3, 9.7), field=(2e-5, 1e-5, -4e-5)):
+    """A turning body at 100 Hz: (stamp ns, gyr, acc, field) per sample."""
+    return [(START + k * SECOND // 100, gyr, acc, field) for k in range(count)]
+
+
+def replay(spinner, driver, nodes, data):
+    """Publish in lockstep: each sample and its field reach every node first."""
+    deadline = time.monotonic() + 60.0
+    for k, (stamp, gyr, acc, field) in enumerate(data):
+        driver.send_field(stamp, field)
+        while any(n.pairer.received['measurement'] < k + 1 for n in nodes):
+            spinner.executor.spin_once(timeout_sec=0.01)
+            assert time.monotonic() < deadline, f'field {k} never arrived'
+        driver.send_imu(stamp, gyr, acc)
+        while any(n.pairer.received['increment'] < k + 1 for n in nodes):
+            spinner.executor.spin_once(timeout_sec=0.01)
+            assert time.monotonic() < deadline, f'sample {k} never arrived'
+
+
+def test_madgwick_params_file_starts_unchanged_warns_once_and_takes_effect(
+        ros_processes, ros_context, spinner, tmp_path):
+    path = tmp_path / 'imu_filter.yaml'
+    path.write_text(MADGWICK_PARAMS)
+    process = ros_processes([installed('imu_filter_node'), '--ros-args',
+                             '--params-file', str(path), '-r', 'imu/data_raw:=/imu/raw',
+                             '-r', 'imu/data:=/imu/filtered'])
+    driver = spinner.add(Driver(ros_context, '/imu/raw', 'imu/mag'))
+    spinner.spin_until(lambda: driver.imu_publisher.get_subscription_count() == 1
+                       and process.process.poll() is None, 20.0, 'imu_filter_node')
+    filtered = {}
+    driver.create_subscription(Imu, '/imu/filtered', lambda msg: filtered.__setitem__(
+        nanoseconds_from_stamp(msg.header.stamp), msg), 1000)
+    spinner.spin_until(lambda: driver.count_publishers('/imu/filtered') == 1
+                       and driver.count_subscribers('/imu/filtered') >= 1, 20.0,
+                       'imu/data of the process')
+    spinner.spin_for(0.5)
+    data = samples(150)
+    for stamp, gyr, acc, field in data:
+        driver.send_field(stamp, field)
+        driver.send_imu(stamp, gyr, acc)
+        spinner.spin_for(0.01)
+    spinner.spin_until(lambda: len(filtered) >= 100, 20.0, 'the estimates')
+    assert process.process.poll() is None, process.output
+    # One warning, naming what is set and not used; gain and zeta are at
+    # the defaults, and the honoured parameters are not named.
+    warnings = [line for line in process.output.splitlines() if 'not used here' in line]
+    assert len(warnings) == 1, process.output
+    assert 'publish_tf=True' in warnings[0]
+    for honoured in ('yaw_offset', 'declination', 'orientation_stddev', 'gain=', 'zeta='):
+        assert honoured not in warnings[0]
+    # orientation_stddev: the covariance; yaw_offset and declination: a turn
+    # of R_z(0.3 − 0.1) of the estimate, in the world frame.
+    message = next(iter(filtered.values()))
+    assert list(message.orientation_covariance) == pytest.approx(
+        [0.04, 0, 0, 0, 0.04, 0, 0, 0, 0.04])
+    turn = (math.cos(0.1), 0.0, 0.0, math.sin(0.1))
+    # The process and the reference saw the same samples, maybe a field
+    # earlier or later: compare the heading turn, not the bits.
+    # The same estimator with the defaults, offline, as the reference.
+    pipeline = RawImuPipeline(imu_filter_settings(
+        {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}))
+    for stamp, gyr, acc, field in data:
+        pipeline.field(stamp, field)
+        _, estimate = pipeline.imu(stamp, gyr, acc)
+        if estimate is not None and stamp in filtered:
+            q = np.array(estimate.state) / np.linalg.norm(estimate.state)
+            expected = np.array(multiply_floats(turn, tuple(q)))
+            got = np.array(quaternion_from_msg(filtered[stamp].orientation))
+            assert min(np.abs(got - expected).max(), np.abs(got + expected).max()) < 2e-3
+
+
+@pytest.mark.parametrize('frame', ['enu', 'nwu', 'ned'])
+def test_declination_turns_the_heading_to_true_north_in_every_frame(frame):
+    # A body whose x axis points to magnetic north, with the declination
+    # 0.2 rad east: its x axis points 0.2 rad east of true north.
+    declination = 0.2
+    north = (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4))  # x → ENU y
+    q = multiply_floats(heading_factor(frame, declination, 0.0), north)
+    true = (math.cos((math.pi / 2 - declination) / 2), 0.0, 0.0,
+            math.sin((math.pi / 2 - declination) / 2))
+    expected = world_from_enu(np.array(true), frame)
+    assert min(np.abs(np.array(q) - expected).max(),
+               np.abs(np.array(q) + expected).max()) < 1e-12
+    # yaw_offset turns about the frame's own z axis (imu_filter_madgwick's).
+    offset = multiply_floats(heading_factor(frame, 0.0, 0.3), north)
+    turned = multiply_floats((math.cos(0.15), 0.0, 0.0, math.sin(0.15)),
+                             tuple(world_from_enu(np.array(north), frame)))
+    assert np.abs(np.array(offset) - np.array(turned)).max() < 1e-12
+
+
+@pytest.mark.parametrize('kind, change, expected', [
+    ('field', dict(field=(20.0, 10.0, -40.0)),
+     ('/imu/mag', '45.83', 'tesla expected', 'µT')),
+    ('acceleration', dict(acc=(0.05, -0.03, 0.99)),
+     ('/imu/data_raw', '0.9917', 'm/s² expected', 'g?')),
+    ('angular_velocity', dict(gyr=(0.0, 0.0, 90.0)),
+     ('/imu/data_raw', '90', 'rad/s expected', 'deg/s')),
+])
+def test_a_wrong_unit_is_one_clear_warn_naming_topic_magnitude_and_unit(
+        ros_context, spinner, kind, change, expected):
+    node = spinner.add(ImuFilterNode(context=ros_context,
+                                     parameter_overrides=overrides(diagnostic_period=60.0)))
+    driver = spinner.add(Driver(ros_context))
+    connect(spinner, driver, node)
+    assert node.status().level == DiagnosticStatus.OK
+    replay(spinner, driver, [node], samples(ACC_WINDOW + 5, **change))
+    status = node.status()
+    assert status.level == DiagnosticStatus.WARN
+    for text in expected:
+        assert text in status.message, (text, status.message)
+    values = values_of(status)
+    assert int(values[f'implausible_{kind}']) > 0
+    others = {'field', 'acceleration', 'angular_velocity'} - {kind}
+    assert all(values[f'implausible_{other}'] == '0' for other in others)
+    # The node keeps running on the samples as they are.
+    assert node.state is not None and all(map(math.isfinite, node.state))
+    assert node._said >= {kind}
+
+
+def test_unit_check_counts_by_magnitude_only():
+    check = UnitCheck()
+    for _ in range(3 * ACC_WINDOW):
+        check.imu((0.3, -0.2, 1.0), (0.1, 0.2, 9.8))
+        check.field((2e-5, 0.0, -4e-5))
+    assert check.counts == {'field': 0, 'acceleration': 0, 'angular_velocity': 0}
+    # A shock or a moment of free fall is not a unit: the mean over a window is.
+    check.imu((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    check.imu((0.0, 0.0, 0.0), (0.0, 0.0, 300.0))
+    assert check.counts['acceleration'] == 0
+    check.field((3e-5, 4e-5, 0.0))
+    check.field((0.3, 0.4, 0.0))   # gauss
+    assert check.counts['field'] == 1 and 'gauss' in check.findings['field']
+    check.field((3e4, 4e4, 0.0))   # nT
+    assert check.counts['field'] == 2 and 'nT' in check.findings['field']
+
+
+def test_the_missing_magnetometer_is_said_once_in_the_log(
+        ros_processes, ros_context, spinner):
+    process = ros_processes([installed('imu_filter_node'), '--ros-args', '-p',
+                             'diagnostic_period:=0.2'])
+    driver = spinner.add(Driver(ros_context))
+    spinner.spin_until(lambda: driver.imu_publisher.get_subscription_count() == 1, 20.0,
+                       'imu_filter_node')
+    stamp = START
+    deadline = time.monotonic() + 30.0
+    # IMU samples and no field, for several status periods after the first warning.
+    while process.output.count('no magnetic field on /imu/mag') == 0:
+        assert time.monotonic() < deadline, process.output
+        driver.send_imu(stamp, (0.0, 0.0, 0.1), (0.0, 0.0, 9.81))
+        stamp += SECOND // 100
+        spinner.spin_for(0.01)
+    until = time.monotonic() + 1.5
+    while time.monotonic() < until:
+        driver.send_imu(stamp, (0.0, 0.0, 0.1), (0.0, 0.0, 9.81))
+        stamp += SECOND // 100
+        spinner.spin_for(0.01)
+    assert process.output.count('no magnetic field on /imu/mag') == 1, process.output
+    assert 'is the magnetometer publishing there?' in process.output
+    assert process.process.poll() is None
+
+
+def test_madgwick_unused_parameters_are_named_only_when_given(ros_context):
+    quiet = ImuFilterNode(node_name='quiet', context=ros_context)
+    loud = ImuFilterNode(node_name='loud', context=ros_context, parameter_overrides=overrides(
+        gain=0.05, zeta=0.01, stateless=True, orientation_stddev=0.1))
+    try:
+        assert not quiet.parameters.given & {'gain', 'zeta', 'stateless'}
+        assert loud.parameters.given >= {'gain', 'zeta', 'stateless', 'orientation_stddev'}
+    finally:
+        quiet.destroy_node()
+        loud.destroy_node()
