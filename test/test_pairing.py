@@ -7,9 +7,10 @@ checks the invariants: every input accounted for, bounded buffers, steps in
 stamp order with valid values, and a finite estimate whatever comes in.
 """
 
+from collections import Counter
 import math
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 import pytest
 
 from ext_observer.core import GAIN_MODES, SingleObserver, VARIANTS
@@ -21,6 +22,9 @@ S = 1_000_000_000
 Y = (1.0, 0.0, 0.0, 0.0)
 THETA = (0.1, 0.2, 0.3)
 nan, inf = float('nan'), float('inf')
+# Drops counted when a later input or a restart pushes an input out, not
+# returned by the call that took it.
+LATER_DROPS = ('unpaired_measurement', 'discarded_increment', 'discarded_measurement')
 
 
 def make(**kwargs):
@@ -163,15 +167,19 @@ def test_configure_refuses_negative_bounds():
 
 any_float = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True)
 nice_float = st.floats(-1.5, 1.5)
-stamps = st.one_of(st.integers(0, 40).map(lambda k: k * 50 * MS),   # a plausible stream
+plausible = st.integers(0, 40).map(lambda k: k * 50 * MS)          # a plausible stream
+stamps = st.one_of(plausible, plausible,                             # (drawn twice as often)
                    st.sampled_from([0, -1, 2 ** 63, 10 ** 12]),      # zero, negative, far
                    st.integers(-2 ** 64, 2 ** 64))
+small_float = st.floats(-1.0, 1.0)
 increments = st.one_of(st.tuples(nice_float, nice_float, nice_float),
-                       st.tuples(any_float, any_float, any_float))
+                       st.tuples(any_float, any_float, any_float),
+                       st.tuples(small_float, small_float, small_float))  # valid
 measurements = st.one_of(
     st.tuples(nice_float, nice_float, nice_float, nice_float),
     st.tuples(any_float, any_float, any_float, any_float),
-    st.sampled_from([Y, (0.0, 0.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5)]))
+    st.sampled_from([Y, (0.0, 0.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5)]),
+    st.sampled_from([Y, (0.0, 1.0, 0.0, 0.0), (-0.5, 0.5, -0.5, 0.5)]))  # valid
 operations = st.lists(st.one_of(
     st.tuples(st.just('increment'), stamps, increments),
     st.tuples(st.just('measurement'), stamps, measurements),
@@ -179,16 +187,40 @@ operations = st.lists(st.one_of(
     st.tuples(st.just('restart'), st.none(), st.none())), max_size=60)
 
 
+# Every drop reason of increments and measurements at least once.
+EVERY_DROP = [
+    ('increment', 100 * MS, THETA), ('measurement', 100 * MS, Y), ('tick', 10 * MS, None),
+    ('increment', 50 * MS, THETA),                                 # stale
+    ('measurement', 50 * MS, Y),                                   # stale
+    ('increment', 100 * MS, THETA), ('measurement', 100 * MS, Y),  # duplicates
+    ('measurement', 150 * MS, Y), ('measurement', 200 * MS, Y),
+    ('increment', 200 * MS, THETA),                                # 150 unpaired
+    ('increment', 300 * MS, THETA), ('restart', None, None),       # discarded
+    ('measurement', 500 * MS, Y), ('restart', None, None),         # discarded
+    ('increment', 700 * MS, (nan, 0.0, 0.0)), ('increment', 700 * MS, (3.0, 0.0, 0.0)),
+    ('measurement', 700 * MS, (0.0, 0.0, 0.0, 0.0)), ('measurement', 700 * MS, (2.0, 0, 0, 0)),
+    ('measurement', 700 * MS, (nan, 0.0, 0.0, 0.0)),
+    ('increment', 0, THETA), ('measurement', -1, Y),               # zero stamps
+]
+
+
 @settings(max_examples=400, deadline=None)
 @given(operations, st.integers(1, 5))
+@example(EVERY_DROP, 4)
 def test_every_input_is_accounted_for_and_steps_are_valid(ops, depth):
     pairer = make(depth=depth, max_increment=2.0, norm_tolerance=0.1)
     now = 0
     last = None
+    # The test's own counts: inputs sent, drops returned at once, steps released.
+    sent = dict.fromkeys(KINDS, 0)
+    returned = Counter()
+    released = corrected = 0
     for op, stamp, value in ops:
         if op == 'increment':
+            sent['increment'] += 1
             outcome = pairer.add_increment(stamp, value, now)
         elif op == 'measurement':
+            sent['measurement'] += 1
             outcome = pairer.add_measurement(stamp, value)
         elif op == 'tick':
             now += stamp
@@ -197,9 +229,13 @@ def test_every_input_is_accounted_for_and_steps_are_valid(ops, depth):
             pairer.restart()
             outcome = BACKWARD_JUMP
         assert outcome is None or outcome == BACKWARD_JUMP or outcome in DROP_REASONS
+        if outcome in DROP_REASONS:
+            returned[outcome] += 1
         if outcome == BACKWARD_JUMP:
             last = None
         for step in pairer.pop_ready(now):
+            released += 1
+            corrected += step.measurement is not None
             assert step.previous == last
             assert last is None or step.stamp > last
             assert step.stamp > 0
@@ -212,7 +248,17 @@ def test_every_input_is_accounted_for_and_steps_are_valid(ops, depth):
         assert pairer.waiting('increment') <= depth
         assert pairer.waiting('measurement') <= depth
         assert_accounted(pairer)
-    assert set(pairer.drops) == set(DROP_REASONS)
+        # The pairer's counts against the test's: nothing received that was
+        # not sent, every step counted once, and each drop it returned at
+        # once counted under that reason (the others come later: unpaired
+        # and discarded inputs).
+        assert pairer.received == sent
+        assert pairer.processed == {'increment': released, 'measurement': corrected}
+        for reason in DROP_REASONS:
+            if reason in LATER_DROPS:
+                assert pairer.drops[reason] >= returned[reason], reason
+            else:
+                assert pairer.drops[reason] == returned[reason], reason
 
 
 # The divergence guard --------------------------------------------------------------
