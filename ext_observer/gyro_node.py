@@ -22,6 +22,8 @@ truth always moves by the exact one. Every ``diagnostic_period`` the status
 subscriber with incompatible QoS (WARN, with the fix).
 """
 
+import math
+
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.node import Node
@@ -266,7 +268,9 @@ class GyroNode(Node):
         # Steps per second of the node clock since the last status: below
         # rate_hz when the process cannot keep up (the stamps stay on the grid).
         now = self.get_clock().now().nanoseconds
-        achieved = 0.0
+        # NaN at the first status: nothing measured yet (0 would read as a
+        # stalled gyro).
+        achieved = math.nan
         if self._rate_mark is not None and now > self._rate_mark[0]:
             achieved = (self.steps_published - self._rate_mark[1]) * 1e9 / (
                 now - self._rate_mark[0])

@@ -110,7 +110,8 @@ MONITOR_PARAMETERS = (
     ParameterSpec('stamp_tolerance', 0.001,
                   'Largest stamp difference between an estimate and the ground truth '
                   'paired with it, s.', (0.0, 10.0)),
-    ParameterSpec('hardware_id', 'ext_observer', 'hardware_id of the status.'),
+    ParameterSpec('hardware_id', '', "hardware_id of the status; '' = the node's full "
+                  "name (/monitor), as the other nodes' statuses."),
     ParameterSpec('queue_depth', 100, 'History depth of the subscriptions and the '
                   'publisher (reliable, keep last).', (1, 10000), read_only=True),
     ParameterSpec('clock_jump_threshold', 1.0,
@@ -237,6 +238,11 @@ class MonitorNode(Node):
                 nanoseconds=-round(settings['clock_jump_threshold'] * 1e9)),
                 on_clock_change=True),
             post_callback=self.clock_jump_callback)
+        self.get_logger().info(
+            f'watching {self.estimate_subscription.topic_name} (distance to S³: WARN above '
+            f'{settings["warn_distance"]:g}, ERROR above {settings["error_distance"]:g} over '
+            f'{settings["window"]} estimates; STALE after {settings["stale_timeout"]:g} s) '
+            f'and {self.truth_subscription.topic_name}')
 
     def destroy_node(self):
         """Unregister the clock jump callback, then destroy the node."""
@@ -347,7 +353,9 @@ class MonitorNode(Node):
         now = self.get_clock().now().nanoseconds
         self.qos.refresh()
         rose = self._deltas.deltas(self.drops)
-        status = DiagnosticStatus(name=STATUS_NAME, hardware_id=settings['hardware_id'])
+        status = DiagnosticStatus(
+            name=STATUS_NAME,
+            hardware_id=settings['hardware_id'] or self.get_fully_qualified_name())
         counters = ([('estimates_received', self.estimates_received),
                      ('estimates_processed', self.estimates_processed),
                      ('ground_truth_received', self.truths_received),

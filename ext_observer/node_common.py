@@ -97,7 +97,13 @@ class CounterDeltas:
         return rose
 
 
+# What the graph reports for an endpoint whose node discovery has not named yet.
+UNNAMED = '_NODE_NAME_UNKNOWN_'
+
+
 def _endpoint_name(info):
+    if info.node_name == UNNAMED:
+        return '(a node discovery has not named yet)'
     namespace = info.node_namespace.rstrip('/')
     return f'{namespace}/{info.node_name}'
 
@@ -155,6 +161,9 @@ class QosWatch:
         self._endpoints = {}
         self.events = 0
         self.problems = {}
+        # The text last logged per topic: logged again once discovery names
+        # a peer it could not name at the event.
+        self._logged = {}
 
     def subscription(self, topic, qos, hint=''):
         """Return ``SubscriptionEventCallbacks`` for a subscription on ``topic``."""
@@ -186,6 +195,7 @@ class QosWatch:
             text = (f'a {peer} on {topic} has an incompatible {policy} policy; '
                     f'match the QoS of this {role}')
         self.problems[topic] = text
+        self._logged[topic] = text
         self._node.get_logger().warning(f'incompatible QoS: {text}')
 
     def _describe(self, topic):
@@ -221,8 +231,12 @@ class QosWatch:
             text = self._describe(topic)
             if text is None:
                 del self.problems[topic]
-            else:
-                self.problems[topic] = text
+                continue
+            self.problems[topic] = text
+            if text != self._logged.get(topic) and 'not named yet' in self._logged.get(
+                    topic, ''):
+                self._logged[topic] = text
+                self._node.get_logger().warning(f'incompatible QoS: {text}')
 
     def key_values(self):
         """Return the diagnostic pairs: the event count and one per problem topic."""

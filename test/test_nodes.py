@@ -90,7 +90,7 @@ def test_pipeline_converges_and_matches_the_core(ros_context, spinner):
                     atol=1e-12)
     status = probe.last_status(STATUS_NAME)
     assert status.level == DiagnosticStatus.OK, status.message
-    assert status.hardware_id == 'ext_observer'
+    assert status.hardware_id == '/monitor'
     values = values_of(status)
     assert set(DIAGNOSTIC_KEYS + ERROR_KEYS) <= set(values)
     assert int(values['estimates_received']) == monitor.estimates_received == steps
