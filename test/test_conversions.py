@@ -5,7 +5,7 @@ import struct
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Quaternion, Vector3
-from hypothesis import given, strategies as st
+from hypothesis import given, settings, strategies as st
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -40,11 +40,13 @@ def test_rotation_about_z_keeps_its_meaning():
     assert msg.x == msg.y == 0.0
 
 
+@settings(deadline=None)
 @given(st.tuples(finite, finite, finite, finite))
 def test_quaternion_round_trip(q):
     assert quaternion_from_msg(msg_from_quaternion(q)) == q
 
 
+@settings(deadline=None)
 @given(st.tuples(finite, finite, finite))
 def test_vector_round_trip(v):
     assert vector_from_msg(msg_from_vector(v)) == v
@@ -67,6 +69,7 @@ def test_vector_needs_three():
         msg_from_vector((1.0, 2.0, 3.0, 4.0))
 
 
+@settings(deadline=None)
 @given(st.tuples(any_float, any_float, any_float, any_float))
 def test_any_float_survives_both_ways(q):
     # What arrives on a topic is copied bit for bit and never raises; the
@@ -78,6 +81,7 @@ def test_any_float_survives_both_ways(q):
     assert bits(vector_from_msg(msg_from_vector(q[1:]))) == bits(q[1:])
 
 
+@settings(deadline=None)
 @given(st.integers(min_value=0, max_value=STAMP_MAX))
 def test_stamp_round_trip(nanoseconds):
     stamp = stamp_from_nanoseconds(nanoseconds)
@@ -85,6 +89,7 @@ def test_stamp_round_trip(nanoseconds):
     assert nanoseconds_from_stamp(stamp) == nanoseconds
 
 
+@settings(deadline=None)
 @given(st.integers(-2 ** 31, 2 ** 31 - 1), st.integers(0, 2 ** 32 - 1))
 def test_any_stamp_converts(sec, nanosec):
     # Negative seconds and nanosec beyond a second exist on the wire: the
