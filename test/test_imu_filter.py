@@ -60,13 +60,17 @@ def samples(count, gyr=(0.0, 0.0, 0.2), acc=(0.5, -0.3, 9.7), field=(2e-5, 1e-5,
 def replay(spinner, driver, nodes, data):
     """Publish in lockstep: each sample and its field reach every node first."""
     deadline = time.monotonic() + 60.0
+    fields0 = [n.pairer.received['measurement'] for n in nodes]
+    samples0 = [n.pairer.received['increment'] for n in nodes]
     for k, (stamp, gyr, acc, field) in enumerate(data):
         driver.send_field(stamp, field)
-        while any(n.pairer.received['measurement'] < k + 1 for n in nodes):
+        while any(n.pairer.received['measurement'] < f0 + k + 1
+                  for n, f0 in zip(nodes, fields0)):
             spinner.executor.spin_once(timeout_sec=0.01)
             assert time.monotonic() < deadline, f'field {k} never arrived'
         driver.send_imu(stamp, gyr, acc)
-        while any(n.pairer.received['increment'] < k + 1 for n in nodes):
+        while any(n.pairer.received['increment'] < s0 + k + 1
+                  for n, s0 in zip(nodes, samples0)):
             spinner.executor.spin_once(timeout_sec=0.01)
             assert time.monotonic() < deadline, f'sample {k} never arrived'
 
@@ -223,3 +227,188 @@ def test_madgwick_unused_parameters_are_named_only_when_given(ros_context):
     finally:
         quiet.destroy_node()
         loud.destroy_node()
+
+
+# Each option of the node through DDS, against RawImuPipeline offline on the
+# same samples in the same order: equal to rounding (the same float code).
+OPTION_TOLERANCE = 1e-12
+
+
+def defaults(**changes):
+    values = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
+    values.update(changes)
+    return imu_filter_settings(values)
+
+
+def offline(settings, data, use_fields=True):
+    """The estimates of RawImuPipeline fed as :func:`replay` feeds the node."""
+    pipeline = RawImuPipeline(settings)
+    out = {}
+    for stamp, gyr, acc, field in data:
+        if use_fields:
+            pipeline.field(stamp, field)
+        _, estimate = pipeline.imu(stamp, gyr, acc)
+        if estimate is not None:
+            out[stamp] = estimate.state
+    return out
+
+
+def turning(count, seed=0):
+    """Samples of a body turning about a changing axis, with noise (seeded)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k, (stamp, _, _, _) in enumerate(samples(count)):
+        gyr = tuple(float(v) for v in (0.3 * math.sin(0.02 * k), 0.2, 0.4 * math.cos(0.03 * k))
+                    + rng.normal(0.0, 0.01, 3))
+        acc = tuple(float(v) for v in (0.4, -0.2, 9.7) + rng.normal(0.0, 0.05, 3))
+        field = tuple(float(v) for v in (2e-5, 1e-5, -4e-5) + rng.normal(0.0, 5e-7, 3))
+        out.append((stamp, gyr, acc, field))
+    return out
+
+
+def published_states(driver, stamps):
+    return {t: quaternion_from_msg(driver.estimates[t].quaternion) for t in stamps
+            if t in driver.estimates}
+
+
+def assert_equal_estimates(got, expected):
+    assert len(got) >= len(expected) - 1 and len(expected) > 10
+    worst = max(np.abs(np.array(got[t]) - np.array(expected[t])).max() for t in got)
+    assert worst <= OPTION_TOLERANCE, worst
+
+
+def run_node(spinner, ros_context, data, name, **parameters):
+    node = spinner.add(ImuFilterNode(node_name=name, context=ros_context,
+                                     parameter_overrides=overrides(**parameters)))
+    driver = spinner.add(Driver(ros_context))
+    connect(spinner, driver, node)
+    replay(spinner, driver, [node], data)
+    spinner.spin_until(lambda: len(driver.estimates) >= len(data) - 1, 10.0,
+                       'the estimates')
+    return node, driver
+
+
+def test_mag_bias_is_removed_from_the_field(ros_context, spinner):
+    bias = (3e-5, -2e-5, 1e-5)
+    data = turning(200)
+    biased = [(t, g, a, tuple(f + b for f, b in zip(field, bias))) for t, g, a, field in data]
+    node, driver = run_node(spinner, ros_context, biased, 'biased', mag_bias_x=bias[0],
+                            mag_bias_y=bias[1], mag_bias_z=bias[2])
+    got = published_states(driver, [t for t, *_ in data])
+    expected = offline(defaults(mag_bias_x=bias[0], mag_bias_y=bias[1],
+                                mag_bias_z=bias[2]), biased)
+    assert_equal_estimates(got, expected)
+    # The same as the unbiased field without the offset, to rounding of the
+    # subtraction; and far from the biased field taken as it is.
+    clean = offline(defaults(), data)
+    assert max(np.abs(np.array(got[t]) - clean[t]).max() for t in got) < 1e-9
+    raw = offline(defaults(), biased)
+    assert max(np.abs(np.array(raw[t]) - clean[t]).max() for t in got) > 1e-3
+
+
+def test_constant_dt_replaces_the_stamps(ros_context, spinner):
+    rng = np.random.default_rng(4)
+    data = turning(200)
+    # Jittered stamps (±3 ms around 10 ms), still increasing.
+    jittered, stamp = [], START
+    for k, (_, g, a, f) in enumerate(data):
+        stamp += int(SECOND // 100 + rng.integers(-3, 4) * 1_000_000)
+        jittered.append((stamp, g, a, f))
+    node, driver = run_node(spinner, ros_context, jittered, 'constant', constant_dt=0.01)
+    got = published_states(driver, [t for t, *_ in jittered])
+    assert_equal_estimates(got, offline(defaults(constant_dt=0.01), jittered))
+    # The stamps' own intervals give another estimate.
+    from_stamps = offline(defaults(), jittered)
+    assert max(np.abs(np.array(got[t]) - from_stamps[t]).max() for t in got) > 1e-6
+
+
+def test_use_mag_false_ignores_fields_and_runs_6d(ros_context, spinner):
+    data = turning(150)
+    node = spinner.add(ImuFilterNode(node_name='six', context=ros_context,
+                                     parameter_overrides=overrides(use_mag=False)))
+    driver = spinner.add(Driver(ros_context))
+    connect(spinner, driver, node)
+    # The node does not subscribe to imu/mag: the fields published beside
+    # the samples reach nobody.
+    assert node.measurement_subscription is None
+    assert driver.mag_publisher.get_subscription_count() == 0
+    for k, (stamp, gyr, acc, field) in enumerate(data):
+        driver.send_field(stamp, field)
+        driver.send_imu(stamp, gyr, acc)
+        spinner.spin_until(lambda: node.pairer.received['increment'] == k + 1, 10.0,
+                           f'sample {k}')
+    spinner.spin_until(lambda: len(driver.estimates) >= len(data) - 1, 10.0, 'estimates')
+    assert node.pairer.received['measurement'] == 0
+    got = published_states(driver, [t for t, *_ in data])
+    assert_equal_estimates(got, offline(defaults(use_mag=False), data, use_fields=False))
+    assert values_of(node.status())['use_mag'] == 'false'
+
+
+def test_reset_service_restarts_from_the_next_sample(ros_context, spinner):
+    from std_srvs.srv import Trigger
+
+    data = turning(120)
+    node, driver = run_node(spinner, ros_context, data[:60], 'resettable')
+    client = driver.create_client(Trigger, '/resettable/reset')
+    spinner.spin_until(client.service_is_ready, 10.0, 'the reset service')
+    future = client.call_async(Trigger.Request())
+    spinner.spin_until(future.done, 10.0, 'the reset answer')
+    assert future.result().success and 'reset' in future.result().message
+    assert node.resets['service'] == 1 and node.state is None
+    replay(spinner, driver, [node], data[60:])
+    spinner.spin_until(lambda: len(driver.estimates) >= len(data) - 1, 10.0, 'estimates')
+    # After the reset the estimator starts over on the next sample, from the
+    # latest field: as a fresh pipeline that saw the same time line.
+    pipeline = RawImuPipeline(defaults())
+    for stamp, gyr, acc, field in data:
+        if stamp == data[60][0]:
+            pipeline.reset('service')
+        pipeline.field(stamp, field)
+        pipeline.imu(stamp, gyr, acc)
+    t = data[-1][0]
+    assert np.abs(np.array(quaternion_from_msg(driver.estimates[t].quaternion))
+                  - np.array(pipeline.estimator.state)).max() <= OPTION_TOLERANCE
+    assert values_of(node.status())['resets_service'] == '1'
+
+
+def test_runtime_changes_take_effect_and_structural_ones_are_refused(ros_context, spinner):
+    from rclpy.parameter import Parameter
+
+    node = spinner.add(ImuFilterNode(node_name='tuned', context=ros_context))
+    results = node.set_parameters([Parameter('mag_bias_x', value=1e-5),
+                                   Parameter('orientation_stddev', value=0.1),
+                                   Parameter('yaw_offset', value=0.5)])
+    assert all(r.successful for r in results)
+    assert node.pipeline.estimator._mag_bias == (1e-5, 0.0, 0.0)
+    assert node._orientation_covariance[0] == pytest.approx(0.01)
+    assert node.pipeline.estimator._frame == pytest.approx(heading_factor('enu', 0.0, 0.5))
+    for name, value in (('ahrs.tau_acc', 5.0), ('use_mag', False), ('world_frame', 'ned')):
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and 'read-only' in result.reason, name
+    result = node.set_parameters([Parameter('forward_gap_action', value='skip')])[0]
+    assert not result.successful and 'forward_gap_action' in result.reason
+    assert node.parameters.values['forward_gap_action'] == 'propagate'
+
+
+def test_a_clock_switch_resets_and_the_guard_reinitializes(ros_context, spinner):
+    from rclpy.parameter import Parameter
+
+    data = turning(80)
+    node, driver = run_node(spinner, ros_context, data[:40], 'guarded')
+    assert node.state is not None
+    # use_sim_time switches the node clock to ROS time: a clock change.
+    node.set_parameters([Parameter('use_sim_time', value=True)])
+    spinner.spin_until(lambda: node.resets['clock_jump'] == 1, 5.0, 'the clock reset')
+    assert node.state is None
+    replay(spinner, driver, [node], data[40:60])
+    # A diverged estimate is reinitialized from the sample, and never published.
+    node.observer.q = (30.0, 0.0, 0.0, 0.0)
+    replay(spinner, driver, [node], data[60:])
+    spinner.spin_until(lambda: data[-1][0] in driver.estimates, 10.0, 'the last estimate')
+    assert node.reinitializations['residual_too_large'] == 1
+    values = values_of(node.status())
+    assert values['reinitialized_residual_too_large'] == '1'
+    assert values['resets_clock_jump'] == '1'
+    for msg in driver.estimates.values():
+        q = quaternion_from_msg(msg.quaternion)
+        assert all(map(math.isfinite, q)) and abs(math.sqrt(sum(v * v for v in q)) - 1) < 0.1
