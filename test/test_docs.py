@@ -258,7 +258,7 @@ def test_readme_is_short_and_keeps_the_quick_start():
     assert len(text.splitlines()) < README_MAX_LINES, (
         f'README.md has {len(text.splitlines())} lines; keep it under {README_MAX_LINES} '
         'and move the details to a page of docs/')
-    assert '```\nmake demo\nmake test\n```' in text
+    assert '```shell\nmake demo\nmake test\n```' in text
 
 
 @pytest.mark.parametrize('page', ['README.md', 'docs/README.md'])

@@ -367,7 +367,8 @@ def _defaults(page, tuning):
 
 def _reproduce():
     return ['## Reproduce', '',
-            '```', 'make broad-data   # once: BROAD into data/broad/', 'make broad', '```', '',
+            '```shell', 'make broad-data   # once: BROAD into data/broad/', 'make broad', '```',
+            '',
             'runs `python -m ext_observer broad --mode both --plain --json out/broad.json '
             '--docs docs` on the data folder found as above (`BROAD_DATA=DIR` passes '
             '`--data DIR`: BROAD\'s HDF5 files directly in DIR or under `DIR/data_hdf5/`, '
