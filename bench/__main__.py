@@ -2,23 +2,42 @@
 ``python -m bench``: run every benchmark, print the tables, write the file.
 
 Sections: batch core (with ``reproduce --seeds 5``), node throughput and
-latency (relay and observer, per executor), accuracy beside the limit, and
-the node's profile. Progress goes to stderr, the Markdown to stdout and to
+latency (relay and observer, per executor), accuracy beside the limit, the
+node's profile, and the raw-IMU estimator (``imu_filter_node`` beside a
+relay, its callbacks' parts, the core over BROAD) with issue 11's goals.
+Progress goes to stderr, the Markdown to stdout and to
 ``docs/performance.md``. Timing never fails the run; a section that cannot
-run (a node that does not start) is reported as such.
+run (a node that does not start, no BROAD data) is reported as such.
 """
 
 import argparse
 import json
 import os
 import signal
+import subprocess
 import sys
+import tempfile
 import time
 
 from bench import machine, report
-from bench.procs import REPO
+from bench.procs import REPO, reserved_domain_id, ros_env
 
-SECTIONS = ('batch', 'accuracy', 'nodes', 'profile')
+SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu')
+# The raw-IMU benchmarks, each a command of its own that prints its figures
+# and verdict (its output goes to stderr here) and writes them with --json.
+RAW_IMU = (
+    ('node_events', ['bench.raw_imu', '--executor', 'events', '--seconds', '8',
+                     '--rounds', '5']),
+    ('node_single', ['bench.raw_imu', '--executor', 'single', '--seconds', '8',
+                     '--rounds', '3']),
+    ('direct', ['bench.raw_imu_direct']),
+    ('batch', ['bench.broad_batch', '--runs', '3', '--vectorized']),
+)
+RAW_IMU_QUICK = (
+    ('node_events', ['bench.raw_imu', '--executor', 'events', '--seconds', '2',
+                     '--rounds', '1']),
+    ('direct', ['bench.raw_imu_direct', '--samples', '1000']),
+)
 
 
 def _log(text):
@@ -94,6 +113,27 @@ def _profile(log_dir):
     return direct, loops
 
 
+def _raw_imu(quick, log_dir):
+    result = {}
+    with tempfile.TemporaryDirectory(prefix='bench-') as tmp:
+        for index, (key, args) in enumerate(RAW_IMU_QUICK if quick else RAW_IMU):
+            _log(f'raw IMU: python -m {" ".join(args)} ...')
+            out = os.path.join(tmp, f'{key}.json')
+            extra = ['--log-dir', log_dir] if log_dir and key.startswith('node') else []
+            # The direct timing starts a node in this process's child: a
+            # domain of its own.
+            with reserved_domain_id(30 + index) as domain_id:
+                done = subprocess.run([sys.executable, '-m', *args, *extra, '--json', out],
+                                      cwd=REPO, env=ros_env(domain_id), stdout=sys.stderr)
+            if os.path.exists(out):
+                with open(out) as f:
+                    result[key] = json.load(f)
+            else:
+                result[key] = {'error': f'`python -m {" ".join(args)}` ended with exit '
+                                        f'code {done.returncode} and no result'}
+    return result
+
+
 def build_parser():
     """Return the parser of ``python -m bench``."""
     parser = argparse.ArgumentParser(
@@ -152,6 +192,8 @@ def main(argv=None):
                 args.log_dir)
         except RuntimeError as error:
             notes.append(f'profile failed: {error.args[0].splitlines()[0]}')
+    if 'raw_imu' in sections:
+        results['raw_imu'] = _raw_imu(args.quick, args.log_dir)
     notes.append(f'The whole run took {time.monotonic() - start:.0f} s.')
     results['machine']['load_end'] = machine.load()
     results['notes'] = notes

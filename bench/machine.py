@@ -64,3 +64,12 @@ def load():
         return round(os.getloadavg()[0], 2)
     except OSError:
         return None
+
+
+def load_range(runs):
+    """The lowest and highest 1-minute load average seen around ``runs``, as text."""
+    seen = [x for run in runs for x in run.get('load') or () if x is not None]
+    if not seen:
+        return 'unknown'
+    low, high = min(seen), max(seen)
+    return f'{low:g}' if low == high else f'{low:g}–{high:g}'

@@ -29,6 +29,7 @@ import tempfile
 import threading
 import time
 
+from bench.numpy_use import numpy_use_per_step
 from bench.procs import Child, children, reserved_domain_id, ros_env
 from bench.rosutil import (EXECUTORS, make_executor, set_stamp,
                            spin_until_shutdown)
@@ -105,8 +106,9 @@ def direct(steps=DIRECT_STEPS):
     result : dict
         µs per step (``observer_callbacks``, ``relay_callbacks``); µs per
         call of each part of :data:`PARTS` and ``calls_per_step``;
-        ``numpy_calls_per_step``; ``top``, the functions with the most own
-        time per step under cProfile.
+        ``numpy_use_per_step``, the functions that use numpy
+        (:func:`bench.numpy_use.numpy_use_per_step`); ``top``, the functions with the most
+        own time per step under cProfile.
 
     """
     import numpy as np
@@ -136,12 +138,9 @@ def direct(steps=DIRECT_STEPS):
         profile.runcall(_run_pairs, node.increment_callback,
                         node.measurement_callback, profiled[:profiled_steps])
         stats = pstats.Stats(profile).stats
-        numpy_calls, calls_per_step, own = {}, dict.fromkeys(PARTS, 0.0), []
+        calls_per_step, own = dict.fromkeys(PARTS, 0.0), []
         for (path, _, name), (_, calls, tottime, _, _) in stats.items():
             label = f'{os.path.basename(path)}:{name}' if path != '~' else name
-            if (f'{os.sep}numpy{os.sep}' in path
-                    or path.endswith(os.path.join('core', 'quaternion.py'))):
-                numpy_calls[label] = calls / profiled_steps
             for key, (ending, function) in PARTS.items():
                 if name == function and path.endswith(ending):
                     calls_per_step[key] += calls / profiled_steps
@@ -149,7 +148,12 @@ def direct(steps=DIRECT_STEPS):
                             "'_lsprof.Profiler' objects>"):
                 own.append((tottime / profiled_steps * 1e6, label,
                             calls / profiled_steps))
-        result['numpy_calls_per_step'] = numpy_calls
+        # Which functions use numpy, by what their calls do (not by module),
+        # on the next steps of the same pass.
+        result['numpy_use_per_step'] = numpy_use_per_step(
+            profiled_steps, _run_pairs, node.increment_callback, node.measurement_callback,
+            profiled[profiled_steps:2 * profiled_steps])
+        result['numpy_use_steps'] = profiled_steps
         result['calls_per_step'] = calls_per_step
         result['top'] = [{'function': label, 'own_us': us, 'calls': calls}
                          for us, label, calls in sorted(own, reverse=True)

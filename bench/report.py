@@ -1,5 +1,6 @@
 """Render the benchmark's results as Markdown (docs/performance.md)."""
 
+from bench import report_raw_imu
 from bench.nodes import LATENCY_RATE, SHIPPED, SUSTAINED_MEDIAN_MS, sustained_rate
 
 BATCH_TARGET = 20e6  # updates/s at batch size 100 000
@@ -461,24 +462,27 @@ def targets_section(r):
                                   f'{best[0] / relay:.2g}×')])
     direct = r.get('profile_direct')
     if direct:
-        numpy_calls = {k: v for k, v in
-                       direct.get('numpy_calls_per_step', {}).items()
-                       if k.startswith('quaternion.py')}
-        if numpy_calls:
-            listed = ', '.join(f'`{k.split(":")[1]}` ×{v:g}'
-                               for k, v in sorted(numpy_calls.items()))
-            rows.append(['node hot path: no per-message numpy allocation',
-                         f'numpy core functions per step: {listed} '
-                         f'(`normalize(np.asarray(state))` alone: '
-                         f'{_us(direct["numpy_normalize"])})', 'no'])
-        else:
-            rows.append(['node hot path: no per-message numpy allocation',
-                         'no numpy-based core call per step', 'yes'])
+        rows.append(numpy_use_row(direct))
         rows.append(['node hot path: profiled and reported',
                      f'callbacks {_us(direct["observer_callbacks"])} per step '
                      f'(maths {_us(direct["core_step"])})', 'yes (section 5)'])
     return '\n'.join(['## Targets of issue 6', '',
                       _table(['target', 'measured', 'met'], rows)])
+
+
+def numpy_use_row(direct):
+    """The target row 'no per-message numpy allocation', from the profile's check."""
+    target = 'node hot path: no per-message numpy allocation'
+    uses = direct.get('numpy_use_per_step')
+    if uses is None:
+        return [target, 'not checked (results of an older `python -m bench`)', 'not measured']
+    if not uses:
+        return [target, 'no function on the callbacks\' path calls numpy or holds a numpy '
+                f'object (`bench/numpy_use.py`, on {direct.get("numpy_use_steps")} steps)',
+                'yes']
+    listed = '; '.join(f'`{label}` ×{entry["per_step"]:.3g} ({", ".join(entry["numpy"])})'
+                       for label, entry in sorted(uses.items()))
+    return [target, f'per step: {listed}', 'no']
 
 
 def analysis_section(r):
@@ -539,6 +543,9 @@ def analysis_section(r):
                      f'the rest is {listed} per step, and the pairing '
                      '(section 5).')
         lines.append(text)
+    raw_line = report_raw_imu.analysis_line(r.get('raw_imu') or {})
+    if raw_line:
+        lines.append(raw_line)
     if r.get('nodes'):
         lines.append(
             '- **Cores.** Driver, node and probe share 2 cores (with whatever '
@@ -556,6 +563,9 @@ def render(r):
     """The whole report."""
     sections = [machine_section(r['machine'], r['command'])]
     sections.append(targets_section(r))
+    raw = r.get('raw_imu')
+    if raw and report_raw_imu.targets_section(raw):
+        sections.append(report_raw_imu.targets_section(raw))
     if r.get('batch'):
         sections.append(batch_section(r['batch']))
     if r.get('nodes') is not None:
@@ -567,6 +577,8 @@ def render(r):
     if r.get('profile_direct') or r.get('profile_loops'):
         sections.append(profile_section(r.get('profile_direct'),
                                         r.get('profile_loops', [])))
+    if raw:
+        sections.append(report_raw_imu.section(raw))
     sections.append(analysis_section(r))
     if r.get('notes'):
         sections.append('## Notes\n\n' + '\n'.join(f'- {n}' for n in r['notes']))

@@ -94,3 +94,157 @@ def test_report_renders_partial_results():
                           'rates': [1000]})
     assert '| relay/single | ✓ 0.40 |' in text
     assert 'did not start' in text
+
+
+# What uses numpy on the hot path: by what a function does, not its module.
+
+def _floats_only():
+    from ext_observer.core.quaternion import multiply_floats
+    q = (1.0, 0.0, 0.0, 0.0)
+    return multiply_floats(multiply_floats(q, (0.0, 1.0, 0.0, 0.0)), q)
+
+
+def _numpy_from_floats():
+    from ext_observer.core.quaternion import normalize
+    return normalize(np.asarray((1.0, 2.0, 3.0, 4.0)))
+
+
+def test_numpy_use_counts_what_a_function_calls_not_its_module():
+    from bench.numpy_use import numpy_use
+
+    def step():
+        _floats_only()
+        return float(_numpy_from_floats()[0])
+
+    uses, result = numpy_use(step)
+    assert result == pytest.approx(0.18257418583505536)
+    # multiply_floats lives in core/quaternion.py beside numpy functions; it
+    # works on floats and must not count (the rule by module counted it).
+    assert not any(label.endswith(':multiply_floats') for label in uses)
+    assert '_floats_only' not in {label.split(':')[1] for label in uses}
+    assert uses['quaternion.py:normalize']['calls'] == 1
+    assert 'numpy asarray' in uses['test_bench.py:_numpy_from_floats']['numpy']
+
+
+def test_the_node_s_float_step_uses_no_numpy_per_step():
+    # The check of the targets' row 'no per-message numpy allocation', on the
+    # node's core step: SingleObserver.step calls quaternion.multiply_floats
+    # twice per step on floats. The rule by module counted those calls as
+    # numpy and turned the row to 'no'.
+    from bench.numpy_use import numpy_use_per_step
+    from ext_observer.core import SingleObserver
+
+    def loop(observer, steps):
+        for _ in range(steps):
+            observer.step((0.001, -0.002, 0.003), (1.0, 0.0, 0.0, 0.0))
+
+    assert numpy_use_per_step(100, loop, SingleObserver(), 100) == {}
+
+    def loop_with_numpy(observer, steps):
+        for _ in range(steps):
+            observer.step((0.001, -0.002, 0.003), (1.0, 0.0, 0.0, 0.0))
+            _numpy_from_floats()
+
+    uses = numpy_use_per_step(100, loop_with_numpy, SingleObserver(), 100)
+    assert uses['quaternion.py:normalize']['per_step'] == 1.0
+    assert not any(label.endswith(':multiply_floats') for label in uses)
+    assert not any(label.endswith(':loop_with_numpy') for label in uses)
+
+
+def test_numpy_use_sees_ufuncs_and_operators_that_a_profiler_does_not():
+    from bench.numpy_use import numpy_use
+
+    def ufunc(a):
+        return np.sqrt(a)
+
+    def operator(a):
+        return float((a * 2.0)[0])
+
+    def caller(values):
+        a = np.array(values)
+        return ufunc(a), operator(a)
+
+    uses, _ = numpy_use(lambda: [caller([1.0, 4.0]) for _ in range(3)])
+    assert uses['test_bench.py:ufunc']['calls'] == 3
+    assert uses['test_bench.py:operator']['calls'] == 3
+    assert 'numpy array' in uses['test_bench.py:caller']['numpy']
+    assert numpy_use(_floats_only)[0] == {}
+
+
+def test_numpy_row_of_the_targets():
+    row = report.numpy_use_row({'numpy_use_per_step': {}, 'numpy_use_steps': 1000})
+    assert row[2] == 'yes' and '1000 steps' in row[1]
+    row = report.numpy_use_row({'numpy_use_per_step': {
+        'quaternion.py:normalize': {'per_step': 1.0, 'numpy': ['numpy asarray']}}})
+    assert row[2] == 'no' and '`quaternion.py:normalize` ×1 (numpy asarray)' in row[1]
+    assert report.numpy_use_row({})[2] == 'not measured'
+
+
+# The raw-IMU goals: verdicts computed from the figures.
+
+def _node_runs(filter_us, relay_us):
+    def run(us):
+        return {'cpu_us_per_sample': us, 'samples': 8000, 'fields': 800, 'outputs': 8000,
+                'achieved_rate_hz': 999.0, 'load': (1.0, 1.5)}
+    return {'imu_filter': [run(x) for x in filter_us], 'relay': [run(x) for x in relay_us]}
+
+
+def _node_result(filter_us, relay_us, executor='events'):
+    from bench.raw_imu import summarize
+    runs = _node_runs(filter_us, relay_us)
+    result = {'executor': executor, 'rate': 1000.0, 'mag_rate': 100.0, 'seconds': 8.0,
+              'rounds': len(filter_us), 'runs': runs}
+    result.update(summarize(runs))
+    return result
+
+
+def test_raw_imu_node_verdict_is_the_ratio_of_the_medians_against_the_goal():
+    from bench.raw_imu import goal_line, NODE_GOAL
+    met = _node_result([220, 230, 260], [200, 195, 190])
+    assert met['ratio'] == pytest.approx(230 / 195) and met['met']
+    assert met['round_ratios'] == pytest.approx([1.1, 230 / 195, 260 / 190])
+    assert goal_line(met).endswith(': met')
+    assert 'on both sides of the goal' in goal_line(met)
+    missed = _node_result([250, 250, 250], [200, 200, 200])
+    assert missed['ratio'] == pytest.approx(1.25)
+    assert missed['ratio'] > NODE_GOAL and not missed['met']
+    assert goal_line(missed).endswith(': not met')
+
+
+def test_raw_imu_batch_verdict():
+    from bench.broad_batch import goal_line
+    batch = {'trials': 22, 'goal': 10.0, 'median_seconds': 12.3, 'met': False,
+             'runs': [{'workers': 2, 'seconds': 12.3, 'cpu_seconds': 24.0, 'load': (0.5, 4)}]}
+    assert goal_line(batch).endswith('load average 0.5–4 on '
+                                     f'{__import__("os").cpu_count()} cores): not met')
+
+
+def test_report_renders_the_raw_imu_goals_and_section():
+    from bench import report_raw_imu
+    machine = {'date': 'today', 'commit': 'abc', 'cores': 2, 'cpu': 'x',
+               'python': '3', 'numpy': '2', 'rclpy': '7', 'rmw': 'r',
+               'rmw_fastrtps_cpp': '8', 'load_start': 0.1, 'load_end': 0.2}
+    direct = {'samples': 5000, 'imu_filter_callbacks': 32.0, 'relay_callbacks': 2.0,
+              'pipeline': 15.0, 'core': 10.0, 'publish_imu': 14.0, 'publish_estimate': 10.0,
+              'outputs_per_sample': {'imu_filter': 2.0, 'relay': 2.0},
+              'numpy_use_per_sample': {}}
+    batch = {'data': 'data/broad', 'trials': 22, 'recordings': 44, 'sample_updates': 2387574,
+             'runs': [{'workers': 2, 'seconds': 8.0, 'cpu_seconds': 15.5, 'load': (0.3, 0.9)}],
+             'median_seconds': 8.0, 'goal': 10.0, 'met': True, 'vectorized': None}
+    raw = {'node_events': _node_result([230, 232, 236], [200, 201, 199]),
+           'node_single': {'error': 'ended with exit code 1 and no result'},
+           'direct': direct, 'batch': batch}
+    text = report.render({'machine': machine, 'command': 'python -m bench', 'raw_imu': raw})
+    assert '## Targets of issue 11 (raw IMU)' in text
+    assert f'## {report_raw_imu.HEADING}' in text
+    assert '(#6-raw-imu-estimator-imu_filter_node)' in text
+    rows = [line for line in text.splitlines() if line.startswith('| node CPU per IMU')]
+    assert rows[0].endswith('| met |') and '1.16×' in rows[0]
+    assert rows[1].endswith('| not measured |')
+    assert any(line.startswith('| the core on all BROAD') and line.endswith('| met |')
+               for line in text.splitlines())
+    assert 'numpy (`bench/numpy_use.py`): none.' in text
+    assert '- **Raw IMU.**' in text
+    raw['batch'] = {'error': 'not run: no BROAD data'}
+    text = report.render({'machine': machine, 'command': 'c', 'raw_imu': raw})
+    assert 'not run: no BROAD data | not measured |' in text

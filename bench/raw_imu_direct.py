@@ -1,0 +1,214 @@
+"""
+Where ``imu_filter_node``'s time per IMU sample goes, its callbacks called directly.
+
+``python -m bench.raw_imu_direct [--samples 5000] [--json PATH]`` builds the
+node (``ImuFilterNode``, its defaults) and :class:`bench.raw_imu.ImuRelay`
+in one process and calls their callbacks with prepared messages: the BROAD
+excerpt of the tests at 1 kHz, a field every tenth sample (no executor, no
+DDS receive, warm caches). Publishing is replaced by a no-op in both, and
+the node publishes ``imu/data`` as if subscribed, so both build their two
+outputs per sample and send none: what is timed is each node's own Python
+work. Beside them, each part timed alone: the node's ROS-free pipeline
+(:class:`~ext_observer.raw_imu.RawImuPipeline`: input checks, stamps, the
+estimator), the core's float step
+(:class:`~ext_observer.core.ahrs.AhrsObserver`), one real ``publish`` of
+each output with no subscriber; and the functions on the callbacks' path
+that use numpy (:mod:`bench.numpy_use`). Each figure is the best of a few
+passes, µs per IMU sample. Run in a child process by ``python -m bench``.
+"""
+
+import argparse
+import json
+import sys
+import time
+
+from bench.numpy_use import numpy_use_per_step
+from bench.raw_imu import ImuRelay, load_samples
+from bench.rosutil import set_stamp
+
+SAMPLES = 5000
+RATE = 1000  # Hz
+MAG_EVERY = 10  # one field per this many IMU samples (100 Hz)
+PASSES = 8  # the first warms up; the best of the others (shared cores)
+
+
+class _NoPublish:
+    """Stands in for ``Publisher.publish``: counts, sends nothing."""
+
+    def __init__(self):
+        self.count = 0
+
+    def __call__(self, msg):
+        self.count += 1
+
+
+def _inputs(samples, start, count):
+    """``count`` IMU samples from ``start`` (ns) on: (stamp, gyr, acc, field or None)."""
+    gyr, acc, mag = samples
+    out = []
+    for k in range(count):
+        i = k % len(gyr)
+        out.append((start + k * (1_000_000_000 // RATE), tuple(map(float, gyr[i])),
+                    tuple(map(float, acc[i])),
+                    tuple(map(float, mag[i])) if k % MAG_EVERY == 0 else None))
+    return out
+
+
+def _messages(inputs):
+    """The inputs as (Imu, MagneticField or None) messages."""
+    from sensor_msgs.msg import Imu, MagneticField
+    out = []
+    for stamp, gyr, acc, field in inputs:
+        imu = Imu()
+        imu.header.frame_id = 'imu_link'
+        set_stamp(imu.header.stamp, stamp)
+        v, a = imu.angular_velocity, imu.linear_acceleration
+        v.x, v.y, v.z = gyr
+        a.x, a.y, a.z = acc
+        mag = None
+        if field is not None:
+            mag = MagneticField()
+            mag.header = imu.header
+            m = mag.magnetic_field
+            m.x, m.y, m.z = field
+        out.append((imu, mag))
+    return out
+
+
+def _feed(imu_callback, mag_callback, messages):
+    start = time.perf_counter()
+    for imu, mag in messages:
+        if mag is not None:
+            mag_callback(mag)
+        imu_callback(imu)
+    return (time.perf_counter() - start) / len(messages) * 1e6
+
+
+def _feed_pipeline(pipeline, inputs):
+    start = time.perf_counter()
+    for stamp, gyr, acc, field in inputs:
+        if field is not None:
+            pipeline.field(stamp, field)
+        pipeline.imu(stamp, gyr, acc)
+    return (time.perf_counter() - start) / len(inputs) * 1e6
+
+
+def _feed_core(core, inputs):
+    dt, mag_dt = 1.0 / RATE, MAG_EVERY / RATE
+    start = time.perf_counter()
+    for _, gyr, acc, field in inputs:
+        if field is not None and core.q is not None:
+            core.update_mag(field, mag_dt)
+        core.update(gyr, acc, None, dt)
+    return (time.perf_counter() - start) / len(inputs) * 1e6
+
+
+class _Timeline:
+    """Passes of inputs on one continuous time line (a jump back resets the node)."""
+
+    def __init__(self, samples, count):
+        self.samples, self.count = samples, count
+        self.next = time.time_ns()
+
+    def inputs(self):
+        out = _inputs(self.samples, self.next, self.count)
+        self.next += self.count * (1_000_000_000 // RATE)
+        return out
+
+
+def direct(count=SAMPLES):
+    """
+    Time the node's and the relay's callbacks and the parts of the node's work.
+
+    Returns
+    -------
+    dict
+        µs per IMU sample: ``imu_filter_callbacks``, ``relay_callbacks``,
+        ``pipeline``, ``core``; µs per call: ``publish_imu``,
+        ``publish_estimate``; ``outputs_per_sample`` of each node (2 when
+        both outputs were built); ``numpy_use_per_sample``
+        (:func:`bench.numpy_use.numpy_use_per_step`); ``samples``.
+
+    """
+    import rclpy
+    from rclpy.context import Context
+
+    from ext_observer.core.ahrs import AhrsObserver
+    from ext_observer.imu_filter_node import ImuFilterNode
+    from ext_observer.raw_imu import RawImuPipeline
+    samples = load_samples()
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = ImuFilterNode(context=context)
+        relay = ImuRelay(context)
+        real_imu, real_estimate = node.imu_publisher.publish, node.estimate_publisher.publish
+        silent = {}
+        for name, publisher in (('imu_filter', node.imu_publisher),
+                                ('imu_filter', node.estimate_publisher),
+                                ('relay', relay.publisher), ('relay', relay.estimate_publisher)):
+            publisher.publish = silent.setdefault(name, _NoPublish())
+        # As with a subscriber on imu/data (the live benchmark has one).
+        node._publish_imu = True
+        result = {'samples': count}
+        # One time line per consumer: the node must see no gap between passes.
+        lines = {label: _Timeline(samples, count) for label in ('imu_filter', 'relay', 'parts')}
+        for label, imu_callback, mag_callback in (
+                ('imu_filter', node.imu_data_raw_callback, node.imu_mag_callback),
+                ('relay', relay.imu_data_raw_callback, relay.imu_mag_callback)):
+            before = silent[label].count
+            runs = [_feed(imu_callback, mag_callback, _messages(lines[label].inputs()))
+                    for _ in range(PASSES)]
+            result[f'{label}_callbacks'] = min(runs[1:])
+            result.setdefault('outputs_per_sample', {})[label] = (
+                (silent[label].count - before) / (PASSES * count))
+        result['numpy_use_per_sample'] = numpy_use_per_step(
+            count, _feed, node.imu_data_raw_callback, node.imu_mag_callback,
+            _messages(lines['imu_filter'].inputs()))
+        settings = node.parameters.settings
+        pipeline = RawImuPipeline(settings, depth=settings['queue_depth'])
+        result['pipeline'] = min([_feed_pipeline(pipeline, lines['parts'].inputs())
+                                  for _ in range(PASSES)][1:])
+        core = AhrsObserver(node.observer.params, use_mag=True)
+        result['core'] = min([_feed_core(core, lines['parts'].inputs())
+                              for _ in range(PASSES)][1:])
+        imu, _ = _messages(lines['parts'].inputs()[:1])[0]
+        estimate = node._estimate_msg
+        result['publish_imu'] = _best(lambda: real_imu(imu), count)
+        result['publish_estimate'] = _best(lambda: real_estimate(estimate), count)
+        node.destroy_node()
+        relay.node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    return result
+
+
+def _best(function, calls, repeat=PASSES):
+    best = float('inf')
+    for _ in range(repeat):
+        start = time.perf_counter()
+        for _ in range(calls):
+            function()
+        best = min(best, (time.perf_counter() - start) / calls)
+    return best * 1e6
+
+
+def main(argv=None):
+    """Print the figures (and write them with ``--json``); return 0."""
+    parser = argparse.ArgumentParser(prog='python -m bench.raw_imu_direct')
+    parser.add_argument('--samples', type=int, default=SAMPLES, help='IMU samples per pass')
+    parser.add_argument('--json', metavar='PATH', help='also write the results there')
+    args = parser.parse_args(argv)
+    result = direct(args.samples)
+    for key in ('imu_filter_callbacks', 'relay_callbacks', 'pipeline', 'core',
+                'publish_imu', 'publish_estimate'):
+        print(f'{key}: {result[key]:.1f} µs')
+    print(f'numpy on the callbacks\' path: {result["numpy_use_per_sample"] or "none"}')
+    if args.json:
+        with open(args.json, 'w') as out:
+            json.dump(result, out, indent=1)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,214 @@
+"""
+The raw-IMU part of docs/performance.md: issue 11's goals and section 6.
+
+Rendered from what ``python -m bench`` gathers under ``raw_imu`` (see
+``bench/__main__.py``): ``node_events`` and ``node_single``
+(:func:`bench.raw_imu.compare`), ``direct``
+(:func:`bench.raw_imu_direct.direct`) and ``batch``
+(:func:`bench.broad_batch.batch`); any of them may be missing or hold an
+``error``. Every verdict is computed here from the figures, never typed.
+"""
+
+import statistics
+
+from bench.broad_batch import BATCH_GOAL
+from bench.machine import load_range
+from bench.raw_imu import NODE_GOAL, verdict
+
+HEADING = '6. Raw-IMU estimator (imu_filter_node)'
+EXECUTOR_NAMES = {'events': 'EventsExecutor (the default)', 'single': 'SingleThreadedExecutor'}
+
+
+def _us(value):
+    return '—' if value is None else f'{value:.1f} µs'
+
+
+def _table(header, rows):
+    lines = ['| ' + ' | '.join(header) + ' |', '|' + '|'.join('---' for _ in header) + '|']
+    lines += ['| ' + ' | '.join(str(c) for c in row) + ' |' for row in rows]
+    return '\n'.join(lines)
+
+
+def _ok(part):
+    return part is not None and 'error' not in part
+
+
+def _node_measured(node):
+    ratios = node.get('round_ratios') or []
+    spread = f', rounds {min(ratios):.2f}–{max(ratios):.2f}' if ratios else ''
+    return (f'{node["ratio"]:.2f}× (imu_filter {_us(node["medians"]["imu_filter"])}, relay '
+            f'{_us(node["medians"]["relay"])}; medians of {node["rounds"]}{spread})')
+
+
+def _node_verdict(node):
+    ratios = node.get('round_ratios') or []
+    text = verdict(node['met'])
+    if ratios and min(ratios) <= node['goal'] < max(ratios):
+        text += ' (rounds on both sides of the goal)'
+    return text
+
+
+def targets_section(raw):
+    """'Targets of issue 11': each goal, what was measured, met or not met."""
+    rows = []
+    for key in ('node_events', 'node_single'):
+        node = raw.get(key)
+        if node is None:
+            continue
+        executor = 'events' if key == 'node_events' else 'single'
+        goal = (f'node CPU per IMU sample (1 kHz IMU, 100 Hz field) ≤ {NODE_GOAL:g}× the bare '
+                f'relay\'s, {EXECUTOR_NAMES[executor]}')
+        if _ok(node) and node.get('ratio') is not None:
+            rows.append([goal, _node_measured(node), _node_verdict(node)])
+        else:
+            rows.append([goal, node.get('error', 'no result'), 'not measured'])
+    batch = raw.get('batch')
+    if batch is not None:
+        goal = f'the core on all BROAD trials, both modes, batched, < {BATCH_GOAL:g} s'
+        if _ok(batch):
+            runs = batch['runs']
+            rows.append([goal, f'{batch["median_seconds"]:.1f} s (median of {len(runs)}, '
+                               f'{runs[0]["workers"]} workers, {batch["trials"]} trials; load '
+                               f'average {load_range(runs)})', verdict(batch['met'])])
+        else:
+            rows.append([goal, batch['error'], 'not measured'])
+    if not rows:
+        return None
+    return '\n'.join([
+        '## Targets of issue 11 (raw IMU)', '',
+        f'Figures and commands: [section 6]({_anchor(HEADING)}). The load average is the '
+        'machine\'s 1-minute load during the runs; above the number of cores, the other '
+        'work shares them and the wall-clock figures stretch.', '',
+        _table(['goal', 'measured', 'verdict'], rows)])
+
+
+def _anchor(heading):
+    slug = ''.join(c for c in heading.lower() if c.isalnum() or c in ' -_').replace(' ', '-')
+    return '#' + slug
+
+
+def _node_rows(node, executor):
+    rows = []
+    for label in ('imu_filter', 'relay'):
+        runs = node['runs'][label]
+        cpu = ', '.join(f'{r["cpu_us_per_sample"]:.0f}' for r in runs)
+        rows.append([f'{label} ({executor})', f'{node["medians"][label]:.1f} µs ({cpu})',
+                     f'{min(r["outputs"] for r in runs)} / {runs[-1]["samples"]}',
+                     f'{min(r["achieved_rate_hz"] for r in runs):.0f} Hz'])
+    return rows
+
+
+def section(raw):
+    """Section 6: the node beside the relay, its callbacks' parts, the core's batch."""
+    lines = [f'## {HEADING}', '']
+    nodes = [(key.split('_')[1], raw[key]) for key in ('node_events', 'node_single')
+             if _ok(raw.get(key)) and raw[key].get('ratio') is not None]
+    if nodes:
+        first = nodes[0][1]
+        rows = [row for executor, node in nodes for row in _node_rows(node, executor)]
+        lines += [
+            f'`imu_filter_node` (the console script, its defaults: `use_mag` true) fed a raw '
+            f'IMU at {first["rate"]:g} Hz (`sensor_msgs/Imu` on `imu/data_raw`) and a field at '
+            f'{first["mag_rate"]:g} Hz (`imu/mag`), both best effort, from the BROAD excerpt '
+            'of the tests (`test/data`) looped, beside `bench.raw_imu.ImuRelay`: the same '
+            'message path without the maths (per sample the two outputs, `imu/data` and '
+            '`attitude_estimate`; the latest field kept). Node CPU per IMU sample: user + '
+            'system time of the target\'s process over the publishing window, divided by the '
+            f'samples; {first["seconds"]:g} s per run, relay and filter runs interleaved, '
+            'medians. `python -m bench.raw_imu --executor events|single --seconds '
+            f'{first["seconds"]:g} --rounds N` prints the same table and the verdict.', '',
+            _table(['target (executor)', 'CPU per IMU sample, median (runs)',
+                    'outputs received (fewest) / samples', 'achieved rate (slowest)'], rows), '']
+        for executor, node in nodes:
+            lines.append(f'- {executor}: imu_filter / relay = **{node["ratio"]:.2f}×** '
+                         f'(goal ≤ {NODE_GOAL:g}×: {_node_verdict(node)}); round by round '
+                         + ', '.join(f'{x:.2f}' for x in node['round_ratios']) + '.')
+        lines.append('')
+    direct = raw.get('direct')
+    if _ok(direct):
+        lines += _direct_lines(direct)
+    batch = raw.get('batch')
+    if _ok(batch):
+        lines += _batch_lines(batch)
+    for key in ('node_events', 'node_single', 'direct', 'batch'):
+        if raw.get(key) is not None and not _ok(raw[key]):
+            lines.append(f'- {key}: {raw[key]["error"]}')
+    return '\n'.join(lines).rstrip('\n')
+
+
+def _direct_lines(d):
+    node, relay = d['imu_filter_callbacks'], d['relay_callbacks']
+    rows = [
+        ['`imu_filter_node`\'s two callbacks (`imu/data_raw`, `imu/mag`)', _us(node)],
+        ['the relay\'s two callbacks', _us(relay)],
+        ['… `RawImuPipeline` alone (input checks, stamps, unit checks, the estimator; '
+         'no messages)', _us(d['pipeline'])],
+        ['… … `AhrsObserver.update` and `update_mag` alone (the core\'s float step)',
+         _us(d['core'])],
+        ['one real `publish` of the `sensor_msgs/Imu` output (no subscriber)',
+         _us(d['publish_imu'])],
+        ['one real `publish` of `attitude_estimate` (no subscriber)', _us(d['publish_estimate'])],
+    ]
+    uses = d.get('numpy_use_per_sample') or {}
+    numpy_text = ('none' if not uses else '; '.join(
+        f'`{label}` ×{entry["per_step"]:.3g} per sample ({", ".join(entry["numpy"])})'
+        for label, entry in sorted(uses.items())))
+    return [
+        'The callbacks called directly with prepared messages (`python -m '
+        f'bench.raw_imu_direct`: {d["samples"]} samples at 1 kHz, a field every tenth; no '
+        'executor, no DDS receive, warm caches; the best of a few passes). Publishing is '
+        'replaced by a no-op in both nodes, which build their two outputs per sample and send '
+        'none: the first two rows are each node\'s own Python work per IMU sample; the parts '
+        'below are timed alone.', '',
+        _table(['per IMU sample', 'time'], rows), '',
+        f'- What the filter adds to the relay\'s work, called directly: {_us(node - relay)} per '
+        f'sample, {_us(d["pipeline"])} of it in the ROS-free pipeline ({_us(d["core"])} in the '
+        'core\'s step); the rest turns messages into the pipeline\'s inputs and its estimate '
+        'into the two outputs.',
+        f'- Functions on the callbacks\' path that use numpy (`bench/numpy_use.py`): '
+        f'{numpy_text}.', '']
+
+
+def _batch_lines(b):
+    runs = b['runs']
+    rows = [[r['workers'], f'{r["seconds"]:.1f} s', f'{r["cpu_seconds"]:.1f} s',
+             f'{r["cpu_seconds"] / r["workers"]:.1f} s',
+             f'{r["cpu_seconds"] / b["sample_updates"] * 1e6:.1f} µs', load_range([r])]
+            for r in runs + ([b['vectorized']] if b.get('vectorized') else [])]
+    cpu = statistics.median(r['cpu_seconds'] for r in runs)
+    return [
+        f'The core over the BROAD trials (`python -m bench.broad_batch`, data from '
+        f'`{b["data"]}`): the one batched call `python -m ext_observer broad` makes for our '
+        f'estimator (`estimate_batch`, every trial in 9D and 6D: {b["recordings"]} recordings, '
+        f'{b["sample_updates"]:,} sample-updates), reading the files not timed; '
+        f'{len(runs)} runs with the default workers (the CPUs)'
+        + (', then one vectorized in one process (`workers=1`)' if b.get('vectorized') else '')
+        + '. CPU: user + system time of all the processes.', '',
+        _table(['workers', 'wall clock', 'CPU', 'CPU / workers', 'CPU per sample-update',
+                'load average (before, after)'], rows), '',
+        f'- Median wall clock {b["median_seconds"]:.1f} s against the goal < {b["goal"]:g} s: '
+        f'{verdict(b["met"])}. The work is {cpu:.1f} s of CPU (median); CPU / workers is the '
+        'wall clock the run would take with its cores to itself.', '']
+
+
+def analysis_line(raw):
+    """The raw-IMU bullet of 'What limits the figures', or None."""
+    direct, node = raw.get('direct'), raw.get('node_events')
+    if not (_ok(direct) and _ok(node) and node.get('ratio') is not None):
+        return None
+    imu_filter, relay = node['medians']['imu_filter'], node['medians']['relay']
+    added = direct['imu_filter_callbacks'] - direct['relay_callbacks']
+    shared = ('most of it' if relay >= imu_filter - relay else 'less than what the filter adds')
+    ratios = node.get('round_ratios') or []
+    text = (f'- **Raw IMU.** Live, `imu_filter_node`\'s process spends {_us(imu_filter)} of CPU '
+            f'per IMU sample ({node["executor"]}) against the relay\'s {_us(relay)}, which is '
+            f'what the executor, DDS and the message path cost both: {shared}. What the filter '
+            f'adds is {_us(added)} per sample when its callbacks are called directly: '
+            f'{_us(direct["core"])} in the estimator\'s float step, '
+            f'{_us(direct["pipeline"] - direct["core"])} in the rest of the pipeline (input '
+            'checks, stamps, guard), the rest in the messages; live, the difference of the '
+            f'medians is {_us(imu_filter - relay)}.')
+    if ratios:
+        text += (f' Round by round the ratio spans {min(ratios):.2f}–{max(ratios):.2f}, '
+                 f'against the goal {node["goal"]:g}.')
+    return text
