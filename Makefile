@@ -13,7 +13,7 @@ BENCH_STAMP := $(VENV)/.ext_observer-bench
 # Every process that starts a ROS node stays on this machine.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-.PHONY: all venv demo test reproduce bench broad docs test-hosts hosts-report clean
+.PHONY: all venv demo test reproduce bench broad broad-data docs test-hosts hosts-report clean
 
 all: test
 
