@@ -46,6 +46,10 @@ DATA = os.path.join(REPO, 'test', 'data')
 # factor of the bare relay's.
 NODE_GOAL = 1.2
 TARGETS = ('relay', 'imu_filter')
+# Below this share of the samples coming back as outputs, a target (or the
+# driver) fell behind: a target that dropped samples did less work per
+# sample published, and the ratio is no longer a clean measure.
+COMPLETE = 0.99
 
 
 def verdict(ok):
@@ -242,7 +246,9 @@ def summarize(runs, goal=NODE_GOAL):
     -------
     dict
         ``medians`` (µs per sample), ``ratio`` (of the medians; None
-        without both), ``round_ratios`` (round by round), ``goal``, ``met``.
+        without both), ``round_ratios`` (round by round), ``goal``, ``met``,
+        and ``short``: the fewest outputs received of each target that, in
+        some run, got fewer than :data:`COMPLETE` of the samples back.
 
     """
     cpu = {label: [r['cpu_us_per_sample'] for r in rows] for label, rows in runs.items()}
@@ -251,7 +257,8 @@ def summarize(runs, goal=NODE_GOAL):
              if 'imu_filter' in medians and medians.get('relay') else None)
     round_ratios = [f / r for f, r in zip(cpu.get('imu_filter', []), cpu.get('relay', []))]
     return {'medians': medians, 'ratio': ratio, 'round_ratios': round_ratios,
-            'goal': goal, 'met': ratio is not None and ratio <= goal}
+            'goal': goal, 'met': ratio is not None and ratio <= goal,
+            'short': short_outputs(runs)}
 
 
 def goal_line(result):
@@ -266,9 +273,29 @@ def goal_line(result):
         if low <= s['goal'] < high:
             spread += ' (on both sides of the goal)'
     runs = [run for rows in s['runs'].values() for run in rows]
-    return (f'goal (issue 11): imu_filter ≤ {s["goal"]:g}× the relay\'s CPU per IMU sample '
+    text = (f'goal (issue 11): imu_filter ≤ {s["goal"]:g}× the relay\'s CPU per IMU sample '
             f'({s["executor"]}): {s["ratio"]:.2f}× (medians of {s["rounds"]}{spread}; load '
             f'average {load_range(runs)} on {os.cpu_count()} cores): {verdict(s["met"])}')
+    if short_text(s):
+        text += f' ({short_text(s)})'
+    return text
+
+
+def short_outputs(runs):
+    """The fewest outputs of each target that got fewer than :data:`COMPLETE` back in a run."""
+    return {label: min(r['outputs'] for r in rows) for label, rows in runs.items()
+            if rows and any(r['outputs'] < COMPLETE * r['samples'] for r in rows)}
+
+
+def short_text(result):
+    """Which targets got fewer outputs back than samples sent, or ''."""
+    short = short_outputs(result['runs'])
+    if not short:
+        return ''
+    samples = max(r['samples'] for rows in result['runs'].values() for r in rows)
+    return ('outputs short of the samples, fewest: '
+            + ', '.join(f'{label} {count} of {samples}' for label, count in short.items())
+            + '; a target that dropped samples did less work per sample')
 
 
 def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds=3,

@@ -36,6 +36,13 @@ def _table(header, rows):
 
 def machine_section(m, command):
     """The header: what ran where."""
+    loads = [x for x in (m.get('load_start'), m.get('load_end')) if x is not None]
+    busy = []
+    if loads and m.get('cores') and max(loads) > m['cores']:
+        busy = ['', f'The machine was not idle: its load average reached {max(loads):g} on '
+                f'{m["cores"]} cores, so other work shared the cores with every benchmark '
+                'here; timings are slower, and losses at high rates more frequent, than on '
+                'an idle machine.']
     return '\n'.join([
         '# Performance',
         '',
@@ -48,7 +55,7 @@ def machine_section(m, command):
                [[m['cores'], m['cpu'], m['python'], m['numpy'], m['rclpy'],
                  f'{m["rmw"]} {m["rmw_fastrtps_cpp"]}',
                  f'{m.get("load_start")} → {m.get("load_end")}']]),
-    ])
+    ] + busy)
 
 
 def batch_section(r):

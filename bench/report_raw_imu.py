@@ -13,7 +13,7 @@ import statistics
 
 from bench.broad_batch import BATCH_GOAL
 from bench.machine import load_range
-from bench.raw_imu import NODE_GOAL, verdict
+from bench.raw_imu import NODE_GOAL, short_text, verdict
 
 HEADING = '6. Raw-IMU estimator (imu_filter_node)'
 EXECUTOR_NAMES = {'events': 'EventsExecutor (the default)', 'single': 'SingleThreadedExecutor'}
@@ -40,12 +40,15 @@ def _node_measured(node):
             f'{_us(node["medians"]["relay"])}; medians of {node["rounds"]}{spread})')
 
 
-def _node_verdict(node):
+def _node_verdict(node, where=': see section 6'):
     ratios = node.get('round_ratios') or []
     text = verdict(node['met'])
+    notes = []
     if ratios and min(ratios) <= node['goal'] < max(ratios):
-        text += ' (rounds on both sides of the goal)'
-    return text
+        notes.append('rounds on both sides of the goal')
+    if short_text(node):
+        notes.append(f'outputs short of the samples{where}')
+    return text + (f' ({"; ".join(notes)})' if notes else '')
 
 
 def targets_section(raw):
@@ -121,8 +124,13 @@ def section(raw):
                     'outputs received (fewest) / samples', 'achieved rate (slowest)'], rows), '']
         for executor, node in nodes:
             lines.append(f'- {executor}: imu_filter / relay = **{node["ratio"]:.2f}×** '
-                         f'(goal ≤ {NODE_GOAL:g}×: {_node_verdict(node)}); round by round '
+                         f'(goal ≤ {NODE_GOAL:g}×: {_node_verdict(node, where="")}); round by '
+                         'round '
                          + ', '.join(f'{x:.2f}' for x in node['round_ratios']) + '.')
+            if short_text(node):
+                lines.append(f'- {executor}: {short_text(node)} (it may also be the driver '
+                             'that fell behind): under this load the ratio is not a clean '
+                             'measure.')
         lines.append('')
     direct = raw.get('direct')
     if _ok(direct):

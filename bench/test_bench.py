@@ -248,3 +248,25 @@ def test_report_renders_the_raw_imu_goals_and_section():
     raw['batch'] = {'error': 'not run: no BROAD data'}
     text = report.render({'machine': machine, 'command': 'c', 'raw_imu': raw})
     assert 'not run: no BROAD data | not measured |' in text
+
+
+def test_a_target_that_got_fewer_outputs_back_is_flagged():
+    from bench.raw_imu import goal_line
+    result = _node_result([230, 232, 236], [200, 201, 199])
+    assert 'outputs short' not in goal_line(result)
+    result['runs']['relay'][1]['outputs'] = 5294
+    line = goal_line(result)
+    assert line.endswith('(outputs short of the samples, fewest: relay 5294 of 8000; a target '
+                         'that dropped samples did less work per sample)')
+    from bench import report_raw_imu
+    assert report_raw_imu.targets_section({'node_events': result}).splitlines()[-1].endswith(
+        '| met (outputs short of the samples: see section 6) |')
+
+
+def test_the_header_says_when_the_machine_was_not_idle():
+    machine = {'date': 'today', 'commit': 'abc', 'cores': 2, 'cpu': 'x', 'python': '3',
+               'numpy': '2', 'rclpy': '7', 'rmw': 'r', 'rmw_fastrtps_cpp': '8',
+               'load_start': 0.4, 'load_end': 1.5}
+    assert 'not idle' not in report.machine_section(machine, 'c')
+    machine['load_end'] = 6.02
+    assert 'load average reached 6.02 on 2 cores' in report.machine_section(machine, 'c')
