@@ -13,6 +13,10 @@ docs
     Regenerate the parameter tables of docs/parameters.md.
 broad
     The raw-IMU estimator and the anchors on the BROAD recordings.
+bag, csv
+    The raw-IMU estimator on a rosbag2 bag or a CSV file (docs/own_data.md).
+example-data
+    A bag and a CSV made from a shipped BROAD excerpt.
 """
 
 import argparse
@@ -87,6 +91,12 @@ def build_parser():
         'broad', add_help=False,
         help='the raw-IMU estimator and the anchors on BROAD (see broad -h)')
     broad.set_defaults(func=None, module='ext_observer.broad')
+    for name, module, text in (
+            ('bag', 'bag', 'the raw-IMU estimator on a rosbag2 bag, MCAP or sqlite3'),
+            ('csv', 'csvio', 'the raw-IMU estimator on a CSV recording'),
+            ('example-data', 'example_data', 'a bag and a CSV made from a BROAD excerpt')):
+        sub.add_parser(name, add_help=False, help=f'{text} (see {name} -h)').set_defaults(
+            func=None, module=f'ext_observer.{module}')
     return parser
 
 
