@@ -28,7 +28,7 @@ plots.
 import json
 import math
 import os
-import socket
+import select
 import subprocess
 import sys
 import time
@@ -54,6 +54,7 @@ BASELINE_S = 5.0
 MONITOR_STALE_TIMEOUT = 1.0
 # The observer's input_timeout: WARN "no increments on ..." after this.
 OBSERVER_INPUT_TIMEOUT = 1.0
+GYRO_DIAGNOSTIC_PERIOD = 0.5
 # (name, kind, loss %, duration s, time given to recover s); the restart:
 # the observer's host down for 2 s (every process killed), then started.
 FAULTS = (
@@ -233,7 +234,7 @@ class Pipeline:
         self.start(self.gyro_host, 'gyro', [
             installed('gyro_node'), '--ros-args', '--params-file', CONFIG,
             '-p', f'rate_hz:={RATE_HZ}', '-p', f'seed:={self.seed}',
-            '-p', 'wait_for_subscribers:=1', '-p', 'diagnostic_period:=0.5',
+            '-p', 'wait_for_subscribers:=1', '-p', f'diagnostic_period:={GYRO_DIAGNOSTIC_PERIOD}',
             '-p', f'queue_depth:={self.queue_depth}'])
 
     def check_alive(self):
@@ -384,8 +385,31 @@ def counter_delta(statuses, key, start, end):
     return counter_at(statuses, key, end) - counter_at(statuses, key, start)
 
 
-def check_accounting(statuses):
-    """received = processed + dropped (the sum of dropped_<reason>) + waiting, every status."""
+def steps_published(pipeline):
+    """
+    At most how many steps the gyro made, by counts that are not the observer's.
+
+    The gyro's own count in its last status, which may be up to its
+    diagnostic period older than its last step (so that many steps more);
+    and the span of the ground-truth stamps the recorder beside it kept
+    (one per step, on the gyro's grid), in case that is larger.
+    """
+    statuses = pipeline.remote.status_list(GYRO_STATUS)
+    assert statuses, 'no status of the gyro'
+    counted = int(statuses[-1][4]['steps_published'])
+    stamps = pipeline.remote.truths
+    span = round((max(stamps) - min(stamps)) / (STEP_PERIOD * SECOND)) + 1 if stamps else 0
+    return max(counted, span) + math.ceil(RATE_HZ * GYRO_DIAGNOSTIC_PERIOD)
+
+
+def check_accounting(statuses, published):
+    """
+    received = processed + dropped (the sum of dropped_<reason>) + waiting, every status.
+
+    And against the test's count: no observer (each incarnation counts from
+    zero) received more increments, or more measurements, than the gyro
+    published.
+    """
     assert statuses, 'no status of the observer'
     for now, _, level, message, values in statuses:
         received, processed = int(values['inputs_received']), int(values['inputs_processed'])
@@ -393,7 +417,8 @@ def check_accounting(statuses):
         by_reason = sum(int(v) for k, v in values.items() if k.startswith('dropped_'))
         assert received == processed + dropped + waiting, values
         assert dropped == by_reason, values
-        assert received == int(values['increments']) + int(values['measurements']), values
+        assert int(values['increments']) <= published, (published, values)
+        assert int(values['measurements']) <= published, (published, values)
 
 
 def check_monitor_accounting(statuses):
@@ -430,13 +455,25 @@ def test_test_bed_is_two_hosts_on_a_private_link(bed, tmp_path):
         main = [r['dst'] for r in bed.routes(host) if r.get('table', 'main') == 'main']
         assert main == [f'{netns.SUBNET}.0/{netns.PREFIX_LENGTH}'], main
     # nftables drops what it is told to: 1000 datagrams A -> B at 20 % loss.
-    receiver = ('import socket, sys\n'
+    # The receiver says when it listens, keeps every datagram that crosses
+    # (a socket buffer for all 1000, whatever the scheduling), and counts
+    # them once told the sender is done: none still on the way when two
+    # reads 0.5 s apart find the socket empty.
+    receiver = ('import socket, sys, time\n'
                 's = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n'
-                f's.bind(("{bed.b.address}", 47000)); s.settimeout(2.0)\n'
-                'n = 0\n'
-                'try:\n'
-                '    while True: s.recv(100); n += 1\n'
-                'except socket.timeout: pass\n'
+                's.setsockopt(socket.SOL_SOCKET, 33, 8 << 20)\n'  # SO_RCVBUFFORCE, root
+                f's.bind(("{bed.b.address}", 47000)); s.setblocking(False)\n'
+                'print("ready", flush=True)\n'
+                'sys.stdin.readline()\n'
+                'n, quiet = 0, 0\n'
+                'while quiet < 2:\n'
+                '    got = 0\n'
+                '    while True:\n'
+                '        try: s.recv(100)\n'
+                '        except BlockingIOError: break\n'
+                '        got += 1\n'
+                '    n += got; quiet = 0 if got else quiet + 1\n'
+                '    time.sleep(0.5)\n'
                 'print(n)\n')
     sender = ('import socket, time\n'
               's = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n'
@@ -444,12 +481,13 @@ def test_test_bed_is_two_hosts_on_a_private_link(bed, tmp_path):
               f'    s.sendto(b"x", ("{bed.b.address}", 47000)); time.sleep(0.0005)\n')
     bed.set_loss(20)
     listener = subprocess.Popen(['ip', 'netns', 'exec', bed.b.namespace, sys.executable, '-c',
-                                 receiver], stdout=subprocess.PIPE, text=True,
-                                start_new_session=True)
+                                 receiver], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                text=True, start_new_session=True)
     try:
-        time.sleep(0.5)
+        ready, _, _ = select.select([listener.stdout], [], [], 20.0)
+        assert ready and listener.stdout.readline() == 'ready\n', 'the receiver did not start'
         bed.a.exec(sys.executable, '-c', sender)
-        received = int(listener.communicate(timeout=20)[0])
+        received = int(listener.communicate('done\n', timeout=20)[0])
     finally:
         listener.kill()
         listener.wait()
@@ -610,7 +648,7 @@ def test_faults(bed, ros_domain_id, tmp_path, layout):
     check_monitor_accounting(pipeline.remote.status_list(MONITOR_STATUS))
     # Every input accounted for in every status of every incarnation; nothing
     # waits once the gyro stopped.
-    check_accounting(pipeline.local.status_list(OBSERVER_STATUS))
+    check_accounting(pipeline.local.status_list(OBSERVER_STATUS), steps_published(pipeline))
     assert final['inputs_waiting'] == '0', final
     phases = {p['name']: p for p in result['phases']}
     for name, kind, loss, seconds, _ in FAULTS:
@@ -712,7 +750,7 @@ def test_qos_across_the_link(bed, ros_domain_id, tmp_path, case):
     assert result['escaped_packets'] == 0
     for record in (pipeline.local, pipeline.remote, pipeline.remote_best_effort):
         assert all_finite(record)
-    check_accounting(observer)
+    check_accounting(observer, steps_published(pipeline))
     check_monitor_accounting(pipeline.remote.status_list(MONITOR_STATUS))
     by_loss = {row['loss_percent']: row for row in rows}
     # No loss: everything arrives, either way.
@@ -730,9 +768,13 @@ def test_qos_across_the_link(bed, ros_domain_id, tmp_path, case):
         # against reliable's 153 ms once; it delivered 67 % once, when the
         # recorders kept the last 1000, and 78 to 83 % since they keep all.
         # Neither is asserted there.)
-        assert (lossy['reliable']['latency_ms']['p50']
-                > lossy['best_effort']['latency_ms']['p50']), lossy
-        assert 0.7 <= lossy['best_effort']['delivered_fraction'] <= 0.9, lossy
+        # Compared on the middleware's own stamps (source to reception, not
+        # when a subscriber's callback got to run on a loaded machine), and
+        # what best effort delivers against the loss the link counted.
+        assert (lossy['reliable']['reception_latency_ms']['p50']
+                > lossy['best_effort']['reception_latency_ms']['p50']), lossy
+        expected = 1.0 - lossy['packet_loss_measured']
+        assert abs(lossy['best_effort']['delivered_fraction'] - expected) <= 0.1, lossy
         # A lost increment is a step without an estimate; the others at once.
         assert 0.7 <= lossy['steps_during']['estimated_fraction'] <= 0.9, lossy
         assert lossy['steps_during']['delay_ms']['p50'] < 100, lossy
