@@ -29,14 +29,22 @@ decode (a truncated record) is counted as ``undecodable``; a storage that
 cannot be read to its end (a truncated file) stops the command with the
 reader's reason, and the partial output is removed.
 
-Messages are decoded and encoded with :mod:`ext_observer.cdr` (the first
-of every input topic checked against ``rosbags``' own deserializer), read
-and written with :mod:`ext_observer.bag_io` (``rosbags``, in processes of
-their own).
+Two processes share the work (one where ``fork`` is not available, or with
+``parallel=False``): this one runs the estimator; a forked one reads the bag
+and decodes its messages, then encodes the estimates and writes the new bag
+(:class:`_BagSide`, with :mod:`ext_observer.cdr` and
+:mod:`ext_observer.bag_io`), a batch ahead, so that reading and writing cost
+little beside the estimator on a machine with a core to spare. Between them
+go only numbers: the samples' kinds, stamps and values one way, the
+estimates the other. The first message of every input topic is checked
+against ``rosbags``' own deserializer.
 """
 
 import argparse
+import array
 import collections
+import math
+import multiprocessing
 import os
 import shutil
 import sys
@@ -44,7 +52,7 @@ import time
 
 import numpy as np
 
-from ext_observer.bag_io import BagReader, BagWriter, BATCH, STORAGES
+from ext_observer.bag_io import BagIOError, BagReader, BagWriter, BATCH, STORAGES
 from ext_observer.cdr import (decode_field, decode_orientation, FIELD_TYPE, IMU_TYPE,
                               imu_layout, ImuData, QUATERNION_TYPE, QuaternionStamped,
                               REFERENCE_TYPES, Undecodable)
@@ -179,7 +187,8 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
         are taken from the root: ``/imu/data_raw``); ``mag_topic`` is not
         read when ``use_mag`` is false.
     compare_topic : str, optional
-        An orientation topic to score the estimate against (:func:`compare`).
+        An orientation topic to score the estimate against (:func:`compare`);
+        it may be the IMU's own.
     parameters : dict, optional
         ``imu_filter_node`` parameter values (a params file's types).
     storage : {'mcap', 'sqlite3'}, optional
@@ -190,7 +199,7 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
         Where progress goes (default stderr; shown from :data:`PROGRESS_MIN`
         messages on).
     parallel : bool
-        Read and write in processes of their own (:mod:`ext_observer.bag_io`).
+        Read and write in a forked process (module docstring).
 
     Returns
     -------
@@ -221,102 +230,316 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     if compare_topic is not None:
         roles['reference'] = _find(reader.connections, _absolute(compare_topic),
                                    tuple(REFERENCE_TYPES), 'reference', '--compare')
-    outputs = {'data': (_absolute(data_topic), IMU_TYPE, roles['imu'][0].ext.offered_qos_profiles),
+    outputs = {'data': (_absolute(data_topic), IMU_TYPE,
+                        roles['imu'][0].ext.offered_qos_profiles),
                'estimate': (_absolute(estimate_topic), QUATERNION_TYPE, [])}
     for role, connections in roles.items():
         if connections[0].topic in (outputs['data'][0], outputs['estimate'][0]):
-            raise ValueError(f'{connections[0].topic} is both an input ({role}) and an output: '
-                             'name the outputs with --data-topic and --estimate-topic')
-    # The IMU's own topic may carry the reference too (an IMU with an AHRS).
-    shared = roles.get('reference') == roles['imu']
+            raise ValueError(f'{connections[0].topic} is both an input ({role}) and an '
+                             'output: name the outputs with --data-topic and --estimate-topic')
     topics = {role: (cs[0].topic, cs[0].msgtype, cs[0].ext.offered_qos_profiles)
-              for role, cs in roles.items() if not (shared and role == 'reference')}
+              for role, cs in roles.items()}
     topics.update(outputs)
-    writer = BagWriter(out, storage, list(topics.values()), parallel=parallel)
-    ids = dict(zip(topics, writer.ids))
-    if shared:
-        del roles['reference']
-        topics['reference'] = topics['imu']
-        ids['reference'] = ids['imu']
-    messages = reader.messages([c for cs in roles.values() for c in cs], parallel=parallel)
+    side = _BagSide(reader, roles, out, storage, topics, settings)
+    estimator = _Estimator(settings, _Progress(side.total, progress))
+    context = _fork() if parallel else None
     try:
-        recording, references, undecodable = _run(
-            messages, writer, roles, ids, settings, shared,
-            _Progress(sum(c.msgcount for cs in roles.values() for c in cs), progress))
+        counts = (_in_process(side, estimator) if context is None
+                  else _forked(context, side, estimator))
+        recording = estimator.run.recording()
         comparison = None
-        if 'reference' in topics:
-            topic, msgtype, _ = topics['reference']
-            if not references:
-                raise ValueError(f'no orientation on {topic} (a sensor_msgs/Imu with '
-                                 'orientation_covariance[0] = -1 has none)')
-            comparison = compare(recording, [stamp for stamp, _ in references],
-                                 [q for _, q in references])
-            comparison.update(topic=topic, type=msgtype)
-        counts = writer.close()
+        if 'reference' in roles:
+            comparison = _compare_references(recording, estimator.references,
+                                             topics['reference'])
     except BaseException:
-        writer.abort()
         shutil.rmtree(out, ignore_errors=True)
         raise
-    finally:
-        messages.close()
     return BagRun(recording, comparison, storage,
-                  {role: (topic, msgtype, counts[ids[role]])
+                  {role: (topic, msgtype, counts[role])
                    for role, (topic, msgtype, _) in topics.items()},
-                  dict(undecodable))
+                  {topics[role][0]: n for role, n in estimator.undecodable.items()})
 
 
-def _run(messages, writer, roles, ids, settings, shared, progress):
-    """The loop: every message of the roles' topics, in receive order, through the node's steps."""
-    kinds = {c.id: (role, c) for role, cs in roles.items() for c in cs}
-    typestore = None
-    checked = set()
-    imu_data = ImuData(settings['orientation_stddev'])
-    estimate_msg = QuaternionStamped(settings['frame_id'])
-    data_id, estimate_id = ids['data'], ids['estimate']
-    run = PipelineRun(settings)
-    imu, field = run.imu, run.field
-    rows = writer.rows
-    references = []
-    undecodable = collections.Counter()
-    count = 0
-    for cid, received, raw in messages:
-        role, source = kinds[cid]
-        rows.append((ids[role], received, raw))
-        count += 1
-        try:
-            if role == 'imu':
-                order, body, stamp, gyr, acc = imu_layout(raw)
-                estimate = imu(stamp, gyr, acc)
-                if estimate is not None:
-                    w, x, y, z = estimate.state
-                    rows.append((data_id, received, imu_data(raw, order, body, w, x, y, z)))
-                    rows.append((estimate_id, received, estimate_msg(stamp, w, x, y, z)))
-                if shared:
-                    references.append(decode_orientation(raw, IMU_TYPE))
-                values = gyr + acc
-            elif role == 'mag':
-                stamp, values = decode_field(raw)
-                field(stamp, values)
+def _compare_references(recording, references, topic):
+    name, msgtype, _ = topic
+    found = [(stamp, q) for stamp, q in references if not math.isnan(q[0])]
+    if not found:
+        raise ValueError(f'no orientation on {name} (a sensor_msgs/Imu with '
+                         'orientation_covariance[0] = -1 has none)')
+    comparison = compare(recording, [stamp for stamp, _ in found], [q for _, q in found])
+    comparison.update(topic=name, type=msgtype)
+    return comparison
+
+
+# What a message is to the estimator (the kinds that cross the pipe), and
+# how many values it carries.
+IMU, FIELD, REFERENCE, IMU_AND_REFERENCE = 0, 1, 2, 3
+UNDECODABLE = {'imu': 4, 'mag': 5, 'reference': 6}
+_SIZES = {IMU: 6, FIELD: 3, REFERENCE: 4, IMU_AND_REFERENCE: 10}
+_NAN4 = (math.nan,) * 4
+
+
+class _BagSide:
+    """
+    The bag's side of the command: read and decode a batch; write it with its estimates.
+
+    Run in the forked process (or in this one): it opens the new bag itself.
+    """
+
+    def __init__(self, reader, roles, out, storage, topics, settings):
+        self.reader = reader
+        self.out = out
+        self.storage = storage
+        self.topics = topics
+        self.settings = settings
+        # The IMU's own topic may carry the reference too (an IMU with an AHRS).
+        shared = roles.get('reference') == roles['imu']
+        self.kinds = {}
+        for role, connections in roles.items():
+            for c in connections:
+                kind = {'imu': IMU, 'mag': FIELD, 'reference': REFERENCE}[role]
+                if shared and role != 'mag':
+                    kind, role = IMU_AND_REFERENCE, 'imu'
+                self.kinds[c.id] = (kind, role, c)
+        self._shared = shared
+        if shared:
+            self.topics = {role: topic for role, topic in topics.items() if role != 'reference'}
+        self.total = sum(c.msgcount for _, _, c in self.kinds.values())
+        self.writer = None
+
+    def open(self):
+        """Create the new bag; its connection ids by role."""
+        self.writer = BagWriter(self.out, self.storage, list(self.topics.values()))
+        self.ids = dict(zip(self.topics, self.writer.ids))
+        if self._shared:
+            self.ids['reference'] = self.ids['imu']
+        self._imu_data = ImuData(self.settings['orientation_stddev'])
+        self._estimate = QuaternionStamped(self.settings['frame_id'])
+
+    def batches(self):
+        """
+        Yield ``(copies, (kinds, stamps, values))`` per :data:`BATCH` messages.
+
+        ``copies``: ``(connection id, receive time, CDR bytes, layout)`` to
+        write, ``layout`` ``(order, body, stamp)`` of an IMU sample, ``()``
+        for an IMU message that did not decode, None for the others; then
+        the estimator's columns.
+        """
+        typestore = None
+        checked = set()
+        ids = self.ids
+        copies, kinds, stamps, values = [], array.array('b'), array.array('q'), []
+        for cid, received, raw in self.reader.messages(self.kinds):
+            kind, role, source = self.kinds[cid]
+            layout = None
+            try:
+                if kind == IMU or kind == IMU_AND_REFERENCE:
+                    order, body, stamp, gyr, acc = imu_layout(raw)
+                    layout = (order, body, stamp)
+                    found = gyr + acc
+                    if kind == IMU_AND_REFERENCE:
+                        q = decode_orientation(raw, IMU_TYPE)[1]
+                        found += _NAN4 if q is None else q
+                elif kind == FIELD:
+                    stamp, found = decode_field(raw)
+                else:
+                    stamp, q = decode_orientation(raw, source.msgtype)
+                    found = _NAN4 if q is None else q
+            except Undecodable:
+                kind, stamp, found = UNDECODABLE[role], 0, ()
+                layout = () if role == 'imu' else None
             else:
-                stamp, values = decode_orientation(raw, source.msgtype)
-                references.append((stamp, values))
-        except Undecodable:
-            undecodable[source.topic] += 1
-            continue
-        if cid not in checked:
-            if typestore is None:
-                from rosbags.typesys import get_typestore, Stores
-                typestore = get_typestore(Stores.ROS2_JAZZY)
-            checked.add(cid)
-            _check_first(typestore, source, role, raw, stamp, values)
+                if cid not in checked:
+                    if typestore is None:
+                        from rosbags.typesys import get_typestore, Stores
+                        typestore = get_typestore(Stores.ROS2_JAZZY)
+                    checked.add(cid)
+                    _check_first(typestore, source, role, raw, stamp,
+                                 found[:6] if role == 'imu' else
+                                 None if role == 'reference' and math.isnan(found[0])
+                                 else found)
+            copies.append((ids[role], received, raw, layout))
+            kinds.append(kind)
+            stamps.append(stamp)
+            values.extend(found)
+            if len(copies) >= BATCH:
+                yield copies, (kinds, stamps, array.array('d', values))
+                copies, kinds, stamps, values = [], array.array('b'), array.array('q'), []
+        if copies:
+            yield copies, (kinds, stamps, array.array('d', values))
+
+    def write(self, copies, states):
+        """Write a batch: the copies, and after each IMU sample its estimate's two messages."""
+        writer = self.writer
+        rows = writer.rows
+        data_id, estimate_id = self.ids['data'], self.ids['estimate']
+        imu_data, estimate = self._imu_data, self._estimate
+        states = iter(states.tolist())
+        for cid, received, raw, layout in copies:
+            rows.append((cid, received, raw))
+            if layout is None:
+                continue
+            w, x, y, z = next(states), next(states), next(states), next(states)
+            if layout and w == w:
+                order, body, stamp = layout
+                rows.append((data_id, received, imu_data(raw, order, body, w, x, y, z)))
+                rows.append((estimate_id, received, estimate(stamp, w, x, y, z)))
         if len(rows) >= BATCH:
             writer.flush()
-            rows = writer.rows
-        if count >= progress.next:
-            progress(count)
-    progress.finish(count)
-    return (run.recording(), [(stamp, q) for stamp, q in references if q is not None],
-            undecodable)
+
+    def close(self):
+        """Write the metadata; return the messages written by role."""
+        counts = self.writer.close()
+        return {role: counts[cid] for role, cid in self.ids.items()}
+
+    def abort(self):
+        if self.writer is not None:
+            self.writer.abort()
+
+
+class _Estimator:
+    """This process's side: the node's steps on a batch's samples; the estimates back."""
+
+    def __init__(self, settings, progress):
+        self.run = PipelineRun(settings)
+        self.progress = progress
+        self.count = 0
+        self.references = []
+        self.undecodable = collections.Counter()
+
+    def __call__(self, kinds, stamps, values):
+        """Return the estimates (4 floats, NaN for none) of the batch's IMU messages."""
+        imu, field = self.run.imu, self.run.field
+        references = self.references
+        values = values.tolist()
+        states = []
+        i = 0
+        for kind, stamp in zip(kinds.tolist(), stamps.tolist()):
+            if kind == IMU or kind == IMU_AND_REFERENCE:
+                estimate = imu(stamp, values[i:i + 3], values[i + 3:i + 6])
+                states.extend(_NAN4 if estimate is None else estimate.state)
+                if kind == IMU_AND_REFERENCE:
+                    references.append((stamp, values[i + 6:i + 10]))
+            elif kind == FIELD:
+                field(stamp, values[i:i + 3])
+            elif kind == REFERENCE:
+                references.append((stamp, values[i:i + 4]))
+            else:
+                role = next(r for r, k in UNDECODABLE.items() if k == kind)
+                self.undecodable[role] += 1
+                if role == 'imu':
+                    states.extend(_NAN4)
+            i += _SIZES.get(kind, 0)
+        self.count += len(kinds)
+        if self.count >= self.progress.next:
+            self.progress(self.count)
+        return array.array('d', states)
+
+
+def _fork():
+    try:
+        return multiprocessing.get_context('fork')
+    except ValueError:
+        return None
+
+
+def _in_process(side, estimator):
+    """Read, estimate and write a batch at a time, here."""
+    try:
+        side.open()
+        for copies, columns in side.batches():
+            side.write(copies, estimator(*columns))
+        estimator.progress.finish(estimator.count)
+        return side.close()
+    except BaseException:
+        side.abort()
+        raise
+
+
+def _forked(context, side, estimator):
+    """
+    The bag's side in a forked process, a batch ahead of the estimator.
+
+    The child sends a batch's columns, then (while this process estimates
+    them) reads the next batch; it takes the estimates, sends the next
+    columns and writes the batch. Each direction is used in turn, so
+    neither side waits on a full pipe while the other does.
+    """
+    ours, theirs = context.Pipe()
+    process = context.Process(target=_bag_process, args=(side, theirs), daemon=True)
+    process.start()
+    theirs.close()
+    try:
+        while True:
+            tag = _receive(ours, process)
+            if tag[0] == 'end':
+                break
+            columns = [array.array(code) for code in 'bqd']
+            for column in columns:
+                column.frombytes(ours.recv_bytes())
+            try:
+                ours.send_bytes(estimator(*columns))
+            except BrokenPipeError:
+                _receive(ours, process)
+                raise
+        estimator.progress.finish(estimator.count)
+        ours.send(('close',))
+        return _receive(ours, process)[1]
+    finally:
+        if process.is_alive():
+            process.terminate()
+        process.join()
+        ours.close()
+
+
+def _receive(pipe, process):
+    """The child's next message; its error raised here."""
+    try:
+        tag = pipe.recv()
+    except EOFError:
+        tag = ('error', f'the reading and writing process stopped (exit code '
+                        f'{process.exitcode})')
+    if tag[0] == 'error':
+        raise BagIOError(tag[1])
+    return tag
+
+
+def _send_columns(pipe, columns):
+    pipe.send(('batch',))
+    for column in columns:
+        pipe.send_bytes(column)
+
+
+def _bag_process(side, pipe):
+    """The forked process: :class:`_BagSide`, talking to :func:`_forked`."""
+    try:
+        side.open()
+        batches = side.batches()
+        pending = next(batches, None)
+        if pending is not None:
+            _send_columns(pipe, pending[1])
+        while pending is not None:
+            following = next(batches, None)
+            states = array.array('d')
+            states.frombytes(pipe.recv_bytes())
+            if following is not None:
+                _send_columns(pipe, following[1])
+            side.write(pending[0], states)
+            pending = following
+        pipe.send(('end',))
+        pipe.recv()
+        pipe.send(('closed', side.close()))
+    except (EOFError, BrokenPipeError):
+        side.abort()
+    except Exception as error:  # noqa: BLE001 -- whatever it is, the command says it
+        side.abort()
+        try:
+            pipe.send(('error', str(error) if isinstance(error, ValueError)
+                       else f'{type(error).__name__}: {error}'))
+        except (BrokenPipeError, OSError):
+            pass
+    finally:
+        pipe.close()
 
 
 def compare(recording, stamps, quaternions, tolerance=None):

@@ -349,7 +349,7 @@ def test_truncated_bag_is_an_error_and_leaves_no_output(tmp_path, recording, sto
 def test_undecodable_messages_are_counted(tmp_path, data, recording):
     writer = bag_io.BagWriter(str(tmp_path / 'in'), 'sqlite3',
                               [('/imu/data_raw', cdr.IMU_TYPE, []),
-                               ('/imu/mag', cdr.FIELD_TYPE, [])], parallel=False)
+                               ('/imu/mag', cdr.FIELD_TYPE, [])])
     imu, mag = writer.ids
     for k, (stamp, gyr, acc) in enumerate(zip(recording['stamps'][:500],
                                               data['gyr'].tolist(), data['acc'].tolist())):
@@ -400,13 +400,11 @@ def test_batched_writer_equals_rosbags_writer(tmp_path, storage):
     bags = []
     for batched in (True, False):
         path = str(tmp_path / f'{batched}')
-        writer = bag_io._BatchWriter(path, storage)
-        ids = [writer.connection(*topic) for topic in topics]
+        writer = bag_io.BagWriter(path, storage, topics)
         if not batched:
             writer._store = None
-        for start in range(0, len(rows), 3000):
-            writer.store(*zip(*[(ids[cid - 1], t, raw) for cid, t, raw in
-                                rows[start:start + 3000]]))
+        for cid, received, raw in rows:
+            writer.write(writer.ids[cid - 1], received, raw)
         writer.close()
         with Reader(path) as reader:
             bags.append(([(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()],
