@@ -12,7 +12,7 @@ unit expected, in the log once and in ``/diagnostics`` while it lasts.
 import math
 import time
 
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
 import pytest
 from sensor_msgs.msg import Imu
@@ -88,16 +88,21 @@ def test_madgwick_params_file_starts_unchanged_warns_once_and_takes_effect(
     filtered = {}
     driver.create_subscription(Imu, '/imu/filtered', lambda msg: filtered.__setitem__(
         nanoseconds_from_stamp(msg.header.stamp), msg), 1000)
+    # The process's own status reached this node: discovery is done both ways.
+    statuses = []
+    driver.create_subscription(DiagnosticArray, '/diagnostics',
+                               lambda msg: statuses.extend(msg.status), 10)
     spinner.spin_until(lambda: driver.count_publishers('/imu/filtered') == 1
-                       and driver.count_subscribers('/imu/filtered') >= 1, 20.0,
-                       'imu/data of the process')
-    spinner.spin_for(0.5)
+                       and any(st.name == 'imu_filter: inputs' for st in statuses), 20.0,
+                       'imu/data and the status of the process')
     data = samples(150)
-    for stamp, gyr, acc, field in data:
+    # Each sample once the estimate of the one before has come back.
+    for k, (stamp, gyr, acc, field) in enumerate(data):
         driver.send_field(stamp, field)
         driver.send_imu(stamp, gyr, acc)
-        spinner.spin_for(0.01)
-    spinner.spin_until(lambda: len(filtered) >= 100, 20.0, 'the estimates')
+        if k:
+            spinner.spin_until(lambda: stamp in filtered, 10.0, f'estimate {k}')
+    assert len(filtered) == len(data) - 1
     assert process.process.poll() is None, process.output
     # One warning, naming what is set and not used; gain and zeta are at
     # the defaults, and the honoured parameters are not named.
