@@ -246,7 +246,7 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     try:
         counts = (_in_process(side, estimator) if context is None
                   else _forked(context, side, estimator))
-        recording = estimator.run.recording()
+        recording = estimator.recording
         comparison = None
         if 'reference' in roles:
             comparison = _compare_references(recording, estimator.references,
@@ -435,6 +435,11 @@ class _Estimator:
             self.progress(self.count)
         return array.array('d', states)
 
+    def finish(self):
+        """After the last batch: the progress's end, and the :class:`Recording`."""
+        self.progress.finish(self.count)
+        self.recording = self.run.recording()
+
 
 def _fork():
     try:
@@ -449,7 +454,7 @@ def _in_process(side, estimator):
         side.open()
         for copies, columns in side.batches():
             side.write(copies, estimator(*columns))
-        estimator.progress.finish(estimator.count)
+        estimator.finish()
         return side.close()
     except BaseException:
         side.abort()
@@ -482,7 +487,8 @@ def _forked(context, side, estimator):
             except BrokenPipeError:
                 _receive(ours, process)
                 raise
-        estimator.progress.finish(estimator.count)
+        # While the child writes the last batch.
+        estimator.finish()
         ours.send(('close',))
         return _receive(ours, process)[1]
     finally:
@@ -518,15 +524,19 @@ def _bag_process(side, pipe):
         pending = next(batches, None)
         if pending is not None:
             _send_columns(pipe, pending[1])
+        else:
+            pipe.send(('end',))
         while pending is not None:
+            # The next batch is read while the estimator runs this one.
             following = next(batches, None)
             states = array.array('d')
             states.frombytes(pipe.recv_bytes())
             if following is not None:
                 _send_columns(pipe, following[1])
+            else:
+                pipe.send(('end',))
             side.write(pending[0], states)
             pending = following
-        pipe.send(('end',))
         pipe.recv()
         pipe.send(('closed', side.close()))
     except (EOFError, BrokenPipeError):

@@ -167,9 +167,12 @@ def _speed(bag, recording, rounds, storage):
         for i in range(rounds):
             out = os.path.join(scratch, f'out{i}')
             start = time.perf_counter()
-            subprocess.run([sys.executable, '-m', 'ext_observer', 'bag', bag, '--out', out],
-                           check=True, stdout=subprocess.DEVNULL)
+            done = subprocess.run([sys.executable, '-m', 'ext_observer', 'bag', bag, '--out',
+                                   out], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                  text=True)
             command_times.append(time.perf_counter() - start)
+            if done.returncode:
+                raise ValueError(f'the bag command failed: {done.stderr.strip()}')
             shutil.rmtree(out)
             estimator_times.append(estimator_seconds(recording))
             print(f'  round {i + 1}: bag command {command_times[-1]:.2f} s, estimator '
@@ -229,8 +232,12 @@ def main(argv=None):
         path = write_csv(os.path.join(args.out, f'{name}.csv'), recording)
         print(f'wrote {path}')
     if args.speed:
-        _speed(os.path.join(args.out, f'{name}_{storages[0]}'), recording, args.rounds,
-               storages[0])
+        try:
+            _speed(os.path.join(args.out, f'{name}_{storages[0]}'), recording, args.rounds,
+                   storages[0])
+        except ValueError as error:
+            print(f'error: {error}', file=sys.stderr)
+            return 2
     return 0
 
 
