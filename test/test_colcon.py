@@ -49,12 +49,13 @@ def workspace(tmp_path_factory):
 def test_colcon_installs_the_ros_layout(workspace):
     root, _ = workspace
     prefix = root / 'install' / 'ext_observer'
-    for name in ('gyro_node', 'observer_node', 'monitor_node'):
+    for name in ('gyro_node', 'observer_node', 'monitor_node', 'imu_filter_node'):
         assert os.access(prefix / 'lib' / 'ext_observer' / name, os.X_OK), name
     share = prefix / 'share'
     assert (share / 'ament_index' / 'resource_index' / 'packages' / 'ext_observer').exists()
     assert (share / 'ext_observer' / 'package.xml').exists()
     assert (share / 'ext_observer' / 'config' / 'ext_observer.yaml').exists()
+    assert (share / 'ext_observer' / 'config' / 'imu_filter.yaml').exists()
 
 
 def test_ros2_run_path_with_the_installed_params_file(workspace, ros_processes):
@@ -75,17 +76,20 @@ def test_ros2_run_path_with_the_installed_params_file(workspace, ros_processes):
     assert prefix == str(root / 'install' / 'ext_observer')
     # The colcon-installed copy is what runs, not the source tree.
     assert module.startswith(prefix)
-    executable = os.path.join(prefix, 'lib', 'ext_observer', 'observer_node')
-    params = os.path.join(share, 'config', 'ext_observer.yaml')
-
-    process = ros_processes([executable, '--ros-args', '--params-file', params],
-                            env=sourced)
-    deadline = time.monotonic() + 30.0
-    while 'extended observer, alpha 0.01' not in process.output:
-        assert process.process.poll() is None, process.output
-        if time.monotonic() > deadline:
-            pytest.fail(f'observer_node did not start:\n{process.output}')
-        time.sleep(0.1)
-    time.sleep(0.5)
-    assert process.interrupt(timeout=10.0) == 0, process.output
-    assert 'Traceback' not in process.output
+    for name, config, started in (
+            ('observer_node', 'ext_observer.yaml', 'extended observer, alpha 0.01'),
+            ('imu_filter_node', 'imu_filter.yaml', 'raw IMU on /imu/data_raw and /imu/mag')):
+        executable = os.path.join(prefix, 'lib', 'ext_observer', name)
+        params = os.path.join(share, 'config', config)
+        process = ros_processes([executable, '--ros-args', '--params-file', params],
+                                env=sourced)
+        deadline = time.monotonic() + 30.0
+        while started not in process.output:
+            assert process.process.poll() is None, process.output
+            if time.monotonic() > deadline:
+                pytest.fail(f'{name} did not start:\n{process.output}')
+            time.sleep(0.1)
+        assert process.interrupt(timeout=10.0) == 0, process.output
+        assert 'Traceback' not in process.output
+        # The installed params file gives nothing imu_filter_madgwick-only.
+        assert 'not used here' not in process.output
