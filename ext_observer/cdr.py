@@ -45,10 +45,11 @@ _HEAD = (struct.Struct('>iII'), struct.Struct('<iII'))  # sec, nanosec, len(fram
 _VECTOR = (struct.Struct('>3d'), struct.Struct('<3d'))
 _QUATERNION = (struct.Struct('>4d'), struct.Struct('<4d'))
 _STAMP = struct.Struct('<iI')
+# angular_velocity, its covariance (skipped), linear_acceleration.
+_RATES = (struct.Struct('>3d72x3d'), struct.Struct('<3d72x3d'))
 # sensor_msgs/Imu after the header, bytes.
 _IMU_COVARIANCE = 32
 _IMU_GYR = 104
-_IMU_ACC = 200
 _IMU_SIZE = 296
 _FIELD_SIZE = 96
 
@@ -88,9 +89,8 @@ def imu_layout(raw):
     order, stamp, body = _header(raw)
     if len(raw) < body + _IMU_SIZE:
         raise Undecodable(f'{len(raw)} bytes, {body + _IMU_SIZE} expected')
-    vector = _VECTOR[order]
-    return (order, body, stamp, vector.unpack_from(raw, body + _IMU_GYR),
-            vector.unpack_from(raw, body + _IMU_ACC))
+    rates = _RATES[order].unpack_from(raw, body + _IMU_GYR)
+    return order, body, stamp, rates[:3], rates[3:]
 
 
 def decode_imu(raw):
@@ -163,12 +163,14 @@ class QuaternionStamped:
     """``geometry_msgs/QuaternionStamped`` messages of one frame_id, as CDR."""
 
     def __init__(self, frame_id):
-        self._frame = _frame_bytes(frame_id)
+        frame = _frame_bytes(frame_id)
+        self._frame = frame
+        self._pack = struct.Struct(f'<4siI{len(frame)}s4d').pack
 
     def __call__(self, stamp, w, x, y, z):
         """Return the message of ``(w, x, y, z)`` stamped ``stamp``."""
-        return b''.join((_LITTLE, _stamp_bytes(stamp), self._frame,
-                         _QUATERNION[1].pack(x, y, z, w)))
+        sec, nanosec = divmod(stamp, SECOND)
+        return self._pack(_LITTLE, sec, nanosec, self._frame, x, y, z, w)
 
 
 def encode_quaternion_stamped(stamp, frame_id, q):

@@ -29,6 +29,7 @@ the same order, in one process; medians of ``--rounds`` interleaved runs.
 
 import argparse
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -140,7 +141,7 @@ def write_csv(path, recording):
 
 
 def estimator_seconds(recording):
-    """Time RawImuPipeline alone on a recording's samples, in the bag's order (s)."""
+    """Time RawImuPipeline alone on a recording's samples, in the bag's order: wall, CPU (s)."""
     from ext_observer.raw_imu import RawImuPipeline
     from ext_observer.recording import node_settings
     settings = node_settings()
@@ -152,39 +153,43 @@ def estimator_seconds(recording):
     with_field = with_field.tolist()
     pipeline = RawImuPipeline(settings, depth=settings['queue_depth'])
     imu, take_field = pipeline.imu, pipeline.field
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for k, stamp in enumerate(stamps):
         imu(stamp, gyr[k], acc[k])
         if with_field[k]:
             take_field(stamp, field[k])
-    return time.perf_counter() - start
+    return time.perf_counter() - start, time.process_time() - cpu
 
 
 def _speed(bag, recording, rounds, storage):
-    """Medians of interleaved runs: the bag command and the estimator alone."""
-    command_times, estimator_times = [], []
+    """Medians of interleaved runs: the bag command and the estimator alone, wall and CPU."""
+    command, estimator = [], []
     with tempfile.TemporaryDirectory() as scratch:
         for i in range(rounds):
             out = os.path.join(scratch, f'out{i}')
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             start = time.perf_counter()
             done = subprocess.run([sys.executable, '-m', 'ext_observer', 'bag', bag, '--out',
                                    out], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                   text=True)
-            command_times.append(time.perf_counter() - start)
+            wall = time.perf_counter() - start
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
             if done.returncode:
                 raise ValueError(f'the bag command failed: {done.stderr.strip()}')
             shutil.rmtree(out)
-            estimator_times.append(estimator_seconds(recording))
-            print(f'  round {i + 1}: bag command {command_times[-1]:.2f} s, estimator '
-                  f'{estimator_times[-1]:.2f} s', file=sys.stderr)
-    command = statistics.median(command_times)
-    estimator = statistics.median(estimator_times)
-    count = len(recording['stamps'])
-    print(f'{storage} bag, {count} IMU samples at {recording["rate"]:g} Hz, '
-          f'{len(recording["field_index"])} fields: bag command {command:.2f} s '
-          f'({min(command_times):.2f}-{max(command_times):.2f}), estimator alone '
-          f'{estimator:.2f} s ({min(estimator_times):.2f}-{max(estimator_times):.2f}): '
-          f'{command / estimator:.2f}x (medians of {rounds})')
+            command.append((wall, after.ru_utime + after.ru_stime - before.ru_utime
+                            - before.ru_stime))
+            estimator.append(estimator_seconds(recording))
+            print(f'  round {i + 1}: bag command {command[-1][0]:.2f} s (CPU '
+                  f'{command[-1][1]:.2f} s), estimator {estimator[-1][0]:.2f} s (CPU '
+                  f'{estimator[-1][1]:.2f} s)', file=sys.stderr)
+    wall = [statistics.median(run[0] for run in runs) for runs in (command, estimator)]
+    cpu = [statistics.median(run[1] for run in runs) for runs in (command, estimator)]
+    print(f'{storage} bag, {len(recording["stamps"])} IMU samples at {recording["rate"]:g} Hz, '
+          f'{len(recording["field_index"])} fields: bag command {wall[0]:.2f} s, estimator '
+          f'alone {wall[1]:.2f} s: {wall[0] / wall[1]:.2f}x (wall clock, medians of {rounds}); '
+          f'CPU {cpu[0]:.2f} s (both processes) and {cpu[1]:.2f} s: {cpu[0] / cpu[1]:.2f}x; '
+          f'load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs')
 
 
 def build_parser():
