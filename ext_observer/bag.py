@@ -410,30 +410,39 @@ class _Estimator:
     def __call__(self, kinds, stamps, values):
         """Return the estimates (4 floats, NaN for none) of the batch's IMU messages."""
         imu, field = self.run.imu, self.run.field
-        references = self.references
         values = values.tolist()
         states = []
+        extend = states.extend
         i = 0
         for kind, stamp in zip(kinds.tolist(), stamps.tolist()):
-            if kind == IMU or kind == IMU_AND_REFERENCE:
+            if kind == IMU:
                 estimate = imu(stamp, values[i:i + 3], values[i + 3:i + 6])
-                states.extend(_NAN4 if estimate is None else estimate.state)
-                if kind == IMU_AND_REFERENCE:
-                    references.append((stamp, values[i + 6:i + 10]))
+                extend(_NAN4 if estimate is None else estimate.state)
+                i += 6
             elif kind == FIELD:
                 field(stamp, values[i:i + 3])
-            elif kind == REFERENCE:
-                references.append((stamp, values[i:i + 4]))
+                i += 3
             else:
-                role = next(r for r, k in UNDECODABLE.items() if k == kind)
-                self.undecodable[role] += 1
-                if role == 'imu':
-                    states.extend(_NAN4)
-            i += _SIZES.get(kind, 0)
+                i = self._other(kind, stamp, values, i, extend)
         self.count += len(kinds)
         if self.count >= self.progress.next:
             self.progress(self.count)
         return array.array('d', states)
+
+    def _other(self, kind, stamp, values, i, extend):
+        """A reference, an IMU sample that carries one, or a message that did not decode."""
+        if kind == IMU_AND_REFERENCE:
+            estimate = self.run.imu(stamp, values[i:i + 3], values[i + 3:i + 6])
+            extend(_NAN4 if estimate is None else estimate.state)
+            self.references.append((stamp, values[i + 6:i + 10]))
+        elif kind == REFERENCE:
+            self.references.append((stamp, values[i:i + 4]))
+        else:
+            role = next(r for r, k in UNDECODABLE.items() if k == kind)
+            self.undecodable[role] += 1
+            if role == 'imu':
+                extend(_NAN4)
+        return i + _SIZES.get(kind, 0)
 
     def finish(self):
         """After the last batch: the progress's end, and the :class:`Recording`."""

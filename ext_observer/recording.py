@@ -284,13 +284,15 @@ class PipelineRun:
         self._core = self.pipeline.estimator.core
         # (stamp, state or None, rest, mag_disturbed) of each IMU sample.
         self._samples = []
+        self._take = self.pipeline.imu
+        self._keep = self._samples.append
 
     def imu(self, stamp, gyr, acc):
         """Take one IMU sample (ns, rad/s, m/s²); return its Estimate or None."""
-        estimate = self.pipeline.imu(stamp, gyr, acc)[1]
+        estimate = self._take(stamp, gyr, acc)[1]
         core = self._core
-        self._samples.append((stamp, None if estimate is None else estimate.state, core.rest,
-                              core.mag_disturbed))
+        self._keep((stamp, None if estimate is None else estimate.state, core.rest,
+                    core.mag_disturbed))
         return estimate
 
     def field(self, stamp, field):
@@ -324,7 +326,9 @@ class PipelineRun:
                 'only sets t_0 and the node drops what it cannot use'
                 + (f' (dropped: {", ".join(dropped)})' if dropped else ''))
         ambient = np.full((count, 4), np.nan)
-        ambient[estimated] = [state for state in states if state is not None]
+        ambient[estimated] = np.fromiter(
+            itertools.chain.from_iterable(state for state in states if state is not None),
+            dtype=float, count=4 * int(estimated.sum())).reshape(-1, 4)
         ambient = _hold_finite(ambient)
         units = pipeline.units
         return Recording(
