@@ -209,6 +209,10 @@ class Recording:
         Rest detected after this sample (the gyro bias is learned then).
     mag_disturbed : ndarray of bool, shape (N,)
         The latest field was rejected as disturbed.
+    calibration : ndarray of str, shape (N,), or None
+        The magnetometer calibration's state after the latest field
+        (``AhrsObserver.calibration_state``: ``'off'``, ``'learning'``,
+        ``'converged'``, ``'loaded'``), where the core has one; else None.
     world_frame : str
     drops : dict
         Inputs dropped, by reason (:data:`ext_observer.pairing.DROP_REASONS`).
@@ -282,22 +286,28 @@ class PipelineRun:
         self.settings = settings
         self.pipeline = RawImuPipeline(settings, depth=settings['queue_depth'])
         self._core = self.pipeline.estimator.core
-        # (stamp, state or None, rest, mag_disturbed) of each IMU sample.
+        # (stamp, state or None, rest, mag_disturbed, calibration) of each IMU sample.
         self._samples = []
         self._take = self.pipeline.imu
         self._keep = self._samples.append
+        # The magnetometer calibration's state, where the core has one: it
+        # changes with the fields only.
+        self._calibration = getattr(self._core, 'calibration_state', None)
 
     def imu(self, stamp, gyr, acc):
         """Take one IMU sample (ns, rad/s, m/s²); return its Estimate or None."""
         estimate = self._take(stamp, gyr, acc)[1]
         core = self._core
         self._keep((stamp, None if estimate is None else estimate.state, core.rest,
-                    core.mag_disturbed))
+                    core.mag_disturbed, self._calibration))
         return estimate
 
     def field(self, stamp, field):
         """Take one field (ns, T); return the pipeline's outcome."""
-        return self.pipeline.field(stamp, field)
+        outcome = self.pipeline.field(stamp, field)
+        if self._calibration is not None:
+            self._calibration = self._core.calibration_state
+        return outcome
 
     def recording(self, times=None):
         """
@@ -315,7 +325,8 @@ class PipelineRun:
 
         """
         count = len(self._samples)
-        stamps, states, rest, disturbed = zip(*self._samples) if count else ((),) * 4
+        stamps, states, rest, disturbed, calibration = (zip(*self._samples) if count
+                                                        else ((),) * 5)
         estimated = np.array([state is not None for state in states], dtype=bool)
         pipeline = self.pipeline
         pairer = pipeline.pairer
@@ -337,6 +348,8 @@ class PipelineRun:
             quaternions=ambient / np.linalg.norm(ambient, axis=1, keepdims=True),
             ambient=ambient, estimated=estimated,
             rest=np.array(rest, dtype=bool), mag_disturbed=np.array(disturbed, dtype=bool),
+            calibration=(None if self._calibration is None
+                         else np.array(calibration, dtype=object)),
             world_frame=self.settings['world_frame'],
             drops=dict(pairer.drops),
             counts={'imu_samples': pairer.received['increment'],

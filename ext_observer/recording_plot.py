@@ -3,7 +3,8 @@ The picture of a recording: ``--plot FILE.png`` of the bag and csv commands.
 
 Panels, sharing the time axis (s from the first sample): roll, pitch and
 yaw (deg; :func:`~ext_observer.recording.roll_pitch_yaw`), the flags (rest,
-magnetic disturbance, samples without an estimate of their own), and, with
+magnetic disturbance, samples without an estimate of their own, the
+magnetometer calibration still learning where the core has one), and, with
 a comparison (:func:`ext_observer.bag.compare`), BROAD's error angles
 against the reference. PNG, matplotlib's Agg backend.
 """
@@ -62,6 +63,8 @@ def plot_recording(recording, path, title='', comparison=None):
     flags = axes[1]
     rows = (('rest', recording.rest, 'C2'), ('mag disturbed', recording.mag_disturbed, 'C3'),
             ('no estimate', ~recording.estimated, 'C7'))
+    if recording.calibration is not None:
+        rows += (('mag calibrating', recording.calibration == 'learning', 'C4'),)
     for i, (name, flag, color) in enumerate(rows):
         flags.fill_between(times, i + 0.1, i + 0.9, where=flag, step='post', color=color,
                            lw=0, label=name)

@@ -139,6 +139,12 @@ def test_bag_equals_python_call_and_offline(tmp_path, data, recording, storage, 
     np.testing.assert_array_equal(run.recording.quaternions, ours.quaternions)
     np.testing.assert_array_equal(run.recording.rest, ours.rest)
     np.testing.assert_array_equal(run.recording.mag_disturbed, ours.mag_disturbed)
+    # The magnetometer calibration's state, where the core has one.
+    if ours.calibration is None:
+        assert run.recording.calibration is None
+    else:
+        np.testing.assert_array_equal(run.recording.calibration, ours.calibration)
+        assert set(ours.calibration) <= {'off', 'learning', 'converged', 'loaded'}
     assert run.storage == storage
     suffix = 'mcap' if storage == 'mcap' else 'db3'
     assert os.path.exists(os.path.join(tmp_path, 'out', f'out.{suffix}'))
