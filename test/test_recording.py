@@ -499,6 +499,7 @@ def test_example_data_command_and_the_speed_measure(tmp_path):
     text = out.getvalue()
     assert 'sqlite3 bag, 800 IMU samples at 400 Hz, 200 fields: bag command' in text
     assert 'x (wall clock, medians of 1); CPU' in text
+    assert "one run in this process: the estimator's process" in text
     with Reader(str(tmp_path / 'broad_01_sqlite3')) as reader:
         assert sorted(c.topic for c in reader.connections) == ['/imu/data_raw', '/imu/mag']
     shutil.rmtree(tmp_path / 'broad_01_sqlite3')
