@@ -374,15 +374,20 @@ class _BagSide:
         rows = writer.rows
         data_id, estimate_id = self.ids['data'], self.ids['estimate']
         imu_data, estimate = self._imu_data, self._estimate
-        states = iter(states.tolist())
+        width = _width(self.settings)
+        states = states.tolist()
+        j = 0
         for cid, received, raw, layout in copies:
             rows.append((cid, received, raw))
             if layout is None:
                 continue
-            w, x, y, z = next(states), next(states), next(states), next(states)
+            w, x, y, z = states[j:j + 4]
+            covariance = states[j + 4:j + width] or None
+            j += width
             if layout and w == w:
                 order, body, stamp = layout
-                rows.append((data_id, received, imu_data(raw, order, body, w, x, y, z)))
+                rows.append((data_id, received,
+                             imu_data(raw, order, body, w, x, y, z, covariance)))
                 rows.append((estimate_id, received, estimate(stamp, w, x, y, z)))
         if len(rows) >= BATCH:
             writer.flush()
@@ -397,11 +402,20 @@ class _BagSide:
             self.writer.abort()
 
 
+def _width(settings):
+    """Floats per estimate across the pipe: the state, and its covariance if imu/data has it."""
+    # imu_filter_node fills imu/data's orientation_covariance from the
+    # estimate's own covariance where the pipeline has one and the setting asks.
+    return 13 if settings.get('orientation_covariance_mode') == 'estimate' else 4
+
+
 class _Estimator:
     """This process's side: the node's steps on a batch's samples; the estimates back."""
 
     def __init__(self, settings, progress):
         self.run = PipelineRun(settings)
+        self._none = (math.nan,) * _width(settings)
+        self._wide = _width(settings) > 4
         self.progress = progress
         self.count = 0
         self.references = []
@@ -413,11 +427,20 @@ class _Estimator:
         values = values.tolist()
         states = []
         extend = states.extend
+        none, wide = self._none, self._wide
         i = 0
         for kind, stamp in zip(kinds.tolist(), stamps.tolist()):
-            if kind == IMU:
+            if kind == IMU or kind == IMU_AND_REFERENCE:
                 estimate = imu(stamp, values[i:i + 3], values[i + 3:i + 6])
-                extend(_NAN4 if estimate is None else estimate.state)
+                if estimate is None:
+                    extend(none)
+                else:
+                    extend(estimate.state)
+                    if wide:
+                        extend(estimate.covariance)
+                if kind == IMU_AND_REFERENCE:
+                    self.references.append((stamp, values[i + 6:i + 10]))
+                    i += 4
                 i += 6
             elif kind == FIELD:
                 field(stamp, values[i:i + 3])
@@ -430,18 +453,14 @@ class _Estimator:
         return array.array('d', states)
 
     def _other(self, kind, stamp, values, i, extend):
-        """A reference, an IMU sample that carries one, or a message that did not decode."""
-        if kind == IMU_AND_REFERENCE:
-            estimate = self.run.imu(stamp, values[i:i + 3], values[i + 3:i + 6])
-            extend(_NAN4 if estimate is None else estimate.state)
-            self.references.append((stamp, values[i + 6:i + 10]))
-        elif kind == REFERENCE:
+        """A reference, or a message that did not decode."""
+        if kind == REFERENCE:
             self.references.append((stamp, values[i:i + 4]))
         else:
             role = next(r for r, k in UNDECODABLE.items() if k == kind)
             self.undecodable[role] += 1
             if role == 'imu':
-                extend(_NAN4)
+                extend(self._none)
         return i + _SIZES.get(kind, 0)
 
     def finish(self):

@@ -185,15 +185,21 @@ class ImuData:
     The sample goes out as it came (header, rates, accelerations and their
     covariances, in its byte order) with the orientation set to the
     normalized estimate and ``orientation_covariance`` to σ² on the
-    diagonal.
+    diagonal, or to the estimate's own covariance when one is given.
     """
 
     def __init__(self, orientation_stddev):
         covariance = _diagonal(orientation_stddev ** 2)
         self._covariance = tuple(struct.pack(order + '9d', *covariance) for order in '><')
+        self._nine = tuple(struct.Struct(order + '9d').pack for order in '><')
 
-    def __call__(self, raw, order, body, w, x, y, z):
-        """Return the message; ``order`` and ``body`` from :func:`imu_layout`."""
+    def __call__(self, raw, order, body, w, x, y, z, covariance=None):
+        """
+        Return the message; ``order`` and ``body`` from :func:`imu_layout`.
+
+        ``covariance``: 9 floats, row-major, rad²; None: ``orientation_stddev``'s.
+        """
         n = (w * w + x * x + y * y + z * z) ** 0.5
         return b''.join((raw[:body], _QUATERNION[order].pack(x / n, y / n, z / n, w / n),
-                         self._covariance[order], raw[body + _IMU_GYR:]))
+                         self._covariance[order] if covariance is None
+                         else self._nine[order](*covariance), raw[body + _IMU_GYR:]))

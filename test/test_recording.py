@@ -402,6 +402,40 @@ def test_compare_with_the_imus_own_orientation(tmp_path, data, recording):
         '/attitude_estimate', '/imu/data', '/imu/data_ext', '/imu/mag']
 
 
+@pytest.mark.parametrize('parallel', [True, False])
+def test_imu_data_carries_the_estimates_own_covariance_when_the_node_does(
+        tmp_path, recording, monkeypatch, parallel):
+    """With orientation_covariance_mode 'estimate', imu/data's covariance is the estimate's."""
+    import collections
+    import ext_observer.bag as bag_module
+    from ext_observer.recording import PipelineRun
+
+    Wide = collections.namedtuple('Wide', 'state covariance')
+
+    class Run(PipelineRun):
+        def imu(self, stamp, gyr, acc):
+            estimate = super().imu(stamp, gyr, acc)
+            return None if estimate is None else Wide(
+                estimate.state, tuple(float(k) for k in range(9)))
+
+    settings = node_settings()
+    monkeypatch.setattr(bag_module, 'node_settings', lambda *args, **kwargs: dict(
+        settings, orientation_covariance_mode='estimate'))
+    monkeypatch.setattr(bag_module, 'PipelineRun', Run)
+    short = dict(recording, stamps=recording['stamps'][:300],
+                 received=recording['received'][:300], gyr=recording['gyr'][:300],
+                 acc=recording['acc'][:300], field_index=recording['field_index'][:100])
+    bag = write_bag(str(tmp_path / 'in'), short, 'sqlite3', reference=False)
+    run = run_bag(bag, str(tmp_path / 'out'), parallel=parallel)
+    out = _read_bag(str(tmp_path / 'out'))
+    assert len(out['/imu/data']) == 299
+    for _, msg, _ in out['/imu/data']:
+        np.testing.assert_array_equal(msg.orientation_covariance, np.arange(9.0))
+    estimates = np.array([[m.quaternion.w, m.quaternion.x, m.quaternion.y, m.quaternion.z]
+                          for _, m, _ in out['/attitude_estimate']])
+    np.testing.assert_array_equal(estimates, run.recording.ambient[1:])
+
+
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_batched_writer_equals_rosbags_writer(tmp_path, storage):
     rng = np.random.default_rng(0)
