@@ -33,6 +33,7 @@ Rows without an estimate of their own
     the node's own estimates.
 """
 
+import array
 import heapq
 import itertools
 import math
@@ -56,6 +57,8 @@ START = 1000 * SECOND
 GYRO_PERCENTILE = 99.0
 
 _SPECS = {spec.name: spec for spec in IMU_FILTER_PARAMETERS}
+# The record of a sample without an estimate.
+_NONE = (math.nan,) * 4
 # rclpy's own parameters, in a params file beside the node's.
 _ROS_OWN = ('use_sim_time', 'qos_overrides.')
 
@@ -286,10 +289,15 @@ class PipelineRun:
         self.settings = settings
         self.pipeline = RawImuPipeline(settings, depth=settings['queue_depth'])
         self._core = self.pipeline.estimator.core
-        # (stamp, state or None, rest, mag_disturbed, calibration) of each IMU sample.
-        self._samples = []
+        # Per IMU sample: its stamp, its estimate (NaN: none), rest | 2 ·
+        # mag_disturbed, the calibration's state. Flat arrays of numbers, not
+        # a tuple per sample: hundreds of thousands of live tuples would make
+        # Python's garbage collector the largest cost of a long recording.
+        self._stamps = array.array('q')
+        self._states = array.array('d')
+        self._flags = bytearray()
+        self._calibrations = []
         self._take = self.pipeline.imu
-        self._keep = self._samples.append
         # The magnetometer calibration's state, where the core has one: it
         # changes with the fields only.
         self._calibration = getattr(self._core, 'calibration_state', None)
@@ -298,8 +306,11 @@ class PipelineRun:
         """Take one IMU sample (ns, rad/s, m/s²); return its Estimate or None."""
         estimate = self._take(stamp, gyr, acc)[1]
         core = self._core
-        self._keep((stamp, None if estimate is None else estimate.state, core.rest,
-                    core.mag_disturbed, self._calibration))
+        self._stamps.append(stamp)
+        self._states.extend(_NONE if estimate is None else estimate.state)
+        self._flags.append(core.rest + 2 * core.mag_disturbed)
+        if self._calibration is not None:
+            self._calibrations.append(self._calibration)
         return estimate
 
     def field(self, stamp, field):
@@ -324,10 +335,10 @@ class PipelineRun:
             If no sample gave an estimate.
 
         """
-        count = len(self._samples)
-        stamps, states, rest, disturbed, calibration = (zip(*self._samples) if count
-                                                        else ((),) * 5)
-        estimated = np.array([state is not None for state in states], dtype=bool)
+        count = len(self._stamps)
+        ambient = np.frombuffer(self._states, dtype=float).reshape(count, 4).copy()
+        estimated = ~np.isnan(ambient[:, 0])
+        flags = np.frombuffer(self._flags, dtype=np.uint8)
         pipeline = self.pipeline
         pairer = pipeline.pairer
         if not estimated.any():
@@ -336,20 +347,16 @@ class PipelineRun:
                 f'no estimate from {count} IMU samples: the first sample of a time line '
                 'only sets t_0 and the node drops what it cannot use'
                 + (f' (dropped: {", ".join(dropped)})' if dropped else ''))
-        ambient = np.full((count, 4), np.nan)
-        ambient[estimated] = np.fromiter(
-            itertools.chain.from_iterable(state for state in states if state is not None),
-            dtype=float, count=4 * int(estimated.sum())).reshape(-1, 4)
         ambient = _hold_finite(ambient)
         units = pipeline.units
         return Recording(
-            times=(np.array(stamps, dtype=np.int64) * 1e-9 if times is None
+            times=(np.frombuffer(self._stamps, dtype=np.int64) * 1e-9 if times is None
                    else np.asarray(times, dtype=float)),
             quaternions=ambient / np.linalg.norm(ambient, axis=1, keepdims=True),
             ambient=ambient, estimated=estimated,
-            rest=np.array(rest, dtype=bool), mag_disturbed=np.array(disturbed, dtype=bool),
+            rest=(flags & 1).astype(bool), mag_disturbed=(flags & 2).astype(bool),
             calibration=(None if self._calibration is None
-                         else np.array(calibration, dtype=object)),
+                         else np.array(self._calibrations, dtype=object)),
             world_frame=self.settings['world_frame'],
             drops=dict(pairer.drops),
             counts={'imu_samples': pairer.received['increment'],
