@@ -43,6 +43,7 @@ against ``rosbags``' own deserializer.
 import argparse
 import array
 import collections
+import gc
 import math
 import multiprocessing
 import os
@@ -546,6 +547,9 @@ def _send_columns(pipe, columns):
 
 def _bag_process(side, pipe):
     """The forked process: :class:`_BagSide`, talking to :func:`_forked`."""
+    # What it inherited lives as long as it does: kept out of the garbage
+    # collector's full passes, which otherwise cost about 0.5 s of its 3 s.
+    gc.freeze()
     try:
         side.open()
         batches = side.batches()
