@@ -222,6 +222,8 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     if os.path.exists(out):
         raise ValueError(f'{out} exists (never overwritten: remove it or choose another '
                          '--out)')
+    if os.path.abspath(out).startswith(os.path.join(os.path.abspath(path), '')):
+        raise ValueError(f'{out} is inside the input bag {path}: the input is only read')
     reader = BagReader(path)
     roles = {'imu': _find(reader.connections, _absolute(imu_topic), (IMU_TYPE,), 'IMU',
                           '--imu-topic')}

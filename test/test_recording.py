@@ -338,6 +338,8 @@ def test_bag_errors_name_the_topic(tmp_path, recording):
     os.makedirs(tmp_path / 'exists')
     with pytest.raises(ValueError, match='exists'):
         run_bag(bag, str(tmp_path / 'exists'))
+    with pytest.raises(ValueError, match='is inside the input bag'):
+        run_bag(bag, os.path.join(bag, 'out'))
     with pytest.raises(ValueError, match='no such bag'):
         run_bag(str(tmp_path / 'nothing'), str(tmp_path / 'out'))
     # 6D needs no magnetometer topic.
