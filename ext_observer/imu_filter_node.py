@@ -8,11 +8,12 @@ both subscribed with the sensor-data QoS (best effort, volatile: reliable
 and best-effort drivers both connect), overridable with ``qos_overrides``.
 Outputs, one per IMU sample and stamped with it: ``imu/data``
 (``sensor_msgs/Imu``: the sample with its orientation filled in, normalized,
-and ``orientation_covariance`` from ``orientation_stddev``; only while
-subscribed) and ``attitude_estimate`` (``QuaternionStamped``, the ambient
-estimate, not normalized: its distance to S³ is what the extension term
-holds small); ``/diagnostics`` every ``diagnostic_period``; the service
-``~/reset`` (``std_srvs/Trigger``).
+and ``orientation_covariance`` the estimate's own, row-major about the world
+frame's axes, or with ``orientation_covariance_mode`` ``fixed`` from
+``orientation_stddev``; only while subscribed) and ``attitude_estimate``
+(``QuaternionStamped``, the ambient estimate, not normalized: its distance
+to S³ is what the extension term holds small); ``/diagnostics`` every
+``diagnostic_period``; the service ``~/reset`` (``std_srvs/Trigger``).
 
 The estimator is :class:`~ext_observer.raw_imu.RawImuPipeline` (validation,
 stamps, the core's :class:`~ext_observer.core.ahrs.AhrsObserver`); this node
@@ -153,7 +154,8 @@ class ImuFilterNode(EstimatorNode):
             n = (w * w + x * x + y * y + z * z) ** 0.5
             q = msg.orientation
             q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
-            msg.orientation_covariance = self._orientation_covariance
+            msg.orientation_covariance = (estimate.covariance if self._covariance_estimated
+                                          else self._orientation_covariance)
             self.imu_publisher.publish(msg)
 
     def imu_mag_callback(self, msg):
@@ -175,6 +177,7 @@ class ImuFilterNode(EstimatorNode):
         variance = settings['orientation_stddev'] ** 2
         self._orientation_covariance = [variance, 0.0, 0.0, 0.0, variance, 0.0,
                                         0.0, 0.0, variance]
+        self._covariance_estimated = settings['orientation_covariance_mode'] == 'estimate'
         self._estimate_msg.header.frame_id = settings['frame_id']
 
     def _apply_parameters(self, settings, changed):

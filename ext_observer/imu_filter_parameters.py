@@ -9,18 +9,24 @@ declared here. Those with the same meaning are honoured (``use_mag``,
 this node does not have (:data:`MADGWICK_UNUSED`: ``gain``, ``zeta``,
 ``publish_tf``, ...) are accepted, and named in one start-up warning when
 given. The estimator's own gains are the ``ahrs.*`` parameters, the fields
-of :class:`~ext_observer.core.ahrs.AhrsParams` in physical units.
+of :class:`~ext_observer.core.ahrs.AhrsParams` in physical units; the
+noise of the model behind the published covariance are the
+``covariance.*`` parameters (:class:`~ext_observer.core.uncertainty.UncertaintyParams`).
 """
 
 import math
 
 from ext_observer.core.ahrs import AhrsParams, WORLD_FRAMES
+from ext_observer.core.uncertainty import UncertaintyParams
 from ext_observer.estimator_node import COMMON_PARAMETERS, common_settings
 from ext_observer.parameters import ParameterSpec
-from ext_observer.raw_imu import AHRS_PREFIX, ahrs_params
+from ext_observer.raw_imu import AHRS_PREFIX, ahrs_params, COVARIANCE_PREFIX, uncertainty_params
 
-__all__ = ['IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'MADGWICK_UNUSED',
+__all__ = ['COVARIANCE_MODES', 'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'MADGWICK_UNUSED',
            'imu_filter_settings']
+
+# orientation_covariance of imu/data: the estimate's own, or orientation_stddev².
+COVARIANCE_MODES = ('estimate', 'fixed')
 
 # What each AhrsParams field means, with its unit; (description, range,
 # constraints).
@@ -56,6 +62,38 @@ _AHRS_DOCS = {
     'tau_mag_ref': ('time constant of the learned field norm and dip references, s.',
                     (0.0, 1e6), 'Positive.'),
 }
+
+
+# What each UncertaintyParams field means, with its unit; (description, range).
+_COVARIANCE_DOCS = {
+    'gyro_noise': ('white noise density of the gyro, rad/s/√Hz.', (1e-9, 1.0)),
+    'gyro_rate_noise': ('noise density of the gyro error proportional to the rate (scale '
+                        'factor, misalignment, vibration), (rad/s per rad/s)/√Hz.', (0.0, 1.0)),
+    'bias_std': ('how far the gyro bias wanders from the learned one, rad/s (σ).',
+                 (0.0, 1.0)),
+    'bias_time': ('correlation time of that wander, s.', (1e-3, 1e6)),
+    'bias_init': ('gyro bias uncertainty per axis before the first rest, rad/s.',
+                  (0.0, 1.0)),
+    'acc_noise': ('accelerometer noise density, m/s²/√Hz.', (1e-9, 10.0)),
+    'mag_noise': ("noise density of the field's horizontal direction, rad·√s.",
+                  (1e-9, 10.0)),
+    'inclination_floor': ('smallest inclination σ (translational acceleration, '
+                          'accelerometer calibration, mounting), rad.', (0.0, 1.0)),
+    'heading_floor': ('smallest heading σ once a field has set the heading (a bent but '
+                      'accepted field), rad.', (0.0, 1.0)),
+    'stamp_error': ("timing error of a sample's stamp, s: the orientation is off by "
+                    '|ω| times it.', (0.0, 1.0)),
+}
+
+
+def _covariance_spec(name, default):
+    description, bounds = _COVARIANCE_DOCS[name]
+    positive = name in UncertaintyParams.POSITIVE
+    return ParameterSpec(
+        COVARIANCE_PREFIX + name, float(default),
+        f'Covariance model: {description} Default: UncertaintyParams.DEFAULTS '
+        '(docs/covariance.md).', bounds, read_only=True,
+        constraints='Positive.' if positive else 'At least 0 (0: off).')
 
 
 def _ahrs_spec(name, default):
@@ -109,10 +147,17 @@ IMU_FILTER_OWN = (
                   'imu_filter_madgwick).', (-1.0, 1.0)),
     ParameterSpec('mag_bias_y', 0.0, 'The same, y, T.', (-1.0, 1.0)),
     ParameterSpec('mag_bias_z', 0.0, 'The same, z, T.', (-1.0, 1.0)),
+    ParameterSpec('orientation_covariance_mode', 'estimate',
+                  "orientation_covariance of imu/data: 'estimate' (the estimate's own "
+                  'covariance, row-major, rad², about the world frame\'s x, y, z axes: '
+                  "docs/covariance.md) or 'fixed' (orientation_stddev squared on the "
+                  'diagonal, as imu_filter_madgwick).',
+                  constraints=f'One of {", ".join(COVARIANCE_MODES)}.'),
     ParameterSpec('orientation_stddev', 0.05,
-                  'Standard deviation of the orientation, rad: orientation_covariance of '
-                  'imu/data is its square on the diagonal (as imu_filter_madgwick; 0 '
-                  'publishes zeros, "unknown" in sensor_msgs/Imu).', (0.0, 10.0)),
+                  "With orientation_covariance_mode 'fixed': standard deviation of the "
+                  'orientation, rad; orientation_covariance of imu/data is its square on '
+                  'the diagonal (as imu_filter_madgwick; 0 publishes zeros, "unknown" in '
+                  'sensor_msgs/Imu).', (0.0, 10.0)),
     ParameterSpec('constant_dt', 0.0,
                   'Δt of every sample, s, instead of the interval between the stamps; 0 = '
                   'from the stamps (as imu_filter_madgwick).', (0.0, 10.0)),
@@ -129,7 +174,8 @@ IMU_FILTER_OWN = (
     ParameterSpec('input_timeout', 2.0,
                   'WARN when no IMU sample has arrived for this long (after the first), s; '
                   'checked at each status, by the node clock; 0 = never.', (0.0, 3600.0)),
-) + tuple(_ahrs_spec(name, default) for name, default in AhrsParams.DEFAULTS.items())
+) + tuple(_ahrs_spec(name, default) for name, default in AhrsParams.DEFAULTS.items()) + tuple(
+    _covariance_spec(name, default) for name, default in UncertaintyParams.DEFAULTS.items())
 
 IMU_FILTER_PARAMETERS = IMU_FILTER_OWN + MADGWICK_UNUSED
 
@@ -158,5 +204,9 @@ def imu_filter_settings(values):
     if values['world_frame'] not in WORLD_FRAMES:
         raise ValueError(f'world_frame must be one of {tuple(WORLD_FRAMES)}, got '
                          f'{values["world_frame"]!r}')
+    if values['orientation_covariance_mode'] not in COVARIANCE_MODES:
+        raise ValueError(f'orientation_covariance_mode must be one of {COVARIANCE_MODES}, '
+                         f'got {values["orientation_covariance_mode"]!r}')
     ahrs_params(values)
+    uncertainty_params(values)
     return dict(values)

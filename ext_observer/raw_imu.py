@@ -36,6 +36,16 @@ Outputs
     ``q = R_z(yaw_offset) ⊗ C ⊗ R_up(−declination) ⊗ q_enu``. For ENU and
     NWU this is imu_filter_madgwick's ``R_z(yaw_offset − declination) ⊗ q``.
 
+Uncertainty
+    Each estimate carries the covariance of its orientation error
+    (:class:`~ext_observer.core.uncertainty.AttitudeUncertainty`, fed after
+    every step with what the estimator did): 3×3, row-major, rad², about the
+    x, y, z axes of ``world_frame`` (a small rotation ``δ`` of the world
+    frame with the true attitude ``exp(δ) ⊗ q̂``): roll, pitch and yaw
+    variances as ``sensor_msgs/Imu``'s ``orientation_covariance`` and
+    robot_localization read them (REP 145). It is ``diag(V_t, V_t, V_h)``:
+    the same in ENU, NWU and NED and after the declination and yaw offset.
+
 Faults
     A stamp older than the last step by more than ``backward_jump_threshold``
     restarts the time line and the estimator; a step after a forward gap
@@ -51,16 +61,20 @@ import math
 
 from ext_observer.core.ahrs import AhrsObserver, AhrsParams, WORLD_FRAMES
 from ext_observer.core.quaternion import multiply_floats
+from ext_observer.core.uncertainty import AttitudeUncertainty, UncertaintyParams
 from ext_observer.core.validation import check_state
 from ext_observer.guard import GUARD_REASONS
 from ext_observer.pairing import BACKWARD_JUMP, StepPairer
 from ext_observer.units import UnitCheck
 
-__all__ = ['AHRS_PREFIX', 'Estimate', 'RESET_CAUSES', 'RawImuEstimator', 'RawImuPipeline',
-           'ahrs_params', 'heading_factor', 'pairing_settings']
+__all__ = ['AHRS_PREFIX', 'COVARIANCE_PREFIX', 'Estimate', 'RESET_CAUSES', 'RawImuEstimator',
+           'RawImuPipeline', 'ahrs_params', 'heading_factor', 'pairing_settings',
+           'uncertainty_params']
 
 # The core's parameters are the node's parameters ahrs.<name>.
 AHRS_PREFIX = 'ahrs.'
+# The uncertainty model's are covariance.<name>.
+COVARIANCE_PREFIX = 'covariance.'
 
 # Why the estimator restarted (the same causes as the nodes').
 RESET_CAUSES = ('backward_jump', 'clock_jump', 'forward_gap', 'service')
@@ -71,8 +85,19 @@ MAX_INCREMENT = 20.0
 
 # One estimate: the sample's stamp (ns), the ambient estimate in
 # world_frame (4 floats), the guard's reason if it reinitialized the
-# estimator on this sample (else None), and the released step (its gap flag).
-Estimate = namedtuple('Estimate', 'stamp state reason step')
+# estimator on this sample (else None), the released step (its gap flag),
+# and the covariance of the orientation (9 floats, row-major, rad², about
+# world_frame's x, y, z axes).
+Estimate = namedtuple('Estimate', 'stamp state reason step covariance')
+
+
+def _prefixed(values, prefix, cls):
+    given = {name[len(prefix):]: value for name, value in values.items()
+             if name.startswith(prefix)}
+    try:
+        return cls(**given)
+    except ValueError as error:
+        raise ValueError(f'{prefix}*: {error}') from None
 
 
 def ahrs_params(values):
@@ -94,12 +119,24 @@ def ahrs_params(values):
         With the parameter's name and the core's reason.
 
     """
-    given = {name[len(AHRS_PREFIX):]: value for name, value in values.items()
-             if name.startswith(AHRS_PREFIX)}
-    try:
-        return AhrsParams(**given)
-    except ValueError as error:
-        raise ValueError(f'{AHRS_PREFIX}*: {error}') from None
+    return _prefixed(values, AHRS_PREFIX, AhrsParams)
+
+
+def uncertainty_params(values):
+    """
+    Return the uncertainty model's parameters from the node's ``covariance.*`` values.
+
+    Returns
+    -------
+    params : ext_observer.core.uncertainty.UncertaintyParams
+
+    Raises
+    ------
+    ValueError
+        With the parameter's name and the reason.
+
+    """
+    return _prefixed(values, COVARIANCE_PREFIX, UncertaintyParams)
 
 
 def _about_z(angle):
@@ -144,21 +181,29 @@ class RawImuEstimator:
     Parameters
     ----------
     settings : dict
-        ``ahrs.*``, ``use_mag``, ``world_frame``, ``declination``,
-        ``yaw_offset``, ``mag_bias_*``, ``divergence_max_residual``.
+        ``ahrs.*``, ``covariance.*`` (those missing take their defaults),
+        ``use_mag``, ``world_frame``, ``declination``, ``yaw_offset``,
+        ``mag_bias_*``, ``divergence_max_residual``.
 
     Attributes
     ----------
     core : ext_observer.core.ahrs.AhrsObserver
+    uncertainty : ext_observer.core.uncertainty.AttitudeUncertainty
+        The variance of the estimate's inclination and heading.
     latest_field : tuple of 3 float or None
         The latest field (T, hard-iron offset removed).
 
     """
 
     def __init__(self, settings):
-        self.core = AhrsObserver(params=ahrs_params(settings), use_mag=settings['use_mag'])
+        params = ahrs_params(settings)
+        self.core = AhrsObserver(params=params, use_mag=settings['use_mag'])
+        self.uncertainty = AttitudeUncertainty.for_estimator(
+            params, uncertainty_params(settings), use_mag=bool(settings['use_mag']))
         self.world_frame = settings['world_frame']
         self.latest_field = None
+        self._fields_used = 0
+        self._calibrated = True
         self.configure(settings)
 
     def configure(self, settings):
@@ -188,6 +233,33 @@ class RawImuEstimator:
         self.latest_field = field
         if self.core.q is not None:
             self.core.update_mag(field, dt)
+            self._track_field(dt)
+
+    def _track_field(self, dt):
+        """Tell the uncertainty what the core's last field did to the heading."""
+        core = self.core
+        # Issue 17's calibrator, where the core has one: until it is ready the
+        # heading does not follow the field, and once ready the next used
+        # field sets it again (a running mean from 1).
+        calibration = getattr(core, 'calibration', None)
+        calibrated = calibration is None or bool(calibration.ready)
+        if calibrated and not self._calibrated:
+            self._fields_used = 0
+        self._calibrated = calibrated
+        sigma = 0.0 if calibration is None else float(calibration.quality)
+        # The gain the core applied, where it says (a calibrator that sets the
+        # heading itself makes it more than the usual gain); else its rule.
+        gain = getattr(core, 'mag_gain', None)
+        if gain is not None:
+            self.uncertainty.field(dt, float(gain), sigma)
+            return
+        if not (core.use_mag and calibrated and not core.mag_disturbed):
+            self.uncertainty.field(dt, 0.0)
+            return
+        # AhrsObserver.update_mag: a running mean of the first fields, then
+        # 1 − exp(−dt / tau_mag).
+        self._fields_used += 1
+        self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma)
 
     def step(self, gyr, acc, dt):
         """
@@ -211,8 +283,9 @@ class RawImuEstimator:
 
         """
         core = self.core
+        starting = core.q is None
         try:
-            q = core.update(gyr, acc, self.latest_field if core.q is None else None, dt)
+            q = core.update(gyr, acc, self.latest_field if starting else None, dt)
         except (ValueError, OverflowError, ZeroDivisionError):
             reason = 'step_failed'
         else:
@@ -220,7 +293,20 @@ class RawImuEstimator:
         if reason is not None:
             core.reset()
             core.update(gyr, acc, self.latest_field, dt)
+            starting = True
+        if starting:
+            self._start(dt)
+        else:
+            self.uncertainty.step(dt, gyr, core.q, core.rest)
         return self.state, reason
+
+    def _start(self, dt):
+        """The core has just initialized (and used the latest field, if any)."""
+        self.uncertainty.start(dt)
+        self._fields_used = 0
+        self._calibrated = True
+        if self.latest_field is not None and self.core.use_mag:
+            self._track_field(None)
 
     @property
     def state(self):
@@ -233,24 +319,37 @@ class RawImuEstimator:
     def reset(self):
         """Forget the estimate: the next step initializes it again."""
         self.core.reset()
+        self.uncertainty.reset()
+
+    @property
+    def covariance(self):
+        """The orientation's covariance (9 floats, row-major, rad², world axes), or None."""
+        return self.uncertainty.covariance if self.uncertainty.started else None
 
     def key_values(self):
         """
         Return the diagnostic pairs of the estimator.
 
         ``world_frame``, ``use_mag``, ``initialized``, ``bias_x``, ``bias_y``,
-        ``bias_z`` (rad/s), ``rest``, ``mag_disturbed`` and ``residual``
-        (``|q̂̄q̂ − 1|``; NaN before the first step).
+        ``bias_z`` (rad/s), ``rest``, ``mag_disturbed``, ``residual``
+        (``|q̂̄q̂ − 1|``), ``inclination_std_deg`` and ``heading_std_deg``
+        (the σ of the published covariance, degrees); NaN before the first
+        step.
         """
         core = self.core
         q = core.q
         residual = math.nan if q is None else abs(
             q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] - 1.0)
         bx, by, bz = core.bias
+        tracker = self.uncertainty
+        started = q is not None and tracker.started
         return [('world_frame', self.world_frame), ('use_mag', bool(core.use_mag)),
                 ('initialized', q is not None), ('bias_x', float(bx)),
                 ('bias_y', float(by)), ('bias_z', float(bz)), ('rest', bool(core.rest)),
-                ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual)]
+                ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
+                ('inclination_std_deg',
+                 math.degrees(tracker.inclination_std) if started else math.nan),
+                ('heading_std_deg', math.degrees(tracker.heading_std) if started else math.nan)]
 
 
 class RawImuPipeline:
@@ -343,7 +442,8 @@ class RawImuPipeline:
                 gyr, acc, self._constant_dt or (step.end - step.stamp) * 1e-9)
             if reason is not None:
                 self.reinitializations[reason] += 1
-            estimate = Estimate(stamp, state, reason, step)
+            estimate = Estimate(stamp, state, reason, step,
+                                self.estimator.uncertainty.covariance)
         return outcome, estimate
 
     def field(self, stamp, field):
