@@ -69,6 +69,10 @@ def build_parser():
                              '(estimate_batch(workers=N); default: the CPUs, '
                              f'{cpus} here; 1: vectorized in this process)')
     parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
+    parser.add_argument('--covariance', action='store_true',
+                        help='instead: is the published orientation covariance honest? (our '
+                             'estimator through the node\'s pipeline; with --docs, '
+                             'DOCS_DIR/covariance.md and its figures)')
     return parser
 
 
@@ -77,7 +81,7 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     progress = (lambda text: None) if args.quiet else log
-    anchors = () if args.no_anchors else ANCHORS
+    anchors = () if args.no_anchors or args.covariance else ANCHORS
     problem = _check(args, anchors)
     if problem:
         print(f'error: {problem}', file=sys.stderr)
@@ -88,6 +92,8 @@ def main(argv=None):
     try:
         folder = data_dir(args.data)
         trials, groups = _read(folder, args, progress)
+        if args.covariance:
+            return _covariance(args, argv, source, folder, trials, groups, progress)
         names = [t.name for t in trials]
         plot_trial = PLOT_TRIAL if PLOT_TRIAL in names else next(
             (n for n in names if 'magnet' in n), names[0])
@@ -122,6 +128,20 @@ def main(argv=None):
     if args.docs:
         meta['plot_movement'] = next(t.movement for t in trials if t.name == plot_trial)
         _write_page(args.docs, result, groups, meta, progress)
+    return 0
+
+
+def _covariance(args, argv, source, folder, trials, groups, progress):
+    """The covariance benchmark (``--covariance``) on the trials read."""
+    from ext_observer.broad.covariance_page import report
+    meta = dict(source, command=('python -m ext_observer broad ' + ' '.join(argv)).strip(),
+                data=shown_path(folder), machine=_machine())
+    # The covariance is the node's: its pipeline and uncertainty model count too.
+    meta['dirty'] = bool(_git('status', '--porcelain', '--', *_ESTIMATOR_FILES,
+                              'ext_observer/core/uncertainty.py', 'ext_observer/raw_imu.py'))
+    modes = MODES if args.mode == 'both' else (args.mode,)
+    report(trials, groups, meta, modes, workers=args.workers, docs=args.docs,
+           json_path=args.json, progress=progress)
     return 0
 
 

@@ -1,0 +1,375 @@
+"""
+The covariance benchmark's report: the figures and ``docs/covariance.md``.
+
+:func:`report` is what ``python -m ext_observer broad --covariance`` runs
+once the trials are read: every trial in 9D and 6D through the node's
+pipeline (:func:`~ext_observer.broad.covariance.run_all`), the table on
+stdout, and with ``--docs`` the reliability plot, the magnet trial and the
+page; with ``--json`` the figures.
+"""
+
+import json
+import math
+import os
+
+import numpy as np
+
+from ext_observer.broad import covariance as cv
+from ext_observer.core.uncertainty import UncertaintyParams
+
+# A trial whose field is rejected for long stretches (a magnet on the sensor).
+MAGNET_TRIALS = ('32_disturbed_attached_magnet_1cm', '28_disturbed_stationary_magnet_A')
+RELIABILITY_FIGURE = 'covariance_reliability.png'
+MAGNET_FIGURE = 'covariance_magnet.png'
+_BINS = 12
+_PANELS = (('9D', 'inclination'), ('9D', 'heading'), ('6D', 'inclination'))
+
+
+def report(trials, groups, meta, modes=cv.MODES, workers=1, docs=None, json_path=None,
+           progress=None):
+    """
+    Run the benchmark, print its table, write what is asked; return the summary.
+
+    Parameters
+    ----------
+    trials : list of Trial
+    groups : dict
+        ``find_groups``'s output.
+    meta : dict
+        ``command``, ``commit``, ``dirty``, ``date``, ``machine``, ``data``.
+    modes : sequence of {'9D', '6D'}
+    workers : int
+    docs : str, optional
+        Write ``docs/covariance.md`` and ``docs/figures/covariance_*.png`` here.
+    json_path : str, optional
+
+    """
+    if progress:
+        progress(f'{len(trials)} trials × {len(modes)} modes through RawImuPipeline, '
+                 f'{workers} process{"es" if workers > 1 else ""} ...')
+    runs = cv.run_all(trials, modes, workers=workers, progress=progress)
+    summary = cv.summarize(trials, runs, groups)
+    print(cv.text_table(summary))
+    missed = [key for key, f in summary.items() if key[1] != 'all' and not cv.verdict(f)]
+    print(f'{len(summary) - len(missed) - sum(k[1] == "all" for k in summary)} of '
+          f'{sum(k[1] != "all" for k in summary)} rows within issue 18\'s bounds '
+          f'(90–99 % within 2σ, mean e²/σ² 0.5–2)'
+          + ('' if not missed else '; outside: ' + ', '.join(' '.join(k) for k in missed)))
+    if json_path:
+        with open(json_path, 'w', encoding='utf-8') as f:
+            json.dump({'meta': meta, 'params': UncertaintyParams().as_dict(),
+                       'figures': [dict(zip(('mode', 'split', 'group', 'component'), key),
+                                        **value) for key, value in sorted(summary.items())]},
+                      f, indent=1)
+    if docs:
+        folder = os.path.join(docs, 'figures')
+        os.makedirs(folder, exist_ok=True)
+        figures = {'reliability': plot_reliability(
+            trials, runs, groups, os.path.join(folder, RELIABILITY_FIGURE))}
+        by_name = {t.name: t for t in trials}
+        magnet = next((name for name in MAGNET_TRIALS if name in by_name), None)
+        if magnet and all(magnet in runs[m] for m in ('9D', '6D') if m in runs):
+            figures['magnet'] = plot_magnet(by_name[magnet], runs,
+                                            os.path.join(folder, MAGNET_FIGURE))
+        page = os.path.join(docs, 'covariance.md')
+        with open(page, 'w', encoding='utf-8') as f:
+            f.write(markdown(summary, meta, figures, docs, magnet))
+        if progress:
+            progress(f'wrote {page} and {", ".join(sorted(figures.values()))}')
+    return summary
+
+
+# --- figures ---------------------------------------------------------------
+
+def _pairs(trials, runs, groups, mode, component, split):
+    member = {n for g in cv.GROUPS for n in groups['members'].get(g, [])}
+    es, ss = [], []
+    for trial in trials:
+        run = runs.get(mode, {}).get(trial.name)
+        if run is None or trial.name not in member or cv.split_of(trial.name) != split:
+            continue
+        pair = cv.scored_pairs(trial, run).get(component)
+        if pair is not None:
+            es.append(pair[0])
+            ss.append(pair[1])
+    if not es:
+        return None, None
+    return np.concatenate(es), np.concatenate(ss)
+
+
+def plot_reliability(trials, runs, groups, path):
+    """Claimed σ against the observed RMS error, in bins of σ; return ``path``."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+
+    plain = FuncFormatter(lambda v, _: f'{v:g}')
+    panels = [(m, c) for m, c in _PANELS if m in runs]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.2), squeeze=False)
+    for ax, (mode, component) in zip(axes[0], panels):
+        low, high = np.inf, 0.0
+        for split, marker in (('dev', 'o'), ('held-out', 's')):
+            e, s = _pairs(trials, runs, groups, mode, component, split)
+            if e is None:
+                continue
+            order = np.argsort(s)
+            bins = np.array_split(order, _BINS)
+            claimed = np.degrees([np.sqrt(np.mean(s[b] ** 2)) for b in bins])
+            observed = np.degrees([np.sqrt(np.mean(e[b] ** 2)) for b in bins])
+            ax.plot(claimed, observed, marker + '-', label=f'{split} trials')
+            low = min(low, claimed.min(), observed.min())
+            high = max(high, claimed.max(), observed.max())
+        line = np.array([low * 0.8, high * 1.25])
+        ax.plot(line, line, 'k--', lw=0.8, label='observed = claimed')
+        ax.set_xscale('log')
+        ax.set_yscale('log')
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_formatter(plain)
+            axis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel('claimed σ, RMS in the bin (°)')
+        ax.set_ylabel('observed error, RMS in the bin (°)')
+        ax.set_title(f'{mode} {component}')
+        ax.grid(alpha=0.3, which='both')
+        ax.legend(fontsize=8)
+    fig.suptitle(f'Reliability on BROAD: scored samples in {_BINS} bins of equal count by '
+                 'claimed σ', fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_magnet(trial, runs, path):
+    """Heading error and σ on a magnet trial, 9D and 6D, rejected fields shaded."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    t = np.arange(len(trial)) / trial.rate
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6.4), sharex=True)
+    run9 = runs['9D'][trial.name]
+    _, heading, _ = cv.errors(trial, run9)
+    ax = axes[0]
+    _shade(ax, t, ~trial.movement, 'grey', 0.15, 'not scored (rest)')
+    _shade(ax, t, run9['rejected'], 'tab:red', 0.12, 'field not used')
+    ax.plot(t, np.degrees(heading), lw=0.6, color='tab:blue', label='|heading error|')
+    ax.plot(t, np.degrees(2.0 * np.sqrt(run9['heading'])), lw=1.0, color='k', label='2σ')
+    ax.set_ylim(0.0, max(8.0, 1.2 * np.nanpercentile(np.degrees(heading), 99.5)))
+    ax.set_ylabel('heading, 9D (°)')
+    ax.set_title(f'{trial.name}: the heading σ grows while the field is rejected')
+    ax.legend(fontsize=8, loc='upper left', ncol=4)
+    ax.grid(alpha=0.3)
+    ax = axes[1]
+    for mode, color in (('9D', 'k'), ('6D', 'tab:orange')):
+        if mode in runs:
+            ax.plot(t, np.degrees(np.sqrt(runs[mode][trial.name]['heading'])), color=color,
+                    label=f'heading σ, {mode}')
+    ax.set_yscale('log')
+    ax.set_ylabel('heading σ (°)')
+    ax.set_xlabel('time (s)')
+    ax.set_title('6D: nothing corrects the heading, its σ grows without bound')
+    ax.legend(fontsize=8, loc='upper left')
+    ax.grid(alpha=0.3, which='both')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _shade(ax, t, mask, color, alpha, label):
+    mask = np.asarray(mask, dtype=bool)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    for i, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
+        ax.axvspan(t[a], t[min(b, len(t) - 1)], color=color, alpha=alpha, lw=0,
+                   label=label if i == 0 else None)
+
+
+# --- the page --------------------------------------------------------------
+
+def markdown(summary, meta, figures, docs, magnet):
+    """The text of ``docs/covariance.md``."""
+    def rel(path):
+        return os.path.relpath(path, docs).replace(os.sep, '/')
+
+    lines = list(_INTRO)
+    lines += _model_lines()
+    lines += ['## On BROAD', '',
+              f'**Made by** `{meta["command"]}` on the data in `{meta["data"]}` at commit '
+              f'`{meta["commit"]}`{" (with uncommitted changes)" if meta["dirty"] else ""}, '
+              f'{meta["date"]}, on {meta["machine"]}. Every trial runs through '
+              '`RawImuPipeline` as `imu_filter_node` runs it (the node\'s defaults; stamps '
+              '1/rate apart, the field after each sample), and each published covariance is '
+              'compared with the error against the optical reference over the scored '
+              '(`movement`) samples. Trials are pooled per group; **dev** are the '
+              'even-numbered trials, on which the defaults were chosen, **held-out** the '
+              'odd-numbered ones. Issue 18 asks for 90–99 % within 2σ and a mean '
+              'of e²/σ² between 0.5 and 2.', '',
+              '| mode | split | group | component | samples | within 2σ | mean e²/σ² | '
+              'RMS error | RMS σ | within bounds |',
+              '|---|---|---|---|---:|---:|---:|---:|---:|---|']
+    for key in sorted(summary, key=cv._order):
+        if key[1] == 'all':
+            continue
+        f = summary[key]
+        lines.append(f'| {" | ".join(key)} | {f["n"]} | {100 * f["within_2sigma"]:.1f} % | '
+                     f'{f["mean_z2"]:.2f} | {math.degrees(f["rms_error"]):.2f}° | '
+                     f'{math.degrees(f["rms_sigma"]):.2f}° | '
+                     f'{"yes" if cv.verdict(f) else "**no**"} |')
+    lines.append('')
+    if 'reliability' in figures:
+        lines += ['![Claimed σ against observed error](' + rel(figures['reliability']) + ')',
+                  '', 'Each point is one twelfth of the scored samples of a split, binned by '
+                  'the σ claimed; on the dashed line the claimed σ is the RMS error. The '
+                  'inclination is the angle of the tilt, so its σ is √(2 V_t).', '']
+    if 'magnet' in figures:
+        lines += ['![Heading σ on a magnet trial](' + rel(figures['magnet']) + ')', '',
+                  f'`{magnet}`: while the field is not used (red: rejected as disturbed, or '
+                  'the magnetometer calibration has not converged yet), nothing corrects '
+                  'the heading and its σ grows; a used field pulls it back. In 6D it grows '
+                  'from the start.', '']
+    lines += list(_CHOICE) + list(_LIMITS) + list(_REPRODUCE)
+    return '\n'.join(lines) + '\n'
+
+
+def _model_lines():
+    names = {
+        'gyro_noise': 'rad/s/√Hz', 'gyro_rate_noise': '1/√Hz', 'bias_std': 'rad/s',
+        'bias_time': 's', 'bias_init': 'rad/s', 'acc_noise': 'm/s²/√Hz',
+        'mag_noise': 'rad·√s', 'inclination_floor': 'rad', 'heading_floor': 'rad',
+        'stamp_error': 's'}
+    how = {
+        'gyro_noise': 'measured at rest (dev trials)',
+        'gyro_rate_noise': 'tuned on dev',
+        'bias_std': 'tuned on dev', 'bias_time': 'tuned on dev',
+        'bias_init': 'RMS per axis of the biases learned at the first rest (dev)',
+        'acc_noise': 'measured at rest (dev trials)',
+        'mag_noise': 'measured at rest: heading of the field (dev trials)',
+        'inclination_floor': 'tuned on dev', 'heading_floor': 'tuned on dev',
+        'stamp_error': 'tuned on dev'}
+    lines = ['| parameter (`covariance.*`) | default | unit | chosen |', '|---|---:|---|---|']
+    for name, value in UncertaintyParams.DEFAULTS.items():
+        lines.append(f'| `{name}` | {value:g} | {names[name]} | {how[name]} |')
+    return list(_MODEL) + lines + ['']
+
+
+_INTRO = [
+    '# The orientation covariance',
+    '',
+    'This page says what `orientation_covariance` of `imu/data` means, how '
+    '`imu_filter_node` computes it from what its estimator does, how its defaults were '
+    'chosen on BROAD (Laidig et al. 2021, CC BY 4.0), and how honest it is there, on '
+    'the trials that chose them and on those that did not. It is generated by the '
+    'command at the end; do not edit it by hand.',
+    '',
+    '## The convention',
+    '',
+    '`orientation_covariance` (9 floats, row-major, rad²) is the covariance of a small '
+    'rotation δ of the world frame (`world_frame`: ENU, NWU or NED) with the true '
+    'attitude `exp(δ) ⊗ q̂`: about the world-fixed x, y and z axes, which is what REP 145 '
+    'and `sensor_msgs/Imu` say and what robot_localization reads as its roll, pitch and '
+    'yaw variances. It is `diag(V_t, V_t, V_h)`: the estimator treats every horizontal '
+    'direction alike, so the two tilt variances are equal and uncorrelated, and the '
+    'heading (about the vertical) is its own. A diagonal with equal x and y is the same '
+    'in ENU, NWU and NED and after `declination` and `yaw_offset`.',
+    '',
+    '- `orientation_covariance_mode` `estimate` (the default) publishes it; `fixed` '
+    'publishes `orientation_stddev`² on the diagonal, exactly as before (and as '
+    'imu_filter_madgwick), for a user who wants that.',
+    '- `/diagnostics` shows `inclination_std_deg` (√(2 V_t): the RMS of the tilt angle) '
+    'and `heading_std_deg` (√V_h).',
+    '- `RawImuPipeline` gives each `Estimate` its `covariance`; '
+    '`pipeline.estimator.uncertainty` has `inclination_std` and `heading_std` (rad).',
+    '- In 9D the heading is unknown (σ = 104°, that of a uniform angle) until a field '
+    'corrects it: before the first field, and while the magnetometer calibration (issue '
+    '17) has not converged. In 6D the heading is relative to the estimator\'s own start; '
+    'its σ starts near 0 and grows without bound.',
+    '',
+]
+
+_MODEL = [
+    '## The model',
+    '',
+    '`AttitudeUncertainty` (`ext_observer/core/uncertainty.py`, numpy only) runs beside '
+    'the estimator and is told after each step what it did: the interval, the gyro\'s '
+    'rate, rest, and for each field the heading gain it applied (0 when rejected). It '
+    'propagates the variance of the attitude error as the covariance step of an '
+    'error-state Kalman filter for attitude does (Markley 2003; Solà 2017), except that '
+    'the gains are not computed from the covariance: they are the estimator\'s own time '
+    'constants, and the covariance follows what they do to the error.',
+    '',
+    '- Per axis (the two horizontal ones share a variance), two states: the angle error '
+    'θ and the gyro bias error β, a 2×2 covariance. Between samples θ grows by β dt and '
+    'by the gyro\'s white noise, `gyro_noise` plus `gyro_rate_noise` times |ω|; β is a '
+    'first-order Gauss-Markov process (`bias_std`, `bias_time`), unknown at the start '
+    '(`bias_init`) and learned at rest (the estimator\'s gain of `tau_rest`).',
+    '- A complementary correction with gain k pulls θ to a measurement with error e: '
+    'θ ← (1 − k) θ + k e, so P ← (1 − k)² P + k² R. Inclination: every sample, k from '
+    '`tau_acc` + `tau_acc_gain`, R the accelerometer\'s direction noise. For a process '
+    'noise density q and a correction of time constant τ this settles at '
+    'q τ / 2 + R dt / (2 τ), the complementary filter\'s trade-off in closed form '
+    '(`test_covariance.py::test_steady_state_is_the_closed_form_of_a_first_order_correction`). '
+    'Heading: only with a field that corrected it, with the gain the estimator applied '
+    '(a running mean of the first fields, then `tau_mag`).',
+    '- Then what the propagation does not model: `inclination_floor` (translational '
+    'acceleration, accelerometer calibration, mounting), `heading_floor` (a field bent '
+    'where it is accepted), the magnetometer calibration\'s own heading σ, and a stamp '
+    'off by `stamp_error`, which puts the orientation off by |ω| times it (on BROAD the '
+    'IMU and the optical reference are about 2.5 ms apart).',
+    '',
+    'Every update is a congruence plus a positive term, so the covariance stays symmetric '
+    'and positive definite; `test_covariance.py` checks that for every input the node '
+    'takes, and that the heading σ grows in 6D and while fields are rejected. The '
+    'parameters are the node\'s `covariance.*` (start-up only; '
+    '[parameters.md](parameters.md#imu_filter)):',
+    '',
+]
+
+_CHOICE = [
+    '## How the defaults were chosen',
+    '',
+    'The 22 trials were split by their number: the 14 even-numbered ones (dev: 02, 04, '
+    '06, 08, 10, 12, 14, 18 undisturbed; 24, 26, 28, 30, 32, 34 disturbed) chose the '
+    'defaults, the 8 odd-numbered ones (held-out: 01, 03, 05, 09, 11, 15; 29, 35) only '
+    'judge them, and the BROAD trials not in this folder are a further held-out set. The '
+    'sensor noises were measured in the rest phases of the dev trials. The other six '
+    '(`gyro_rate_noise`, `bias_std`, `bias_time`, `inclination_floor`, `heading_floor`, '
+    '`stamp_error`) were searched coordinate by coordinate on the 9D runs of the dev '
+    'trials (`covariance.tune`, replaying the logged runs), minimizing the distance of '
+    'each dev group\'s two figures from 95 % and 1.1 (`covariance.tuning_cost`), and '
+    'rounded.',
+    '',
+    'Two findings shaped the model. First, the error of a trial scales with how fast the '
+    'body turns (a timing offset between the IMU and the reference explains up to 80 % '
+    'of the error\'s variance on the fast trials), hence `stamp_error` and '
+    '`gyro_rate_noise`. Second, the inclination error is two-dimensional: with a σ equal '
+    'to the RMS error, a Rayleigh-distributed angle is within 2σ 98 % of the time, '
+    'next to the 99 % bound; aiming at 95 % makes the inclination σ about 5–10 % '
+    'smaller than the RMS error (a mean e²/σ² above 1).',
+    '',
+]
+
+_LIMITS = [
+    '## What is not met, and why',
+    '',
+    'The errors differ from trial to trial by more than anything the estimator can see: '
+    'on the dev trials the heading error of two fast-rotation trials (06, 08) is three '
+    'times that of the others with similar motion, and fields that are bent but accepted '
+    'cannot be told from good ones. With 2 to 8 trials per group, a group\'s pooled '
+    'figures follow its worst trials: a σ that covers the dev groups (which hold 06 and '
+    '08) is larger than the held-out trials need, whose heading errors are smaller. Rows '
+    'marked **no** above are the result; the defaults were not changed after seeing '
+    'them.',
+    '',
+]
+
+_REPRODUCE = [
+    '## Reproduce',
+    '',
+    'Run `python -m ext_observer broad --covariance --docs docs` (a few minutes on two '
+    'cores; the data as for [broad.md](broad.md): `make broad-data` fetches it). It '
+    'prints the table above and rewrites this page and its figures; `--json OUT` writes '
+    'the figures, `--trials`, `--mode`, `--workers` and `--data` work as for the '
+    'accuracy run.',
+    '',
+]
