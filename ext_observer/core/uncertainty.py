@@ -198,8 +198,14 @@ class AttitudeUncertainty:
                 raise ValueError(f'{name} must be positive and finite, got {tau}')
         self._tau = (float(tau_acc), float(tau_mag), float(tau_rest))
         self.use_mag = use_mag
+        p = self.params
+        # What is added on output, rad² (the stamp's per (rad/s)²).
+        self._tilt_floor = 0.5 * p.inclination_floor ** 2
+        self._heading_floor = p.heading_floor ** 2
+        self._stamp2 = p.stamp_error ** 2
         self._dt = None
         self._field_dt = None
+        self._gain_dt = None
         self.reset()
 
     @classmethod
@@ -305,8 +311,8 @@ class AttitudeUncertainty:
         n2 = w * w + x * x + y * y + z * z
         wz = (2.0 * (x * z - w * y) * gx + 2.0 * (y * z + w * x) * gy
               + (w * w - x * x - y * y + z * z) * gz) / n2
-        self._wz2 = wz * wz
-        self._wh2 = w2 - self._wz2
+        wz2 = wz * wz
+        self._wz2, self._wh2 = wz2, w2 - wz2
 
     def field(self, dt, gain, calibration=0.0):
         """
@@ -352,26 +358,24 @@ class AttitudeUncertainty:
         :class:`~ext_observer.core.ahrs.AhrsObserver` does).
         """
         dt = self._dt if dt is None else dt
-        k = 1.0 - math.exp(-dt / self._tau[1])
-        return max(k, 1.0 / count) if count >= 1 else 0.0
+        if dt != self._gain_dt:
+            self._gain_dt = dt
+            self._k_mag = 1.0 - math.exp(-dt / self._tau[1])
+        k = self._k_mag
+        return (k if k * count > 1.0 else 1.0 / count) if count >= 1 else 0.0
 
     # --- outputs -----------------------------------------------------------
 
     @property
     def tilt_variance(self):
         """Variance of the tilt about each horizontal world axis, rad²."""
-        p = self.params
-        floor = p.inclination_floor
-        s = p.stamp_error
-        return self._pt + 0.5 * (floor * floor + s * s * self._wh2)
+        return self._pt + self._tilt_floor + 0.5 * self._stamp2 * self._wh2
 
     @property
     def heading_variance(self):
         """Variance of the heading (about the world vertical), rad²."""
-        p = self.params
-        s = p.stamp_error
-        floor = self.heading_set * (p.heading_floor * p.heading_floor + self._calibration)
-        return self._ph + floor + s * s * self._wz2
+        floor = self.heading_set * (self._heading_floor + self._calibration)
+        return self._ph + floor + self._stamp2 * self._wz2
 
     @property
     def inclination_std(self):
@@ -394,7 +398,8 @@ class AttitudeUncertainty:
             ``(V_t, 0, 0, 0, V_t, 0, 0, 0, V_h)``, rad².
 
         """
-        t = self.tilt_variance
-        h = self.heading_variance
+        t = self._pt + self._tilt_floor + 0.5 * self._stamp2 * self._wh2
+        h = (self._ph + self.heading_set * (self._heading_floor + self._calibration)
+             + self._stamp2 * self._wz2)
         z = 0.0 * t
         return (t, z, z, z, t, z, z, z, h)
