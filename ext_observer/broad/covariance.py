@@ -38,6 +38,9 @@ COMPONENTS = ('inclination', 'heading')
 # Issue 18's bounds.
 FRACTION_RANGE = (0.90, 0.99)
 MEAN_RANGE = (0.5, 2.0)
+# A σ this large says the heading is unknown (before a field sets it, or while
+# the magnetometer calibration has not converged), rad.
+UNKNOWN_SIGMA = math.radians(30.0)
 # BROAD's magnetometer is in µT; the node takes T.
 TESLA_PER_MICROTESLA = 1e-6
 _START_NS = 1_000_000_000
@@ -198,15 +201,21 @@ def calibration_figures(samples):
     -------
     dict
         ``n``, ``within_2sigma`` (fraction), ``mean_z2``, ``rms_error``,
-        ``rms_sigma`` (rad).
+        ``rms_sigma`` (rad); ``unknown``, the share of samples with σ of
+        :data:`UNKNOWN_SIGMA` or more, and ``within_2sigma_known``,
+        ``mean_z2_known`` over the others (NaN if none).
 
     """
     e = np.concatenate([s[0] for s in samples])
     sigma = np.concatenate([s[1] for s in samples])
     z2 = (e / sigma) ** 2
+    known = sigma < UNKNOWN_SIGMA
     return {'n': int(e.size), 'within_2sigma': float(np.mean(z2 <= 4.0)),
             'mean_z2': float(np.mean(z2)), 'rms_error': float(np.sqrt(np.mean(e * e))),
-            'rms_sigma': float(np.sqrt(np.mean(sigma * sigma)))}
+            'rms_sigma': float(np.sqrt(np.mean(sigma * sigma))),
+            'unknown': float(np.mean(~known)),
+            'within_2sigma_known': float(np.mean(z2[known] <= 4.0)) if known.any() else math.nan,
+            'mean_z2_known': float(np.mean(z2[known])) if known.any() else math.nan}
 
 
 def scored_pairs(trial, run, variances=None):
@@ -264,7 +273,8 @@ def verdict(figures):
 def text_table(summary):
     """The figures as a text table, one row per mode, split, group and component."""
     lines = [f'{"mode":4} {"split":8} {"group":11} {"component":11} {"samples":>8} '
-             f'{"within 2σ":>9} {"mean e²/σ²":>10} {"RMS error":>9} {"RMS σ":>7}  in bounds']
+             f'{"within 2σ":>9} {"mean e²/σ²":>10} {"RMS error":>9} {"RMS σ":>7}  in bounds  '
+             f'{"σ ≥ 30°":>7} {"known: 2σ":>9} {"mean":>5}']
     for key in sorted(summary, key=_order):
         f = summary[key]
         mode, split, group, component = key
@@ -272,7 +282,8 @@ def text_table(summary):
             f'{mode:4} {split:8} {group:11} {component:11} {f["n"]:8d} '
             f'{100 * f["within_2sigma"]:8.1f}% {f["mean_z2"]:10.2f} '
             f'{math.degrees(f["rms_error"]):8.2f}° {math.degrees(f["rms_sigma"]):6.2f}°  '
-            f'{"yes" if verdict(f) else "NO"}')
+            f'{"yes" if verdict(f) else "NO ":9} {100 * f["unknown"]:6.1f}% '
+            f'{100 * f["within_2sigma_known"]:8.1f}% {f["mean_z2_known"]:5.2f}')
     return '\n'.join(lines)
 
 
