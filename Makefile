@@ -13,7 +13,7 @@ BENCH_STAMP := $(VENV)/.ext_observer-bench
 # Every process that starts a ROS node stays on this machine.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-.PHONY: all venv demo test reproduce bench broad broad-data docs test-hosts hosts-report clean
+.PHONY: all venv demo test coverage reproduce bench broad broad-data docs test-hosts hosts-report clean
 
 all: test
 
@@ -41,6 +41,13 @@ demo: $(RUNTIME_STAMP)
 # no ROS.
 test: $(TEST_STAMP)
 	$(PY) -m pytest $(PYTEST_ARGS) test $(wildcard bench/test_*.py)
+
+# Which lines of the raw-IMU path the suite runs (docs/tests.md#coverage):
+# the suite under coverage.py, in-process code only (the node processes the
+# tests start are not traced), then the report of core/ahrs.py and raw_imu.py.
+coverage: $(TEST_STAMP)
+	$(PY) -m coverage run --source=ext_observer -m pytest -q -p no:cacheprovider $(PYTEST_ARGS) test
+	$(PY) -m coverage report -m --include='ext_observer/core/ahrs.py,ext_observer/core/magcal.py,ext_observer/core/uncertainty.py,ext_observer/raw_imu.py'
 
 # The paper's figures and Table 1, regenerated into docs/reproduction.md.
 reproduce: $(RUNTIME_STAMP)

@@ -111,11 +111,16 @@ def test_madgwick_params_file_starts_unchanged_warns_once_and_takes_effect(
     assert 'publish_tf=True' in warnings[0]
     for honoured in ('yaw_offset', 'declination', 'orientation_stddev', 'gain=', 'zeta='):
         assert honoured not in warnings[0]
-    # orientation_stddev: the covariance; yaw_offset and declination: a turn
-    # of R_z(0.3 − 0.1) of the estimate, in the world frame.
-    message = next(iter(filtered.values()))
-    assert list(message.orientation_covariance) == pytest.approx(
-        [0.04, 0, 0, 0, 0.04, 0, 0, 0, 0.04])
+    # The covariance is the estimate's own (orientation_covariance_mode
+    # 'estimate', the default; 'fixed' takes orientation_stddev's, tested in
+    # test_covariance.py): diagonal, positive, not the file's 0.2² = 0.04.
+    message = filtered[max(filtered)]
+    covariance = list(message.orientation_covariance)
+    assert all(covariance[i] == 0.0 for i in (1, 2, 3, 5, 6, 7))
+    assert min(covariance[0], covariance[4], covariance[8]) > 0.0
+    assert covariance[0] != pytest.approx(0.04)
+    # yaw_offset and declination: a turn of R_z(0.3 − 0.1) of the estimate,
+    # in the world frame.
     turn = (math.cos(0.1), 0.0, 0.0, math.sin(0.1))
     # The process and the reference saw the same samples, maybe a field
     # earlier or later: compare the heading turn, not the bits.
