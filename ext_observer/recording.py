@@ -59,6 +59,7 @@ GYRO_PERCENTILE = 99.0
 _SPECS = {spec.name: spec for spec in IMU_FILTER_PARAMETERS}
 # The record of a sample without an estimate.
 _NONE = (math.nan,) * 4
+_NO_VARIANCE = (math.nan, math.nan)
 # rclpy's own parameters, in a params file beside the node's.
 _ROS_OWN = ('use_sim_time', 'qos_overrides.')
 
@@ -212,6 +213,11 @@ class Recording:
         Rest detected after this sample (the gyro bias is learned then).
     mag_disturbed : ndarray of bool, shape (N,)
         The latest field was rejected as disturbed.
+    inclination_std, heading_std : ndarray, shape (N,)
+        rad: the uncertainty the node publishes with this sample's estimate
+        (``imu/data``'s ``orientation_covariance``, docs/covariance.md), as
+        ``/diagnostics`` states it: inclination ``√(2 V_tilt)``, heading
+        ``√V_heading``; NaN without an estimate of its own.
     calibration : ndarray of str, shape (N,), or None
         The magnetometer calibration's state after the latest field
         (``AhrsObserver.calibration_state``: ``'off'``, ``'learning'``,
@@ -295,6 +301,7 @@ class PipelineRun:
         # Python's garbage collector the largest cost of a long recording.
         self._stamps = array.array('q')
         self._states = array.array('d')
+        self._variances = array.array('d')
         self._flags = bytearray()
         self._calibrations = []
         self._take = self.pipeline.imu
@@ -307,7 +314,13 @@ class PipelineRun:
         estimate = self._take(stamp, gyr, acc)[1]
         core = self._core
         self._stamps.append(stamp)
-        self._states.extend(_NONE if estimate is None else estimate.state)
+        if estimate is None:
+            self._states.extend(_NONE)
+            self._variances.extend(_NO_VARIANCE)
+        else:
+            self._states.extend(estimate.state)
+            covariance = estimate.covariance
+            self._variances.extend((covariance[0], covariance[8]))
         self._flags.append(core.rest + 2 * core.mag_disturbed)
         if self._calibration is not None:
             self._calibrations.append(self._calibration)
@@ -348,12 +361,14 @@ class PipelineRun:
                 'only sets t_0 and the node drops what it cannot use'
                 + (f' (dropped: {", ".join(dropped)})' if dropped else ''))
         ambient = _hold_finite(ambient)
+        variances = np.frombuffer(self._variances, dtype=float).reshape(count, 2)
         units = pipeline.units
         return Recording(
             times=(np.frombuffer(self._stamps, dtype=np.int64) * 1e-9 if times is None
                    else np.asarray(times, dtype=float)),
             quaternions=ambient / np.linalg.norm(ambient, axis=1, keepdims=True),
             ambient=ambient, estimated=estimated,
+            inclination_std=np.sqrt(2.0 * variances[:, 0]), heading_std=np.sqrt(variances[:, 1]),
             rest=(flags & 1).astype(bool), mag_disturbed=(flags & 2).astype(bool),
             calibration=(None if self._calibration is None
                          else np.array(self._calibrations, dtype=object)),
