@@ -17,6 +17,9 @@ bag, csv
     The raw-IMU estimator on a rosbag2 bag or a CSV file (docs/own_data.md).
 example-data
     A bag and a CSV made from a shipped BROAD excerpt.
+calibrate
+    The magnetometer's hard- and soft-iron calibration from a recording, as a
+    params file for imu_filter_node (docs/calibration.md).
 """
 
 import argparse
@@ -94,7 +97,9 @@ def build_parser():
     for name, module, text in (
             ('bag', 'bag', 'the raw-IMU estimator on a rosbag2 bag, MCAP or sqlite3'),
             ('csv', 'csvio', 'the raw-IMU estimator on a CSV recording'),
-            ('example-data', 'example_data', 'a bag and a CSV made from a BROAD excerpt')):
+            ('example-data', 'example_data', 'a bag and a CSV made from a BROAD excerpt'),
+            ('calibrate', 'calibrate',
+             'the magnetometer calibration learned from a recording, as a params file')):
         sub.add_parser(name, add_help=False, help=f'{text} (see {name} -h)').set_defaults(
             func=None, module=f'ext_observer.{module}')
     return parser

@@ -13,6 +13,8 @@ observer
     The extended, plain and projected Luenberger-like observers.
 gyro_model
     The simulated gyro and attitude sensor.
+magcal
+    Online magnetometer calibration (hard and soft iron) from the gyro.
 """
 
 from .certificate import (GainCertificate, certified_alpha_max,
@@ -21,6 +23,7 @@ from .extension import (ConstraintExtension, TransversalExtension,
                         so3_extension, sphere_extension, sphere_grad_V,
                         sphere_hessian_V, sphere_V)
 from .gyro_model import GyroSample, SimulatedGyro, Trajectory
+from .magcal import check_calibration, MagCalibrator
 from .observer import (GAIN_MODES, LuenbergerObserver, ObserverConfig,
                        PAPER_ALPHA, PAPER_GAIN, SingleObserver, VARIANTS)
 from .quaternion import (attitude_error, check_quaternions, check_vectors,
@@ -32,10 +35,10 @@ from .quaternion import (attitude_error, check_quaternions, check_vectors,
 
 __all__ = [
     'ConstraintExtension', 'GAIN_MODES', 'GainCertificate', 'GyroSample',
-    'IDENTITY', 'LuenbergerObserver', 'ObserverConfig', 'PAPER_ALPHA',
+    'IDENTITY', 'LuenbergerObserver', 'MagCalibrator', 'ObserverConfig', 'PAPER_ALPHA',
     'PAPER_GAIN', 'SimulatedGyro', 'SingleObserver', 'Trajectory',
     'TransversalExtension', 'VARIANTS', 'attitude_error',
-    'certified_alpha_max', 'check_quaternions', 'check_vectors', 'conjugate',
+    'certified_alpha_max', 'check_calibration', 'check_quaternions', 'check_vectors', 'conjugate',
     'constraint_residual', 'estimate_certificate', 'exp', 'log',
     'manifold_distance', 'multiply', 'norm', 'normalize', 'optimal_delta',
     'quaternion_from_rotation_vector', 'random_unit_quaternions',

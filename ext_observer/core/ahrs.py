@@ -33,6 +33,35 @@ accelerometer) and, with ``tau_bias > 0`` (off by default), in motion from
 the corrections: a constant bias makes the estimate drift, so the body-frame
 correction averages ``−(b − b̂) dt``.
 
+In 9D the magnetometer is calibrated online (``mag_cal``, on by default):
+:class:`~ext_observer.core.magcal.MagCalibrator` learns the hard-iron
+offset and the soft-iron matrix from the fields and the gyro's rotation
+between them. Until its quality (the heading error its uncertainty would
+cause) is below ``mag_cal_heading`` the heading does not follow the field:
+it starts from the field as given (averaged until the body first moves, as
+without calibration) and then follows the gyro alone (6D), while the
+disturbance test watches the raw field. Once converged, a learned
+calibration that turns the heading by more than ``mag_cal_deadband`` (RMS)
+from the field as given is applied: the heading is set once from the
+calibrated field (as the calibration tracks it, its noise averaged), again
+each time the calibration's heading error halves, the field references
+become the calibrated field's, and 9D runs on calibrated fields. One that
+turns it less (the sensor was calibrated already) is watched, and the field
+is used as given. A field the norm/dip test rejects does not teach the
+calibration. ``calibration_state`` says which phase runs;
+:meth:`AhrsObserver.load_calibration` starts from a saved calibration.
+
+Credit: several ideas here are VQF's (D. Laidig and T. Seel, "VQF: Highly
+accurate IMU orientation estimation with bias estimation and magnetic
+disturbance rejection", Information Fusion 90, 2023): the parameter set and
+its first defaults (time constants in seconds, thresholds in physical
+units), the accelerometer low-passed in a frame that only the gyro moves
+(VQF's inertial frame), rest detection from the low-passed gyro and
+accelerometer with the bias learned at rest, and the rejection of a field
+whose norm or dip leaves its learned reference, with a candidate field that
+is accepted after it has lasted while the body turns. The equations and the
+code are ours (the extension term and the Luenberger form are the paper's).
+
 Conventions: quaternions scalar first ``(w, x, y, z)``, sensor → world; the
 world frame is ENU (x east, y north, z up, REP-103); at rest the
 accelerometer reads about ``+9.81`` along the world vertical. Angular rate in
@@ -49,6 +78,8 @@ import math
 import multiprocessing
 
 import numpy as np
+
+from .magcal import MagCalibrator
 
 __all__ = [
     'AhrsObserver',
@@ -116,6 +147,37 @@ class AhrsParams:
         Angular rate (rad/s) the body must turn at for that time to count.
     tau_mag_ref : float
         Time constant (s) of the learned field norm and dip references.
+    mag_cal : bool
+        Calibrate the magnetometer online in 9D (hard and soft iron); false:
+        the fields are used as given, exactly as without the calibrator.
+    mag_cal_noise : float
+        The field's noise per sample and axis, relative to its norm.
+    mag_cal_field_rw : float
+        How fast the world field may change where the body goes, relative to
+        its norm, per √s: the calibration learns from the gyro's prediction
+        of the field over about the time it takes this walk to reach the
+        field's noise (well under a second with the defaults).
+    mag_cal_soft_iron : float
+        Prior standard deviation of each element of the soft-iron matrix
+        ``S − I``.
+    mag_cal_delay : float
+        Prior standard deviation (s) of the field's lag behind the gyro,
+        which is learned; 0: no lag.
+    mag_cal_heading : float
+        The calibration is converged (and the heading follows the field)
+        when the heading error its uncertainty would cause is below this
+        (rad, 1σ).
+    mag_cal_deadband : float
+        A learned calibration replaces the field as given only when it turns
+        the heading by more than this (rad, RMS over the recent attitudes):
+        below, the sensor is taken as calibrated (on BROAD, whose fields are
+        calibrated, what is learned turns the heading by 2–9°).
+    mag_cal_drift : float
+        Random walk of the hard-iron offset, relative to the field's norm,
+        per √s (a payload moves, the temperature changes); 0: constant.
+    mag_cal_rate : float
+        Most fields per second the calibration learns from (Hz; one value
+        for a batch); every field is calibrated.
 
     Raises
     ------
@@ -140,6 +202,15 @@ class AhrsParams:
         mag_new_time=20.0,
         mag_new_gyr=math.radians(20.0),
         tau_mag_ref=20.0,
+        mag_cal=True,
+        mag_cal_noise=0.025,
+        mag_cal_field_rw=0.03,
+        mag_cal_soft_iron=0.1,
+        mag_cal_delay=0.02,
+        mag_cal_heading=math.radians(3.0),
+        mag_cal_deadband=math.radians(10.0),
+        mag_cal_drift=0.002,
+        mag_cal_rate=100.0,
     )
 
     def __init__(self, **values):
@@ -148,12 +219,17 @@ class AhrsParams:
             raise ValueError(f'unknown parameters: {sorted(unknown)}')
         merged = dict(self.DEFAULTS, **values)
         for name, value in merged.items():
+            if isinstance(self.DEFAULTS[name], bool):
+                if value not in (True, False):
+                    raise ValueError(f'{name} must be true or false, got {value!r}')
+                setattr(self, name, bool(value))
+                continue
             value = float(value)
             if not math.isfinite(value):
                 raise ValueError(f'{name} must be finite, got {value}')
-            if name == 'tau_bias':
+            if name in ('tau_bias', 'mag_cal_delay', 'mag_cal_drift'):
                 if value < 0.0:
-                    raise ValueError(f'tau_bias must be >= 0 (0: off), got {value}')
+                    raise ValueError(f'{name} must be >= 0 (0: off), got {value}')
             elif not value > 0.0:
                 raise ValueError(f'{name} must be positive, got {value}')
             setattr(self, name, value)
@@ -166,7 +242,8 @@ class AhrsParams:
         return {name: getattr(self, name) for name in self.DEFAULTS}
 
     def __repr__(self):
-        items = ', '.join(f'{k}={v:g}' for k, v in self.as_dict().items())
+        items = ', '.join(f'{k}={v}' if isinstance(v, bool) else f'{k}={v:g}'
+                          for k, v in self.as_dict().items())
         return f'AhrsParams({items})'
 
 
@@ -281,6 +358,10 @@ class AhrsObserver:
         Whether rest is detected.
     mag_disturbed : bool or ndarray
         Whether the last magnetometer sample was rejected.
+    calibration : MagCalibrator or None
+        The online magnetometer calibration (``None`` when ``mag_cal`` is
+        false or no element runs 9D): ``bias``, ``soft_iron``, ``quality``,
+        ``counts``.
 
     """
 
@@ -303,6 +384,18 @@ class AhrsObserver:
         self._motion_bias = bool(np.any(np.asarray(self.params.tau_bias) > 0.0))
         self._dt = None
         self._mag_dt = None
+        self.calibration = None
+        p = self.params
+        calibrate = np.asarray(p.mag_cal, dtype=bool) & self.use_mag
+        if np.any(calibrate):
+            self.calibration = MagCalibrator(
+                batch, enabled=calibrate, noise=p.mag_cal_noise, field_rw=p.mag_cal_field_rw,
+                soft_iron=p.mag_cal_soft_iron, delay=p.mag_cal_delay,
+                heading=p.mag_cal_heading, deadband=p.mag_cal_deadband,
+                drift=p.mag_cal_drift)
+            # Slightly early, so that a field rate at mag_cal_rate learns from each.
+            self._cal_period = 0.999 / float(np.max(p.mag_cal_rate))
+            self._cal_floor = p.mag_cal_heading / 8.0
         self.reset()
 
     # --- state -------------------------------------------------------------
@@ -322,6 +415,52 @@ class AhrsObserver:
         self._mag_cand = None  # (norm, dip) of a new field
         self._mag_cand_time = z
         self._mag_used = z  # samples used since start (initial averaging)
+        if self.calibration is not None:
+            # The learned calibration stays; the field is followed afresh.
+            self.calibration.restart()
+            one = self._o.full(self._proto, 1.0)
+            self._cal_turn = (one, z, z, z)  # body rotation since the previous field
+            self._cal_rate = (z, z, z)  # the latest angular rate, bias removed
+            self._cal_wait = math.inf  # time since the calibration last learned
+            self._cal_moved = self.rest  # False: the body has not turned yet
+            # Heading error of the calibration when the heading was last set
+            # from it; below the floor it is not set again (the gain follows).
+            self._cal_aligned = self._o.full(self._proto, math.inf)
+            self._cal_loaded = False
+
+    @property
+    def calibration_state(self):
+        """``'off'``, ``'learning'``, ``'converged'`` or ``'loaded'`` (a list with ``batch``)."""
+        if self.calibration is None:
+            return 'off' if self.batch is None else ['off'] * self.batch
+        return self.calibration.state
+
+    def load_calibration(self, bias, soft_iron):
+        """
+        Start from a saved magnetometer calibration, refined online.
+
+        Parameters
+        ----------
+        bias : sequence of 3 floats
+            Hard-iron offset ``b`` in the field's unit.
+        soft_iron : sequence of 9 floats or array_like, shape (3, 3)
+            Soft-iron matrix ``S`` (row-major) of ``m_raw = S m + b``.
+
+        Raises
+        ------
+        ValueError
+            When the calibration is off (``mag_cal`` false, or 6D), or for a
+            non-finite, asymmetric, singular or indefinite value.
+
+        """
+        if self.calibration is None:
+            raise ValueError('the magnetometer calibration is off (mag_cal false or 6D); '
+                             'subtract a fixed offset before the estimator instead')
+        self.calibration.load(bias, soft_iron)
+        # Loaded while running: the heading and the references are taken
+        # from the calibrated field at the next field (before the first
+        # field, the start does that).
+        self._cal_loaded = self._mag_ref is not None
 
     def _coefficients(self, dt):
         # Every sample when the stamps jitter: math on the float path.
@@ -351,6 +490,9 @@ class AhrsObserver:
         if dt != self._dt:
             self._coefficients(dt)
         if self.q is None:
+            if mag is not None and self.calibration is not None:
+                # Identity until the calibration is converged or loaded.
+                mag = self.calibration.apply(mag)
             self.q = initial_attitude(acc, mag if self._any_mag else None,
                                       self._o, self.use_mag)
             self._init_filters(acc, gyr)
@@ -390,6 +532,17 @@ class AhrsObserver:
         px = w * ex + x * c + y * ez - z * ey
         py = w * ey - x * ez + y * c + z * ex
         pz = w * ez + x * ey - y * ex + z * c
+        if self.calibration is not None:
+            tw, tx, ty, tz = self._cal_turn
+            self._cal_turn = (tw * c - tx * ex - ty * ey - tz * ez,
+                              tw * ex + tx * c + ty * ez - tz * ey,
+                              tw * ey - tx * ez + ty * c + tz * ex,
+                              tw * ez + tx * ey - ty * ex + tz * c)
+            self._cal_rate = (gyr[0] - bx, gyr[1] - by, gyr[2] - bz)
+            lx, ly, lz = self._rest_gyr
+            lx, ly, lz = lx - bx, ly - by, lz - bz
+            self._cal_moved = self._cal_moved | (lx * lx + ly * ly + lz * lz
+                                                 >= self.params.rest_gyr ** 2)
         if self.variant == 'extended':
             # p − α ∇V(p), ∇V(p) = 4 p (p̄p − 1).
             f = 1.0 - 4.0 * self.params.alpha * (pw * pw + px * px + py * py + pz * pz - 1.0)
@@ -499,6 +652,8 @@ class AhrsObserver:
         dt = self._dt if dt is None else dt
         if dt != self._mag_dt:
             self._mag_coefficients(dt)
+        if self.calibration is not None:
+            mag = self._calibrate(mag, dt)
         o = self._o
         p = self.params
         w, x, y, z = self.q
@@ -532,6 +687,10 @@ class AhrsObserver:
         self._mag_ref = (o.where(use, ref_n + kr * (norm - ref_n), ref_n),
                          o.where(use, ref_d + kr * (dip - ref_d), ref_d))
         self.mag_disturbed = disturbed
+        if self.calibration is not None:
+            # The heading waits for the calibration; before the body has
+            # first moved it is the field's as given, averaged (the start).
+            use = use & (self.calibration.ready | o.logical_not(self._cal_moved))
 
         # Heading measurement y = R_z(ψ) ⊗ q̂; gain κ_m, a running average at first.
         used = self._mag_used + use
@@ -539,6 +698,14 @@ class AhrsObserver:
         kap = o.maximum(self._k_mag, 1.0 / o.maximum(used, 1.0)) * use
         half = 0.5 * psi
         rw, rz = 1.0 - kap + kap * o.cos(half), kap * o.sin(half)
+        self._turn_heading(rw, rz)
+        if self._motion_bias:
+            # Only corrections of the steady phase teach the bias.
+            self._learn_bias(rw, 0.0, 0.0, rz * (used * self._k_mag > 1.0))
+
+    def _turn_heading(self, rw, rz):
+        """``q̂ ← r ⊗ q̂`` for ``r = (rw, 0, 0, rz)`` (not unit), the filter's states with it."""
+        w, x, y, z = self.q
         self.q = (rw * w - rz * z, rw * x - rz * y, rw * y + rz * x, rw * z + rz * w)
         # The filter's states turn with it about the vertical: (c, s) of 2θ.
         n2 = rw * rw + rz * rz
@@ -546,9 +713,71 @@ class AhrsObserver:
         s1x, s1y, s1z, s2x, s2y, s2z = self._lp
         self._lp = (c * s1x - s * s1y, s * s1x + c * s1y, s1z,
                     c * s2x - s * s2y, s * s2x + c * s2y, s2z)
-        if self._motion_bias:
-            # Only corrections of the steady phase teach the bias.
-            self._learn_bias(rw, 0.0, 0.0, rz * (used * self._k_mag > 1.0))
+
+    def _norm_dip(self, mag):
+        """Norm and dip angle of a body-frame field in the world frame."""
+        o = self._o
+        mx, my, mz = _rotate(*self.q, *mag)
+        h = o.sqrt(mx * mx + my * my)
+        return o.sqrt(h * h + mz * mz), o.atan2(mz, h)
+
+    def _calibrate(self, mag, dt):
+        """Teach the calibration this field; return the field the heading logic uses."""
+        o = self._o
+        cal = self.calibration
+        rate = self._cal_rate
+        self._cal_wait += dt
+        if self._cal_wait < self._cal_period:
+            return cal.apply(mag)  # learn at most at mag_cal_rate
+        ready, applied = cal.ready, cal.applied
+        allow = True
+        if self._mag_ref is not None and np.any(ready):
+            # A field the norm/dip test rejects does not teach.
+            norm, dip = self._norm_dip(cal.apply(mag))
+            ref_n, ref_d = self._mag_ref
+            p = self.params
+            disturbed = ((abs(norm - ref_n) > p.mag_norm_th * ref_n)
+                         | (abs(dip - ref_d) > p.mag_dip_th))
+            allow = o.logical_not(ready & disturbed)
+        w, x, y, z = self.q
+        n2 = w * w + x * x + y * y + z * z
+        up = (2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
+              (w * w - x * x - y * y + z * z) / n2)
+        cal.learn(mag, self._cal_turn, self._cal_wait, rate, up, allow)
+        one, zero = o.full(self._proto, 1.0), o.zeros(self._proto)
+        self._cal_turn = (one, zero, zero, zero)
+        self._cal_wait = 0.0
+        now_applied = cal.applied
+        # A learned calibration applied, and each time its heading error
+        # halves after that: the heading is set from the calibrated field as
+        # the calibration tracks it (its noise averaged over many fields).
+        switched = now_applied & (o.logical_not(applied) | self._cal_loaded)
+        self._cal_loaded = False
+        align = switched
+        if np.any(now_applied & (self._cal_aligned > self._cal_floor)):
+            quality = cal.quality
+            align = switched | (now_applied & (quality < 0.5 * self._cal_aligned)
+                                & (self._cal_aligned > self._cal_floor))
+            self._cal_aligned = o.where(align, quality, self._cal_aligned)
+        if np.any(align) and self._mag_ref is not None:
+            field = cal.field
+            mx, my, mz = _rotate(*self.q, *(tuple(field.tolist()) if self.batch is None
+                                            else tuple(field.T)))
+            half = 0.5 * o.atan2(mx, my) * align
+            self._turn_heading(o.cos(half), o.sin(half))
+            # The steady gain from now on (no initial averaging).
+            self._mag_used = o.where(align, math.inf, self._mag_used)
+            if np.any(switched):
+                # The references become the calibrated field's norm and dip.
+                h = o.sqrt(mx * mx + my * my)
+                norm, dip = o.sqrt(h * h + mz * mz), o.atan2(mz, h)
+                ref_n, ref_d = self._mag_ref
+                self._mag_ref = (o.where(switched, norm, ref_n), o.where(switched, dip, ref_d))
+                cand_n, cand_d = self._mag_cand
+                self._mag_cand = (o.where(switched, norm, cand_n),
+                                  o.where(switched, dip, cand_d))
+                self._mag_cand_time = o.where(switched, 0.0, self._mag_cand_time)
+        return cal.apply(mag)
 
 
 def initial_attitude(acc, mag=None, ops=_FloatOps, use_mag=True):
@@ -615,7 +844,9 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
     """
     Run many recordings at once (one estimator each, same parameters).
 
-    Two ways, one estimator, the same results (to rounding, about 1e-12):
+    Two ways, one estimator, the same results (to rounding, about 1e-12;
+    the magnetometer calibration's Kalman filter, multiplied in a stack
+    when vectorized, magnifies rounding to about 1e-11):
 
     - ``workers=1``: in this process, vectorized across the recordings (one
       :class:`AhrsObserver` on arrays of shape ``(B,)``). A step costs about
