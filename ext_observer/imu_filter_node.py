@@ -24,9 +24,13 @@ parameters are :data:`~ext_observer.imu_filter_parameters.IMU_FILTER_PARAMETERS`
 imu_filter_madgwick's among them (``docs/raw_imu.md``).
 """
 
+import os
+
 from geometry_msgs.msg import QuaternionStamped
 from sensor_msgs.msg import Imu, MagneticField
+from std_srvs.srv import Trigger
 
+from ext_observer.calibrate import write_params
 from ext_observer.conversions import nanoseconds_from_stamp, vector_from_msg
 from ext_observer.estimator_node import EstimatorNode
 from ext_observer.imu_filter_parameters import (IMU_FILTER_PARAMETERS, imu_filter_settings,
@@ -86,6 +90,9 @@ class ImuFilterNode(EstimatorNode):
         self._status_steps = self._status_fields = 0
         self._said = set()
         self._unit_counts = dict(self.pipeline.units.counts)
+        self._calibration_state = None  # as last reported
+        self.save_calibration_service = self.create_service(
+            Trigger, '~/save_calibration', self.save_calibration_callback)
         self._cache_settings(settings)
         logger = self.get_logger()
         logger.info(
@@ -220,7 +227,53 @@ class ImuFilterNode(EstimatorNode):
                     text + ' (the samples are used as they are; counted in '
                     f'/diagnostics as implausible_{kind})')
         self._unit_counts = dict(units.counts)
+        parts.extend(self._calibration_problems())
         return parts
+
+    def _calibration_problems(self):
+        # The online magnetometer calibration: WARN while it learns from the
+        # fields that came (the heading is held on the gyro), a line in the
+        # log at each change.
+        state = self.pipeline.estimator.core.calibration_state
+        if state == 'learning' and not self.pairer.processed['measurement']:
+            state = None
+        if state != self._calibration_state:
+            logger = self.get_logger()
+            if state == 'converged':
+                logger.info('magnetometer calibration converged: the heading was aligned '
+                            'once to the calibrated field and follows it from now on; '
+                            '~/save_calibration writes it to '
+                            f'{self.parameters.settings["calibration_file"]}')
+            elif state == 'learning':
+                logger.warning('magnetometer calibration learning: the heading is held on '
+                               'the gyro until it converges (turn the sensor about several '
+                               'axes)')
+            elif state == 'loaded':
+                logger.info('magnetometer calibration: started from the saved one '
+                            '(mag_bias_*, mag_soft_iron), refined online')
+            self._calibration_state = state
+        if state == 'learning':
+            return ['magnetometer calibration learning: heading held on the gyro until it '
+                    'converges']
+        return []
+
+    def save_calibration_callback(self, request, response):
+        """Service ``~/save_calibration``: write the calibration as a params file."""
+        path = self.parameters.settings['calibration_file']
+        try:
+            bias, soft_iron = self.pipeline.estimator.calibration()
+            write_params(path, bias, soft_iron, node=self.get_name(),
+                         comment=f'The magnetometer calibration {self.get_fully_qualified_name()} '
+                         'learned; load it with --params-file.')
+        except (ValueError, OSError) as error:
+            response.success = False
+            response.message = str(error)
+            self.get_logger().warning(f'~/save_calibration: {error}')
+            return response
+        response.success = True
+        response.message = f'saved to {os.path.abspath(path)}'
+        self.get_logger().info(f'magnetometer calibration {response.message}')
+        return response
 
 
 def main(args=None):

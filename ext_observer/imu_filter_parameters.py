@@ -17,6 +17,7 @@ noise of the model behind the published covariance are the
 import math
 
 from ext_observer.core.ahrs import AhrsParams, WORLD_FRAMES
+from ext_observer.core.magcal import check_calibration
 from ext_observer.core.uncertainty import UncertaintyParams
 from ext_observer.estimator_node import COMMON_PARAMETERS, common_settings
 from ext_observer.parameters import ParameterSpec
@@ -61,6 +62,27 @@ _AHRS_DOCS = {
                     (0.0, 100.0), 'Positive.'),
     'tau_mag_ref': ('time constant of the learned field norm and dip references, s.',
                     (0.0, 1e6), 'Positive.'),
+    'mag_cal': ('calibrate the magnetometer online in 9D (hard-iron offset and soft-iron '
+                'matrix, learned while the body turns; docs/calibration.md); false: the '
+                'fields are used as given.', None, ''),
+    'mag_cal_noise': ("the field's noise per sample and axis, relative to its norm.",
+                      (0.0, 1.0), 'Positive.'),
+    'mag_cal_field_rw': ('how fast the world field may change where the body goes, '
+                         'relative to its norm, per √s.', (0.0, 10.0), 'Positive.'),
+    'mag_cal_soft_iron': ('prior standard deviation of each element of the soft-iron '
+                          'matrix S − I.', (0.0, 10.0), 'Positive.'),
+    'mag_cal_delay': ("prior standard deviation of the field's lag behind the gyro, s "
+                      '(learned); 0: no lag.', (0.0, 10.0), 'At least 0.'),
+    'mag_cal_heading': ('the calibration is converged, and the heading follows the '
+                        'field, when the heading error its uncertainty would cause is '
+                        'below this, rad (1σ).', (0.0, 3.1416), 'Positive.'),
+    'mag_cal_deadband': ('a learned calibration replaces the field as given only when it '
+                         'turns the heading by more than this, rad (RMS).', (0.0, 3.1416),
+                         'At least 0.'),
+    'mag_cal_drift': ('random walk of the hard-iron offset, relative to the field norm, '
+                      'per √s; 0: constant.', (0.0, 10.0), 'At least 0.'),
+    'mag_cal_rate': ('most fields per second the calibration learns from, Hz (every field '
+                     'is calibrated).', (0.0, 1e5), 'Positive.')
 }
 
 
@@ -143,10 +165,21 @@ IMU_FILTER_OWN = (
                   '(as imu_filter_madgwick: with enu, R_z(yaw_offset − declination) ⊗ q).',
                   (-6.2832, 6.2832)),
     ParameterSpec('mag_bias_x', 0.0,
-                  'Hard-iron offset subtracted from the field, x, T (as '
-                  'imu_filter_madgwick).', (-1.0, 1.0)),
+                  'Hard-iron offset b of the field, x, T, in m_raw = S m + b: with the '
+                  'online calibration (ahrs.mag_cal, 9D) the saved value it starts from '
+                  'and refines; without, subtracted as it is (imu_filter_madgwick).',
+                  (-1.0, 1.0)),
     ParameterSpec('mag_bias_y', 0.0, 'The same, y, T.', (-1.0, 1.0)),
     ParameterSpec('mag_bias_z', 0.0, 'The same, z, T.', (-1.0, 1.0)),
+    ParameterSpec('mag_soft_iron', [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                  'Soft-iron matrix S of the field, row-major, in m_raw = S m + b; as '
+                  'mag_bias_*. python -m ext_observer calibrate and the ~/save_calibration '
+                  'service write both.',
+                  constraints='9 finite numbers: symmetric, positive definite.'),
+    ParameterSpec('calibration_file', 'mag_calibration.yaml',
+                  'Where ~/save_calibration writes the learned calibration (a params '
+                  'file for this node: mag_bias_*, mag_soft_iron), relative to the '
+                  "node's working directory."),
     ParameterSpec('orientation_covariance_mode', 'estimate',
                   "orientation_covariance of imu/data: 'estimate' (the estimate's own "
                   'covariance, row-major, rad², about the world frame\'s x, y, z axes: '
@@ -201,6 +234,12 @@ def imu_filter_settings(values):
 
     """
     common_settings(values)
+    try:
+        check_calibration((values['mag_bias_x'], values['mag_bias_y'], values['mag_bias_z']),
+                          values['mag_soft_iron'])
+    except ValueError as error:
+        raise ValueError(f'mag_bias_*, mag_soft_iron (the saved magnetometer calibration): '
+                         f'{error}') from None
     if values['world_frame'] not in WORLD_FRAMES:
         raise ValueError(f'world_frame must be one of {tuple(WORLD_FRAMES)}, got '
                          f'{values["world_frame"]!r}')

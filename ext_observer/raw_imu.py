@@ -59,7 +59,10 @@ Faults
 from collections import namedtuple
 import math
 
+import numpy as np
+
 from ext_observer.core.ahrs import AhrsObserver, AhrsParams, WORLD_FRAMES
+from ext_observer.core.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.core.uncertainty import AttitudeUncertainty, UncertaintyParams
 from ext_observer.core.validation import check_state
@@ -80,6 +83,8 @@ COVARIANCE_PREFIX = 'covariance.'
 RESET_CAUSES = ('backward_jump', 'clock_jump', 'forward_gap', 'service')
 
 SECOND = 1_000_000_000
+# The soft-iron matrix of no distortion, row-major.
+_IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 # Largest accepted ‖θ‖ of one sample interval, rad (StepPairer).
 MAX_INCREMENT = 20.0
 
@@ -207,10 +212,37 @@ class RawImuEstimator:
         self.configure(settings)
 
     def configure(self, settings):
-        """Take the settings that may change at runtime."""
+        """
+        Take the settings that may change at runtime.
+
+        A saved magnetometer calibration (``mag_bias_*``, ``mag_soft_iron``,
+        ``m_raw = S m + b``) starts the online calibration where it has one
+        (9D, ``ahrs.mag_cal``), which goes on refining it; without one it is
+        applied as it is, ``m = S⁻¹ (m_raw − b)`` (imu_filter_madgwick's
+        ``mag_bias_*`` with ``S = I``).
+
+        Raises
+        ------
+        ValueError
+            For a calibration that is not finite, not symmetric positive
+            definite, or singular.
+        """
         self.max_residual = settings['divergence_max_residual']
-        self._mag_bias = (settings['mag_bias_x'], settings['mag_bias_y'],
-                          settings['mag_bias_z'])
+        bias, soft_iron = check_calibration(
+            (settings['mag_bias_x'], settings['mag_bias_y'], settings['mag_bias_z']),
+            settings['mag_soft_iron'])
+        saved = (tuple(bias.tolist()), tuple(soft_iron.ravel().tolist()))
+        given = saved != ((0.0, 0.0, 0.0), _IDENTITY)
+        if self.core.calibration is not None:
+            self._mag_bias = (0.0, 0.0, 0.0)
+            self._unskew = None
+            if given and saved != getattr(self, '_loaded', None):
+                self.core.load_calibration(*saved)
+                self._loaded = saved
+        else:
+            self._mag_bias = saved[0]
+            self._unskew = (None if saved[1] == _IDENTITY
+                            else tuple(np.linalg.inv(soft_iron).ravel().tolist()))
         self._frame = heading_factor(self.world_frame, settings['declination'],
                                      settings['yaw_offset'])
 
@@ -230,6 +262,11 @@ class RawImuEstimator:
         """
         bx, by, bz = self._mag_bias
         field = (field[0] - bx, field[1] - by, field[2] - bz)
+        if self._unskew is not None:
+            a = self._unskew
+            field = (a[0] * field[0] + a[1] * field[1] + a[2] * field[2],
+                     a[3] * field[0] + a[4] * field[1] + a[5] * field[2],
+                     a[6] * field[0] + a[7] * field[1] + a[8] * field[2])
         self.latest_field = field
         if self.core.q is not None:
             self.core.update_mag(field, dt)
@@ -349,7 +386,44 @@ class RawImuEstimator:
                 ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
                 ('inclination_std_deg',
                  math.degrees(tracker.inclination_std) if started else math.nan),
-                ('heading_std_deg', math.degrees(tracker.heading_std) if started else math.nan)]
+                ('heading_std_deg', math.degrees(tracker.heading_std) if started else math.nan),
+                ('calibration', core.calibration_state)] + self._calibration_values()
+
+    def _calibration_values(self):
+        calibration = self.core.calibration
+        if calibration is None:
+            return []
+        b = calibration.bias
+        return [('calibration_heading_std_deg', math.degrees(calibration.quality)),
+                ('calibration_bias_x', float(b[0])), ('calibration_bias_y', float(b[1])),
+                ('calibration_bias_z', float(b[2])),
+                ('calibration_soft_iron', ' '.join(
+                    f'{v:.6g}' for v in calibration.soft_iron.ravel()))]
+
+    def calibration(self):
+        """
+        Return the calibration learned or loaded, as the params file holds it.
+
+        Returns
+        -------
+        bias : tuple of 3 float
+            ``mag_bias_*``, T.
+        soft_iron : tuple of 9 float
+            ``mag_soft_iron``, row-major.
+
+        Raises
+        ------
+        ValueError
+            When there is none yet (off, or still learning).
+        """
+        calibration = self.core.calibration
+        state = self.core.calibration_state
+        if calibration is None or state not in ('converged', 'loaded'):
+            raise ValueError(f'no magnetometer calibration to save: it is {state}'
+                             + (' (turn the sensor about several axes)'
+                                if state == 'learning' else ''))
+        return (tuple(float(v) for v in calibration.bias),
+                tuple(float(v) for v in calibration.soft_iron.ravel()))
 
 
 class RawImuPipeline:

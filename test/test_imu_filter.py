@@ -298,22 +298,86 @@ def run_node(spinner, ros_context, data, name, **parameters):
     return node, driver
 
 
-def test_mag_bias_is_removed_from_the_field(ros_context, spinner):
+def test_a_fixed_calibration_is_removed_from_the_field(ros_context, spinner):
+    # Without the online calibration (ahrs.mag_cal false), mag_bias_* and
+    # mag_soft_iron are applied as they are: m = S⁻¹ (m_raw − b).
     bias = (3e-5, -2e-5, 1e-5)
+    soft = np.array([[1.05, 0.02, -0.01], [0.02, 0.97, 0.03], [-0.01, 0.03, 1.02]])
     data = turning(200)
-    biased = [(t, g, a, tuple(f + b for f, b in zip(field, bias))) for t, g, a, field in data]
-    node, driver = run_node(spinner, ros_context, biased, 'biased', mag_bias_x=bias[0],
-                            mag_bias_y=bias[1], mag_bias_z=bias[2])
+    raw = [(t, g, a, tuple(soft @ np.array(field) + bias)) for t, g, a, field in data]
+    fixed = {'ahrs.mag_cal': False, 'mag_bias_x': bias[0], 'mag_bias_y': bias[1],
+             'mag_bias_z': bias[2], 'mag_soft_iron': soft.ravel().tolist()}
+    node, driver = run_node(spinner, ros_context, raw, 'fixed', **fixed)
+    assert node.observer.calibration_state == 'off'
     got = published_states(driver, [t for t, *_ in data])
-    expected = offline(defaults(mag_bias_x=bias[0], mag_bias_y=bias[1],
-                                mag_bias_z=bias[2]), biased)
-    assert_equal_estimates(got, expected)
-    # The same as the unbiased field without the offset, to rounding of the
-    # subtraction; and far from the biased field taken as it is.
-    clean = offline(defaults(), data)
+    assert_equal_estimates(got, offline(defaults(**fixed), raw))
+    # The same as the undistorted field, to the rounding of the inverse; and
+    # far from the distorted field taken as it is.
+    clean = offline(defaults(**{'ahrs.mag_cal': False}), data)
     assert max(np.abs(np.array(got[t]) - clean[t]).max() for t in got) < 1e-9
-    raw = offline(defaults(), biased)
-    assert max(np.abs(np.array(raw[t]) - clean[t]).max() for t in got) > 1e-3
+    as_is = offline(defaults(**{'ahrs.mag_cal': False}), raw)
+    assert max(np.abs(np.array(as_is[t]) - clean[t]).max() for t in got) > 1e-3
+
+
+def test_a_saved_calibration_is_loaded_refined_saved_and_refused_when_bad(
+        ros_context, spinner, tmp_path):
+    from std_srvs.srv import Trigger
+
+    from ext_observer.calibrate import read_params
+    from ext_observer.node_common import ParameterError
+
+    bias = (3e-5, -2e-5, 1e-5)
+    soft = [1.05, 0.02, -0.01, 0.02, 0.97, 0.03, -0.01, 0.03, 1.02]
+    path = tmp_path / 'saved.yaml'
+    node = spinner.add(ImuFilterNode(
+        node_name='calibrated', context=ros_context, parameter_overrides=overrides(
+            mag_bias_x=bias[0], mag_bias_y=bias[1], mag_bias_z=bias[2], mag_soft_iron=soft,
+            calibration_file=str(path))))
+    # With the online calibration (the default in 9D) the saved one is where
+    # it starts from the first field on, refined from there; none is
+    # subtracted before it.
+    core = node.observer
+    assert core.calibration_state == 'loaded'
+    assert node.pipeline.estimator._mag_bias == (0.0, 0.0, 0.0)
+    distorted = np.reshape(soft, (3, 3))
+    for stamp, gyr, acc, field in turning(20):
+        node.pipeline.field(stamp, tuple(distorted @ np.array(field) + bias))
+        node.pipeline.imu(stamp, gyr, acc)
+    assert core.calibration_state == 'loaded'
+    assert core.calibration.bias == pytest.approx(bias, abs=2e-6)
+    assert core.calibration.soft_iron.ravel() == pytest.approx(soft, abs=0.02)
+    values = values_of(node.status())
+    assert values['calibration'] == 'loaded'
+    assert float(values['calibration_bias_x']) == pytest.approx(
+        core.calibration.bias[0], rel=1e-5)
+    # ~/save_calibration writes a params file that gives it back.
+    driver = spinner.add(Driver(ros_context))
+    client = driver.create_client(Trigger, '/calibrated/save_calibration')
+    spinner.spin_until(client.service_is_ready, 10.0, 'the save service')
+    future = client.call_async(Trigger.Request())
+    spinner.spin_until(future.done, 10.0, 'the save answer')
+    assert future.result().success, future.result().message
+    saved_bias, saved_soft = read_params(str(path), node='calibrated')
+    now_bias, now_soft = node.pipeline.estimator.calibration()
+    assert saved_bias == pytest.approx(now_bias, abs=1e-15)
+    assert saved_soft.ravel() == pytest.approx(now_soft, abs=1e-12)
+    # Nothing to save while learning, said so.
+    learning = spinner.add(ImuFilterNode(node_name='learning', context=ros_context))
+    assert learning.observer.calibration_state == 'learning'
+    client = driver.create_client(Trigger, '/learning/save_calibration')
+    spinner.spin_until(client.service_is_ready, 10.0, 'the save service')
+    future = client.call_async(Trigger.Request())
+    spinner.spin_until(future.done, 10.0, 'the save answer')
+    assert not future.result().success and 'learning' in future.result().message
+    # A bad saved value stops the start with the reason.
+    for bad, reason in (
+            (dict(mag_soft_iron=[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]), 'singular'),
+            (dict(mag_soft_iron=[1.0, 0.5, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]), 'symmetric'),
+            (dict(mag_soft_iron=[1.0] * 8), 'mag_soft_iron'),
+            (dict(mag_bias_x=math.nan), 'mag_bias_x')):
+        with pytest.raises(ParameterError, match=reason):
+            ImuFilterNode(node_name='bad', context=ros_context,
+                          parameter_overrides=overrides(**bad))
 
 
 def test_constant_dt_replaces_the_stamps(ros_context, spinner):
@@ -389,7 +453,8 @@ def test_runtime_changes_take_effect_and_structural_ones_are_refused(ros_context
                                    Parameter('orientation_stddev', value=0.1),
                                    Parameter('yaw_offset', value=0.5)])
     assert all(r.successful for r in results)
-    assert node.pipeline.estimator._mag_bias == (1e-5, 0.0, 0.0)
+    # With the online calibration, a new saved offset restarts it from there.
+    assert node.observer.calibration_state == 'loaded'
     assert node._orientation_covariance[0] == pytest.approx(0.01)
     assert node.pipeline.estimator._frame == pytest.approx(heading_factor('enu', 0.0, 0.5))
     for name, value in (('ahrs.tau_acc', 5.0), ('use_mag', False), ('world_frame', 'ned')):
