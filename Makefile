@@ -94,7 +94,7 @@ soak: $(TEST_STAMP)
 
 # Two hosts over DDS (test/test_hosts.py, docs/across_machines.md): two
 # network namespaces joined by a veth pair, loss and a partition with
-# nftables, at 200 Hz; about 4 minutes. Root only: the first line checks
+# nftables, at 200 Hz; about 3 minutes. Root only: the first line checks
 # (and as root installs iproute2 and nftables if missing), and fails with
 # one line saying what is missing. Figures in out/hosts.json; make
 # hosts-report draws them into docs/.

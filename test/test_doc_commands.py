@@ -48,7 +48,7 @@ NOT_RUN = {
                  'runs after installing',
     'make test': 'the suite itself (this test is part of it)',
     'make soak': 'the soak, 70 s; CI runs it after make test',
-    'make test-hosts': 'needs root and network namespaces, about 4 minutes; CI runs it',
+    'make test-hosts': 'needs root and network namespaces, about 3 minutes; CI runs it',
     'make bench': 'minutes, rewrites docs/performance.md; run by hand',
     'make broad': 'minutes, needs the BROAD files, rewrites docs/broad.md; run by hand',
     'make broad-data': 'fetches BROAD from GitHub: this machine reaches package registries '
