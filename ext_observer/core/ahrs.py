@@ -93,6 +93,10 @@ __all__ = [
 
 MODES = ('6D', '9D')
 _TINY = 1e-300
+# After a calibration is applied, the heading's time constant is this share
+# of the time since, and at least this (s), until it reaches tau_mag.
+_REFINE_SHARE = 0.5
+_REFINE_SHORTEST = 1.0
 
 _H = math.sqrt(0.5)
 # Left factor C with q_frame = C ⊗ q_enu (C maps ENU coordinates to the frame's).
@@ -205,9 +209,9 @@ class AhrsParams:
         mag_cal=True,
         mag_cal_noise=0.025,
         mag_cal_field_rw=0.03,
-        mag_cal_soft_iron=0.1,
+        mag_cal_soft_iron=0.05,
         mag_cal_delay=0.02,
-        mag_cal_heading=math.radians(3.0),
+        mag_cal_heading=0.07,
         mag_cal_deadband=math.radians(10.0),
         mag_cal_drift=0.002,
         mag_cal_rate=100.0,
@@ -395,7 +399,6 @@ class AhrsObserver:
                 drift=p.mag_cal_drift)
             # Slightly early, so that a field rate at mag_cal_rate learns from each.
             self._cal_period = 0.999 / float(np.max(p.mag_cal_rate))
-            self._cal_floor = p.mag_cal_heading / 8.0
         self.reset()
 
     # --- state -------------------------------------------------------------
@@ -423,9 +426,8 @@ class AhrsObserver:
             self._cal_rate = (z, z, z)  # the latest angular rate, bias removed
             self._cal_wait = math.inf  # time since the calibration last learned
             self._cal_moved = self.rest  # False: the body has not turned yet
-            # Heading error of the calibration when the heading was last set
-            # from it; below the floor it is not set again (the gain follows).
-            self._cal_aligned = self._o.full(self._proto, math.inf)
+            # Time since a calibration was applied (s).
+            self._cal_since = self._o.full(self._proto, math.inf)
             self._cal_loaded = False
 
     @property
@@ -695,7 +697,16 @@ class AhrsObserver:
         # Heading measurement y = R_z(ψ) ⊗ q̂; gain κ_m, a running average at first.
         used = self._mag_used + use
         self._mag_used = used
-        kap = o.maximum(self._k_mag, 1.0 / o.maximum(used, 1.0)) * use
+        if self.calibration is None:
+            kap = o.maximum(self._k_mag, 1.0 / o.maximum(used, 1.0)) * use
+        else:
+            # A calibration applied t ago improves still: the heading follows
+            # it with the time constant t/2 (at least 1 s) until that reaches
+            # tau_mag; the fields of older calibrations weigh less.
+            since = self._cal_since + dt
+            self._cal_since = since
+            follow = 1.0 - o.exp(-dt / o.maximum(_REFINE_SHORTEST, _REFINE_SHARE * since))
+            kap = o.maximum(o.maximum(self._k_mag, 1.0 / o.maximum(used, 1.0)), follow) * use
         half = 0.5 * psi
         rw, rz = 1.0 - kap + kap * o.cos(half), kap * o.sin(half)
         self._turn_heading(rw, rz)
@@ -748,25 +759,21 @@ class AhrsObserver:
         self._cal_turn = (one, zero, zero, zero)
         self._cal_wait = 0.0
         now_applied = cal.applied
-        # A learned calibration applied, and each time its heading error
-        # halves after that: the heading is set from the calibrated field as
-        # the calibration tracks it (its noise averaged over many fields).
+        # A learned calibration applied: the heading is set once from the
+        # calibrated field as the calibration tracks it (its noise averaged
+        # over many fields); then it follows the calibrated fields.
         switched = now_applied & (o.logical_not(applied) | self._cal_loaded)
         self._cal_loaded = False
         align = switched
-        if np.any(now_applied & (self._cal_aligned > self._cal_floor)):
-            quality = cal.quality
-            align = switched | (now_applied & (quality < 0.5 * self._cal_aligned)
-                                & (self._cal_aligned > self._cal_floor))
-            self._cal_aligned = o.where(align, quality, self._cal_aligned)
         if np.any(align) and self._mag_ref is not None:
             field = cal.field
             mx, my, mz = _rotate(*self.q, *(tuple(field.tolist()) if self.batch is None
                                             else tuple(field.T)))
             half = 0.5 * o.atan2(mx, my) * align
             self._turn_heading(o.cos(half), o.sin(half))
-            # The steady gain from now on (no initial averaging).
+            # No initial averaging: the refinement's gain follows.
             self._mag_used = o.where(align, math.inf, self._mag_used)
+            self._cal_since = o.where(align, 0.0, self._cal_since)
             if np.any(switched):
                 # The references become the calibrated field's norm and dip.
                 h = o.sqrt(mx * mx + my * my)

@@ -3,59 +3,68 @@ Online magnetometer calibration: hard iron, soft iron and the field's lag.
 
 The model, body frame: a raw field sample is ``y = S m + b``, with ``m`` the
 true field, ``b`` the hard-iron offset and ``S`` a symmetric soft-iron
-matrix. Written with ``A = S⁻¹`` (calibrated field ``A y − z``, ``z = A b``)
-it is linear in the unknowns::
-
-    y = m + z − D(d) y,        A = I + D(d),  D symmetric, trace 0,
-
-so a Kalman filter estimates ``(m, z, d)`` exactly as a linear one; no
-linearization of the calibration itself. ``S`` is known only up to a scale
-(a uniform gain moves no direction), fixed here by ``trace(A) = 3``, or by
-the trace of a loaded matrix.
+matrix. With ``A = S⁻¹ = I + D(d)`` (``D`` symmetric, trace 0: five numbers
+``d``) and ``z = A b``, the calibrated field is ``m = A y − z``. ``S`` is
+known only up to a scale (a uniform gain moves no direction), fixed here by
+``trace(A) = 3``, or by the trace of a loaded matrix.
 
 What makes it observable is the gyro. The field is fixed in the world, so
-in the body frame it turns against the body: between two fields the state
-``m`` is propagated with the gyro's rotation, ``m ← Rᵀ m``, and a body that
-turns about two axes leaves one offset and one matrix that fit
-(gyro-aided calibration: Troni and Whitcomb 2013, "Adaptive estimation of
-measurement bias in three-dimensional field sensors with angular rate
-sensors", Robotics: Science and Systems; Kok and Schön 2016,
-"Magnetometer calibration using inertial sensors", IEEE Sensors Journal
-16(14), for the view of the field as a constant world vector seen through
-the gyro's orientation). Two things measured on BROAD (Laidig et al. 2021)
-shape the filter beyond that:
+in the body frame it turns against the body: between two fields ``m ← Rᵀ m``
+with ``R`` the gyro's rotation, and a body that turns about two axes leaves
+one offset and one matrix that fit (gyro-aided calibration: Troni and
+Whitcomb 2013, "Adaptive estimation of measurement bias in
+three-dimensional field sensors with angular rate sensors", Robotics:
+Science and Systems; Kok and Schön 2016, "Magnetometer calibration using
+inertial sensors", IEEE Sensors Journal 16(14), for the view of the field as
+a constant world vector seen through the gyro's orientation). A Kalman
+filter estimates ``(s, z, d, τ)`` with ``s = m + z = A y``: then the field's
+turn, ``s ← Rᵀ s + (I − Rᵀ) z``, is linear, nothing ties ``s`` to ``z`` at
+rest (the covariance stays well conditioned while nothing can be learned),
+and the measurement ``y = A⁻¹ (s + τ ω × (s − z))`` is linear in ``s`` and
+``z`` and linearized about the estimate in ``d`` and ``τ`` only. (Written as
+``A y = s``, with the measured ``y`` in the regressor, its noise would pull
+``A`` towards 0 while the body rests: the errors-in-variables bias.) Two
+things measured on BROAD (Laidig et al. 2021) shape the filter beyond that:
 
-- The field lags the gyro by a few samples on real hardware (about 12 ms
-  there); uncorrected, the lag correlates with the turn rate and biases the
-  offset by about 1 % of the field. The lag ``τ`` is a state:
-  ``m(t − τ) ≈ m + τ ω × m``, so ``A y − z = m + τ ω × m``, linearized in
-  ``τ`` only (an extended step on one scalar).
+- The field lags the gyro on real hardware (about 12 ms there);
+  uncorrected, the lag correlates with the turn rate and biases the offset
+  by about 1 % of the field. The lag ``τ`` is a state:
+  ``m(t − τ) ≈ m + τ ω × m``.
 - The world field is not quite constant where a body moves (a lab's field
   changes by a few percent over a metre). ``m`` is a random walk, relative
-  ``field_rw`` per √s: the gyro's prediction is trusted over about a
-  second, so a slowly changing field is not learned as an offset.
+  ``field_rw`` per √s, so a slowly changing field is not learned as an
+  offset; the offset itself may drift (``drift``).
 
-A sample whose innovation is improbable (``gate``) is not used (a field that
-jumps: a magnet passing); a body-fixed offset that changes for good shows
-as samples refused one after the other, and the calibration starts over.
-The caller may also refuse a sample (``allow``): :class:`AhrsObserver
-<ext_observer.core.ahrs.AhrsObserver>` does for a field its norm/dip test
-rejects once calibrated.
+A sample whose innovation is improbable (``GATE``) is not used (a field that
+jumps: a magnet passing). The caller may also refuse a sample (``allow``):
+:class:`AhrsObserver <ext_observer.core.ahrs.AhrsObserver>` does for a field
+its norm/dip test rejects once calibrated. When most samples are refused
+while the body turns (the offset changed for good, or a field that moved
+while nothing was known misled the filter), or the soft iron leaves its
+prior far behind, the calibration starts over.
 
 **Convergence.** The quality is the heading error the calibration's
 uncertainty would cause now: the covariance of ``(z, d)`` mapped onto the
 calibrated field, along the horizontal direction across the field (body
-frame, from the caller's up vector), over the horizontal field. Below
-``heading`` (rad) the calibration is converged. Measured where it matters,
-so a robot that only turns about its vertical converges (the offset along
-that axis is never learned, and does not move the heading while it stays
-level).
+frame, from the caller's up vector), over the horizontal field. The
+calibration is converged once the quality has stayed below ``heading``
+(rad) for ``_HOLD`` seconds of learning without the calibration turning the
+heading by more than that meanwhile. Measured where it matters, so a robot
+that only turns about its vertical converges (the offset along that axis is
+never learned, and does not move the heading while it stays level).
+
+**The field as given, or the learned calibration.** :meth:`MagCalibrator.apply`
+returns the field as given until a converged calibration turns the heading
+by more than ``deadband`` (RMS over the recent learning steps) from it: a
+sensor calibrated already (BROAD's are) keeps its own calibration, which
+what can be learned online, about 1 % of the field, does not beat. A loaded
+calibration is applied at once.
 
 One code path serves one calibrator and a batch: the state has a leading
 batch axis (length 1 for one calibrator), inputs and outputs are Python
 floats, or arrays of shape ``(B,)`` with ``batch=B``. Units: the field in
-any unit (``noise`` and ``field_rw`` are relative to its norm), time in s,
-angular rate in rad/s.
+any unit (``noise``, ``field_rw`` and ``drift`` are relative to its norm),
+time in s, angular rate in rad/s.
 """
 
 import math
@@ -68,8 +77,17 @@ STATES = ('off', 'learning', 'converged', 'loaded')
 
 # Innovations beyond this (χ², 3 degrees of freedom; 16.3 is 99.9 %) are refused.
 GATE = 16.0
-# Time constant (s) of the share of refused samples; above half, start over.
-_REFUSED_TAU = 5.0
+# The share of fields refused while the body turns faster than _TURNING
+# (rad/s), with this time constant (s): above _REFUSED_SHARE, start over.
+_REFUSED_TAU = 10.0
+_REFUSED_SHARE = 0.7
+_TURNING = 0.2
+# A soft-iron element beyond this many prior standard deviations: start over.
+_WILD = 4.0
+# Seconds of learning the quality must stay below the threshold, the
+# calibration settled, before it counts as converged.
+_HOLD = 2.0
+_HOLD_TURN = 2.0
 # The heading turn of the learned calibration: its mean square over the last
 # this many learning steps, from a quality of _WATCH times the threshold on.
 _SHIFT_SAMPLES = 1000
@@ -79,7 +97,7 @@ _DIFFUSE = 4.0
 # Prior standard deviation of a loaded offset, times the field's norm.
 _LOADED_BIAS_STD = 0.05
 _N = 12  # m (3), z (3), d (5), τ
-_M, _Z, _D, _T = slice(0, 3), slice(3, 6), slice(6, 11), 11
+_S, _Z, _D, _T = slice(0, 3), slice(3, 6), slice(6, 11), 11
 
 
 def check_calibration(bias, soft_iron):
@@ -131,15 +149,31 @@ def check_calibration(bias, soft_iron):
     return b, s
 
 
-# Entries of H (3 × 12) that change with the sample (the rest is I for z and
-# the diagonal of I + τ[ω]×, kept in a buffer): τ[ω]×, −Y(y), ω × m.
-_H_ROWS = (0, 0, 1, 1, 2, 2, 0, 0, 0, 1, 1, 1, 2, 2, 2, 2, 0, 1, 2)
-_H_COLS = (1, 2, 0, 2, 0, 1, 6, 8, 9, 7, 8, 10, 6, 7, 9, 10, 11, 11, 11)
+# Entries of H (3 × 12) that change with the sample (the rest, the diagonal
+# of I + τ[ω]× for s, is kept in a buffer): τ[ω]× for s, −τ[ω]× for z,
+# −Y(y) for d, ω × m for τ.
+_H_ROWS = (0, 0, 1, 1, 2, 2, 0, 0, 1, 1, 2, 2, 0, 0, 0, 1, 1, 1, 2, 2, 2, 2, 0, 1, 2)
+_H_COLS = (1, 2, 0, 2, 0, 1, 4, 5, 3, 5, 3, 4, 6, 8, 9, 7, 8, 10, 6, 7, 9, 10, 11, 11, 11)
 # Entries of J = [−I, Y(y)] (3 × 8) that change: Y(y).
 _J_ROWS = (0, 0, 0, 1, 1, 1, 2, 2, 2, 2)
 _J_COLS = (3, 5, 6, 4, 5, 7, 3, 4, 6, 7)
 _EYE3 = np.eye(3)
 _IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+
+
+def _calibrated(y, z, d):
+    """``(I + D(d)) y − z`` for rows of shape (n, 3), (n, 3), (n, 5)."""
+    y0, y1, y2 = y.T
+    d0, d1, d2, d3, d4 = d.T
+    return np.stack([y0 + d0 * y0 + d2 * y1 + d3 * y2, y1 + d2 * y0 + d1 * y1 + d4 * y2,
+                     y2 + d3 * y0 + d4 * y1 - (d0 + d1) * y2], axis=1) - z
+
+
+def _heading_between(up, f, g):
+    """The angle (rad) about ``up`` from the horizontal part of ``f`` to that of ``g``."""
+    a, b = np.cross(up, f), np.cross(up, g)
+    return np.arctan2(np.einsum('ni,ni->n', np.cross(a, b), up),
+                      np.einsum('ni,ni->n', a, b))
 
 
 class MagCalibrator:
@@ -167,13 +201,18 @@ class MagCalibrator:
     heading : float or ndarray
         Converged when the heading error from the calibration's uncertainty
         is below this (rad).
+    deadband : float or ndarray
+        The learned calibration is applied only if it turns the heading by
+        more than this (rad, RMS) from the field as given.
+    drift : float or ndarray
+        Random walk of the offset, relative to the field's norm, per √s.
 
     Attributes
     ----------
     counts : dict of ndarray (B,) or (1,)
         ``fields`` given to :meth:`learn`, ``used``, ``gated`` (improbable),
         ``refused`` (by the caller), ``invalid`` (non-finite or zero),
-        ``resets`` (started over after refusals one after the other).
+        ``resets`` (started over: the calibration no longer fitted).
 
     """
 
@@ -196,7 +235,7 @@ class MagCalibrator:
         self._deadband = per(deadband)
         self._drift = per(drift)
         self._h = np.zeros((n, 3, _N))
-        self._h[:, [0, 1, 2, 0, 1, 2], [0, 1, 2, 3, 4, 5]] = 1.0
+        self._h[:, [0, 1, 2], [0, 1, 2]] = 1.0
         self._j = np.zeros((n, 3, 8))
         self._j[:, [0, 1, 2], [0, 1, 2]] = -1.0
         self.reset()
@@ -218,6 +257,8 @@ class MagCalibrator:
         self._learned = 0  # learning steps, for the occasional symmetrization of P
         self._refused_share = np.zeros(n)
         self._nis = np.full(n, 3.0)
+        self._candidate = np.zeros((n, 8))  # (z, d) when the quality first passed
+        self._held = np.full(n, -1.0)  # time since then (s); -1: not below
         # The field as given is applied until the learned calibration turns
         # the heading by more than the deadband (mean square, rad²).
         self._identity = np.ones(n, dtype=bool)
@@ -309,6 +350,7 @@ class MagCalibrator:
         take = on & np.isfinite(norm) & (norm > 0.0)
         if not take.all():
             counts['invalid'] += on & ~take
+        valid = take & ~self._fresh
         if allow is not True:
             allow = np.asarray(allow, dtype=bool).reshape(-1)
             counts['refused'] += take & ~allow
@@ -327,11 +369,17 @@ class MagCalibrator:
         use = self._update(y, w, live, norm)
         counts['used'] += use | start
         counts['gated'] += live & ~use
-        # Refusals one after the other: the offset changed; start over.
+        # Most fields refused (by the gate or the caller) while the body
+        # turns: the calibration no longer fits (the offset changed, or it
+        # was learned wrong); start over.
+        watched = valid & ((w * w).sum(axis=1) > _TURNING ** 2)
         k_share = 1.0 - math.exp(-float(dt) / _REFUSED_TAU)
         share = self._refused_share
-        self._refused_share = np.where(live, share + k_share * (~use - share), share)
-        lost = live & (self._refused_share > 0.5)
+        self._refused_share = np.where(watched, share + k_share * (~use - share), share)
+        lost = watched & (self._refused_share > _REFUSED_SHARE)
+        # A soft iron far outside its prior: the filter has gone astray
+        # (a field that changed while it could not yet tell); start over.
+        lost |= live & (np.abs(self._x[:, _D]).max(axis=1) > _WILD * self._soft_iron)
         if lost.any():
             counts['resets'] += lost
             self._fresh |= lost
@@ -346,7 +394,7 @@ class MagCalibrator:
         up_rows = None if up is None else np.array(up, dtype=float).reshape(3, n).T
         self._seen = (y, up_rows, take & ~self._fresh)
         if (self._seen[2] & ~self._loaded & ~self._converged).any():
-            self._assess()  # the convergence test needs the quality now
+            self._assess(float(dt))  # the convergence test needs the quality now
         else:
             self._stale = True  # computed when asked for
         if up is not None:
@@ -354,12 +402,19 @@ class MagCalibrator:
             watch = (take & ~self._fresh & self._identity
                      & (self._quality < _WATCH * self._heading))
             if watch.any():
-                self._watch(y, up, watch)
+                self._watch(y, up_rows, watch)
         self._cache()
         return self._out(use | start)
 
     def _predict(self, rotation, dt):
-        """The field turns against the body: ``m ← Rᵀ m``; it walks in the world."""
+        """
+        The field turns against the body and walks in the world.
+
+        With ``s = m + z`` (= ``A y``, the field before the offset is
+        removed): ``m ← Rᵀ m`` is ``s ← Rᵀ s + (I − Rᵀ) z``. At rest ``R = I``
+        and nothing ties ``s`` to ``z``, which keeps the covariance well
+        conditioned while nothing can be learned.
+        """
         n = self._n
         w, x, y, z = rotation
         s = 2.0 / (w * w + x * x + y * y + z * z)
@@ -369,41 +424,58 @@ class MagCalibrator:
                      dtype=float).reshape(9, n).T.reshape(n, 3, 3)
         rt = r.transpose(0, 2, 1)
         state, p = self._x, self._p
-        state[:, _M] = (rt @ state[:, _M, None])[:, :, 0]
-        p[:, _M, :] = rt @ p[:, _M, :]
-        p[:, :, _M] = p[:, :, _M] @ r
-        q = (self._field_rw * self._field_scale) ** 2 * float(dt)
-        p[:, _M, _M] += q[:, None, None] * _EYE3
+        offset = state[:, _Z, None]
+        state[:, _S] = (rt @ (state[:, _S, None] - offset) + offset)[:, :, 0]
+        p[:, _S, :] = rt @ p[:, _S, :] + (_EYE3 - rt) @ p[:, _Z, :]
+        p[:, :, _S] = p[:, :, _S] @ r + p[:, :, _Z] @ (_EYE3 - r)
+        q = ((self._field_rw * self._field_scale) ** 2 * float(dt))[:, None, None] * _EYE3
+        p[:, _S, _S] += q
         if self._drift.any():
-            # The offset drifts (temperature, a payload moved): never quite frozen.
-            q = (self._drift * self._field_scale) ** 2 * float(dt)
-            p[:, _Z, _Z] += q[:, None, None] * _EYE3
+            # The offset drifts (temperature, a payload moved): never quite
+            # frozen. s = m + z drifts with it.
+            q = ((self._drift * self._field_scale) ** 2 * float(dt))[:, None, None] * _EYE3
+            p[:, _S, _S] += q
+            p[:, _S, _Z] += q
+            p[:, _Z, _S] += q
+            p[:, _Z, _Z] += q
 
     def _update(self, y, w, live, norm):
-        """One Kalman update with ``y = m + τ ω × m + z − Y(y) d``; gated."""
+        """
+        One (gated) Kalman update with ``y = A⁻¹ (s + τ ω × (s − z))``.
+
+        Linear in ``s`` and ``z``, linearized in ``d`` and ``τ`` about the
+        estimate: the measured ``y`` never enters the gain (written as
+        ``A y = s + …`` with ``y`` in the regressor, its noise would pull
+        ``A`` towards 0 at rest, the errors-in-variables bias).
+        """
         n = self._n
         x, p = self._x, self._p
-        m0, m1, m2, z0, z1, z2, d0, d1, d2, d3, d4, tau = self._columns(x)
-        y0, y1, y2 = self._columns(y)
+        s0, s1, s2, z0, z1, z2, d0, d1, d2, d3, d4, tau = self._columns(x)
         w0, w1, w2 = self._columns(w)
+        m0, m1, m2 = s0 - z0, s1 - z1, s2 - z2
         c0, c1, c2 = w1 * m2 - w2 * m1, w2 * m0 - w0 * m2, w0 * m1 - w1 * m0
-        nu = np.array([
-            y0 - m0 - tau * c0 - z0 + y0 * d0 + y1 * d2 + y2 * d3,
-            y1 - m1 - tau * c1 - z1 + y1 * d1 + y0 * d2 + y2 * d4,
-            y2 - m2 - tau * c2 - z2 - y2 * (d0 + d1) + y0 * d3 + y1 * d4,
-        ], dtype=float).reshape(3, n).T
+        a_inv = np.linalg.inv(np.array(
+            [1.0 + d0, d2, d3, d2, 1.0 + d1, d4, d3, d4, 1.0 - d0 - d1],
+            dtype=float).reshape(9, n).T.reshape(n, 3, 3))
+        pred = (a_inv @ np.array([s0 + tau * c0, s1 + tau * c1, s2 + tau * c2],
+                                 dtype=float).reshape(3, n).T[:, :, None])[:, :, 0]
+        nu = y - pred
+        p0, p1, p2 = self._columns(pred)
         tw0, tw1, tw2 = tau * w0, tau * w1, tau * w2
         h = self._h
         h[:, _H_ROWS, _H_COLS] = np.array(
-            [-tw2, tw1, tw2, -tw0, -tw1, tw0, -y0, -y1, -y2, -y1, -y0, -y2, y2, y2, -y0, -y1,
-             c0, c1, c2], dtype=float).reshape(19, n).T
+            [-tw2, tw1, tw2, -tw0, -tw1, tw0, tw2, -tw1, -tw2, tw0, tw1, -tw0,
+             -p0, -p1, -p2, -p1, -p0, -p2, p2, p2, -p0, -p1, c0, c1, c2],
+            dtype=float).reshape(25, n).T
+        h = a_inv @ h
         ph = p @ h.transpose(0, 2, 1)
         s = h @ ph
         s += ((self._noise * self._field_scale) ** 2)[:, None, None] * _EYE3
         s_inv = np.linalg.inv(s)
         nis = np.einsum('ni,nij,nj->n', nu, s_inv, nu)
         use = live & (nis < GATE)
-        self._nis = np.where(use, self._nis + 0.01 * (nis - self._nis), self._nis)
+        self._nis = np.where(live, self._nis + 0.02 * (np.minimum(nis, 3 * GATE) - self._nis),
+                             self._nis)
         k = ph @ s_inv
         if not use.all():
             k[~use] = 0.0
@@ -412,8 +484,9 @@ class MagCalibrator:
         self._learned += 1
         if self._learned % 64 == 0:  # rounding makes P drift from symmetric, slowly
             p[:] = 0.5 * (p + p.transpose(0, 2, 1))
-        self._field_scale = np.where(use, np.maximum(
-            np.sqrt((x[:, _M] ** 2).sum(axis=1)), 0.25 * norm), self._field_scale)
+        m = x[:, _S] - x[:, _Z]
+        self._field_scale = np.where(use, np.maximum(np.sqrt((m * m).sum(axis=1)), 0.25 * norm),
+                                     self._field_scale)
         return use
 
     def _start(self, start, y, norm):
@@ -438,36 +511,24 @@ class MagCalibrator:
                     p[i, 3, 3] = p[i, 4, 4] = p[i, 5, 5] = std * std
                     p[i, _D, _D] = np.eye(5) * (0.2 * self._soft_iron[i]) ** 2
                     p[i, _T, _T] = self._delay[i] ** 2
-            # The field now is this sample calibrated, m = A y − z: as uncertain
-            # as the calibration (and correlated with it), plus the noise.
-            d0, d1, d2, d3, d4 = x[i, _D]
-            a = np.array([[1.0 + d0, d2, d3], [d2, 1.0 + d1, d4], [d3, d4, 1.0 - d0 - d1]])
-            x[i, _M] = a @ y[i] - x[i, _Z]
-            j = np.zeros((3, 8))
-            j[:, :3] = -np.eye(3)
-            j[_J_ROWS, _J_COLS] = (y[i, 0], y[i, 1], y[i, 2], y[i, 1], y[i, 0], y[i, 2],
-                                   -y[i, 2], -y[i, 2], y[i, 0], y[i, 1])
-            p[i, _M, 3:11] = j @ p[i, 3:11, 3:11]
-            p[i, 3:11, _M] = p[i, _M, 3:11].T
+            # s = A y = y + Y(y) d: as uncertain as d (and correlated with
+            # it), plus the noise; independent of the offset.
+            yy = np.zeros((3, 5))
+            yy[_J_ROWS, np.array(_J_COLS) - 3] = (y[i, 0], y[i, 1], y[i, 2], y[i, 1], y[i, 0],
+                                                  y[i, 2], -y[i, 2], -y[i, 2], y[i, 0], y[i, 1])
+            x[i, _S] = y[i] + yy @ x[i, _D]
+            p[i, _S, 3:] = yy @ p[i, _D, 3:]
+            p[i, 3:, _S] = p[i, _S, 3:].T
             noise = self._noise[i] * norm[i]
-            p[i, _M, _M] = j @ p[i, 3:11, 3:11] @ j.T + np.eye(3) * noise * noise
-            self._field_scale[i] = max(float(np.linalg.norm(x[i, _M])), 0.25 * norm[i])
+            p[i, _S, _S] = yy @ p[i, _D, _D] @ yy.T + _EYE3 * noise * noise
+            m = x[i, _S] - x[i, _Z]
+            self._field_scale[i] = max(float(np.linalg.norm(m)), 0.25 * norm[i])
             self._refused_share[i] = 0.0
         self._fresh &= ~start
 
     def _watch(self, y, up, watch):
         """How far the learned calibration turns the heading from the field as given."""
-        _, _, _, z0, z1, z2, d0, d1, d2, d3, d4, _ = self._columns(self._x)
-        y0, y1, y2 = self._columns(y)
-        u0, u1, u2 = up
-        f0 = y0 + d0 * y0 + d2 * y1 + d3 * y2 - z0
-        f1 = y1 + d2 * y0 + d1 * y1 + d4 * y2 - z1
-        f2 = y2 + d3 * y0 + d4 * y1 - (d0 + d1) * y2 - z2
-        # Horizontal parts (turned by 90° about the vertical: the same angle).
-        a0, a1, a2 = u1 * f2 - u2 * f1, u2 * f0 - u0 * f2, u0 * f1 - u1 * f0
-        b0, b1, b2 = u1 * y2 - u2 * y1, u2 * y0 - u0 * y2, u0 * y1 - u1 * y0
-        sin = u0 * (a1 * b2 - a2 * b1) + u1 * (a2 * b0 - a0 * b2) + u2 * (a0 * b1 - a1 * b0)
-        angle = np.arctan2(sin, a0 * b0 + a1 * b1 + a2 * b2)
+        angle = _heading_between(up, y, _calibrated(y, self._x[:, _Z], self._x[:, _D]))
         # A mean over the samples watched, then over the last _SHIFT_SAMPLES.
         self._watched += watch
         k = 1.0 / np.minimum(np.maximum(self._watched, 1), _SHIFT_SAMPLES)
@@ -475,7 +536,7 @@ class MagCalibrator:
         self._shift = np.where(watch, shift + k * (angle * angle - shift), shift)
         self._identity &= ~(self._converged & (self._shift > self._deadband ** 2))
 
-    def _assess(self):
+    def _assess(self, dt=0.0):
         """The quality (heading error from the calibration's uncertainty) and convergence."""
         y, up, live = self._seen
         self._stale = False
@@ -502,7 +563,28 @@ class MagCalibrator:
             across = np.sqrt(np.maximum(np.einsum('ni,nij,nj->n', cross, c, cross), 0.0))
         quality = across / np.maximum(horizontal, 1e-300)
         self._quality = np.where(live, quality, self._quality)
-        self._converged |= live & ~self._loaded & (quality < self._heading)
+        # Converged once the quality has stayed below the threshold for
+        # _HOLD s of learning and the calibration has not turned the heading
+        # by more than the threshold meanwhile (a filter misled by a field
+        # that changes keeps moving; a settled one does not).
+        learning = live & ~self._loaded & ~self._converged
+        below = learning & (quality < self._heading)
+        if below.any():
+            z, d = self._x[:, _Z], self._x[:, _D]
+            fresh = below & (self._held < 0.0)
+            self._candidate[fresh] = self._x[fresh, 3:11]
+            turned = np.abs(_heading_between(
+                up if up is not None else y, _calibrated(y, z, d),
+                _calibrated(y, self._candidate[:, :3], self._candidate[:, 3:])))
+            moved = below & (turned > _HOLD_TURN * self._heading)
+            self._candidate[moved] = self._x[moved, 3:11]
+            self._held = np.where(below, np.where(moved, 0.0, np.maximum(self._held, 0.0) + dt),
+                                  self._held)
+            self._converged |= below & (self._held >= _HOLD)
+        # The hold pauses while the quality is a little above the threshold
+        # (it changes with the attitude), and ends well above it.
+        self._held = np.where(learning & (quality > _HOLD_TURN * self._heading), -1.0,
+                              self._held)
 
     # --- outputs -------------------------------------------------------------
 
@@ -604,5 +686,5 @@ class MagCalibrator:
     @property
     def field(self):
         """The calibrated field now, as the filter tracks it (body frame), shape (3,) or (B, 3)."""
-        m = self._x[:, _M] * self._scale[:, None]
+        m = (self._x[:, _S] - self._x[:, _Z]) * self._scale[:, None]
         return m[0] if self.batch is None else m
