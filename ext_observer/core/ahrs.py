@@ -42,12 +42,14 @@ it starts from the field as given (averaged until the body first moves, as
 without calibration) and then follows the gyro alone (6D), while the
 disturbance test watches the raw field. Once converged, a learned
 calibration that turns the heading by more than ``mag_cal_deadband`` (RMS)
-from the field as given is applied: the heading is set once from the
-calibrated field (as the calibration tracks it, its noise averaged), again
-each time the calibration's heading error halves, the field references
-become the calibrated field's, and 9D runs on calibrated fields. One that
-turns it less (the sensor was calibrated already) is watched, and the field
-is used as given. A field the norm/dip test rejects does not teach the
+from the field as given, and by more than its uncertainty could, is
+applied: the heading is set once from the calibrated field (as the
+calibration tracks it, its noise averaged), the field references become the
+calibrated field's, and 9D runs on calibrated fields, the heading following
+them with a time constant of half the time since (at least 1 s) until that
+reaches ``tau_mag``, as the calibration still improves. One that turns it
+less (the sensor was calibrated already) is watched, and the field is used
+as given. A field the norm/dip test rejects does not teach the
 calibration. ``calibration_state`` says which phase runs;
 :meth:`AhrsObserver.load_calibration` starts from a saved calibration.
 
@@ -173,9 +175,10 @@ class AhrsParams:
         (rad, 1σ).
     mag_cal_deadband : float
         A learned calibration replaces the field as given only when it turns
-        the heading by more than this (rad, RMS over the recent attitudes):
-        below, the sensor is taken as calibrated (on BROAD, whose fields are
-        calibrated, what is learned turns the heading by 2–9°).
+        the heading by more than this (rad, RMS over the recent attitudes),
+        and by more than three times its own uncertainty: below, the sensor
+        is taken as calibrated (on BROAD, whose fields are calibrated, what
+        is learned from a trial turns the heading by 2–11°).
     mag_cal_drift : float
         Random walk of the hard-iron offset, relative to the field's norm,
         per √s (a payload moves, the temperature changes); 0: constant.
@@ -211,8 +214,8 @@ class AhrsParams:
         mag_cal_field_rw=0.03,
         mag_cal_soft_iron=0.05,
         mag_cal_delay=0.02,
-        mag_cal_heading=0.07,
-        mag_cal_deadband=math.radians(10.0),
+        mag_cal_heading=math.radians(6.0),
+        mag_cal_deadband=math.radians(15.0),
         mag_cal_drift=0.002,
         mag_cal_rate=100.0,
     )

@@ -92,6 +92,7 @@ _HOLD_TURN = 2.0
 # this many learning steps, from a quality of _WATCH times the threshold on.
 _SHIFT_SAMPLES = 1000
 _WATCH = 3.0
+_SIGNIFICANT = 3.0
 # Prior standard deviation of an unknown offset and field, times the first field's norm.
 _DIFFUSE = 4.0
 # Prior standard deviation of a loaded offset, times the field's norm.
@@ -216,8 +217,8 @@ class MagCalibrator:
 
     """
 
-    def __init__(self, batch=None, enabled=True, noise=0.025, field_rw=0.03, soft_iron=0.1,
-                 delay=0.02, heading=math.radians(3.0), deadband=math.radians(10.0),
+    def __init__(self, batch=None, enabled=True, noise=0.025, field_rw=0.03, soft_iron=0.05,
+                 delay=0.02, heading=math.radians(6.0), deadband=math.radians(15.0),
                  drift=0.002):
         self.batch = batch
         n = 1 if batch is None else int(batch)
@@ -369,10 +370,12 @@ class MagCalibrator:
         use = self._update(y, w, live, norm)
         counts['used'] += use | start
         counts['gated'] += live & ~use
-        # Most fields refused (by the gate or the caller) while the body
-        # turns: the calibration no longer fits (the offset changed, or it
-        # was learned wrong); start over.
+        # Most fields refused while the body turns, by the gate or (where
+        # the calibration is applied, so that the caller tests calibrated
+        # fields) by the caller: the calibration no longer fits (the offset
+        # changed, or it was learned wrong); start over.
         watched = valid & ((w * w).sum(axis=1) > _TURNING ** 2)
+        watched &= take | self._applied
         k_share = 1.0 - math.exp(-float(dt) / _REFUSED_TAU)
         share = self._refused_share
         self._refused_share = np.where(watched, share + k_share * (~use - share), share)
@@ -393,8 +396,10 @@ class MagCalibrator:
                 self._prior[i] = None
         up_rows = None if up is None else np.array(up, dtype=float).reshape(3, n).T
         self._seen = (y, up_rows, take & ~self._fresh)
-        if (self._seen[2] & ~self._loaded & ~self._converged).any():
-            self._assess(float(dt))  # the convergence test needs the quality now
+        if (self._seen[2] & ~self._loaded & (~self._converged | self._identity)).any():
+            # The convergence test, and the watch of a calibration not
+            # applied, need the quality now.
+            self._assess(float(dt))
         else:
             self._stale = True  # computed when asked for
         if up is not None:
@@ -534,7 +539,11 @@ class MagCalibrator:
         k = 1.0 / np.minimum(np.maximum(self._watched, 1), _SHIFT_SAMPLES)
         shift = self._shift
         self._shift = np.where(watch, shift + k * (angle * angle - shift), shift)
-        self._identity &= ~(self._converged & (self._shift > self._deadband ** 2))
+        # Applied once it turns the heading by more than the deadband, and by
+        # more than its own uncertainty could (3 σ): a sensor calibrated
+        # already is not recalibrated with a less certain calibration.
+        self._identity &= ~(self._converged & (self._shift > self._deadband ** 2)
+                            & (self._shift > (_SIGNIFICANT * self._quality) ** 2))
 
     def _assess(self, dt=0.0):
         """The quality (heading error from the calibration's uncertainty) and convergence."""
