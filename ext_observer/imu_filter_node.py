@@ -234,16 +234,23 @@ class ImuFilterNode(EstimatorNode):
         # The online magnetometer calibration: WARN while it learns from the
         # fields that came (the heading is held on the gyro), a line in the
         # log at each change.
-        state = self.pipeline.estimator.core.calibration_state
+        core = self.pipeline.estimator.core
+        state = core.calibration_state
         if state == 'learning' and not self.pairer.processed['measurement']:
             state = None
+        if state == 'converged' and core.calibration.applied:
+            state = 'applied'
         if state != self._calibration_state:
             logger = self.get_logger()
-            if state == 'converged':
-                logger.info('magnetometer calibration converged: the heading was aligned '
-                            'once to the calibrated field and follows it from now on; '
-                            '~/save_calibration writes it to '
+            if state == 'applied':
+                logger.info('magnetometer calibration converged and applied: the heading was '
+                            'aligned once to the calibrated field and follows it from now '
+                            'on; ~/save_calibration writes it to '
                             f'{self.parameters.settings["calibration_file"]}')
+            elif state == 'converged':
+                logger.info('magnetometer calibration converged: it turns the heading by '
+                            'less than ahrs.mag_cal_deadband, so the field is used as given '
+                            '(the sensor looks calibrated); applied if that changes')
             elif state == 'learning':
                 logger.warning('magnetometer calibration learning: the heading is held on '
                                'the gyro until it converges (turn the sensor about several '

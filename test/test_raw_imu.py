@@ -121,8 +121,14 @@ def connect(spinner, driver, *observers):
         10.0, 'the subscriptions')
 
 
-def replay_lockstep(spinner, driver, observer, data, count=None, mag_every=MAG_EVERY):
-    """Publish the excerpt; the field of sample k between samples k and k + 1."""
+def replay_lockstep(spinner, driver, observer, data, count=None, mag_every=MAG_EVERY,
+                    first=0):
+    """
+    Publish samples ``first`` to ``count`` of the excerpt.
+
+    The field of sample k goes between samples k and k + 1, each message
+    once the node has taken the one before.
+    """
     gyr, acc, mag = data['gyr'], data['acc'], fields_tesla(data)
     count = len(gyr) if count is None else count
     times = stamps(count, float(data['rate']))
@@ -130,11 +136,11 @@ def replay_lockstep(spinner, driver, observer, data, count=None, mag_every=MAG_E
     imu0, mag0 = received['increment'], received['measurement']
     fields = 0
     deadline = time.monotonic() + 120.0
-    for k in range(count):
+    for k in range(first, count):
         driver.send_imu(times[k], gyr[k], acc[k])
         if k % mag_every:
             continue
-        while received['increment'] < imu0 + k + 1:
+        while received['increment'] < imu0 + k - first + 1:
             spinner.executor.spin_once(timeout_sec=0.01)
             assert time.monotonic() < deadline, f'sample {k} never arrived'
         driver.send_field(times[k], mag[k])

@@ -89,9 +89,10 @@ _WILD = 4.0
 _HOLD = 2.0
 _HOLD_TURN = 2.0
 # The heading turn of the learned calibration: its mean square over the last
-# this many learning steps, from a quality of _WATCH times the threshold on.
+# this many learning steps, from a quality of _WATCH times the threshold on
+# (earlier, a calibration still far off would count).
 _SHIFT_SAMPLES = 1000
-_WATCH = 3.0
+_WATCH = 1.0
 _SIGNIFICANT = 3.0
 # Prior standard deviation of an unknown offset and field, times the first field's norm.
 _DIFFUSE = 4.0
