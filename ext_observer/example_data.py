@@ -140,11 +140,16 @@ def write_csv(path, recording):
     return path
 
 
-def estimator_seconds(recording):
-    """Time RawImuPipeline alone on a recording's samples, in the bag's order: wall, CPU (s)."""
+def estimator_seconds(recording, params=None):
+    """
+    Time RawImuPipeline alone on a recording's samples, in the bag's order: wall, CPU (s).
+
+    ``params``: a params file of ``imu_filter_node`` (None: the defaults).
+    """
     from ext_observer.raw_imu import RawImuPipeline
-    from ext_observer.recording import node_settings
-    settings = node_settings()
+    from ext_observer.recording import node_settings, parameters_from_yaml
+    settings = node_settings(parameters_from_yaml(params) if params else None,
+                             strict_types=True)
     stamps = recording['stamps']
     gyr, acc = recording['gyr'].tolist(), recording['acc'].tolist()
     field = recording['field'].tolist()
@@ -161,8 +166,9 @@ def estimator_seconds(recording):
     return time.perf_counter() - start, time.process_time() - cpu
 
 
-def _speed(bag, recording, rounds, storage):
+def _speed(bag, recording, rounds, storage, params=None):
     """Medians of interleaved runs: the bag command and the estimator alone, wall and CPU."""
+    given = ['--params', params] if params else []
     command, estimator = [], []
     with tempfile.TemporaryDirectory() as scratch:
         for i in range(rounds):
@@ -170,7 +176,7 @@ def _speed(bag, recording, rounds, storage):
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             start = time.perf_counter()
             done = subprocess.run([sys.executable, '-m', 'ext_observer', 'bag', bag, '--out',
-                                   out], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                   out] + given, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                   text=True)
             wall = time.perf_counter() - start
             after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -179,11 +185,11 @@ def _speed(bag, recording, rounds, storage):
             shutil.rmtree(out)
             command.append((wall, after.ru_utime + after.ru_stime - before.ru_utime
                             - before.ru_stime))
-            estimator.append(estimator_seconds(recording))
+            estimator.append(estimator_seconds(recording, params))
             print(f'  round {i + 1}: bag command {command[-1][0]:.2f} s (CPU '
                   f'{command[-1][1]:.2f} s), estimator {estimator[-1][0]:.2f} s (CPU '
                   f'{estimator[-1][1]:.2f} s)', file=sys.stderr)
-        split = _split(bag, os.path.join(scratch, 'split'))
+        split = _split(bag, os.path.join(scratch, 'split'), params)
     wall = [statistics.median(run[0] for run in runs) for runs in (command, estimator)]
     cpu = [statistics.median(run[1] for run in runs) for runs in (command, estimator)]
     print(f'{storage} bag, {len(recording["stamps"])} IMU samples at {recording["rate"]:g} Hz, '
@@ -196,13 +202,15 @@ def _speed(bag, recording, rounds, storage):
           f'{split[2]:.2f} s wall')
 
 
-def _split(bag, out):
+def _split(bag, out, params=None):
     """CPU of the two processes of one bag command run from here: (ours, the child's, wall)."""
     from ext_observer.bag import run_bag
+    from ext_observer.recording import parameters_from_yaml
+    parameters = parameters_from_yaml(params) if params else None
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu, start = time.process_time(), time.perf_counter()
     with open(os.devnull, 'w') as quiet:
-        run_bag(bag, out, progress=quiet)
+        run_bag(bag, out, parameters=parameters, progress=quiet)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return cpu, after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, wall
@@ -228,6 +236,9 @@ def build_parser():
                         help="time the bag command on the bag against the estimator's own "
                              'time (one storage)')
     parser.add_argument('--rounds', type=int, default=3, help='with --speed (default 3)')
+    parser.add_argument('--params', metavar='FILE.yaml',
+                        help="with --speed: imu_filter_node's parameters for both the bag "
+                             'command and the estimator alone (default: the defaults)')
     return parser
 
 
@@ -255,7 +266,7 @@ def main(argv=None):
     if args.speed:
         try:
             _speed(os.path.join(args.out, f'{name}_{storages[0]}'), recording, args.rounds,
-                   storages[0])
+                   storages[0], args.params)
         except ValueError as error:
             print(f'error: {error}', file=sys.stderr)
             return 2

@@ -531,9 +531,13 @@ def test_progress_on_long_bags():
 def test_example_data_command_and_the_speed_measure(tmp_path):
     from ext_observer.example_data import main as example_main
     out = io.StringIO()
+    # Both sides with the same parameters (here the calibration off).
+    params = tmp_path / 'params.yaml'
+    params.write_text('imu_filter:\n  ros__parameters:\n    ahrs:\n      mag_cal: false\n')
     assert _quiet(example_main, ['--out', str(tmp_path), '--seconds', '2', '--rate', '400',
                                  '--mag-every', '4', '--storage', 'sqlite3', '--no-reference',
-                                 '--speed', '--rounds', '1'], out) == 0
+                                 '--speed', '--rounds', '1', '--params', str(params)],
+                  out) == 0
     text = out.getvalue()
     assert 'sqlite3 bag, 800 IMU samples at 400 Hz, 200 fields: bag command' in text
     assert 'x (wall clock, medians of 1); CPU' in text
