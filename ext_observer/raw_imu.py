@@ -283,7 +283,12 @@ class RawImuEstimator:
         if calibrated and not self._calibrated:
             self._fields_used = 0
         self._calibrated = calibrated
-        sigma = 0.0 if calibration is None else float(calibration.quality)
+        # The calibration's own heading σ counts where the heading follows
+        # the calibrated field; a calibration not applied (the sensor looked
+        # calibrated, the field is used as given) does not move the heading,
+        # and the field's own error is heading_floor's.
+        sigma = (float(calibration.quality) if calibration is not None and calibration.applied
+                 else 0.0)
         # The gain the core applied, where it says (a calibrator that sets the
         # heading itself makes it more than the usual gain); else its rule.
         gain = getattr(core, 'mag_gain', None)

@@ -232,6 +232,28 @@ def test_9d_heading_is_unknown_while_the_magnetometer_is_being_calibrated():
     assert sigmas[-1, 0] >= math.degrees(math.sqrt(HEADING_UNKNOWN))
 
 
+@pytest.mark.skipif(not HAS_CALIBRATION, reason='the core has no online calibration yet')
+def test_the_calibration_sigma_counts_only_where_the_calibration_is_applied():
+    # Converged on a calibrated field (turning about the vertical): not
+    # applied, the field is used as given, and the heading's σ is the
+    # field's own; the learned calibration's uncertainty does not enter it.
+    pipeline = RawImuPipeline(node_settings())
+    turning_run(pipeline, 60.0, gyr=(0.0, 0.0, 0.5))
+    calibration = pipeline.estimator.core.calibration
+    assert calibration.state == 'converged' and not calibration.applied
+    _, gain, sigma = pipeline.estimator.uncertainty.last_field
+    assert gain > 0.0 and sigma == 0.0 < calibration.quality
+    # A loaded calibration is applied: the heading follows the calibrated
+    # field, and the calibration's σ is part of the heading's.
+    pipeline = RawImuPipeline(node_settings(mag_bias_x=2e-6, mag_bias_y=-1e-6))
+    turning_run(pipeline, 10.0, gyr=(0.0, 0.0, 0.5))
+    calibration = pipeline.estimator.core.calibration
+    assert calibration.state == 'loaded' and calibration.applied
+    _, gain, sigma = pipeline.estimator.uncertainty.last_field
+    assert gain > 0.0 and sigma == calibration.quality > 0.0
+    assert stds(pipeline)[1] > math.degrees(calibration.quality)
+
+
 def test_the_covariance_is_the_same_in_every_world_frame():
     covariances = {}
     for frame in ('enu', 'nwu', 'ned'):

@@ -333,7 +333,9 @@ _MODEL = [
     '(a running mean of the first fields, then `tau_mag`).',
     '- Then what the propagation does not model: `inclination_floor` (translational '
     'acceleration, accelerometer calibration, mounting), `heading_floor` (a field bent '
-    'where it is accepted), the magnetometer calibration\'s own heading σ, and a stamp '
+    'where it is accepted), the magnetometer calibration\'s own heading σ where the '
+    'calibration is applied (one not applied leaves the field as given, whose error is '
+    '`heading_floor`\'s), and a stamp '
     'off by `stamp_error`, which puts the orientation off by |ω| times it (on BROAD the '
     'IMU and the optical reference are about 2.5 ms apart).',
     '',

@@ -56,7 +56,8 @@ What is published
     translational acceleration, accelerometer calibration, mounting),
     ``heading_floor`` (a field bent where it is accepted, once a field has
     set the heading), the magnetometer calibration's own heading
-    uncertainty when given, and the error of a stamp off by ``stamp_error``
+    uncertainty when given (``raw_imu`` gives it where the calibration is
+    applied), and the error of a stamp off by ``stamp_error``
     seconds, ``|ω| stamp_error``, split over the world axes by the world
     rate. The 3×3 covariance about the world frame's x, y, z axes is
     ``diag(V_t, V_t, V_h)``; the inclination σ is ``√(2 V_t)`` (the RMS of
