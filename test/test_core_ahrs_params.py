@@ -271,8 +271,6 @@ def test_bias_learned_in_motion_is_clipped_at_bias_max():
         assert xs[-1] == pytest.approx(expected, abs=5e-4)
 
 
-@pytest.mark.xfail(strict=True, reason='the bias learned at rest is not clipped at bias_max '
-                                       '(_detect_rest); issue 21')
 def test_bias_learned_at_rest_is_clipped_at_bias_max():
     # bias_max is the largest bias estimate, per axis: at rest too. A bias of
     # 0.02 rad/s (below rest_gyr, so rest is detected) under bias_max 0.01.

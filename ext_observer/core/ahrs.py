@@ -570,9 +570,13 @@ class AhrsObserver:
         still = (dev < th) & (mean < th) & self._acc_still
         self.rest_time = (self.rest_time + self._dt) * still
         self.rest = self.rest_time >= p.rest_time
-        # At rest the bias is the low-passed rate.
+        # At rest the bias is the low-passed rate, within bias_max per axis
+        # as in motion.
         kr = k * self.rest
-        self.bias = (bx + kr * mx, by + kr * my, bz + kr * mz)
+        m = p.bias_max
+        clip = self._o.clip
+        self.bias = (clip(bx + kr * mx, -m, m), clip(by + kr * my, -m, m),
+                     clip(bz + kr * mz, -m, m))
 
     _acc_still = True
 
