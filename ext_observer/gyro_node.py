@@ -205,6 +205,12 @@ class GyroNode(Node):
             f'{settings["measurement_noise_std"]:g}' + errors
             + (f', {settings["steps"]} steps' if settings['steps'] else ''))
 
+    def destroy_node(self):
+        """Log how many steps went out (the count a user or a test can trust), then destroy."""
+        if hasattr(self, 'steps_published'):
+            self.get_logger().info(f'stopping: {self.steps_published} steps published')
+        return super().destroy_node()
+
     def _stamp(self):
         rate = self.parameters.settings['rate_hz']
         if self._anchor is None:

@@ -8,6 +8,7 @@ process is ended by the test (SIGINT, checked), or by the fixture on failure.
 """
 
 import os
+import re
 import sys
 import time
 
@@ -107,6 +108,9 @@ def test_installed_nodes_end_to_end(ros_processes, ros_context, spinner):
     for process in (gyro, observer, monitor):
         process.interrupt(timeout=10.0)
         assert_clean_exit(process)
+    # The gyro's last word is its count, at least every truth the probe got.
+    [count] = re.findall(r'stopping: (\d+) steps published', gyro.output)
+    assert int(count) >= len(probe.truths)
 
 
 @pytest.mark.parametrize('name, executor', [
