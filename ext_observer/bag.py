@@ -409,7 +409,7 @@ def _width(settings):
     """Floats per estimate across the pipe: the state, and its covariance if imu/data has it."""
     # imu_filter_node fills imu/data's orientation_covariance from the
     # estimate's own covariance where the pipeline has one and the setting asks.
-    return 13 if settings.get('orientation_covariance_mode') == 'estimate' else 4
+    return 13 if settings['covariance_estimated'] else 4
 
 
 class _Estimator:

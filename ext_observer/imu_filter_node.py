@@ -9,8 +9,9 @@ and best-effort drivers both connect), overridable with ``qos_overrides``.
 Outputs, one per IMU sample and stamped with it: ``imu/data``
 (``sensor_msgs/Imu``: the sample with its orientation filled in, normalized,
 and ``orientation_covariance`` the estimate's own, row-major about the world
-frame's axes, or with ``orientation_covariance_mode`` ``fixed`` from
-``orientation_stddev``; only while subscribed) and ``attitude_estimate``
+frame's axes, or ``orientation_stddev``'s where ``orientation_covariance_mode``
+says so (``fixed``; ``auto``, the default, when it is set); only while
+subscribed) and ``attitude_estimate``
 (``QuaternionStamped``, the ambient estimate, not normalized: its distance
 to S³ is what the extension term holds small); ``/diagnostics`` every
 ``diagnostic_period``; the service ``~/reset`` (``std_srvs/Trigger``).
@@ -184,7 +185,7 @@ class ImuFilterNode(EstimatorNode):
         variance = settings['orientation_stddev'] ** 2
         self._orientation_covariance = [variance, 0.0, 0.0, 0.0, variance, 0.0,
                                         0.0, 0.0, variance]
-        self._covariance_estimated = settings['orientation_covariance_mode'] == 'estimate'
+        self._covariance_estimated = settings['covariance_estimated']
         self._estimate_msg.header.frame_id = settings['frame_id']
 
     def _apply_parameters(self, settings, changed):

@@ -24,10 +24,13 @@ from ext_observer.parameters import ParameterSpec
 from ext_observer.raw_imu import AHRS_PREFIX, ahrs_params, COVARIANCE_PREFIX, uncertainty_params
 
 __all__ = ['COVARIANCE_MODES', 'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'MADGWICK_UNUSED',
-           'imu_filter_settings']
+           'covariance_estimated', 'imu_filter_settings']
 
-# orientation_covariance of imu/data: the estimate's own, or orientation_stddev².
-COVARIANCE_MODES = ('estimate', 'fixed')
+# orientation_covariance of imu/data: the estimate's own, or orientation_stddev²;
+# 'auto' is 'fixed' when orientation_stddev is set (an imu_filter_madgwick
+# params file asks for its number), else 'estimate'.
+COVARIANCE_MODES = ('auto', 'estimate', 'fixed')
+ORIENTATION_STDDEV = 0.05
 
 # What each AhrsParams field means, with its unit; (description, range,
 # constraints).
@@ -180,17 +183,20 @@ IMU_FILTER_OWN = (
                   'Where ~/save_calibration writes the learned calibration (a params '
                   'file for this node: mag_bias_*, mag_soft_iron), relative to the '
                   "node's working directory."),
-    ParameterSpec('orientation_covariance_mode', 'estimate',
+    ParameterSpec('orientation_covariance_mode', 'auto',
                   "orientation_covariance of imu/data: 'estimate' (the estimate's own "
                   'covariance, row-major, rad², about the world frame\'s x, y, z axes: '
-                  "docs/covariance.md) or 'fixed' (orientation_stddev squared on the "
-                  'diagonal, as imu_filter_madgwick).',
+                  "docs/covariance.md), 'fixed' (orientation_stddev squared on the "
+                  "diagonal, as imu_filter_madgwick) or 'auto': 'fixed' when "
+                  'orientation_stddev is set to other than its default (an '
+                  "imu_filter_madgwick params file), else 'estimate'.",
                   constraints=f'One of {", ".join(COVARIANCE_MODES)}.'),
-    ParameterSpec('orientation_stddev', 0.05,
-                  "With orientation_covariance_mode 'fixed': standard deviation of the "
-                  'orientation, rad; orientation_covariance of imu/data is its square on '
-                  'the diagonal (as imu_filter_madgwick; 0 publishes zeros, "unknown" in '
-                  'sensor_msgs/Imu).', (0.0, 10.0)),
+    ParameterSpec('orientation_stddev', ORIENTATION_STDDEV,
+                  "With orientation_covariance_mode 'fixed' (or 'auto' and a value other "
+                  'than this default): standard deviation of the orientation, rad; '
+                  'orientation_covariance of imu/data is its square on the diagonal (as '
+                  'imu_filter_madgwick; 0 publishes zeros, "unknown" in sensor_msgs/Imu).',
+                  (0.0, 10.0)),
     ParameterSpec('constant_dt', 0.0,
                   'Δt of every sample, s, instead of the interval between the stamps; 0 = '
                   'from the stamps (as imu_filter_madgwick).', (0.0, 10.0)),
@@ -248,4 +254,20 @@ def imu_filter_settings(values):
                          f'got {values["orientation_covariance_mode"]!r}')
     ahrs_params(values)
     uncertainty_params(values)
-    return dict(values)
+    settings = dict(values)
+    settings['covariance_estimated'] = covariance_estimated(values)
+    return settings
+
+
+def covariance_estimated(values):
+    """
+    Whether ``imu/data`` carries the estimate's own covariance (else orientation_stddev's).
+
+    ``orientation_covariance_mode`` ``'auto'`` is ``'fixed'`` when
+    ``orientation_stddev`` differs from its default: a user (or an
+    imu_filter_madgwick params file) who sets it gets it.
+    """
+    mode = values['orientation_covariance_mode']
+    if mode == 'auto':
+        return values['orientation_stddev'] == ORIENTATION_STDDEV
+    return mode == 'estimate'

@@ -112,14 +112,12 @@ def test_madgwick_params_file_starts_unchanged_warns_once_and_takes_effect(
     assert 'publish_tf=True' in warnings[0]
     for honoured in ('yaw_offset', 'declination', 'orientation_stddev', 'gain=', 'zeta='):
         assert honoured not in warnings[0]
-    # The covariance is the estimate's own (orientation_covariance_mode
-    # 'estimate', the default; 'fixed' takes orientation_stddev's, tested in
-    # test_covariance.py): diagonal, positive, not the file's 0.2² = 0.04.
-    message = filtered[max(filtered)]
-    covariance = list(message.orientation_covariance)
-    assert all(covariance[i] == 0.0 for i in (1, 2, 3, 5, 6, 7))
-    assert min(covariance[0], covariance[4], covariance[8]) > 0.0
-    assert covariance[0] != pytest.approx(0.04)
+    # The file's orientation_stddev is honoured: orientation_covariance_mode
+    # 'auto' (the default) publishes its square, 0.2² on the diagonal, as
+    # imu_filter_madgwick would (without it, the estimate's own: test_covariance.py).
+    v = 0.2 ** 2
+    for message in filtered.values():
+        assert list(message.orientation_covariance) == [v, 0, 0, 0, v, 0, 0, 0, v]
     # yaw_offset and declination: a turn of R_z(0.3 − 0.1) of the estimate,
     # in the world frame.
     turn = (math.cos(0.1), 0.0, 0.0, math.sin(0.1))
@@ -498,6 +496,10 @@ def test_runtime_changes_take_effect_and_structural_ones_are_refused(ros_context
     # With the online calibration, a new saved offset restarts it from there.
     assert node.observer.calibration_state == 'loaded'
     assert node._orientation_covariance[0] == pytest.approx(0.01)
+    # orientation_covariance_mode 'auto': an orientation_stddev set is used.
+    assert not node._covariance_estimated
+    assert node.set_parameters([Parameter('orientation_stddev', value=0.05)])[0].successful
+    assert node._covariance_estimated
     assert node.pipeline.estimator._frame == pytest.approx(heading_factor('enu', 0.0, 0.5))
     for name, value in (('ahrs.tau_acc', 5.0), ('use_mag', False), ('world_frame', 'ned')):
         result = node.set_parameters([Parameter(name, value=value)])[0]

@@ -125,7 +125,7 @@ def test_bag_equals_python_call_and_offline(tmp_path, data, recording, storage, 
                                       raw_in.angular_velocity_covariance)
         assert (msg.linear_acceleration.z, msg.angular_velocity.x) == (
             raw_in.linear_acceleration.z, raw_in.angular_velocity.x)
-    if node_settings().get('orientation_covariance_mode', 'fixed') != 'estimate':
+    if not node_settings()['covariance_estimated']:
         # orientation_stddev's (the estimate's own: test_imu_data_carries_...).
         np.testing.assert_array_equal(data_msgs[0][1].orientation_covariance,
                                       np.diag([0.05 ** 2] * 3).ravel())
@@ -424,7 +424,7 @@ def test_imu_data_carries_the_estimates_own_covariance_when_the_node_does(
 
     settings = node_settings()
     monkeypatch.setattr(bag_module, 'node_settings', lambda *args, **kwargs: dict(
-        settings, orientation_covariance_mode='estimate'))
+        settings, orientation_covariance_mode='estimate', covariance_estimated=True))
     monkeypatch.setattr(bag_module, 'PipelineRun', Run)
     short = dict(recording, stamps=recording['stamps'][:300],
                  received=recording['received'][:300], gyr=recording['gyr'][:300],

@@ -290,9 +290,11 @@ _INTRO = [
     'heading (about the vertical) is its own. A diagonal with equal x and y is the same '
     'in ENU, NWU and NED and after `declination` and `yaw_offset`.',
     '',
-    '- `orientation_covariance_mode` `estimate` (the default) publishes it; `fixed` '
-    'publishes `orientation_stddev`² on the diagonal, exactly as before (and as '
-    'imu_filter_madgwick), for a user who wants that.',
+    '- `orientation_covariance_mode` `auto` (the default) publishes it unless '
+    '`orientation_stddev` is set to other than its default (an imu_filter_madgwick '
+    'params file); `fixed` publishes `orientation_stddev`² on the diagonal, exactly as '
+    'before (and as imu_filter_madgwick), for a user who wants that; `estimate` always '
+    'publishes it.',
     '- `/diagnostics` shows `inclination_std_deg` (√(2 V_t): the RMS of the tilt angle) '
     'and `heading_std_deg` (√V_h).',
     '- `RawImuPipeline` gives each `Estimate` its `covariance`; '
