@@ -21,7 +21,8 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 
 # The package is installed in editable mode: the console scripts gyro_node,
-# observer_node and monitor_node land in $(VENV)/bin and run this tree.
+# observer_node, monitor_node and imu_filter_node land in $(VENV)/bin and
+# run this tree.
 $(RUNTIME_STAMP): requirements.txt pyproject.toml setup.py setup.cfg package.xml resource/ext_observer $(wildcard config/*.yaml) | $(PY)
 	$(PIP) install -r requirements.txt wheel
 	$(PIP) install --no-deps --no-build-isolation --use-pep517 -e .

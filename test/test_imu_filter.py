@@ -531,3 +531,19 @@ def test_a_clock_switch_resets_and_the_guard_reinitializes(ros_context, spinner)
     for msg in driver.estimates.values():
         q = quaternion_from_msg(msg.quaternion)
         assert all(map(math.isfinite, q)) and abs(math.sqrt(sum(v * v for v in q)) - 1) < 0.1
+
+
+def test_a_silent_imu_is_named_in_its_own_words_and_never_rounded_up(ros_context):
+    from ext_observer.estimator_node import floor_text
+
+    # 4.99997 s of silence is "4.99 s or more", never "5 s": the text states
+    # no more than was measured.
+    assert floor_text(4.99997) == '4.99'
+    assert floor_text(2.0) == '2'
+    node = ImuFilterNode(node_name='quiet', context=ros_context)
+    try:
+        texts = node._silent_texts({'increment': 4.99997, 'measurement': 0.0}, 2.0)
+        assert texts == {'increment': 'no IMU samples on /imu/data_raw for 4.99 s or more'}
+        assert node._silent_texts({'increment': 1.99, 'measurement': 0.0}, 2.0) == {}
+    finally:
+        node.destroy_node()

@@ -391,6 +391,8 @@ def test_gyro_publishes_its_steps_and_stops(ros_context, spinner):
     gyro = spinner.add(GyroNode(context=ros_context, parameter_overrides=overrides(
         rate_hz=100.0, steps=5, seed=3, initial_attitude=initial, frame_id='map',
         increment_max=0.5)))
+    # Its first status has measured no rate yet: NaN, not a stalled 0.
+    assert values_of(gyro.status())['achieved_rate_hz'] == 'nan'
     spinner.spin_until(lambda: gyro.finished and len(probe.increments) == 5
                        and len(probe.truths) == 5, 10.0, 'five steps')
     # Stopped: ten more periods publish nothing (more time only makes a sixth
