@@ -17,11 +17,15 @@ which the node loads with ``--params-file`` and refines online.
 
 The estimation takes plain arrays (:func:`estimate_calibration`: gyro
 ``(N, 3)`` rad/s, specific force ``(N, 3)`` m/s², field ``(N, 3)`` and the
-rate); reading a file is apart (:data:`READERS`, by extension), so a CSV or
-rosbag2 reader is one more entry. Read now: HDF5 in BROAD's layout
-(``imu_gyr``, ``imu_acc``, ``imu_mag`` in µT, attribute ``sampling_rate``;
-needs h5py) and ``.npz`` with ``gyr``, ``acc``, ``mag``, ``rate`` (the
-excerpts in ``test/data``).
+rate); reading a file is apart (:data:`READERS`, by extension): HDF5 in
+BROAD's layout (``imu_gyr``, ``imu_acc``, ``imu_mag`` in µT, attribute
+``sampling_rate``; needs h5py) and ``.npz`` with ``gyr``, ``acc``, ``mag``,
+``rate`` (the excerpts in ``test/data``). A CSV file (``python -m
+ext_observer csv``'s columns) or a rosbag2 bag (``python -m ext_observer
+bag``'s topics) has its own times and a field in T: it runs through
+``imu_filter_node``'s pipeline (:func:`calibration_from_recording`), its
+stamp rules included, and the calibration is the one the node would have
+learned from it.
 
 No ROS is imported; PyYAML only to read a params file back
 (:func:`read_params`).
@@ -37,8 +41,9 @@ import numpy as np
 from ext_observer.core.ahrs import AhrsObserver, AhrsParams
 from ext_observer.core.magcal import check_calibration
 
-__all__ = ['Calibration', 'NODE', 'READERS', 'UNITS', 'estimate_calibration', 'main',
-           'params_text', 'read_hdf5', 'read_npz', 'read_params', 'read_recording',
+__all__ = ['Calibration', 'NODE', 'READERS', 'UNITS', 'calibration_from_recording',
+           'estimate_calibration', 'is_node_recording', 'main', 'params_text', 'read_bag',
+           'read_csv', 'read_hdf5', 'read_npz', 'read_params', 'read_recording',
            'write_params']
 
 NODE = 'imu_filter'
@@ -111,6 +116,55 @@ class Calibration:
                  f'field lag behind the gyro: {1e3 * self.delay:.1f} ms',
                  'field samples: ' + ', '.join(f'{k} {v}' for k, v in self.counts.items())]
         return '\n'.join(lines)
+
+
+def calibration_from_recording(recording):
+    """
+    The :class:`Calibration` a :class:`~ext_observer.recording.Recording` ends with.
+
+    Raises
+    ------
+    ValueError
+        When the recording's estimator learned none (6D, ``ahrs.mag_cal``
+        false, or no field).
+
+    """
+    cal = recording.calibrator
+    if cal is None or recording.counts['fields_used'] == 0:
+        raise ValueError('no magnetometer calibration was learned: the recording needs its '
+                         'field (mag_* columns, or the field topic) and ahrs.mag_cal true')
+    times = recording.times
+    states = recording.calibration
+    converged = np.flatnonzero(states == 'converged') if states is not None else []
+    converged_at = float(times[converged[0]] - times[0]) if len(converged) else None
+    return Calibration(cal, float(times[-1] - times[0]), converged_at, cal.applied)
+
+
+def read_csv(path):
+    """A CSV recording (:mod:`ext_observer.csvio`) through the node's pipeline: ``Calibration``."""
+    from ext_observer.csvio import read_recording as read_columns
+    from ext_observer.recording import attitude_from_imu
+    times, gyr, acc, mag = read_columns(path)
+    if mag is None:
+        raise ValueError(f'{path}: no mag_x, mag_y, mag_z columns: nothing to calibrate')
+    return calibration_from_recording(attitude_from_imu(gyr, acc, mag, times=times))
+
+
+def read_bag(path, imu_topic='imu/data_raw', mag_topic='imu/mag'):
+    """A rosbag2 bag (MCAP or sqlite3) through the bag command's run: ``Calibration``."""
+    import tempfile
+    from ext_observer.bag import run_bag
+    with tempfile.TemporaryDirectory() as scratch, open(os.devnull, 'w') as quiet:
+        # The bag command writes its new bag; here only what it learned counts.
+        run = run_bag(path, os.path.join(scratch, 'out'), imu_topic=imu_topic,
+                      mag_topic=mag_topic, progress=quiet, parallel=False)
+    return calibration_from_recording(run.recording)
+
+
+def is_node_recording(path):
+    """True for the recordings that run through the node's pipeline (CSV, bags; field in T)."""
+    ext = os.path.splitext(path)[1].lower()
+    return ext in ('.csv', '.mcap', '.db3') or os.path.isdir(path)
 
 
 def estimate_calibration(gyr, acc, mag, rate, params=None):
@@ -274,12 +328,19 @@ def build_parser():
         description='Learn the magnetometer\'s hard- and soft-iron calibration from a '
                     'recording and write it as a params file for imu_filter_node.')
     parser.add_argument('--data', required=True, metavar='FILE',
-                        help=f'the recording ({", ".join(READERS)}; HDF5 in BROAD\'s layout)')
+                        help=f'the recording: {", ".join(READERS)} (HDF5 in BROAD\'s layout), '
+                             '.csv (python -m ext_observer csv\'s columns, field in T) or a '
+                             'rosbag2 bag (a folder, .mcap or .db3)')
+    parser.add_argument('--imu-topic', default='imu/data_raw',
+                        help='of a bag: the sensor_msgs/Imu topic (default imu/data_raw)')
+    parser.add_argument('--mag-topic', default='imu/mag',
+                        help='of a bag: the sensor_msgs/MagneticField topic (default imu/mag)')
     parser.add_argument('--out', default='mag_calibration.yaml', metavar='FILE',
                         help='the params file to write (default mag_calibration.yaml)')
     parser.add_argument('--unit', choices=sorted(UNITS), default=None,
                         help='unit of the recording\'s field (default: the reader\'s, µT for '
-                             'BROAD); the file holds T')
+                             'BROAD; a CSV or a bag is in T, as the node takes it); the file '
+                             'holds T')
     parser.add_argument('--node', default=NODE, help=f'node name in the file (default {NODE})')
     parser.add_argument('--force', action='store_true',
                         help='write the file even when the calibration has not converged')
@@ -290,9 +351,14 @@ def main(argv=None):
     """Run the command; return the exit code (1: not converged, 2: bad input)."""
     args = build_parser().parse_args(argv)
     try:
-        gyr, acc, mag, rate, unit = read_recording(args.data)
-        unit = args.unit or unit
-        result = estimate_calibration(gyr, acc, mag, rate)
+        if is_node_recording(args.data):
+            unit = 'T'
+            result = (read_csv(args.data) if args.data.lower().endswith('.csv')
+                      else read_bag(args.data, args.imu_topic, args.mag_topic))
+        else:
+            gyr, acc, mag, rate, unit = read_recording(args.data)
+            unit = args.unit or unit
+            result = estimate_calibration(gyr, acc, mag, rate)
     except (ValueError, RuntimeError, OSError) as error:
         print(f'error: {error}', file=sys.stderr)
         return 2

@@ -222,6 +222,10 @@ class Recording:
         The magnetometer calibration's state after the latest field
         (``AhrsObserver.calibration_state``: ``'off'``, ``'learning'``,
         ``'converged'``, ``'loaded'``), where the core has one; else None.
+    calibrator : ext_observer.core.magcal.MagCalibrator or None
+        The core's magnetometer calibration as it stands after the last
+        sample (what ``~/save_calibration`` would write); None in 6D or with
+        ``ahrs.mag_cal`` false.
     world_frame : str
     drops : dict
         Inputs dropped, by reason (:data:`ext_observer.pairing.DROP_REASONS`).
@@ -372,6 +376,7 @@ class PipelineRun:
             rest=(flags & 1).astype(bool), mag_disturbed=(flags & 2).astype(bool),
             calibration=(None if self._calibration is None
                          else np.array(self._calibrations, dtype=object)),
+            calibrator=getattr(self._core, 'calibration', None),
             world_frame=self.settings['world_frame'],
             drops=dict(pairer.drops),
             counts={'imu_samples': pairer.received['increment'],

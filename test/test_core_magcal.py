@@ -280,7 +280,38 @@ def test_the_command_refuses_what_it_cannot_use(tmp_path, capsys):
     assert calibrate.main(['--data', src, '--out', out]) == 1
     assert 'not converged' in capsys.readouterr().err and not os.path.exists(out)
     assert calibrate.main(['--data', str(tmp_path / 'x.csv'), '--out', out]) == 2
-    assert "no reader for '.csv'" in capsys.readouterr().err
+    assert 'x.csv' in capsys.readouterr().err
+    assert calibrate.main(['--data', str(tmp_path / 'x.txt'), '--out', out]) == 2
+    assert "no reader for '.txt'" in capsys.readouterr().err
     with pytest.raises(ValueError, match=r'shape \(N, 3\)'):
         calibrate.estimate_calibration(np.zeros((5, 2)), np.zeros((5, 3)), np.zeros((5, 3)),
                                        100.0)
+
+
+def test_a_csv_and_a_bag_with_an_offset_calibrate_as_the_node_would(tmp_path, capsys):
+    from ext_observer import example_data
+
+    recording = example_data.excerpt(example_data.load_excerpt())
+    field = recording['field']
+    norm = float(np.mean(np.linalg.norm(field, axis=1)))
+    b = 1.5 * norm * np.array([0.6, -0.48, 0.64])  # T
+    recording['field'] = field + b
+    csv = example_data.write_csv(str(tmp_path / 'distorted.csv'), recording)
+    bag = example_data.write_bag(str(tmp_path / 'distorted_bag'), recording, storage='sqlite3',
+                                 reference=False)
+    results = {}
+    for name, src in (('csv', csv), ('bag', bag)):
+        out = str(tmp_path / f'{name}.yaml')
+        assert calibrate.main(['--data', src, '--out', out]) == 0, capsys.readouterr().err
+        results[name] = calibrate.read_params(out)
+        assert np.linalg.norm(results[name][0] - b) < 0.05 * norm
+    # The same samples with the same stamps: the same calibration.
+    assert_allclose(results['csv'][0], results['bag'][0], rtol=0, atol=1e-9 * norm)
+    assert_allclose(results['csv'][1], results['bag'][1], rtol=0, atol=1e-9)
+    # Without the field there is nothing to learn, said as such.
+    bare = str(tmp_path / 'bare.csv')
+    with open(csv) as f, open(bare, 'w') as g:
+        for line in f:
+            g.write(','.join(line.rstrip('\n').split(',')[:7]) + '\n')
+    assert calibrate.main(['--data', bare, '--out', str(tmp_path / 'x.yaml')]) == 2
+    assert 'no mag_x, mag_y, mag_z columns' in capsys.readouterr().err
