@@ -2,8 +2,8 @@
 Tests of the BROAD benchmark (``python -m ext_observer broad``).
 
 The scoring, the grouping and the page run on synthetic arrays (no h5py, no
-data). The anchors' frame conversions run on a synthetic static sensor when
-their packages are installed (``make bench``). Where the data is looked for,
+data). The anchors' frame conversions run on a synthetic static sensor
+(their packages are in requirements-test.txt). Where the data is looked for,
 and ``make broad-data``'s fetch from a local stand-in for BROAD's
 repository, run on temporary folders. The command end to end runs on two
 short trials of BROAD (see broad_data.py: without the data it fails, or
@@ -380,7 +380,7 @@ def test_anchor_frames_on_a_static_sensor(anchor, mode):
     ENU) gives 90° of heading, a conjugate or a scalar-last reading tens of
     degrees of inclination.
     """
-    pytest.importorskip(broad.ANCHOR_PACKAGES[anchor])
+    # The anchors are in requirements-test.txt: a missing one fails here.
     q = multiply(rotation((0, 0, 1), math.radians(30.0)),
                  multiply(rotation((1, 0, 0), math.radians(10.0)),
                           rotation((0, 1, 0), math.radians(-15.0))))

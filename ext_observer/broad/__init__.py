@@ -28,7 +28,7 @@ m/s², field µT (BROAD's units); angles in the report in degrees.
 
 Nothing here imports ROS; h5py is needed only to read the HDF5 files
 (requirements-test.txt) and the anchor packages only for the anchors
-(requirements-bench.txt, ``make bench``). Every public name of the modules
+(requirements-test.txt, ``make test``). Every public name of the modules
 is importable from here.
 """
 

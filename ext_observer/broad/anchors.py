@@ -8,7 +8,7 @@ Each anchor gets the raw samples (rad/s, m/s², µT; Fusion °/s and g) and
 its output is brought to scalar-first ``(w, x, y, z)``, sensor → ENU (the
 convention of BROAD's ``opt_quat`` and of our estimator) by a fixed left
 factor, checked on the data (see each runner). The packages are imported
-only when an anchor runs (requirements-bench.txt).
+only when an anchor runs (requirements-test.txt).
 """
 
 import importlib.util

@@ -154,7 +154,7 @@ def _check(args, anchors):
     missing = missing_anchor_packages() if anchors else []
     if missing:
         return (f'the anchors need {", ".join(missing)}: pip install -r '
-                'requirements-bench.txt (or make bench), or run with --no-anchors')
+                'requirements-test.txt (or make test), or run with --no-anchors')
     return None
 
 
