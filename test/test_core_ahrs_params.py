@@ -258,6 +258,24 @@ def test_bias_learned_in_motion_converges_with_tau_bias(tau_bias):
         assert k * DT == pytest.approx(m * tau_bias, rel=0.05), m
 
 
+def test_a_vertical_bias_is_learned_in_motion_from_the_field_only():
+    # Level and turning about the vertical with a bias on the body's z axis:
+    # the accelerometer cannot see the heading drift it makes, the field
+    # can. With tau_bias > 0 in 9D the heading corrections (once steady:
+    # tau_mag 2 s) teach it; in 6D, or with tau_bias 0, it is never learned.
+    bias = (0.0, 0.0, 0.01)
+    _, gyr, acc, mag = simulate(turning(40.0, 0.3), bias=bias)
+    for use_mag, tau_bias in ((False, 5.0), (True, 0.0), (True, 5.0)):
+        est = AhrsObserver(AhrsParams(tau_bias=tau_bias, tau_mag=2.0, mag_cal=False),
+                           use_mag=use_mag)
+        z = [b[2] for _, _, _, b in run(est, gyr, acc, mag)]
+        if use_mag and tau_bias:
+            assert 0.003 < z[round(5.0 * RATE)] < 0.007  # on its way
+            assert z[-1] == pytest.approx(bias[2], abs=2e-4)
+        else:
+            assert max(map(abs, z)) == 0.0
+
+
 def test_bias_learned_in_motion_is_clipped_at_bias_max():
     # A bias of 0.03 rad/s on x: learned as it is under a bias_max of 0.05,
     # held at 0.02 under a bias_max of 0.02 (and never beyond).
