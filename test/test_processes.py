@@ -108,6 +108,8 @@ def test_installed_nodes_end_to_end(ros_processes, ros_context, spinner):
     for process in (gyro, observer, monitor):
         process.interrupt(timeout=10.0)
         assert_clean_exit(process)
+    # The monitor said at start-up what it watches.
+    assert 'watching /attitude_estimate (distance to S³' in monitor.output
     # The gyro's last word is its count, at least every truth the probe got.
     [count] = re.findall(r'stopping: (\d+) steps published', gyro.output)
     assert int(count) >= len(probe.truths)
