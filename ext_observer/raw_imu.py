@@ -289,12 +289,6 @@ class RawImuEstimator:
         # and the field's own error is heading_floor's.
         sigma = (float(calibration.quality) if calibration is not None and calibration.applied
                  else 0.0)
-        # The gain the core applied, where it says (a calibrator that sets the
-        # heading itself makes it more than the usual gain); else its rule.
-        gain = getattr(core, 'mag_gain', None)
-        if gain is not None:
-            self.uncertainty.field(dt, float(gain), sigma)
-            return
         if not (core.use_mag and calibrated and not core.mag_disturbed):
             self.uncertainty.field(dt, 0.0)
             return
