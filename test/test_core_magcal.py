@@ -95,6 +95,26 @@ def test_the_estimator_learns_it_runs_6d_until_then_and_holds_the_heading(motion
     assert np.sqrt(np.mean(heading_off[first:] ** 2)) > 10.0
 
 
+def test_an_offset_that_changes_for_good_makes_the_calibration_start_over():
+    # A payload moves halfway: the hard iron jumps to another 1.5 |m| offset.
+    # The learned calibration no longer fits, most fields are refused while
+    # the body turns, it starts over and learns the new offset; meanwhile
+    # the refused fields leave the heading on the gyro.
+    truth, gyr, acc, mag = synthetic(seconds=120.0, seed=11)
+    s, before = distortion(2)
+    _, after = distortion(5)
+    half = len(mag) // 2
+    raw = np.vstack([distort(mag[:half], s, before), distort(mag[half:], s, after)])
+    q, est, states = run(gyr, acc, raw)
+    counts = {key: int(v[0]) for key, v in est.calibration.counts.items()}
+    assert counts['resets'] >= 1 and counts['refused'] > 0
+    assert states[-1] == 'converged'
+    assert np.linalg.norm(est.calibration.bias - after) < 0.02 * NORM
+    _, heading, _ = errors_deg(q, truth)
+    assert np.abs(heading[half:]).max() < 5.0
+    assert np.sqrt(np.mean(heading[-int(20 * RATE):] ** 2)) < 1.0
+
+
 def test_a_world_fixed_disturbance_does_not_move_the_calibration():
     # Converged by about 11 s; then a field added in the world frame from
     # 20 s to 26 s (a magnet by the path): rejected by the norm/dip test, it
