@@ -208,7 +208,7 @@ def test_reliable_publishers_connect_to_the_sensor_streams_too(ros_context, spin
 
 
 def test_qos_overrides_make_a_sensor_stream_reliable_and_incompatibility_is_reported(
-        ros_context, spinner):
+        ros_context, spinner, capfd):
     observer = spinner.add(ObserverNode(context=ros_context, parameter_overrides=overrides(
         increment_source='imu', **{
             'qos_overrides./imu/data_raw.subscription.reliability': 'reliable'})))
@@ -224,6 +224,11 @@ def test_qos_overrides_make_a_sensor_stream_reliable_and_incompatibility_is_repo
     status = observer.status()
     assert 'incompatible QoS on /imu/data_raw' in status.message
     assert int(values_of(status)['qos_incompatible_events']) >= 1
+    # The log names the peer as /diagnostics does (logged again once
+    # discovery has named it), never the graph's placeholder.
+    logged = capfd.readouterr().err
+    assert 'incompatible QoS: publisher /imu_driver on /imu/data_raw' in logged
+    assert '_NODE_NAME_UNKNOWN_' not in logged
     del driver
 
 
