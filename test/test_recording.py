@@ -412,6 +412,7 @@ def test_imu_data_carries_the_estimates_own_covariance_when_the_node_does(
     """With orientation_covariance_mode 'estimate', imu/data's covariance is the estimate's."""
     import collections
     import ext_observer.bag as bag_module
+    import ext_observer.bag_worker as worker_module
     from ext_observer.recording import PipelineRun
 
     Wide = collections.namedtuple('Wide', 'state covariance')
@@ -425,7 +426,7 @@ def test_imu_data_carries_the_estimates_own_covariance_when_the_node_does(
     settings = node_settings()
     monkeypatch.setattr(bag_module, 'node_settings', lambda *args, **kwargs: dict(
         settings, orientation_covariance_mode='estimate', covariance_estimated=True))
-    monkeypatch.setattr(bag_module, 'PipelineRun', Run)
+    monkeypatch.setattr(worker_module, 'PipelineRun', Run)
     short = dict(recording, stamps=recording['stamps'][:300],
                  received=recording['received'][:300], gyr=recording['gyr'][:300],
                  acc=recording['acc'][:300], field_index=recording['field_index'][:100])
