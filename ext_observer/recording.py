@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from ext_observer.core.ahrs import _hold_finite
+from ext_observer.core.ahrs_batch import _hold_finite
 from ext_observer.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.raw_imu import RawImuPipeline
 from ext_observer.units import ACC_WINDOW, UnitCheck

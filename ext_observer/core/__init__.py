@@ -13,8 +13,14 @@ observer
     The extended, plain and projected Luenberger-like observers.
 gyro_model
     The simulated gyro and attitude sensor.
-magcal
-    Online magnetometer calibration (hard and soft iron) from the gyro.
+magcal, magcal_model
+    Online magnetometer calibration (hard and soft iron) from the gyro; its
+    model and the check of a saved calibration.
+ahrs, ahrs_params, ahrs_math, ahrs_batch
+    The raw-IMU estimator, its parameters, its float-or-array arithmetic and
+    frames, and many recordings at once.
+uncertainty
+    The variance of the raw-IMU estimate's inclination and heading.
 """
 
 from .certificate import (GainCertificate, certified_alpha_max,
