@@ -146,8 +146,9 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     ----------
     path : str
         The input bag: a rosbag2 folder, or one ``.mcap`` or ``.db3`` file.
-    out : str
-        The new bag's folder; must not exist.
+    out : str or None
+        The new bag's folder; must not exist. None: no new bag (the run and
+        its recording only, as ``calibrate`` uses it).
     imu_topic, mag_topic : str
         ``sensor_msgs/Imu`` and ``sensor_msgs/MagneticField`` (relative names
         are taken from the root: ``/imu/data_raw``); ``mag_topic`` is not
@@ -184,10 +185,11 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
         raise ValueError(f'storage must be one of {STORAGES}, got {storage!r}')
     if not os.path.exists(path):
         raise ValueError(f'{path}: no such bag')
-    if os.path.exists(out):
+    if out is not None and os.path.exists(out):
         raise ValueError(f'{out} exists (never overwritten: remove it or choose another '
                          '--out)')
-    if os.path.abspath(out).startswith(os.path.join(os.path.abspath(path), '')):
+    if out is not None and os.path.abspath(out).startswith(
+            os.path.join(os.path.abspath(path), '')):
         raise ValueError(f'{out} is inside the input bag {path}: the input is only read')
     reader = BagReader(path)
     roles = {'imu': _find(reader.connections, _absolute(imu_topic), (IMU_TYPE,), 'IMU',
@@ -220,7 +222,8 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
             comparison = _compare_references(recording, estimator.references,
                                              topics['reference'])
     except BaseException:
-        shutil.rmtree(out, ignore_errors=True)
+        if out is not None:
+            shutil.rmtree(out, ignore_errors=True)
         raise
     return BagRun(recording, comparison, storage,
                   {role: (topic, msgtype, counts[role])

@@ -92,8 +92,9 @@ class _BagSide:
         self.writer = None
 
     def open(self):
-        """Create the new bag; its connection ids by role."""
-        self.writer = BagWriter(self.out, self.storage, list(self.topics.values()))
+        """Create the new bag (none with ``out`` None); its connection ids by role."""
+        self.writer = (_Discard(self.topics) if self.out is None
+                       else BagWriter(self.out, self.storage, list(self.topics.values())))
         self.ids = dict(zip(self.topics, self.writer.ids))
         if self._shared:
             self.ids['reference'] = self.ids['imu']
@@ -184,6 +185,26 @@ class _BagSide:
     def abort(self):
         if self.writer is not None:
             self.writer.abort()
+
+
+class _Discard:
+    """A writer that writes nothing but counts (``run_bag`` with ``out`` None)."""
+
+    def __init__(self, topics):
+        self.ids = list(range(len(topics)))
+        self.rows = []
+        self._counts = collections.Counter()
+
+    def flush(self):
+        self._counts.update(cid for cid, _, _ in self.rows)
+        self.rows = []
+
+    def close(self):
+        self.flush()
+        return dict(self._counts)
+
+    def abort(self):
+        self.rows = []
 
 
 def _width(settings):

@@ -152,12 +152,11 @@ def read_csv(path):
 
 def read_bag(path, imu_topic='imu/data_raw', mag_topic='imu/mag'):
     """A rosbag2 bag (MCAP or sqlite3) through the bag command's run: ``Calibration``."""
-    import tempfile
     from ext_observer.bag import run_bag
-    with tempfile.TemporaryDirectory() as scratch, open(os.devnull, 'w') as quiet:
-        # The bag command writes its new bag; here only what it learned counts.
-        run = run_bag(path, os.path.join(scratch, 'out'), imu_topic=imu_topic,
-                      mag_topic=mag_topic, progress=quiet, parallel=False)
+    with open(os.devnull, 'w') as quiet:
+        # Only what the estimator learned counts: no new bag is written.
+        run = run_bag(path, None, imu_topic=imu_topic, mag_topic=mag_topic, progress=quiet,
+                      parallel=False)
     return calibration_from_recording(run.recording)
 
 
