@@ -14,7 +14,13 @@ a soft-iron ``S = I + E``, ``E`` symmetric with elements uniform in ±10 %
 - VQF and Madgwick (packages ``vqf`` and ``ahrs``, run as
   ``python -m ext_observer broad`` runs them) on the same distorted samples;
 - the estimator on the undistorted trial, calibration on (the comparison the
-  issue asks for) and off (the estimator before the calibration).
+  issue asks for) and off (the estimator before the calibration);
+- a yardstick for what the data allow: the best constant calibration (the
+  same model, ``S`` symmetric and ``b``) fitted by least squares over the
+  whole trial's movement samples with the optical reference's attitude
+  (future samples included, one robust refit), applied to the distorted
+  field before the estimator with its calibration off. No calibration
+  learned from the field and the motion can know more than this one does.
 
 Scored as BROAD scores (:func:`ext_observer.broad.score`, total angle):
 over the movement samples, and over those 30 s or more after the first one.
@@ -90,6 +96,59 @@ def _ours(task):
     return task, q, converged, trace, est.calibration_state, time.perf_counter() - start
 
 
+def _rotation_matrices(q):
+    w, x, y, z = q.T
+    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                     2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                     2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+                    axis=1).reshape(-1, 3, 3)
+
+
+def oracle_calibration(quat, raw):
+    """
+    ``(A, c)`` with ``A raw − c`` the calibrated field: least squares with known attitude.
+
+    The model of the online calibration: ``A = I + D``, ``D`` symmetric with
+    zero trace (the scale is free), and a world field ``m_w`` fixed:
+    ``A y − c = Rᵀ m_w`` for each sample, ``R`` the attitude (sensor →
+    world) from ``quat``. Linear in ``(D, c, m_w)``; fitted once, then again
+    without the samples whose residual is over three times the median (a
+    magnet near the path).
+    """
+    r = _rotation_matrices(quat)
+    y0, y1, y2 = raw.T
+    zero = np.zeros(len(raw))
+    design = np.zeros((len(raw), 3, 11))
+    design[:, :, :5] = np.stack([np.stack([y0, zero, -y2]), np.stack([zero, y1, -y2]),
+                                 np.stack([y1, y0, zero]), np.stack([y2, zero, y0]),
+                                 np.stack([zero, y2, y1])], axis=-1).transpose(1, 0, 2)
+    design[:, :, 5:8] = -np.eye(3)
+    design[:, :, 8:] = -r.transpose(0, 2, 1)
+    keep = np.ones(len(raw), dtype=bool)
+    for _ in range(2):
+        sol = np.linalg.lstsq(design[keep].reshape(-1, 11), -raw[keep].reshape(-1),
+                              rcond=None)[0]
+        residual = np.linalg.norm(design @ sol + raw, axis=1)
+        keep = residual <= 3.0 * np.median(residual)
+    d0, d1, d2, d3, d4 = sol[:5]
+    a = np.eye(3) + np.array([[d0, d2, d3], [d2, d1, d4], [d3, d4, -d0 - d1]])
+    return a, sol[5:8]
+
+
+def _oracle(task):
+    """The estimator (calibration off) on the field calibrated by :func:`oracle_calibration`."""
+    from ext_observer.core.ahrs import AhrsObserver, AhrsParams
+    name, level, _, seed = task
+    trial = _TRIALS[name]
+    mag, _, _ = _samples(name, level, seed)
+    fit = np.isfinite(trial.quat).all(axis=1) & trial.movement
+    a, c = oracle_calibration(trial.quat[fit], mag[fit])
+    est = AhrsObserver(AhrsParams(mag_cal=False))
+    g, acc, m = trial.gyr.tolist(), trial.acc.tolist(), (mag @ a.T - c).tolist()
+    dt = 1.0 / trial.rate
+    return task, np.array([est.update(g[k], acc[k], m[k], dt) for k in range(len(g))])
+
+
 def _anchor(task):
     from ext_observer.broad import anchor_estimates
     name, level, anchor, seed = task
@@ -117,10 +176,12 @@ def run(trials, levels=LEVELS, anchors=ANCHORS, jobs=2, seed=0, progress=None):
               if (t.name, level) == PLOT]
     anchor_tasks = [(t.name, level, anchor, seed) for t in trials for level in levels
                     for anchor in anchors]
+    anchor_tasks += [(t.name, level, 'oracle', seed) for t in trials for level in levels]
     # The longest first: the anchors in pure Python (Madgwick) are the slowest.
     work = ([(_anchor, x) for x in anchor_tasks if x[2] == 'Madgwick']
-            + [(_ours, x) for x in tasks] + [(_anchor, x) for x in anchor_tasks
-                                             if x[2] != 'Madgwick'])
+            + [(_ours, x) for x in tasks]
+            + [(_oracle if x[2] == 'oracle' else _anchor, x) for x in anchor_tasks
+               if x[2] != 'Madgwick'])
     result = {t.name: {'levels': {}} for t in trials}
     traces = {}
     done = 0
@@ -202,6 +263,11 @@ def summary(result, levels):
                    'n': len(cells)}
             row['ratio_all'] = row['ours'][0] / und_all
             row['ratio_late'] = row['ours'][1] / und_late
+            if all('oracle' in c for c in cells):
+                row['oracle'] = (_mean(c['oracle'][0] for c in cells),
+                                 _mean(c['oracle'][1] for c in cells))
+                # Its estimator runs with the calibration off: so does its reference.
+                row['ratio_oracle_late'] = row['oracle'][1] / rows['undistorted']['off'][1]
             for anchor in ANCHORS:
                 if all(anchor in c for c in cells):
                     row[anchor] = (_mean(c[anchor][0] for c in cells),
@@ -230,20 +296,23 @@ def markdown(result, levels, meta):
              '### Means', '',
              '| trials | distortion | ours all | ours late | late ÷ undistorted (goal ≤ 1.2) '
              '| all ÷ undistorted (goal ≤ 2) | converged after (s) | VQF all / late '
-             '| Madgwick all / late |',
-             '|---|---|---:|---:|---:|---:|---:|---:|---:|']
+             '| Madgwick all / late | yardstick late | yardstick late ÷ undistorted |',
+             '|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|']
     for label in ('tuning', 'held out', 'all'):
         rows = summ[label]
         und = rows['undistorted']
         lines.append(f'| {label} | none (calibration on) | {_f(und["on"][0])} | '
-                     f'{_f(und["on"][1])} | | | {_f(und["converged_s"], 1)} | | |')
+                     f'{_f(und["on"][1])} | | | {_f(und["converged_s"], 1)} | | | '
+                     f'{_f(und["off"][1])} (calibration off) | |')
         for level in levels:
             r = rows[level]
             never = f' ({r["never"]} never)' if r['never'] else ''
             anchors = [' / '.join(_f(v) for v in r[a]) if a in r else '—' for a in ANCHORS]
             lines.append(f'| {label} | {level:g} × \\|m\\| | {_f(r["ours"][0])} | '
                          f'{_f(r["ours"][1])} | {_f(r["ratio_late"])} | {_f(r["ratio_all"])} '
-                         f'| {_f(r["converged_s"], 1)}{never} | {anchors[0]} | {anchors[1]} |')
+                         f'| {_f(r["converged_s"], 1)}{never} | {anchors[0]} | {anchors[1]} '
+                         f'| {_f(r["oracle"][1]) if "oracle" in r else "—"} '
+                         f'| {_f(r.get("ratio_oracle_late"))} |')
     lines += ['', '### Undistorted: the calibration on and off', '',
               'The same estimator on the trials as recorded (BROAD\'s fields are calibrated), '
               '9D total RMSE over the movement samples; 6D inclination (the calibration acts '
@@ -259,17 +328,19 @@ def markdown(result, levels, meta):
                   + '; '.join(f'{n}: {_f(result[n]["ours_on"][0])} on, '
                               f'{_f(result[n]["ours_off"][0])} off' for n in magnets) + '.']
     lines += ['', '### Per trial', '', '<details><summary>Table per trial</summary>', '',
-              '| trial | split | undistorted on / off | '
-              + ' | '.join(f'{level:g} × \\|m\\|: ours all / late (converged s) | VQF | Madgwick'
-                           for level in levels) + ' |',
-              '|---|---|---|' + '---|---|---|' * len(levels)]
+              '| trial | split | undistorted on / off (all) | '
+              + ' | '.join(f'{level:g} × \\|m\\|: ours all / late (converged s) | yardstick '
+                           f'late | VQF | Madgwick' for level in levels) + ' |',
+              '|---|---|---|' + '---|---|---|---|' * len(levels)]
     for name in names:
         r = result[name]
-        cells = [f'{_f(r["ours_on"][0])} / {_f(r["ours_off"][0])}']
+        cells = [f'{_f(r["ours_on"][0])} / {_f(r["ours_off"][0])} '
+                 f'(late, off: {_f(r["ours_off"][1])})']
         for level in levels:
             c = r['levels'][level]
             conv = '—' if c['converged_s'] is None else f'{c["converged_s"]:.1f}'
             cells.append(f'{_f(c["ours"][0])} / {_f(c["ours"][1])} ({conv})')
+            cells.append(_f(c['oracle'][1]) if 'oracle' in c else '—')
             cells += ['/'.join(_f(v) for v in c[a]) if a in c else '—' for a in ANCHORS]
         lines.append(f'| {name} | {"tuning" if name in tuning else "held out"} | '
                      + ' | '.join(cells) + ' |')
@@ -292,7 +363,9 @@ def text_report(result, levels):
             extra = ' '.join(f'{a} {_f(r[a][0])}/{_f(r[a][1])}' for a in ANCHORS if a in r)
             lines.append(f'  {level:g}×|m|: ours {_f(r["ours"][0])}/{_f(r["ours"][1])}  '
                          f'late ratio {_f(r["ratio_late"])} (≤1.2)  all ratio '
-                         f'{_f(r["ratio_all"])} (≤2)  converged {_f(r["converged_s"], 1)} s'
+                         f'{_f(r["ratio_all"])} (≤2)  yardstick late '
+                         f'{_f(r.get("oracle", (None, None))[1])} ratio '
+                         f'{_f(r.get("ratio_oracle_late"))}  converged {_f(r["converged_s"], 1)} s'
                          f'{" (" + str(r["never"]) + " never)" if r["never"] else ""}  {extra}')
     lines.append('')
     for name in sorted(result):

@@ -270,3 +270,30 @@ def test_the_header_says_when_the_machine_was_not_idle():
     assert 'not idle' not in report.machine_section(machine, 'c')
     machine['load_end'] = 6.02
     assert 'load average reached 6.02 on 2 cores' in report.machine_section(machine, 'c')
+
+
+def test_the_magcal_yardstick_recovers_a_known_calibration_from_known_attitudes():
+    """bench.magcal's least-squares yardstick: ``A y − c`` is the field again, up to scale."""
+    from bench.magcal import oracle_calibration
+    from ext_observer.core.quaternion import random_unit_quaternions
+    rng = np.random.default_rng(3)
+    q = random_unit_quaternions(rng, (400,))
+    w, x, y, z = q.T
+    r = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                  2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                  2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+                 axis=1).reshape(-1, 3, 3)
+    world = np.array([0.0, 16.0, -41.0])
+    field = np.einsum('nji,j->ni', r, world)  # Rᵀ m_w, body frame
+    soft = np.array([[1.08, 0.05, -0.03], [0.05, 0.95, 0.02], [-0.03, 0.02, 1.04]])
+    bias = np.array([30.0, -50.0, 20.0])
+    raw = field @ soft.T + bias + rng.normal(scale=0.3, size=field.shape)
+    raw[::50] += 40.0  # a magnet near the path: the robust refit drops these
+    a, c = oracle_calibration(q, raw)
+    calibrated = raw @ a.T - c
+    scale = np.median(np.linalg.norm(calibrated, axis=1) / np.linalg.norm(field, axis=1))
+    good = np.ones(len(raw), dtype=bool)
+    good[::50] = False
+    error = np.linalg.norm(calibrated[good] / scale - field[good], axis=1)
+    assert np.max(error) < 0.05 * np.linalg.norm(world)
+    np.testing.assert_allclose(a / scale, np.linalg.inv(soft), atol=0.01)
