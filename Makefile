@@ -40,8 +40,15 @@ demo: $(RUNTIME_STAMP)
 # The whole suite, with the benchmark's own logic checks (bench/test_*.py).
 # test_core_observer.py checks in a fresh interpreter that the core imports
 # no ROS.
+# Then the estimator's own tests again on the plain kernels (no numba):
+# the compiled kernels are used wherever numba is installed, and the plain
+# path is what a pip install without numba runs.
+PLAIN_TESTS := test/test_core_ahrs.py test/test_core_ahrs_params.py test/test_core_magcal.py \
+	test/test_raw_imu.py test/test_compiled.py test/test_covariance.py test/test_recording.py
+
 test: $(TEST_STAMP)
 	$(PY) -m pytest $(PYTEST_ARGS) test $(wildcard bench/test_*.py)
+	EXT_OBSERVER_COMPILED=0 $(PY) -m pytest $(PYTEST_ARGS) $(PLAIN_TESTS)
 
 # Which lines of the raw-IMU path the suite runs (docs/tests.md#coverage):
 # the suite under coverage.py, in-process code only (the node processes the

@@ -386,7 +386,8 @@ class RawImuEstimator:
                 ('inclination_std_deg',
                  math.degrees(tracker.inclination_std) if started else math.nan),
                 ('heading_std_deg', math.degrees(tracker.heading_std) if started else math.nan),
-                ('calibration', core.calibration_state)] + self._calibration_values()
+                ('calibration', core.calibration_state),
+                ('kernels', 'compiled' if core.compiled else 'plain')] + self._calibration_values()
 
     def _calibration_values(self):
         calibration = self.core.calibration

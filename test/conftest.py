@@ -173,3 +173,17 @@ def ros_processes(ros_domain_id, tmp_path):
             except subprocess.TimeoutExpired:
                 pass
             process.kill()
+
+
+def pytest_sessionstart(session):
+    """
+    Get the estimator's compiled kernels once, before any test starts a node.
+
+    With numba installed (requirements-test.txt), the first process to ask
+    compiles them into the on-disk cache (about 10 s on two cores); nodes
+    started later load them from there in about half a second instead of
+    each compiling at once under the tests' start-up timeouts.
+    ``EXT_OBSERVER_COMPILED=0`` skips it (the plain kernels).
+    """
+    from ext_observer.core.compiled import kernels
+    kernels()

@@ -14,11 +14,14 @@ observer
 gyro_model
     The simulated gyro and attitude sensor.
 magcal, magcal_model
-    Online magnetometer calibration (hard and soft iron) from the gyro; its
-    model and the check of a saved calibration.
+    Online magnetometer calibration (hard and soft iron) from the gyro; the
+    check of a saved calibration.
 ahrs, ahrs_params, ahrs_math, ahrs_batch
-    The raw-IMU estimator, its parameters, its float-or-array arithmetic and
-    frames, and many recordings at once.
+    The raw-IMU estimator, its parameters, its world frames and first
+    attitude, and many recordings at once.
+ahrs_kernel, magcal_kernel, compiled
+    The estimator's steps and the calibration's filter as functions on a
+    flat state (one source), and their compiled form (numba, optional).
 uncertainty
     The variance of the raw-IMU estimate's inclination and heading.
 """

@@ -1,9 +1,10 @@
 """
-Many recordings through the raw-IMU estimator at once (:func:`estimate_batch`).
+Many recordings through the raw-IMU estimator (:func:`estimate_batch`).
 
-Vectorized in this process (one :class:`~ext_observer.core.ahrs.AhrsObserver`
-on ``(B,)`` arrays) or shared among forked workers, each on Python floats:
-the same estimator, the same results to rounding.
+Each recording runs whole through one
+:class:`~ext_observer.core.ahrs.AhrsObserver` (:meth:`~ext_observer.core.ahrs.AhrsObserver.run`:
+compiled by numba where it is installed, plain Python otherwise), in this
+process or shared among forked workers: the same estimator, the same results.
 """
 
 import multiprocessing
@@ -11,6 +12,7 @@ import multiprocessing
 import numpy as np
 
 from .ahrs_params import AhrsParams
+from .compiled import kernels
 
 __all__ = ['estimate_batch']
 
@@ -18,18 +20,12 @@ __all__ = ['estimate_batch']
 def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extended',
                    workers=1):
     """
-    Run many recordings at once (one estimator each, same parameters).
+    Run many recordings (one estimator each, same parameters).
 
-    Two ways, one estimator, the same results (to rounding, about 1e-12;
-    the magnetometer calibration's Kalman filter, multiplied in a stack
-    when vectorized, magnifies rounding to about 1e-11):
-
-    - ``workers=1``: in this process, vectorized across the recordings (one
-      :class:`AhrsObserver` on arrays of shape ``(B,)``). A step costs about
-      the same whatever ``B``, so the time is that of the longest recording.
-    - ``workers>1``: the recordings shared among forked processes, each run
-      on Python floats, longest first. The time is the total work over
-      ``workers``: faster than the vectorized way from two processes on.
+    Each recording runs whole, on floats (:meth:`AhrsObserver.run
+    <ext_observer.core.ahrs.AhrsObserver.run>`); ``workers > 1`` shares them
+    among forked processes, longest first, which takes the total work over
+    ``workers``. The results do not depend on ``workers``.
 
     Parameters
     ----------
@@ -53,6 +49,7 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
         The ambient estimates ``q̂_k`` (not normalized), sensor → ENU.
 
     """
+    global _JOB
     count = len(gyr)
     if not (len(acc) == len(mag) == len(rate_hz) == len(use_mag) == count):
         raise ValueError('gyr, acc, mag, rate_hz and use_mag must have one entry per recording')
@@ -63,57 +60,39 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
     use_mag = np.asarray(use_mag, dtype=bool)
     lengths = [len(g) for g in gyr]
     workers = max(1, min(int(workers), count))
-    if workers > 1:
-        global _JOB
-        _JOB = (gyr, acc, mag, use_mag, dt, params, variant)
+    _JOB = (gyr, acc, mag, use_mag, dt, params, variant)
+    out = [None] * count
+    kernels()  # compiled (or loaded from numba's cache) once, before the workers fork
+    try:
+        if workers == 1:
+            for i in range(count):
+                out[i] = _run_one(i)[1]
+            return out
         order = sorted(range(count), key=lambda i: -lengths[i])
-        out = [None] * count
-        try:
-            # Forked workers read the inputs from this module (no copies).
-            with multiprocessing.get_context('fork').Pool(workers) as pool:
-                for i, q in pool.imap_unordered(_run_one, order):
-                    out[i] = q
-        finally:
-            _JOB = None
+        # Forked workers read the inputs from this module (no copies).
+        with multiprocessing.get_context('fork').Pool(workers) as pool:
+            for i, q in pool.imap_unordered(_run_one, order):
+                out[i] = q
         return out
-
-    n_max = max(lengths)
-
-    def stack(arrays):
-        out = np.empty((n_max, 3, count))
-        for i, a in enumerate(arrays):
-            a = np.zeros((lengths[i], 3)) if a is None else np.asarray(a, dtype=float)
-            out[:len(a), :, i] = _hold_finite(a)
-            out[len(a):, :, i] = out[len(a) - 1, :, i]  # hold the last sample past the end
-        return out
-
-    g_all, a_all, m_all = stack(gyr), stack(acc), stack(mag)
-    from .ahrs import AhrsObserver  # ahrs imports this module
-    est = AhrsObserver(params, use_mag=use_mag, batch=count, variant=variant)
-    out = np.empty((n_max, 4, count))
-    update = est.update
-    for k in range(n_max):
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = update(g_all[k], a_all[k], m_all[k], dt)
-    return [np.ascontiguousarray(out[:n, :, i]) for i, n in enumerate(lengths)]
+    finally:
+        _JOB = None
 
 
 _JOB = None
 
 
 def _run_one(i):
-    """Recording ``i`` of ``_JOB`` on Python floats: ``(i, estimates)``."""
+    """Recording ``i`` of ``_JOB``: ``(i, estimates)``."""
     gyr, acc, mag, use_mag, dt, params, variant = _JOB
     if params is not None and any(np.ndim(v) for v in params.as_dict().values()):
         params = AhrsParams(**{name: value[i] if np.ndim(value) else value
                                for name, value in params.as_dict().items()})
     from .ahrs import AhrsObserver  # ahrs imports this module
     est = AhrsObserver(params, use_mag=bool(use_mag[i]), variant=variant)
-    g = _hold_finite(np.asarray(gyr[i], dtype=float)).tolist()
-    a = _hold_finite(np.asarray(acc[i], dtype=float)).tolist()
-    m = (_hold_finite(np.asarray(mag[i], dtype=float)).tolist() if use_mag[i]
-         else [None] * len(g))
-    update = est.update
-    return i, np.array([update(g[k], a[k], m[k], dt) for k in range(len(g))])
+    g = _hold_finite(np.asarray(gyr[i], dtype=float))
+    a = _hold_finite(np.asarray(acc[i], dtype=float))
+    m = _hold_finite(np.asarray(mag[i], dtype=float)) if use_mag[i] else None
+    return i, est.run(g, a, m, dt)
 
 
 def _hold_finite(a):

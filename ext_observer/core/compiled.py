@@ -1,0 +1,261 @@
+"""
+The raw-IMU estimator's kernels, plain or compiled by numba: :func:`kernels`.
+
+The estimator's steps are written once, in :mod:`~ext_observer.core.magcal_kernel`
+and :mod:`~ext_observer.core.ahrs_kernel`, in the part of Python that numba
+compiles. Without numba (an optional dependency: ``pip install numba``)
+they run as they are, on a Python list of floats. With it, this module
+joins the two files' source into one module (the imports between them
+dropped; a name defined differently in both is an error), compiles every function of it
+with ``numba.njit(cache=True)`` and runs them on a float64 array: the same
+source, compiled.
+
+The joined source is written to a cache folder under a name made of its
+hash, so numba's on-disk cache (beside it, in ``__pycache__``) always
+belongs to the source it was compiled from: a changed kernel is a new file,
+compiled afresh, and a process started later loads the compiled code
+instead of compiling it again. The folder: ``$EXT_OBSERVER_CACHE``, else
+``$XDG_CACHE_HOME/ext_observer``, else ``~/.cache/ext_observer``; a
+temporary folder where none of these can be written.
+
+``EXT_OBSERVER_COMPILED`` chooses for the whole process: ``0`` plain, ``1``
+compiled (an error without numba), unset or ``auto``: compiled where numba
+imports.
+"""
+
+import ast
+import hashlib
+import importlib.util
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+__all__ = ['Kernels', 'kernels', 'compiled_available', 'CompiledUnavailable']
+
+_SOURCES = ('magcal_kernel.py', 'ahrs_kernel.py')
+_ENV = 'EXT_OBSERVER_COMPILED'
+
+
+class CompiledUnavailable(RuntimeError):
+    """The compiled kernels were asked for and cannot be had (numba missing or failing)."""
+
+
+class Kernels:
+    """
+    One set of kernels.
+
+    Attributes
+    ----------
+    ahrs, magcal : module
+        The functions and layout constants of
+        :mod:`~ext_observer.core.ahrs_kernel` and
+        :mod:`~ext_observer.core.magcal_kernel` (one joined module when
+        compiled).
+    compiled : bool
+    load_seconds : float
+        How long getting them took (compiling, or loading numba's cache).
+    """
+
+    def __init__(self, ahrs, magcal, compiled, load_seconds=0.0):
+        self.ahrs = ahrs
+        self.magcal = magcal
+        self.compiled = compiled
+        self.load_seconds = load_seconds
+
+    def container(self, size):
+        """A zeroed state of ``size`` slots: a float64 array compiled, a list plain."""
+        return np.zeros(size) if self.compiled else [0.0] * size
+
+
+_PLAIN = None
+_COMPILED = None
+_FAILURE = None
+
+
+def _plain():
+    global _PLAIN
+    if _PLAIN is None:
+        from . import ahrs_kernel, magcal_kernel
+        _PLAIN = Kernels(ahrs_kernel, magcal_kernel, False)
+    return _PLAIN
+
+
+def compiled_available():
+    """Whether numba imports (the compiled kernels can be had)."""
+    try:
+        import numba  # noqa: F401
+    except Exception:  # ImportError, or a broken install
+        return False
+    return True
+
+
+def _wanted(compiled):
+    if compiled is not None:
+        return bool(compiled), bool(compiled)
+    value = os.environ.get(_ENV, 'auto').strip().lower()
+    if value in ('0', 'false', 'no', 'off'):
+        return False, False
+    if value in ('1', 'true', 'yes', 'on'):
+        return True, True
+    if value not in ('', 'auto'):
+        raise ValueError(f'{_ENV} must be 0, 1 or auto, got {value!r}')
+    return compiled_available(), False
+
+
+def kernels(compiled=None):
+    """
+    The kernels to run: compiled or plain.
+
+    Parameters
+    ----------
+    compiled : bool, optional
+        True: compiled (``CompiledUnavailable`` without numba); False:
+        plain; None: as ``EXT_OBSERVER_COMPILED`` says (default: compiled
+        where numba imports, else plain).
+
+    Returns
+    -------
+    Kernels
+
+    """
+    global _COMPILED, _FAILURE
+    want, required = _wanted(compiled)
+    if not want:
+        return _plain()
+    if _COMPILED is None and _FAILURE is None:
+        try:
+            _COMPILED = _load_compiled()
+        except Exception as exc:  # numba missing, or it failed: say why when asked
+            _FAILURE = exc
+    if _COMPILED is not None:
+        return _COMPILED
+    if required:
+        raise CompiledUnavailable(f'the compiled kernels are not available: {_FAILURE}') \
+            from _FAILURE
+    return _plain()
+
+
+def joined_source():
+    """The kernels' source as one module: ``(text, sha256 hex)``."""
+    folder = os.path.dirname(os.path.abspath(__file__))
+    parts, defined = [], {}
+    for name in _SOURCES:
+        with open(os.path.join(folder, name), encoding='utf-8') as f:
+            text = f.read()
+        tree = ast.parse(text)
+        lines = text.splitlines()
+        drop = set()
+        for node in tree.body:
+            if isinstance(node, ast.ImportFrom) and node.level > 0:
+                drop.update(range(node.lineno - 1, node.end_lineno))
+                continue
+            targets = []
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                targets = [node.name]
+            elif isinstance(node, ast.Assign):
+                targets = [t.id for t in node.targets if isinstance(t, ast.Name)]
+            definition = ast.unparse(node)
+            for target in targets:
+                if target.startswith('__'):
+                    continue
+                # The same constant in both files is harmless; anything else is not.
+                if target in defined and defined[target][1] != definition:
+                    raise RuntimeError(f'{target} is defined in both {defined[target][0]} and '
+                                       f'{name}: the kernels are joined into one module')
+                defined[target] = (name, definition)
+        kept = ['' if i in drop else line for i, line in enumerate(lines)]
+        parts.append(f'# --- {name} ---\n' + '\n'.join(kept) + '\n')
+    text = '\n'.join(parts)
+    return text, hashlib.sha256(text.encode('utf-8')).hexdigest()
+
+
+def cache_folder():
+    """Where the joined source and numba's cache of it live (created if needed)."""
+    candidates = []
+    if os.environ.get('EXT_OBSERVER_CACHE'):
+        candidates.append(os.environ['EXT_OBSERVER_CACHE'])
+    base = os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache')
+    candidates.append(os.path.join(base, 'ext_observer'))
+    candidates.append(os.path.join(tempfile.gettempdir(), f'ext_observer-{os.getuid()}'))
+    for folder in candidates:
+        try:
+            os.makedirs(folder, exist_ok=True)
+            probe = os.path.join(folder, f'.probe-{os.getpid()}')
+            with open(probe, 'w', encoding='utf-8'):
+                pass
+            os.remove(probe)
+            return folder
+        except OSError:
+            continue
+    raise CompiledUnavailable(f'no writable cache folder among {candidates}')
+
+
+def _load_compiled():
+    start = time.perf_counter()
+    import numba
+    text, digest = joined_source()
+    folder = cache_folder()
+    name = f'ext_observer_kernels_{digest[:16]}'
+    path = os.path.join(folder, name + '.py')
+    if not os.path.exists(path):
+        partial = f'{path}.{os.getpid()}.tmp'
+        with open(partial, 'w', encoding='utf-8') as f:
+            f.write(text)
+        os.replace(partial, path)  # atomic: processes starting together agree
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    # Every function compiled before any runs, so that calls between them
+    # resolve to the compiled ones.
+    for key, value in list(vars(module).items()):
+        if callable(value) and getattr(value, '__module__', None) == name \
+                and not isinstance(value, type):
+            setattr(module, key, numba.njit(cache=True)(value))
+    result = Kernels(module, module, True)
+    _warm_up(result)
+    result.load_seconds = time.perf_counter() - start
+    return result
+
+
+def _warm_up(k):
+    """Compile (or load from the cache) what the estimator calls, now rather than mid-run."""
+    from .ahrs import AhrsObserver
+    from .ahrs_params import AhrsParams
+    global _COMPILED
+    _COMPILED = k  # AhrsObserver(compiled=True) below asks for these
+    try:
+        est = AhrsObserver(AhrsParams(), compiled=True)
+        dt = 0.01
+        for i in range(40):
+            a = 0.02 * i
+            est.update((0.3, -0.2, 0.5), (0.1, 0.2, 9.8), (20.0 * np.cos(a), 20.0 * np.sin(a),
+                                                           -40.0), dt)
+        cal = est.calibration
+        _ = (cal.quality, cal.bias, cal.soft_iron, cal.field, cal.state, cal.counts)
+        est.update_mag((20.0, 0.0, -40.0), 0.02)
+        est.load_calibration((1.0, 2.0, 3.0), np.eye(3))
+        est.reset()
+        six = AhrsObserver(AhrsParams(), use_mag=False, compiled=True)
+        out = np.zeros((3, 4))
+        g = np.zeros((3, 3))
+        acc = np.tile([0.0, 0.0, 9.8], (3, 1))
+        k.ahrs.ahrs_run(six._states[0], g, acc, g, 3, False, dt, out)
+    finally:
+        _COMPILED = None
+
+
+def main():
+    """``python -m ext_observer.core.compiled``: compile into the cache now; print how long it took."""
+    k = kernels(True)
+    print(f'compiled kernels ready in {k.load_seconds:.2f} s (cache: {cache_folder()})')
+    return 0
+
+
+if __name__ == '__main__':
+    # The package's module, not this __main__ copy: one set of kernels.
+    from ext_observer.core import compiled
+    sys.exit(compiled.main())

@@ -1,0 +1,129 @@
+"""
+The compiled kernels (numba) and the plain ones: one source, the same estimates.
+
+The raw-IMU estimator's steps (core/ahrs_kernel.py, core/magcal_kernel.py)
+run as plain Python, or compiled by numba where it is installed
+(core/compiled.py). Here both run the shipped BROAD excerpts, sample by
+sample and whole, and must agree to 1e-12; the joined source must hold
+every kernel function; and without numba the package must run plain.
+"""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ext_observer.core import compiled as compiled_module
+from ext_observer.core.ahrs import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs_batch import estimate_batch
+
+DATA = os.path.join(os.path.dirname(__file__), 'data')
+EXCERPTS = sorted(f for f in os.listdir(DATA) if f.endswith('.npz'))
+
+needs_numba = pytest.mark.skipif(not compiled_module.compiled_available(),
+                                 reason='numba is not installed (requirements-test.txt has it)')
+
+
+def _excerpt(name):
+    d = np.load(os.path.join(DATA, name))
+    return d['gyr'], d['acc'], d['mag'], float(d['rate'])
+
+
+def _per_sample(est, gyr, acc, mag, rate):
+    g, a, m = gyr.tolist(), acc.tolist(), mag.tolist()
+    return np.array([est.update(g[k], a[k], m[k], 1.0 / rate) for k in range(len(g))])
+
+
+@needs_numba
+@pytest.mark.parametrize('name', EXCERPTS)
+@pytest.mark.parametrize('mode', ['9D', '6D', 'no-calibration', 'motion-bias'])
+def test_compiled_and_plain_agree_to_1e_12_on_the_excerpts(name, mode):
+    gyr, acc, mag, rate = _excerpt(name)
+    params = AhrsParams(mag_cal=mode != 'no-calibration',
+                        tau_bias=30.0 if mode == 'motion-bias' else 0.0)
+    runs = {}
+    for compiled in (False, True):
+        est = AhrsObserver(params, use_mag=mode != '6D', compiled=compiled)
+        assert est.compiled is compiled
+        runs[compiled] = (_per_sample(est, gyr, acc, mag, rate), est)
+    q_plain, plain = runs[False]
+    q_jit, jit = runs[True]
+    assert np.max(np.abs(q_jit - q_plain)) <= 1e-12
+    assert np.max(np.abs(np.subtract(jit.bias, plain.bias))) <= 1e-12
+    if plain.calibration is not None:
+        assert jit.calibration_state == plain.calibration_state
+        for key in plain.calibration.counts:
+            np.testing.assert_array_equal(jit.calibration.counts[key],
+                                          plain.calibration.counts[key])
+        np.testing.assert_allclose(jit.calibration.bias, plain.calibration.bias,
+                                   rtol=0, atol=1e-9 * np.max(np.abs(mag)))
+        assert abs(jit.calibration.quality - plain.calibration.quality) <= 1e-12
+    # The whole-recording loop gives the per-sample estimates.
+    est = AhrsObserver(params, use_mag=mode != '6D', compiled=True)
+    whole = est.run(gyr, acc, mag, 1.0 / rate)
+    assert np.max(np.abs(whole - q_jit)) <= 1e-12
+
+
+@pytest.mark.parametrize('compiled', [False, pytest.param(True, marks=needs_numba)])
+def test_the_whole_recording_loop_gives_the_per_sample_estimates(compiled):
+    gyr, acc, mag, rate = _excerpt(EXCERPTS[0])
+    gyr, acc, mag = gyr[:3000], acc[:3000], mag[:3000]
+    per_sample = _per_sample(AhrsObserver(compiled=compiled), gyr, acc, mag, rate)
+    whole = AhrsObserver(compiled=compiled).run(gyr, acc, mag, 1.0 / rate)
+    assert whole.shape == per_sample.shape
+    assert np.max(np.abs(whole - per_sample)) <= 1e-12
+    # estimate_batch runs the same loop, in this process or in workers.
+    both = estimate_batch([gyr, gyr[:2000]], [acc, acc[:2000]], [mag, mag[:2000]],
+                          [rate, rate], [True, True], workers=2)
+    assert np.max(np.abs(both[0] - per_sample)) <= 1e-12
+    assert np.max(np.abs(both[1] - per_sample[:2000])) <= 1e-12
+
+
+def test_the_joined_source_holds_every_kernel_function():
+    text, digest = compiled_module.joined_source()
+    from ext_observer.core import ahrs_kernel, magcal_kernel
+    for module in (ahrs_kernel, magcal_kernel):
+        names = [n for n, v in vars(module).items()
+                 if callable(v) and getattr(v, '__module__', '') == module.__name__]
+        assert names
+        for n in names:
+            assert f'\ndef {n}(' in text, n
+    assert 'from .' not in text  # the imports between the kernels are dropped
+    assert len(digest) == 64
+
+
+def test_without_numba_the_estimator_runs_plain():
+    # A process where numba cannot be imported: auto falls back to plain,
+    # and asking for the compiled kernels names why they are not there.
+    code = '\n'.join([
+        'import sys',
+        "sys.modules['numba'] = None",
+        'from ext_observer.core.ahrs import AhrsObserver',
+        'from ext_observer.core.compiled import CompiledUnavailable, compiled_available',
+        'assert not compiled_available()',
+        'est = AhrsObserver()',
+        'assert not est.compiled',
+        'q = est.update((0.0, 0.0, 0.1), (0.0, 0.0, 9.8), (20.0, 0.0, -40.0), 0.01)',
+        'assert len(q) == 4',
+        'try:',
+        '    AhrsObserver(compiled=True)',
+        'except CompiledUnavailable as exc:',
+        "    print('refused:', exc)",
+        'else:',
+        "    raise SystemExit('compiled without numba')",
+    ])
+    env = dict(os.environ, EXT_OBSERVER_COMPILED='auto')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert 'refused: the compiled kernels are not available' in out.stdout
+
+
+def test_the_environment_chooses_the_kernels(monkeypatch):
+    monkeypatch.setenv('EXT_OBSERVER_COMPILED', '0')
+    assert not AhrsObserver().compiled
+    monkeypatch.setenv('EXT_OBSERVER_COMPILED', 'maybe')
+    with pytest.raises(ValueError, match='EXT_OBSERVER_COMPILED must be 0, 1 or auto'):
+        AhrsObserver()
