@@ -62,7 +62,10 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
     workers = max(1, min(int(workers), count))
     _JOB = (gyr, acc, mag, use_mag, dt, params, variant)
     out = [None] * count
-    kernels()  # compiled (or loaded from numba's cache) once, before the workers fork
+    if workers > 1 and kernels().compiled:
+        # The loop compiled (or loaded from numba's cache) once, before the workers fork.
+        from .ahrs import AhrsObserver  # ahrs imports this module
+        AhrsObserver(use_mag=False).run(np.zeros((1, 3)), np.array([[0.0, 0.0, 9.8]]), None, dt)
     try:
         if workers == 1:
             for i in range(count):
