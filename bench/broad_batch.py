@@ -89,7 +89,7 @@ def main(argv=None):
     parser.add_argument('--runs', type=int, default=3)
     parser.add_argument('--workers', type=int, help='default: the CPUs')
     parser.add_argument('--vectorized', action='store_true',
-                        help='also one run vectorized in this process (workers=1)')
+                        help='also one run in this process (workers=1)')
     parser.add_argument('--json', metavar='PATH', help='also write the results there')
     args = parser.parse_args(argv)
     if args.runs < 1:

@@ -190,7 +190,7 @@ def _batch_lines(b):
         f'estimator (`estimate_batch`, every trial in 9D and 6D: {b["recordings"]} recordings, '
         f'{b["sample_updates"]:,} sample-updates), reading the files not timed; '
         f'{len(runs)} runs with the default workers (the CPUs)'
-        + (', then one vectorized in one process (`workers=1`)' if b.get('vectorized') else '')
+        + (', then one in a single process (`workers=1`)' if b.get('vectorized') else '')
         + '. CPU: user + system time of all the processes.', '',
         _table(['workers', 'wall clock', 'CPU', 'CPU / workers', 'CPU per sample-update',
                 'load average (before, after)'], rows), '',

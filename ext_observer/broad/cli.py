@@ -67,7 +67,7 @@ def build_parser():
     parser.add_argument('--workers', type=int, default=cpus,
                         help="processes of our estimator's one batched call "
                              '(estimate_batch(workers=N); default: the CPUs, '
-                             f'{cpus} here; 1: vectorized in this process)')
+                             f'{cpus} here; 1: all in this process)')
     parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
     parser.add_argument('--covariance', action='store_true',
                         help='instead: is the published orientation covariance honest? (our '

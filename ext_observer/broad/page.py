@@ -300,7 +300,7 @@ def _run_time(page):
         rows.append([OURS, f'{secs[OURS]:.1f} s',
                      f'{page.n_trials} trials × {len(page.modes)} modes, one batched call'
                      + (f' ({workers} processes, each recording on floats)' if workers > 1
-                        else ' (vectorized, one process)')])
+                        else ' (one process)')])
     if OURS_PLAIN in secs:
         rows.append([OURS_PLAIN, f'{secs[OURS_PLAIN]:.1f} s', 'the same, no extension term'])
     for anchor in ANCHORS:
@@ -377,5 +377,5 @@ def _reproduce():
             '(`test_core_real_data.py`). Options: `--mode 6D|9D|both`, '
             '`--no-anchors`, `--plain` (also without the extension term), '
             '`--trials NAME...`, `--jobs N` (processes for the anchors) and `--workers N` '
-            '(for our batched call; 1: vectorized in one process), both by default the '
+            '(for our batched call; 1: one process), both by default the '
             'CPUs; `make broad BROAD_ARGS="--jobs 1"` passes them on.', '']

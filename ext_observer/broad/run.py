@@ -36,7 +36,7 @@ def estimate_ours(trials, modes, variant, workers=1):
     variant : {'extended', 'plain'}
         With the extension term, or without it.
     workers : int
-        ``estimate_batch``'s processes (1: vectorized in this process).
+        ``estimate_batch``'s processes (1: all in this process).
 
     Returns
     -------
@@ -78,7 +78,7 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
         Processes for the anchors.
     workers : int
         Processes of our estimator's batched call (``estimate_batch``'s
-        ``workers``; 1: vectorized in this process).
+        ``workers``; 1: all in this process).
     plot_trial : str, optional
         Keep the per-sample errors of this trial (for ``plot``).
     progress : callable
