@@ -70,11 +70,14 @@ accelerometer reads about ``+9.81`` along the world vertical. Angular rate in
 rad/s, acceleration in m/s², the magnetic field in any unit (only its
 direction and its norm relative to the reference are used), time in s.
 
-One code path serves one estimate and a batch: every quantity is a Python
-float or a numpy array of shape ``(B,)``; :class:`AhrsObserver` picks the
-operations (``math`` or ``numpy``, :mod:`~ext_observer.core.ahrs_math`) once.
+The steps are written once, as functions on a flat state in
+:mod:`~ext_observer.core.ahrs_kernel` (the calibration's in
+:mod:`~ext_observer.core.magcal_kernel`): compiled by numba where it is
+installed, plain Python otherwise (:mod:`~ext_observer.core.compiled`), the
+same estimates. :class:`AhrsObserver` wraps them for one estimate on floats
+or a batch of ``(B,)`` arrays (each estimate stepping on floats in turn).
 The ROS node runs it on floats; :func:`estimate_batch`
-(:mod:`~ext_observer.core.ahrs_batch`) runs many recordings at once. The
+(:mod:`~ext_observer.core.ahrs_batch`) runs many recordings. The
 parameters: :class:`AhrsParams` (:mod:`~ext_observer.core.ahrs_params`).
 """
 
