@@ -251,14 +251,9 @@ def markdown(broad, steps, starts, meta, node=None):
 
 
 def write_docs(folder, section):
-    path = os.path.join(folder, 'compiled.md')
-    with open(path, encoding='utf-8') as f:
-        text = f.read()
-    head, rest = text.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    with open(path, 'w', encoding='utf-8') as f:
-        f.write(head + section + tail)
-    return path
+    """Put ``section`` between the markers of ``folder/compiled.md``."""
+    from bench.report import replace_section
+    return replace_section(os.path.join(folder, 'compiled.md'), section, BEGIN, END)
 
 
 def main(argv=None):

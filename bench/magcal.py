@@ -428,16 +428,8 @@ def plot(trial, traces, level, seed, path):
 
 def write_docs(docs_dir, section):
     """Put ``section`` between the markers of ``docs_dir/calibration.md``."""
-    path = os.path.join(docs_dir, 'calibration.md')
-    with open(path, encoding='utf-8') as f:
-        page = f.read()
-    if BEGIN not in page or END not in page:
-        raise ValueError(f'{path} has no generated section ({BEGIN} ... {END})')
-    head, rest = page.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    with open(path, 'w', encoding='utf-8') as f:
-        f.write(head + section + tail)
-    return path
+    from bench.report import replace_section
+    return replace_section(os.path.join(docs_dir, 'calibration.md'), section, BEGIN, END)
 
 
 def main(argv=None):

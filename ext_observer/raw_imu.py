@@ -333,7 +333,7 @@ class RawImuEstimator:
         if starting:
             self._start(dt)
         else:
-            self.uncertainty.step(dt, gyr, core.q, core.rest)
+            self.uncertainty.step(dt, gyr, q, core.rest)  # q: core.q, not reset
         return self.state, reason
 
     def _start(self, dt):

@@ -83,8 +83,8 @@ def test_the_whole_recording_loop_gives_the_per_sample_estimates(compiled):
 
 def test_the_joined_source_holds_every_kernel_function():
     text, digest = compiled_module.joined_source()
-    from ext_observer.core import ahrs_kernel, magcal_kernel
-    for module in (ahrs_kernel, magcal_kernel):
+    from ext_observer.core import ahrs_kernel, magcal_filter, magcal_kernel
+    for module in (ahrs_kernel, magcal_filter, magcal_kernel):
         names = [n for n, v in vars(module).items()
                  if callable(v) and getattr(v, '__module__', '') == module.__name__]
         assert names

@@ -19,9 +19,10 @@ magcal, magcal_model
 ahrs, ahrs_params, ahrs_math, ahrs_batch
     The raw-IMU estimator, its parameters, its world frames and first
     attitude, and many recordings at once.
-ahrs_kernel, magcal_kernel, compiled
+ahrs_kernel, magcal_kernel, magcal_filter, magcal_layout, compiled
     The estimator's steps and the calibration's filter as functions on a
-    flat state (one source), and their compiled form (numba, optional).
+    flat state (one source; the filter's steps and the state's slots in
+    their own modules), and their compiled form (numba, optional).
 uncertainty
     The variance of the raw-IMU estimate's inclination and heading.
 """

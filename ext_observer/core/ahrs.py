@@ -238,6 +238,12 @@ class AhrsObserver:
     def q(self):
         """The ambient estimate ``(w, x, y, z)``; None before the first sample."""
         k = self._kernels.ahrs
+        if self.batch is None:  # the node's path, read every sample: no generator
+            s = self._states[0]
+            if s[k.S_INIT] == 0.0:
+                return None
+            i = k.S_Q
+            return float(s[i]), float(s[i + 1]), float(s[i + 2]), float(s[i + 3])
         if not any(s[k.S_INIT] != 0.0 for s in self._states):
             return None
         return self._slots(k.S_Q, 4)

@@ -1,14 +1,15 @@
 """
 The raw-IMU estimator's kernels, plain or compiled by numba: :func:`kernels`.
 
-The estimator's steps are written once, in :mod:`~ext_observer.core.magcal_kernel`
-and :mod:`~ext_observer.core.ahrs_kernel`, in the part of Python that numba
-compiles. Without numba (an optional dependency: ``pip install numba``)
-they run as they are, on a Python list of floats. With it, this module
-joins the two files' source into one module (the imports between them
-dropped; a name defined differently in both is an error), compiles every function of it
-with ``numba.njit(cache=True)`` and runs them on a float64 array: the same
-source, compiled.
+The estimator's steps are written once, in :mod:`~ext_observer.core.ahrs_kernel`
+and the calibration's kernel (:mod:`~ext_observer.core.magcal_layout`,
+:mod:`~ext_observer.core.magcal_filter`, :mod:`~ext_observer.core.magcal_kernel`),
+in the part of Python that numba compiles. Without numba (an optional
+dependency: ``pip install numba``) they run as they are, on a Python list of
+floats. With it, this module joins the files' source into one module (the
+imports between them dropped; a name defined differently in two is an
+error), compiles every function of it with ``numba.njit(cache=True)`` and
+runs them on a float64 array: the same source, compiled.
 
 The joined source is written to a cache folder under a name made of its
 hash, so numba's on-disk cache (beside it, in ``__pycache__``) always
@@ -35,7 +36,8 @@ import numpy as np
 
 __all__ = ['Kernels', 'kernels', 'compiled_available', 'CompiledUnavailable']
 
-_SOURCES = ('magcal_kernel.py', 'ahrs_kernel.py')
+# In this order: each file's names are defined before the next one's functions use them.
+_SOURCES = ('magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py', 'ahrs_kernel.py')
 _ENV = 'EXT_OBSERVER_COMPILED'
 
 
