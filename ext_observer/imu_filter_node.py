@@ -33,6 +33,7 @@ from std_srvs.srv import Trigger
 
 from ext_observer.calibrate import write_params
 from ext_observer.conversions import nanoseconds_from_stamp, vector_from_msg
+from ext_observer.core.compiled import BackgroundCompile, start_plan
 from ext_observer.estimator_node import EstimatorNode
 from ext_observer.imu_filter_parameters import (IMU_FILTER_PARAMETERS, imu_filter_settings,
                                                 MADGWICK_UNUSED)
@@ -77,7 +78,11 @@ class ImuFilterNode(EstimatorNode):
     def __init__(self, node_name=NODE_NAME, **kwargs):
         super().__init__(node_name, IMU_FILTER_PARAMETERS, imu_filter_settings, **kwargs)
         settings = self.parameters.settings
-        self.pipeline = RawImuPipeline(settings, depth=settings['queue_depth'])
+        # The compiled kernels where numba is installed; with a cold cache
+        # the node does not wait for the compiler (docs/compiled.md).
+        plan = start_plan()
+        self.pipeline = RawImuPipeline(settings, depth=settings['queue_depth'],
+                                       compiled=False if plan == 'background' else None)
         self.pairer = self.pipeline.pairer
         # One set of counters: the pipeline counts the resets it makes
         # itself (stamps), the node those it is told of (clock, service).
@@ -102,6 +107,13 @@ class ImuFilterNode(EstimatorNode):
                else ' (use_mag false: heading free)')
             + f', world frame {settings["world_frame"]}, '
             f'{self.pipeline.estimator.core.params}')
+        self.compiler = None
+        if plan == 'background':
+            self.compiler = BackgroundCompile()
+            self._compile_timer = self.create_timer(0.2, self.compile_timer_callback)
+            logger.info(f'compiling the estimator\'s kernels in the background (pid '
+                        f'{self.compiler.pid}, once per install or upgrade): the '
+                        'plain kernels run meanwhile, with the same estimates')
         unused = [spec.name for spec in MADGWICK_UNUSED if spec.name in self.parameters.given]
         if unused:
             logger.warning(
@@ -171,6 +183,33 @@ class ImuFilterNode(EstimatorNode):
         self.pipeline.field(nanoseconds_from_stamp(msg.header.stamp),
                             vector_from_msg(msg.magnetic_field))
 
+    def compile_timer_callback(self):
+        """Go on with the compiled kernels once the background compile has them."""
+        compiler = self.compiler
+        kernels = compiler.take()
+        if kernels is not None:
+            # Between two samples (one executor thread): the same state, the
+            # same estimates from here on, faster.
+            self.pipeline.estimator.core.use_kernels(kernels)
+            self.get_logger().info(f'compiled kernels ready after {compiler.seconds:.1f} s: '
+                                   'the estimator goes on with them')
+        elif compiler.error is not None:
+            self.get_logger().warning(f'compiled kernels unavailable, the plain ones go on: '
+                                      f'{compiler.error}')
+        elif compiler.running:
+            return
+        self._compile_timer.cancel()
+        self.destroy_timer(self._compile_timer)
+        compiler.stop()
+        self.compiler = None
+
+    def destroy_node(self):
+        """End a background compile, then destroy the node."""
+        if getattr(self, 'compiler', None) is not None:
+            self.compiler.stop()
+            self.compiler = None
+        super().destroy_node()
+
     # Resets (EstimatorNode) -------------------------------------------------
 
     def _reset_estimator(self):
@@ -197,8 +236,11 @@ class ImuFilterNode(EstimatorNode):
 
     def _estimator_values(self):
         units = self.pipeline.units.counts
-        return (self.pipeline.estimator.key_values()
-                + [(f'implausible_{kind}', count) for kind, count in units.items()])
+        values = self.pipeline.estimator.key_values()
+        if self.compiler is not None:
+            values = [(key, 'plain (compiling)' if key == 'kernels' else value)
+                      for key, value in values]
+        return values + [(f'implausible_{kind}', count) for kind, count in units.items()]
 
     def _problems(self, steps):
         parts = []

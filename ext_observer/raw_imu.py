@@ -189,6 +189,9 @@ class RawImuEstimator:
         ``ahrs.*``, ``covariance.*`` (those missing take their defaults),
         ``use_mag``, ``world_frame``, ``declination``, ``yaw_offset``,
         ``mag_bias_*``, ``divergence_max_residual``.
+    compiled : bool, optional
+        The core's kernels (:class:`~ext_observer.core.ahrs.AhrsObserver`'s
+        ``compiled``): default, compiled where numba is installed.
 
     Attributes
     ----------
@@ -200,9 +203,9 @@ class RawImuEstimator:
 
     """
 
-    def __init__(self, settings):
+    def __init__(self, settings, compiled=None):
         params = ahrs_params(settings)
-        self.core = AhrsObserver(params=params, use_mag=settings['use_mag'])
+        self.core = AhrsObserver(params=params, use_mag=settings['use_mag'], compiled=compiled)
         self.uncertainty = AttitudeUncertainty.for_estimator(
             params, uncertainty_params(settings), use_mag=bool(settings['use_mag']))
         self.world_frame = settings['world_frame']
@@ -437,6 +440,8 @@ class RawImuPipeline:
         imu_filter_settings`).
     depth : int
         Most inputs waiting (the node's ``queue_depth``).
+    compiled : bool, optional
+        The estimator's kernels (:class:`RawImuEstimator`).
 
     Attributes
     ----------
@@ -452,8 +457,8 @@ class RawImuPipeline:
 
     """
 
-    def __init__(self, settings, depth=100):
-        self.estimator = RawImuEstimator(settings)
+    def __init__(self, settings, depth=100, compiled=None):
+        self.estimator = RawImuEstimator(settings, compiled)
         self.pairer = StepPairer(depth=depth, **pairing_settings(settings))
         self.units = UnitCheck()
         self.resets = dict.fromkeys(RESET_CAUSES, 0)

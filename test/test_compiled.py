@@ -127,3 +127,31 @@ def test_the_environment_chooses_the_kernels(monkeypatch):
     monkeypatch.setenv('EXT_OBSERVER_COMPILED', 'maybe')
     with pytest.raises(ValueError, match='EXT_OBSERVER_COMPILED must be 0, 1 or auto'):
         AhrsObserver()
+
+
+@needs_numba
+@pytest.mark.parametrize('mode', ['9D', '6D'])
+def test_switching_kernels_mid_run_changes_no_estimate(mode):
+    # A node that started on the plain kernels while the compiled ones were
+    # being compiled goes on with them from the same state (and back).
+    gyr, acc, mag, rate = _excerpt(EXCERPTS[1])
+    gyr, acc, mag = gyr[:6000], acc[:6000], mag[:6000]
+    use_mag = mode == '9D'
+    reference = AhrsObserver(use_mag=use_mag, compiled=False)
+    expected = _per_sample(reference, gyr, acc, mag, rate)
+    est = AhrsObserver(use_mag=use_mag, compiled=False)
+    first = _per_sample(est, gyr[:2500], acc[:2500], mag[:2500], rate)
+    est.use_kernels(compiled_module.kernels(True))
+    assert est.compiled and isinstance(est._states[0], np.ndarray)
+    second = _per_sample(est, gyr[2500:4500], acc[2500:4500], mag[2500:4500], rate)
+    est.use_kernels(compiled_module.kernels(False))
+    assert not est.compiled and isinstance(est._states[0], list)
+    third = _per_sample(est, gyr[4500:], acc[4500:], mag[4500:], rate)
+    assert np.max(np.abs(np.concatenate([first, second, third]) - expected)) <= 1e-12
+    if use_mag:
+        # The calibration went along: the same state, counts and offset.
+        assert est.calibration_state == reference.calibration_state
+        assert est.calibration.counts['used'][0] == reference.calibration.counts['used'][0] > 0
+        np.testing.assert_allclose(est.calibration.bias, reference.calibration.bias,
+                                   rtol=0, atol=1e-12 * np.max(np.abs(mag)))
+

@@ -17,6 +17,7 @@ DDS keeps the order. Faster than real time: the stamps, not the clock, give
 
 import math
 import os
+import re
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -33,6 +34,7 @@ from conftest import REPO, Spinner
 from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
                                       stamp_from_nanoseconds)
 from ext_observer.core.ahrs import AhrsParams, world_from_enu
+from ext_observer.core.compiled import compiled_available
 from ext_observer.node_common import ParameterError
 from ext_observer.imu_filter_node import ImuFilterNode
 from ext_observer.imu_filter_parameters import IMU_FILTER_PARAMETERS
@@ -466,3 +468,75 @@ def test_drop_in_for_imu_filter_madgwick_as_a_process(ros_processes, ros_context
     assert difference < 1e-3
     assert observer.process.poll() is None, observer.output
     assert 'raw IMU on /camera/imu and /camera/mag' in observer.output
+
+
+def _kernels_status(statuses):
+    """The ``kernels`` value of the last ``imu_filter: estimate`` status, or None."""
+    for status in reversed(statuses):
+        values = {kv.key: kv.value for kv in status.values}
+        if 'kernels' in values:
+            return values['kernels']
+    return None
+
+
+@pytest.mark.skipif(not compiled_available()
+                    or os.environ.get('EXT_OBSERVER_COMPILED', 'auto') != 'auto',
+                    reason='numba is not installed, or the run asks for one kind of kernels')
+def test_a_cold_cache_starts_plain_and_switches_to_compiled_between_samples(
+        ros_processes, ros_context, spinner, tmp_path):
+    """
+    A first start (an empty kernel cache) does not wait for the compiler.
+
+    The node runs the plain kernels while a child process compiles; then it
+    goes on with the compiled ones between two samples. Every estimate, on
+    both sides of the switch, equals the core's offline run (6D: no field
+    whose order against the samples two topics could change), the child
+    is gone, and the next start finds the cache ready.
+    """
+    data = load(TRIALS[0])
+    cache = tmp_path / 'kernels'
+    env = dict(os.environ, EXT_OBSERVER_CACHE=str(cache))
+    argv = [installed('imu_filter_node'), '--ros-args', '-p', 'use_mag:=false',
+            '-p', 'diagnostic_period:=0.2']
+    node = ros_processes(argv, env=env)
+    driver = spinner.add(Driver(ros_context))
+    statuses = []
+    driver.create_subscription(DiagnosticArray, '/diagnostics',
+                               lambda msg: statuses.extend(msg.status), 100)
+    spinner.spin_until(lambda: driver.imu_publisher.get_subscription_count() == 1
+                       and driver.count_publishers('/imu/data') == 1
+                       and _kernels_status(statuses) is not None, 30.0, 'the node')
+    assert _kernels_status(statuses) == 'plain (compiling)', node.output
+    match = re.search(r'in the background \(pid (\d+)', node.output)
+    assert match, node.output
+    compiler = int(match.group(1))
+    gyr, acc = data['gyr'], data['acc']
+    times = stamps(1600, float(data['rate']))
+
+    def send(first, last):
+        for k in range(first, last):
+            driver.send_imu(times[k], gyr[k], acc[k])
+            if k:
+                spinner.spin_until(lambda: times[k] in driver.outputs, 10.0, f'estimate {k}')
+
+    send(0, 800)
+    assert 'compiled kernels ready' not in node.output  # the first half ran plain
+    spinner.spin_until(lambda: _kernels_status(statuses) == 'compiled', 240.0,
+                       'the switch to the compiled kernels')
+    assert re.search(r'compiled kernels ready after [\d.]+ s', node.output), node.output
+    send(800, 1600)
+    expected = offline(data, use_mag=False)[:1600]
+    unit = expected / np.linalg.norm(expected, axis=1, keepdims=True)
+    got = published(driver.outputs, times)
+    assert np.max(np.abs(got[1:] - unit[1:])) <= TOLERANCE
+    # The compiler is gone, the cache is marked, and the node stops cleanly.
+    assert not os.path.exists(f'/proc/{compiler}') or open(
+        f'/proc/{compiler}/stat').read().split()[2] == 'Z'
+    assert list(cache.glob('*.ready'))
+    assert node.interrupt() == 0, node.output
+    # The next start loads the cache: compiled from its first status.
+    statuses.clear()
+    again = ros_processes(argv, env=env)
+    spinner.spin_until(lambda: _kernels_status(statuses) is not None, 30.0, 'the second start')
+    assert _kernels_status(statuses) == 'compiled', again.output
+    assert 'in the background' not in again.output

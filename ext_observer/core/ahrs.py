@@ -214,6 +214,35 @@ class AhrsObserver:
         self.__dict__.update(state)
         self._kernels = kernels(self.compiled)
 
+    def use_kernels(self, kernels):
+        """
+        Go on with other kernels (plain or compiled) from the same state.
+
+        The state is copied into the new kernels' container; the estimates
+        go on as they would have (compiled and plain agree to the bit). A
+        node that started on the plain kernels while the compiled ones were
+        being compiled switches with this between two samples.
+
+        Parameters
+        ----------
+        kernels : ext_observer.core.compiled.Kernels
+
+        """
+        if kernels is self._kernels:
+            return
+        states = []
+        for s in self._states:
+            c = kernels.container(len(s))
+            for i in range(len(s)):
+                c[i] = float(s[i])
+            states.append(c)
+        self._states = states
+        self._kernels = kernels
+        self.compiled = kernels.compiled
+        if self.calibration is not None:
+            self.calibration.use_kernel(kernels.magcal,
+                                        [(s, kernels.ahrs.MC0) for s in states])
+
     # --- state -------------------------------------------------------------
 
     def reset(self):

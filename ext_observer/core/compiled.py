@@ -22,19 +22,32 @@ temporary folder where none of these can be written.
 ``EXT_OBSERVER_COMPILED`` chooses for the whole process: ``0`` plain, ``1``
 compiled (an error without numba), unset or ``auto``: compiled where numba
 imports.
+
+A process that compiles holds a lock in the cache folder, so processes
+started together compile once: the others wait, then load. A marker
+(``<name>.ready``) says the cache holds every kernel a node calls; a node
+that finds none does not wait for the compiler (:func:`start_plan`,
+:class:`BackgroundCompile`): it starts on the plain kernels, a child process
+compiles, and the node goes on with the compiled kernels once they load,
+from the same state (the estimates are the same to the bit).
 """
 
 import ast
+import fcntl
 import hashlib
 import importlib.util
 import os
+import signal
+import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 import numpy as np
 
-__all__ = ['Kernels', 'kernels', 'compiled_available', 'CompiledUnavailable']
+__all__ = ['BackgroundCompile', 'CompiledUnavailable', 'Kernels', 'cache_ready',
+           'compiled_available', 'kernels', 'start_plan']
 
 # In this order: each file's names are defined before the next one's functions use them.
 _SOURCES = ('magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py', 'ahrs_kernel.py')
@@ -195,30 +208,57 @@ def cache_folder():
     raise CompiledUnavailable(f'no writable cache folder among {candidates}')
 
 
+def _names():
+    """The joined source's text, its module name and the cache folder."""
+    text, digest = joined_source()
+    return text, f'ext_observer_kernels_{digest[:16]}', cache_folder()
+
+
+def cache_ready():
+    """
+    Whether the cache holds the compiled kernels a node calls (no compiling at start).
+
+    False where numba's cache has not been filled by this version of the
+    kernels (a first start, a changed kernel, an emptied cache folder).
+    """
+    try:
+        _, name, folder = _names()
+    except CompiledUnavailable:
+        return False
+    return os.path.exists(os.path.join(folder, name + '.ready'))
+
+
 def _load_compiled():
     start = time.perf_counter()
     import numba
-    text, digest = joined_source()
-    folder = cache_folder()
-    name = f'ext_observer_kernels_{digest[:16]}'
+    text, name, folder = _names()
     path = os.path.join(folder, name + '.py')
     if not os.path.exists(path):
         partial = f'{path}.{os.getpid()}.tmp'
         with open(partial, 'w', encoding='utf-8') as f:
             f.write(text)
         os.replace(partial, path)  # atomic: processes starting together agree
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    # Every function compiled before any runs, so that calls between them
-    # resolve to the compiled ones.
-    for key, value in list(vars(module).items()):
-        if callable(value) and getattr(value, '__module__', None) == name \
-                and not isinstance(value, type):
-            setattr(module, key, numba.njit(cache=True)(value))
-    result = Kernels(module, module, True)
-    _warm_up(result)
+    # One process compiles at a time: one that waited finds the cache filled
+    # and loads from it.
+    with open(os.path.join(folder, name + '.lock'), 'a') as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+        # Every function compiled before any runs, so that calls between them
+        # resolve to the compiled ones.
+        for key, value in list(vars(module).items()):
+            if callable(value) and getattr(value, '__module__', None) == name \
+                    and not isinstance(value, type):
+                setattr(module, key, numba.njit(cache=True)(value))
+        result = Kernels(module, module, True)
+        _warm_up(result)
+        ready = os.path.join(folder, name + '.ready')
+        if not os.path.exists(ready):
+            with open(ready, 'w', encoding='utf-8') as f:
+                f.write(f'compiled by numba {numba.__version__} in '
+                        f'{time.perf_counter() - start:.2f} s\n')
     result.load_seconds = time.perf_counter() - start
     return result
 
@@ -246,10 +286,139 @@ def _warm_up(k):
         _COMPILED = None
 
 
-def main():
-    """``python -m ext_observer.core.compiled``: compile into the cache now; print how long it took."""
-    k = kernels(True)
-    print(f'compiled kernels ready in {k.load_seconds:.2f} s (cache: {cache_folder()})')
+def start_plan():
+    """
+    How a node starts: ``'compiled'``, ``'plain'`` or ``'background'``.
+
+    ``'compiled'``: load the compiled kernels now (the cache is ready, or
+    ``EXT_OBSERVER_COMPILED=1`` insists); ``'plain'``: no numba, or
+    ``EXT_OBSERVER_COMPILED=0``; ``'background'``: numba is there but the
+    cache is not ready, so start on the plain kernels and compile in a
+    child process (:class:`BackgroundCompile`).
+    """
+    want, required = _wanted(None)
+    if not want:
+        return 'plain'
+    if required or _COMPILED is not None or cache_ready():
+        return 'compiled'
+    return 'background'
+
+
+def _die_with_parent():
+    # In the child, before exec: end it if the node that started it ends
+    # (killed, not only stopped: stop() ends it then).
+    import ctypes
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+class BackgroundCompile:
+    """
+    Compile the kernels in a child process; load them here once it is done.
+
+    The child, ``python -m ext_observer.core.compiled``, runs on another core
+    and leaves this process's interpreter free; a thread then loads the
+    compiled kernels from the cache (about half a second, with the
+    interpreter's switch interval shortened meanwhile so that the node's
+    callbacks keep running). :meth:`take` hands them over once, from the
+    thread that runs the estimator.
+
+    Must be created from a thread that lives as long as the process (the
+    main thread): the child is ended when that thread ends.
+
+    Attributes
+    ----------
+    pid : int
+        The child's process id.
+    error : str or None
+        Why the compiled kernels could not be had (the plain ones go on).
+    seconds : float or None
+        From the start to the kernels loaded here.
+    """
+
+    # Interpreter switch interval while loading, s (default 0.005).
+    SWITCH_INTERVAL = 0.0005
+
+    def __init__(self):
+        self._start = time.monotonic()
+        self.error = None
+        self.seconds = None
+        self._kernels = None
+        self._taken = False
+        self._stopped = threading.Event()
+        env = dict(os.environ, EXT_OBSERVER_COMPILED='1')
+        self._child = subprocess.Popen(
+            [sys.executable, '-m', 'ext_observer.core.compiled', '--quiet'], env=env,
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+            start_new_session=True, preexec_fn=_die_with_parent)
+        self.pid = self._child.pid
+        self._thread = threading.Thread(target=self._run, name='ext_observer-compile',
+                                        daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        _, err = self._child.communicate()
+        if self._stopped.is_set():
+            return
+        if self._child.returncode != 0:
+            lines = err.decode('utf-8', 'replace').strip().splitlines()
+            self.error = (f'the compiler exited with {self._child.returncode}'
+                          + (f': {lines[-1]}' if lines else ''))
+            return
+        previous = sys.getswitchinterval()
+        sys.setswitchinterval(self.SWITCH_INTERVAL)
+        try:
+            k = kernels(True)
+        except Exception as exc:  # numba failing here after it worked in the child
+            self.error = f'loading the compiled kernels failed: {exc}'
+            return
+        finally:
+            sys.setswitchinterval(previous)
+        self.seconds = time.monotonic() - self._start
+        self._kernels = k
+
+    @property
+    def running(self):
+        """Whether the child or the loading still runs."""
+        return self._thread.is_alive()
+
+    def take(self):
+        """The compiled kernels, the first time they are asked for once ready; else None."""
+        if self._kernels is None or self._taken:
+            return None
+        self._taken = True
+        return self._kernels
+
+    def stop(self, timeout=2.0):
+        """End the child if it still runs; wait for the thread (at most ``timeout`` s)."""
+        self._stopped.set()
+        if self._child.poll() is None:
+            self._child.terminate()
+            try:
+                self._child.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self._child.kill()
+                self._child.wait()
+        self._thread.join(timeout)
+
+
+def main(argv=None):
+    """
+    ``python -m ext_observer.core.compiled [--quiet]``: compile into the cache now.
+
+    Prints how long it took (nothing with ``--quiet``); exits 1 with the
+    reason when the kernels cannot be compiled.
+    """
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        k = kernels(True)
+    except CompiledUnavailable as error:
+        print(error, file=sys.stderr)
+        return 1
+    if '--quiet' not in argv:
+        print(f'compiled kernels ready in {k.load_seconds:.2f} s (cache: {cache_folder()})')
     return 0
 
 

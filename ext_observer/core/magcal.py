@@ -135,6 +135,25 @@ class MagCalibrator:
         state['_k'] = magcal_kernel if name is None else sys.modules[name]
         self.__dict__.update(state)
 
+    def use_kernel(self, kernel, blocks):
+        """
+        Go on with another kernel module on states that hold the same values.
+
+        Parameters
+        ----------
+        kernel : module
+            The calibration's kernel (plain, or the compiled module).
+        blocks : list of (state, offset)
+            One per calibrator, each a copy of the block it replaces.
+
+        """
+        blocks = [(s, int(o)) for s, o in blocks]
+        if len(blocks) != self._n:
+            raise ValueError(f'{len(blocks)} blocks given for {self._n} calibrator(s)')
+        self._k = kernel
+        self._blocks = blocks
+        self._s, self._o = blocks[0]
+
     # --- state ---------------------------------------------------------------
 
     def reset(self):
