@@ -78,8 +78,9 @@ class ImuFilterNode(EstimatorNode):
     def __init__(self, node_name=NODE_NAME, **kwargs):
         super().__init__(node_name, IMU_FILTER_PARAMETERS, imu_filter_settings, **kwargs)
         settings = self.parameters.settings
-        # The compiled kernels where numba is installed; with a cold cache
-        # the node does not wait for the compiler (docs/compiled.md).
+        # The compiled kernels where numba is installed, but the node waits
+        # neither for the compiler (a cold cache) nor for loading them: it
+        # starts on the plain ones, the same estimates (docs/compiled.md).
         plan = start_plan()
         self.pipeline = RawImuPipeline(settings, depth=settings['queue_depth'],
                                        compiled=False if plan == 'background' else None)
@@ -110,10 +111,11 @@ class ImuFilterNode(EstimatorNode):
         self.compiler = None
         if plan == 'background':
             self.compiler = BackgroundCompile()
-            self._compile_timer = self.create_timer(0.2, self.compile_timer_callback)
-            logger.info(f'compiling the estimator\'s kernels in the background (pid '
-                        f'{self.compiler.pid}, once per install or upgrade): the '
-                        'plain kernels run meanwhile, with the same estimates')
+            self._compile_timer = self.create_timer(0.1, self.compile_timer_callback)
+            if self.compiler.compiling:
+                logger.info(f'compiling the estimator\'s kernels in the background (pid '
+                            f'{self.compiler.pid}, once per install or upgrade): the '
+                            'plain kernels run meanwhile, with the same estimates')
         unused = [spec.name for spec in MADGWICK_UNUSED if spec.name in self.parameters.given]
         if unused:
             logger.warning(
@@ -191,8 +193,9 @@ class ImuFilterNode(EstimatorNode):
             # Between two samples (one executor thread): the same state, the
             # same estimates from here on, faster.
             self.pipeline.estimator.core.use_kernels(kernels)
-            self.get_logger().info(f'compiled kernels ready after {compiler.seconds:.1f} s: '
-                                   'the estimator goes on with them')
+            if compiler.compiling:
+                self.get_logger().info(f'compiled kernels ready after {compiler.seconds:.1f} '
+                                       's: the estimator goes on with them')
         elif compiler.error is not None:
             self.get_logger().warning(f'compiled kernels unavailable, the plain ones go on: '
                                       f'{compiler.error}')
@@ -238,8 +241,8 @@ class ImuFilterNode(EstimatorNode):
         units = self.pipeline.units.counts
         values = self.pipeline.estimator.key_values()
         if self.compiler is not None:
-            values = [(key, 'plain (compiling)' if key == 'kernels' else value)
-                      for key, value in values]
+            now = 'plain (compiling)' if self.compiler.compiling else 'plain (loading)'
+            values = [(key, now if key == 'kernels' else value) for key, value in values]
         return values + [(f'implausible_{kind}', count) for kind, count in units.items()]
 
     def _problems(self, steps):

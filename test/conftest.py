@@ -180,9 +180,10 @@ def pytest_sessionstart(session):
     Get the estimator's compiled kernels once, before any test starts a node.
 
     With numba installed (requirements-test.txt), the first process to ask
-    compiles them into the on-disk cache (about 10 s on two cores); nodes
-    started later load them from there in about half a second instead of
-    each compiling at once under the tests' start-up timeouts.
+    compiles them into the on-disk cache (10 to 25 s on two cores); the
+    nodes in this process use them, and node processes started later load
+    them from there (about a second, on the plain kernels meanwhile) instead
+    of each compiling in the background.
     ``EXT_OBSERVER_COMPILED=0`` skips it (the plain kernels).
     """
     from ext_observer.core.compiled import kernels

@@ -25,11 +25,11 @@ imports.
 
 A process that compiles holds a lock in the cache folder, so processes
 started together compile once: the others wait, then load. A marker
-(``<name>.ready``) says the cache holds every kernel a node calls; a node
-that finds none does not wait for the compiler (:func:`start_plan`,
-:class:`BackgroundCompile`): it starts on the plain kernels, a child process
-compiles, and the node goes on with the compiled kernels once they load,
-from the same state (the estimates are the same to the bit).
+(``<name>.ready``) says the cache holds every kernel a node calls. A node
+waits for neither (:func:`start_plan`, :class:`BackgroundCompile`): it
+starts on the plain kernels; a child process compiles where the cache is
+not ready, a thread loads the compiled kernels, and the node goes on with
+them from the same state (the estimates are the same to the bit).
 """
 
 import ast
@@ -290,24 +290,33 @@ def start_plan():
     """
     How a node starts: ``'compiled'``, ``'plain'`` or ``'background'``.
 
-    ``'compiled'``: load the compiled kernels now (the cache is ready, or
-    ``EXT_OBSERVER_COMPILED=1`` insists); ``'plain'``: no numba, or
-    ``EXT_OBSERVER_COMPILED=0``; ``'background'``: numba is there but the
-    cache is not ready, so start on the plain kernels and compile in a
-    child process (:class:`BackgroundCompile`).
+    ``'compiled'``: this process has the compiled kernels already, or
+    ``EXT_OBSERVER_COMPILED=1`` insists (they are loaded, or compiled, before
+    the first sample); ``'plain'``: numba is not installed, or
+    ``EXT_OBSERVER_COMPILED=0``; ``'background'``: start on the plain
+    kernels at once and go on with the compiled ones when
+    :class:`BackgroundCompile` has them (compiled in a child process where
+    the cache is not ready, then loaded). numba is not imported here.
     """
-    want, required = _wanted(None)
-    if not want:
-        return 'plain'
-    if required or _COMPILED is not None or cache_ready():
+    value = os.environ.get(_ENV, 'auto').strip().lower()
+    if value not in ('', 'auto'):
+        return 'compiled' if _wanted(None)[0] else 'plain'
+    if _COMPILED is not None:
         return 'compiled'
+    if importlib.util.find_spec('numba') is None:
+        return 'plain'
     return 'background'
 
 
-def _die_with_parent():
-    # In the child, before exec: end it if the node that started it ends
-    # (killed, not only stopped: stop() ends it then).
+def _child_setup():
+    # In the child, before exec: below the node in the scheduler's eyes (it
+    # must not slow the node's samples), and ended if the node that started
+    # it ends (killed, not only stopped: stop() ends it then).
     import ctypes
+    try:
+        os.nice(10)
+    except OSError:
+        pass
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
@@ -316,21 +325,24 @@ def _die_with_parent():
 
 class BackgroundCompile:
     """
-    Compile the kernels in a child process; load them here once it is done.
+    Get the compiled kernels without making the caller wait: compile, then load.
 
-    The child, ``python -m ext_observer.core.compiled``, runs on another core
-    and leaves this process's interpreter free; a thread then loads the
-    compiled kernels from the cache (about half a second, with the
-    interpreter's switch interval shortened meanwhile so that the node's
-    callbacks keep running). :meth:`take` hands them over once, from the
-    thread that runs the estimator.
+    Where the cache is not ready (:func:`cache_ready`), a child process,
+    ``python -m ext_observer.core.compiled``, compiles into it on another
+    core, leaving this process's interpreter free. A thread then loads the
+    compiled kernels from the cache (about a second, with the interpreter's
+    switch interval shortened meanwhile so that the caller's callbacks keep
+    running). :meth:`take` hands them over once, to the thread that runs the
+    estimator.
 
     Must be created from a thread that lives as long as the process (the
     main thread): the child is ended when that thread ends.
 
     Attributes
     ----------
-    pid : int
+    compiling : bool
+        Whether a child compiles (the cache was not ready).
+    pid : int or None
         The child's process id.
     error : str or None
         Why the compiled kernels could not be had (the plain ones go on).
@@ -348,30 +360,35 @@ class BackgroundCompile:
         self._kernels = None
         self._taken = False
         self._stopped = threading.Event()
-        env = dict(os.environ, EXT_OBSERVER_COMPILED='1')
-        self._child = subprocess.Popen(
-            [sys.executable, '-m', 'ext_observer.core.compiled', '--quiet'], env=env,
-            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-            start_new_session=True, preexec_fn=_die_with_parent)
-        self.pid = self._child.pid
-        self._thread = threading.Thread(target=self._run, name='ext_observer-compile',
+        self.compiling = not cache_ready()
+        self._child = None
+        self.pid = None
+        if self.compiling:
+            env = dict(os.environ, EXT_OBSERVER_COMPILED='1')
+            self._child = subprocess.Popen(
+                [sys.executable, '-m', 'ext_observer.core.compiled', '--quiet'], env=env,
+                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                start_new_session=True, preexec_fn=_child_setup)
+            self.pid = self._child.pid
+        self._thread = threading.Thread(target=self._run, name='ext_observer-kernels',
                                         daemon=True)
         self._thread.start()
 
     def _run(self):
-        _, err = self._child.communicate()
-        if self._stopped.is_set():
-            return
-        if self._child.returncode != 0:
-            lines = err.decode('utf-8', 'replace').strip().splitlines()
-            self.error = (f'the compiler exited with {self._child.returncode}'
-                          + (f': {lines[-1]}' if lines else ''))
-            return
+        if self._child is not None:
+            _, err = self._child.communicate()
+            if self._stopped.is_set():
+                return
+            if self._child.returncode != 0:
+                lines = err.decode('utf-8', 'replace').strip().splitlines()
+                self.error = (f'the compiler exited with {self._child.returncode}'
+                              + (f': {lines[-1]}' if lines else ''))
+                return
         previous = sys.getswitchinterval()
         sys.setswitchinterval(self.SWITCH_INTERVAL)
         try:
             k = kernels(True)
-        except Exception as exc:  # numba failing here after it worked in the child
+        except Exception as exc:  # numba missing or failing
             self.error = f'loading the compiled kernels failed: {exc}'
             return
         finally:
@@ -394,7 +411,7 @@ class BackgroundCompile:
     def stop(self, timeout=2.0):
         """End the child if it still runs; wait for the thread (at most ``timeout`` s)."""
         self._stopped.set()
-        if self._child.poll() is None:
+        if self._child is not None and self._child.poll() is None:
             self._child.terminate()
             try:
                 self._child.wait(timeout)
