@@ -176,8 +176,9 @@ class ImuFilterNode(EstimatorNode):
             n = (w * w + x * x + y * y + z * z) ** 0.5
             q = msg.orientation
             q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
-            msg.orientation_covariance = (estimate.covariance if self._covariance_estimated
-                                          else self._orientation_covariance)
+            # In place: the message's own float64 array (cheaper than a new one).
+            msg.orientation_covariance[:] = (estimate.covariance if self._covariance_estimated
+                                             else self._orientation_covariance)
             self.imu_publisher.publish(msg)
 
     def imu_mag_callback(self, msg):

@@ -331,13 +331,14 @@ class RawImuEstimator:
             reason = check_state(q, None, self.max_residual)
         if reason is not None:
             core.reset()
-            core.update(gyr, acc, self.latest_field, dt)
+            q = core.update(gyr, acc, self.latest_field, dt)
             starting = True
         if starting:
             self._start(dt)
         else:
-            self.uncertainty.step(dt, gyr, q, core.rest)  # q: core.q, not reset
-        return self.state, reason
+            self.uncertainty.step(dt, gyr, q, core.rest)
+        # The state property's value, from the q the step returned.
+        return (q if self._frame is None else multiply_floats(self._frame, q)), reason
 
     def _start(self, dt):
         """The core has just initialized (and used the latest field, if any)."""

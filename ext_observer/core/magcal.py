@@ -350,8 +350,9 @@ class MagCalibrator:
     @property
     def quality(self):
         """Heading error (rad, 1σ) the calibration's uncertainty causes; inf before any field."""
-        q = np.array([float(self._k.mc_quality(s, o)) for s, o in self._blocks])
-        return self._out(q)
+        if self.batch is None:  # the node's path, read at every field
+            return float(self._k.mc_quality(self._s, self._o))
+        return np.array([float(self._k.mc_quality(s, o)) for s, o in self._blocks])
 
     @property
     def counts(self):
