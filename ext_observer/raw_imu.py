@@ -273,9 +273,9 @@ class RawImuEstimator:
         self.latest_field = field
         if self.core.q is not None:
             self.core.update_mag(field, dt)
-            self._track_field(dt)
+            self._track_field(dt, field)
 
-    def _track_field(self, dt):
+    def _track_field(self, dt, field):
         """Tell the uncertainty what the core's last field did to the heading."""
         core = self.core
         # Issue 17's calibrator, where the core has one: until it is ready the
@@ -293,7 +293,21 @@ class RawImuEstimator:
         sigma = (float(calibration.quality) if calibration is not None and calibration.applied
                  else 0.0)
         if not (core.use_mag and calibrated and not core.mag_disturbed):
-            self.uncertainty.field(dt, 0.0)
+            reference = math.nan
+            if not calibrated and core.use_mag and not core.mag_disturbed:
+                # Learning: the heading rests on the field as given; how far
+                # the calibration learned so far turns this field's heading
+                # says how wrong that may be (a disturbed field says nothing).
+                quality = float(calibration.quality)
+                if math.isfinite(quality):
+                    w, x, y, z = core.q
+                    turn = calibration.heading_turn(field, (
+                        2.0 * (x * z - w * y), 2.0 * (y * z + w * x),
+                        w * w - x * x - y * y + z * z))
+                    reference = turn * turn + quality * quality
+                else:
+                    reference = math.inf
+            self.uncertainty.field(dt, 0.0, 0.0, reference)
             return
         # AhrsObserver.update_mag: a running mean of the first fields, then
         # 1 − exp(−dt / tau_mag).
@@ -346,7 +360,7 @@ class RawImuEstimator:
         self._fields_used = 0
         self._calibrated = True
         if self.latest_field is not None and self.core.use_mag:
-            self._track_field(None)
+            self._track_field(None, self.latest_field)
 
     @property
     def state(self):

@@ -241,7 +241,7 @@ def test_the_calibration_sigma_counts_only_where_the_calibration_is_applied():
     turning_run(pipeline, 60.0, gyr=(0.0, 0.0, 0.5))
     calibration = pipeline.estimator.core.calibration
     assert calibration.state == 'converged' and not calibration.applied
-    _, gain, sigma = pipeline.estimator.uncertainty.last_field
+    _, gain, sigma, _ = pipeline.estimator.uncertainty.last_field
     assert gain > 0.0 and sigma == 0.0 < calibration.quality
     # A loaded calibration is applied: the heading follows the calibrated
     # field, and the calibration's σ is part of the heading's.
@@ -249,7 +249,7 @@ def test_the_calibration_sigma_counts_only_where_the_calibration_is_applied():
     turning_run(pipeline, 10.0, gyr=(0.0, 0.0, 0.5))
     calibration = pipeline.estimator.core.calibration
     assert calibration.state == 'loaded' and calibration.applied
-    _, gain, sigma = pipeline.estimator.uncertainty.last_field
+    _, gain, sigma, _ = pipeline.estimator.uncertainty.last_field
     assert gain > 0.0 and sigma == calibration.quality > 0.0
     assert stds(pipeline)[1] > math.degrees(calibration.quality)
 
@@ -427,3 +427,62 @@ def test_the_benchmark_writes_its_page_and_figures(tmp_path, capsys):
     for figure in ('covariance_reliability.png', 'covariance_magnet.png'):
         assert (tmp_path / 'figures' / figure).stat().st_size > 10000
         assert f'figures/{figure}' in page
+
+
+def learning_run(level, seed=3):
+    """
+    Synthetic motion through the node's pipeline, the field distorted by a hard iron.
+
+    Returns the heading error and the published heading σ (degrees) per
+    sample, and the calibration's state per sample.
+    """
+    from test_core_ahrs import errors_deg, FIELD as FIELD_UT, RATE, synthetic
+    truth, gyr, acc, mag = synthetic(seconds=40.0, seed=seed)
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=3)
+    raw = (mag + level * np.linalg.norm(FIELD_UT) * u / np.linalg.norm(u)) * 1e-6  # T
+    pipeline = RawImuPipeline(node_settings())
+    period = round(SECOND / RATE)
+    q = np.full((len(gyr), 4), np.nan)
+    sigma = np.full(len(gyr), np.nan)
+    states = []
+    for k in range(len(gyr)):
+        stamp = START + k * period
+        _, estimate = pipeline.imu(stamp, tuple(gyr[k]), tuple(acc[k]))
+        if estimate is not None:
+            q[k] = estimate.state
+            sigma[k] = math.degrees(math.sqrt(estimate.covariance[8]))
+        states.append(pipeline.estimator.core.calibration_state)
+        if k % 2 == 0:
+            pipeline.field(stamp, tuple(raw[k]))
+    _, heading, _ = errors_deg(q[1:], truth[1:])
+    return heading, sigma[1:], states[1:]
+
+
+@pytest.mark.skipif(not HAS_CALIBRATION, reason='the core has no online calibration yet')
+@pytest.mark.parametrize('level', [0.0, 1.5])
+def test_while_the_calibration_learns_the_heading_sigma_says_what_it_has_learned(level):
+    # The heading is held from the field as given until the calibration
+    # converges. Its σ is that of an unknown heading only until the
+    # calibration has learned something; then it is the learned
+    # calibration's verdict on that field: small for a sensor that is
+    # calibrated already, as large as the error for one with a hard iron.
+    heading, sigma, states = learning_run(level)
+    learning = np.array([s == 'learning' for s in states]) & np.isfinite(sigma)
+    assert learning.sum() > 200 and 'converged' in states
+    unknown = math.degrees(math.sqrt(HEADING_UNKNOWN))
+    informed = learning & (sigma < 0.99 * unknown)
+    assert informed.sum() > 0.3 * learning.sum()
+    within = np.abs(heading[informed]) <= 2.0 * sigma[informed]
+    print(f'level {level}: {learning.sum()} learning samples, {informed.sum()} with an '
+          f'informed σ (median {np.median(sigma[informed]):.1f}°), '
+          f'{100 * within.mean():.1f} % within 2σ; largest error '
+          f'{np.abs(heading[learning]).max():.1f}°')
+    assert within.mean() >= 0.95
+    if level == 0.0:
+        # Calibrated already: the held heading is good, and σ comes down to
+        # a few degrees before the calibration converges.
+        assert np.min(sigma[learning]) < 10.0
+    else:
+        # The held heading is the distorted field's, far off: σ stays large.
+        assert np.abs(heading[learning]).max() > 20.0

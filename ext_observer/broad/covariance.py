@@ -78,9 +78,10 @@ def run_trial(trial, mode, values=None):
         ``state`` (N, 4, ENU, NaN without an estimate), ``tilt`` and
         ``heading`` (N, the published variances, rad², as ``imu/data``
         carries them: before the sample's field), ``rest``, ``started`` (the
-        estimator initialized at this sample), ``gain`` and ``calibration``
-        (what the sample's field told the uncertainty model: NaN without
-        one; ``gain0`` and ``calibration0`` for the field the start used),
+        estimator initialized at this sample), ``gain``, ``calibration`` and
+        ``reference`` (what the sample's field told the uncertainty model:
+        NaN without one; ``gain0``, ``calibration0`` and ``reference0`` for
+        the field the start used),
         ``rejected`` (a field came and did not correct the heading), ``dt``.
 
     """
@@ -90,7 +91,8 @@ def run_trial(trial, mode, values=None):
     n = len(trial)
     period = 1e9 / trial.rate
     out = {key: np.full(n, np.nan) for key in ('tilt', 'heading', 'gain', 'calibration',
-                                               'gain0', 'calibration0')}
+                                               'reference', 'gain0', 'calibration0',
+                                               'reference0')}
     out['state'] = np.full((n, 4), np.nan)
     for key in ('rest', 'rejected', 'started'):
         out[key] = np.zeros(n, dtype=bool)
@@ -107,12 +109,14 @@ def run_trial(trial, mode, values=None):
             out['started'][k] = not was_started or estimate.reason is not None
             out['rest'][k] = core.rest
             if tracker.last_field is not None:
-                out['gain0'][k], out['calibration0'][k] = tracker.last_field[1:]
+                out['gain0'][k], out['calibration0'][k], out['reference0'][k] = (
+                    tracker.last_field[1:])
         if mag is not None:
             tracker.last_field = None
             pipeline.field(stamp, mag[k])
             if tracker.last_field is not None:
-                out['gain'][k], out['calibration'][k] = tracker.last_field[1:]
+                out['gain'][k], out['calibration'][k], out['reference'][k] = (
+                    tracker.last_field[1:])
                 out['rejected'][k] = tracker.last_field[1] == 0.0
     out['dt'] = 1.0 / trial.rate
     return out
@@ -161,14 +165,15 @@ def replay(runs, params=None, ahrs_params=None):
         raise ValueError('replay needs runs that all start at the same sample and never restart')
     tilt, heading = np.full((n, len(runs)), np.nan), np.full((n, len(runs)), np.nan)
 
-    gains = [(stack('gain0', np.nan), stack('calibration0', 0.0)),
-             (stack('gain', np.nan), stack('calibration', 0.0))]
+    gains = [(stack('gain0', np.nan), stack('calibration0', 0.0), stack('reference0', np.nan)),
+             (stack('gain', np.nan), stack('calibration', 0.0), stack('reference', np.nan))]
 
     def apply(which, k):
-        g, c = gains[which][0][k], gains[which][1][k]
+        g, c, u = (a[k] for a in gains[which])
         seen = np.isfinite(g)
         if mag and seen.any():
-            tracker.field(dt, np.where(seen, g, 0.0), np.where(seen, c, 0.0))
+            tracker.field(dt, np.where(seen, g, 0.0), np.where(seen, c, 0.0),
+                          np.where(seen, u, np.nan))
 
     tracker.start(dt)
     apply(0, first)

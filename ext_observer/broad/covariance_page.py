@@ -207,8 +207,8 @@ def markdown(summary, meta, figures, docs, magnet):
               'odd-numbered ones. Issue 18 asks for 90–99 % within 2σ and a mean '
               'of e²/σ² between 0.5 and 2. The last three columns: the share of samples whose '
               'σ says the heading is unknown (30° or more: before a field sets it, or while '
-              'the magnetometer calibration has not converged; any error is within 2σ '
-              'there), and the two figures over the other samples.', '',
+              'the magnetometer calibration has learned too little to judge the field; any '
+              'error is within 2σ there), and the two figures over the other samples.', '',
               '| mode | split | group | component | samples | within 2σ | mean e²/σ² | '
               'RMS error | RMS σ | within bounds | σ ≥ 30° | within 2σ, σ < 30° | '
               'mean e²/σ², σ < 30° |',
@@ -300,9 +300,10 @@ _INTRO = [
     '- `RawImuPipeline` gives each `Estimate` its `covariance`; '
     '`pipeline.estimator.uncertainty` has `inclination_std` and `heading_std` (rad).',
     '- In 9D the heading is unknown (σ = 104°, that of a uniform angle) until a field '
-    'corrects it: before the first field, and while the magnetometer calibration (issue '
-    '17) has not converged. In 6D the heading is relative to the estimator\'s own start; '
-    'its σ starts near 0 and grows without bound.',
+    'says more: before the first field, and while the magnetometer calibration (issue '
+    '17) has learned too little to judge the field the heading was taken from (see the '
+    'model). In 6D the heading is relative to the estimator\'s own start; its σ starts '
+    'near 0 and grows without bound.',
     '',
 ]
 
@@ -333,6 +334,16 @@ _MODEL = [
     '(`test_covariance.py::test_steady_state_is_the_closed_form_of_a_first_order_correction`). '
     'Heading: only with a field that corrected it, with the gain the estimator applied '
     '(a running mean of the first fields, then `tau_mag`).',
+    '- In 9D the heading\'s error is that drift plus the error U of the field the '
+    'heading was taken from: unknown at the start (U = (104°)²), 0 once a good field has '
+    'corrected it. While the magnetometer calibration learns, the estimator holds the '
+    'heading it took from the field as given (issue 17), and each field tells what the '
+    'calibration learned so far makes of it: U = turn² + quality² + `heading_floor`², '
+    'at most (104°)², with turn the angle by which that calibration turns the field\'s '
+    'heading and quality its own heading σ (infinite before it has learned anything). '
+    'A sensor calibrated already gets a σ of a few degrees before the calibration has '
+    'converged; one with a hard iron, a σ as large as its heading\'s error '
+    '(`test_covariance.py::test_while_the_calibration_learns_the_heading_sigma_says_what_it_has_learned`).',
     '- Then what the propagation does not model: `inclination_floor` (translational '
     'acceleration, accelerometer calibration, mounting), `heading_floor` (a field bent '
     'where it is accepted), the magnetometer calibration\'s own heading σ where the '

@@ -277,7 +277,8 @@ def _warm_up(k):
             est.update((0.3, -0.2, 0.5), (0.1, 0.2, 9.8), (20.0 * np.cos(a), 20.0 * np.sin(a),
                                                            -40.0), dt)
         cal = est.calibration
-        _ = (cal.quality, cal.bias, cal.soft_iron, cal.field, cal.state, cal.counts)
+        _ = (cal.quality, cal.bias, cal.soft_iron, cal.field, cal.state, cal.counts,
+             cal.heading_turn((20.0, 0.0, -40.0), (0.0, 0.0, 1.0)))
         est.update_mag((20.0, 0.0, -40.0), 0.02)
         est.reset()
         # The rest (the whole-recording loop, loading a calibration, the

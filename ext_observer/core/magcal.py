@@ -354,6 +354,29 @@ class MagCalibrator:
             return float(self._k.mc_quality(self._s, self._o))
         return np.array([float(self._k.mc_quality(s, o)) for s, o in self._blocks])
 
+    def heading_turn(self, mag, up):
+        """
+        How far the calibration learned so far turns a field's heading (one calibrator).
+
+        Parameters
+        ----------
+        mag : sequence of 3 float
+            The field as given (as :meth:`learn` takes it).
+        up : sequence of 3 float
+            The world's vertical in the body frame (any norm).
+
+        Returns
+        -------
+        float
+            The angle about ``up`` from the field as given to the field the
+            learned calibration makes of it, rad; 0 before anything is learned.
+
+        """
+        k, st, o = self._k, self._s, self._o
+        f0, f1, f2 = k.mc_calibrated(st, o + MC_X + 3, mag[0], mag[1], mag[2])
+        return float(k.mc_heading_between(up[0], up[1], up[2], mag[0], mag[1], mag[2],
+                                          f0, f1, f2))
+
     @property
     def counts(self):
         """The counts (see the class's attributes): a dict of int64 arrays (B,) or (1,)."""

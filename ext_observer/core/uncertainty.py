@@ -50,6 +50,19 @@ The corrections
     magnetometer still being calibrated) nothing shrinks ``P_h``: it grows
     without bound.
 
+The reference of the heading
+    In 9D the heading's error is the drift ``P_h`` plus the error of the
+    field the heading was taken from, ``U``: unknown at the start
+    (``HEADING_UNKNOWN``, a uniform angle), 0 once a field known to be good
+    corrects it (``U`` joins ``P_h`` and the correction shrinks both).
+    While the magnetometer calibration learns, the estimator holds the
+    heading it took from the field as given, and the caller may say what
+    the calibration learned so far makes of that field: ``U = min(U₀,
+    turn² + quality² + heading_floor²)``, with ``turn`` the angle by which
+    the calibration learned so far turns the field's heading (0 for a
+    sensor that is calibrated already) and ``quality`` that calibration's
+    own heading σ (infinite before it has learned anything).
+
 What is published
     The variances plus what the propagation does not model, each in
     physical units: ``inclination_floor`` (the smallest inclination σ:
@@ -187,8 +200,8 @@ class AttitudeUncertainty:
     heading_set : bool or ndarray
         Whether a field has corrected the heading since the start.
     last_field : tuple or None
-        The latest :meth:`field`'s interval, gain and calibration σ, as
-        given (a run can be replayed from them).
+        The latest :meth:`field`'s interval, gain, calibration σ and
+        reference variance, as given (a run can be replayed from them).
 
     """
 
@@ -224,6 +237,7 @@ class AttitudeUncertainty:
         self.heading_set = False
         self.last_field = None
         self._pt = self._ct = self._ph = self._ch = self._b = 0.0
+        self._unknown = 0.0
         self._calibration = 0.0
         self._wh2 = self._wz2 = 0.0
 
@@ -244,7 +258,10 @@ class AttitudeUncertainty:
         self._pt = self._r_acc
         self._ct = self._ch = 0.0 * self._pt
         self._b = p.bias_init * p.bias_init + 0.0 * self._pt
-        self._ph = self.use_mag * HEADING_UNKNOWN + (1 - self.use_mag) * self._q_gyro
+        # 9D: only the reference is unknown, the drift starts now; 6D: the
+        # heading is the start's, one sample's drift.
+        self._ph = (1 - self.use_mag) * self._q_gyro
+        self._unknown = self.use_mag * HEADING_UNKNOWN
         self._calibration = 0.0
         self._wh2 = self._wz2 = 0.0
 
@@ -315,7 +332,7 @@ class AttitudeUncertainty:
         wz2 = wz * wz
         self._wz2, self._wh2 = wz2, w2 - wz2
 
-    def field(self, dt, gain, calibration=0.0):
+    def field(self, dt, gain, calibration=0.0, reference=math.nan):
         """
         A field, and the gain with which it corrected the heading.
 
@@ -331,23 +348,42 @@ class AttitudeUncertainty:
             one; at most that of an unknown heading is counted, also for
             an infinite or NaN σ); counted while the heading follows the
             field.
+        reference : float or ndarray
+            Where the field did not correct the heading (gain 0) and the
+            heading still rests on a field whose calibration is being
+            learned: ``turn² + quality²`` of that calibration for this field,
+            rad² (see the module's docstring; at most that of an unknown
+            heading is counted, also for inf). NaN: nothing new (the
+            default).
 
         """
         dt = self._dt if dt is None else dt
-        self.last_field = (dt, gain, calibration)
+        self.last_field = (dt, gain, calibration, reference)
         if dt != self._field_dt:
             if not (math.isfinite(dt) and dt > 0.0):
                 raise ValueError(f'dt must be positive and finite, got {dt}')
             self._field_dt = dt
             self._r_mag = self.params.mag_noise ** 2 / dt
-        a = 1.0 - gain
-        self._ph = a * a * self._ph + gain * gain * self._r_mag
-        self._ch = a * self._ch
         used = gain > 0.0
+        a = 1.0 - gain
+        # A correction pulls the whole heading error, the reference's part
+        # included, to the field's; without one both stay.
+        self._ph = a * a * (self._ph + used * self._unknown) + gain * gain * self._r_mag
+        self._ch = a * self._ch
+        self._unknown = (1 - used) * self._unknown
         self.heading_set = self.heading_set | used
         c2 = calibration * calibration
-        c2 = (c2 if c2 <= HEADING_UNKNOWN else HEADING_UNKNOWN) if isinstance(c2, float) else (
-            np.where(c2 <= HEADING_UNKNOWN, c2, HEADING_UNKNOWN))
+        u = reference + self._heading_floor
+        if isinstance(c2, float):
+            c2 = c2 if c2 <= HEADING_UNKNOWN else HEADING_UNKNOWN
+        else:
+            c2 = np.where(c2 <= HEADING_UNKNOWN, c2, HEADING_UNKNOWN)
+        if isinstance(u, float):
+            if u == u and not used:
+                self._unknown = u if u <= HEADING_UNKNOWN else HEADING_UNKNOWN
+        else:
+            given = (u == u) & ~np.asarray(used)
+            self._unknown = np.where(given, np.minimum(u, HEADING_UNKNOWN), self._unknown)
         self._calibration = used * c2 + (1 - used) * self._calibration
 
     def heading_gain(self, count, dt=None):
@@ -376,7 +412,7 @@ class AttitudeUncertainty:
     def heading_variance(self):
         """Variance of the heading (about the world vertical), rad²."""
         floor = self.heading_set * (self._heading_floor + self._calibration)
-        return self._ph + floor + self._stamp2 * self._wz2
+        return self._ph + self._unknown + floor + self._stamp2 * self._wz2
 
     @property
     def inclination_std(self):
@@ -400,7 +436,8 @@ class AttitudeUncertainty:
 
         """
         t = self._pt + self._tilt_floor + 0.5 * self._stamp2 * self._wh2
-        h = (self._ph + self.heading_set * (self._heading_floor + self._calibration)
+        h = (self._ph + self._unknown
+             + self.heading_set * (self._heading_floor + self._calibration)
              + self._stamp2 * self._wz2)
         z = 0.0 * t
         return (t, z, z, z, t, z, z, z, h)
