@@ -13,9 +13,12 @@ over the publishing window, in ``--rounds`` interleaved runs of each:
   ``attitude_estimate``; the latest field kept);
 - ``imu_filter``: the shipped ``imu_filter_node`` (the console script next
   to this interpreter, else ``python -m ext_observer.imu_filter_node``) with
-  its defaults (``use_mag`` true).
+  its defaults (``use_mag`` true);
+- with ``--floor``, ``step_only`` between them: :func:`step_only_node`, the
+  node cut down to the estimate's arithmetic (no input checks): what the
+  node's own checks cost is its CPU above this one's.
 
-Both spin on the same executor (``--executor``, default ``events``, the
+All spin on the same executor (``--executor``, default ``events``, the
 node's default). The samples are the BROAD excerpt the tests replay
 (``test/data``), looped. It prints one table, CPU µs per IMU sample (median
 and every run), outputs received (the fewest of any run), and the ratio of
@@ -23,7 +26,7 @@ the medians against the goal, ``met`` or ``not met``: within
 :data:`NODE_GOAL` × the relay's (issue 11).
 
 ``python -m bench.raw_imu relay --executor events`` runs the relay alone
-(SIGINT ends it).
+(SIGINT ends it); ``python -m bench.raw_imu step_only`` the floor.
 """
 
 import argparse
@@ -46,6 +49,8 @@ DATA = os.path.join(REPO, 'test', 'data')
 # factor of the bare relay's.
 NODE_GOAL = 1.2
 TARGETS = ('relay', 'imu_filter')
+# With --floor: a third target between them (see step_only_node).
+FLOOR = 'step_only'
 # Below this share of the samples coming back as outputs, a target (or the
 # driver) fell behind: a target that dropped samples did less work per
 # sample published, and the ratio is no longer a clean measure.
@@ -102,6 +107,70 @@ class ImuRelay:
         self.estimate_publisher.publish(self._estimate)
 
 
+def step_only_node():
+    """
+    The node class of the ``step_only`` target: the estimate's arithmetic and nothing else.
+
+    ``imu_filter_node`` with its sample callback cut down to what no raw-IMU
+    node can leave out: the stamp, one compiled step of the estimator, the
+    covariance's step, and the two outputs; the field straight to the
+    estimator. No validation, no stamp checks, no unit checks, no
+    counters: not a node to run, a floor to measure the node's own checks
+    against (what they cost is the node's CPU above this one's).
+    """
+    from ext_observer.imu_filter_node import ImuFilterNode
+
+    class StepOnly(ImuFilterNode):
+
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self._previous = None
+            self._field_previous = None
+
+        def imu_data_raw_callback(self, msg):
+            stamp = msg.header.stamp
+            ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+            previous, self._previous = self._previous, ns
+            if previous is None:
+                return
+            dt = (ns - previous) * 1e-9
+            v, a = msg.angular_velocity, msg.linear_acceleration
+            gyr = (v.x, v.y, v.z)
+            estimator = self.pipeline.estimator
+            core, tracker = estimator.core, estimator.uncertainty
+            if core.q is None:
+                core.update(gyr, (a.x, a.y, a.z), estimator.latest_field, dt)
+                tracker.start(dt)
+                return
+            w, x, y, z = q = core.update(gyr, (a.x, a.y, a.z), None, dt)
+            tracker.step(dt, gyr, q, False)
+            out = self._estimate_msg
+            out.header.stamp = stamp
+            o = out.quaternion
+            o.w, o.x, o.y, o.z = w, x, y, z
+            self.estimate_publisher.publish(out)
+            n = (w * w + x * x + y * y + z * z) ** 0.5
+            o = msg.orientation
+            o.w, o.x, o.y, o.z = w / n, x / n, y / n, z / n
+            msg.orientation_covariance[:] = tracker.covariance
+            self.imu_publisher.publish(msg)
+
+        def imu_mag_callback(self, msg):
+            stamp = msg.header.stamp
+            ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+            previous, self._field_previous = self._field_previous, ns
+            f = msg.magnetic_field
+            self.pipeline.estimator.field(
+                (f.x, f.y, f.z), None if previous is None else (ns - previous) * 1e-9)
+
+    return StepOnly
+
+
+def _step_only_main(argv):
+    from ext_observer.node_common import run_node
+    return run_node(step_only_node(), argv)
+
+
 def _relay_main(argv):
     parser = argparse.ArgumentParser(prog='python -m bench.raw_imu relay')
     parser.add_argument('--executor', choices=EXECUTORS, default='events')
@@ -123,6 +192,9 @@ def target_args(label, executor):
     """The command line of a target (``relay`` or ``imu_filter``) on ``executor``."""
     if label == 'relay':
         return ['-m', 'bench.raw_imu', 'relay', '--executor', executor]
+    if label == FLOOR:
+        return ['-m', 'bench.raw_imu', FLOOR, '--executor', executor, '--ros-args', '-p',
+                'use_mag:=true']
     script = os.path.join(os.path.dirname(sys.executable), 'imu_filter_node')
     command = [script] if os.path.exists(script) else ['-m', 'ext_observer.imu_filter_node']
     return command + ['--executor', executor, '--ros-args', '-p', 'use_mag:=true']
@@ -194,7 +266,7 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path):
             if time.monotonic() > deadline or child.proc.poll() is not None:
                 raise RuntimeError(f'target did not come up: {child.log_tail()}')
             time.sleep(0.05)
-        if 'imu_filter' in ' '.join(target):
+        if 'imu_filter' in ' '.join(target) or FLOOR in target:
             deadline = time.monotonic() + 300.0
             while not kernels or kernels[-1].startswith('plain ('):
                 if time.monotonic() > deadline or child.proc.poll() is not None:
@@ -294,6 +366,16 @@ def goal_line(result):
     return text
 
 
+def floor_line(result):
+    """The ``step_only`` floor against the relay and the node, or '' without it."""
+    m = result['medians']
+    if FLOOR not in m or not m.get('relay') or 'imu_filter' not in m:
+        return ''
+    return (f'{FLOOR} (the estimate\'s arithmetic alone, no input checks): '
+            f'{m[FLOOR] / m["relay"]:.2f}× the relay; the node\'s checks, stamps and '
+            f'counters: {m["imu_filter"] - m[FLOOR]:.0f} µs per sample more')
+
+
 def short_outputs(runs):
     """The fewest outputs of each target that got fewer than :data:`COMPLETE` back in a run."""
     return {label: min(r['outputs'] for r in rows) for label, rows in runs.items()
@@ -312,7 +394,7 @@ def short_text(result):
 
 
 def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds=3,
-            log_dir=None, progress=None):
+            log_dir=None, progress=None, floor=False):
     """
     Run the relay and the node in interleaved rounds; return the runs and the verdict.
 
@@ -327,9 +409,10 @@ def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds
     samples = load_samples()
     # One run of one target varies by about ±10 % (the machine's other
     # work); interleaved rounds and medians keep the ratio steady.
-    runs = {label: [] for label in TARGETS}
+    targets = (TARGETS[0], FLOOR, TARGETS[1]) if floor else TARGETS
+    runs = {label: [] for label in targets}
     for round_ in range(rounds):
-        for index, label in enumerate(TARGETS):
+        for index, label in enumerate(targets):
             if progress:
                 progress(f'round {round_ + 1}/{rounds}, {label} ({executor}): {rate:g} Hz '
                          f'IMU, {mag_rate:g} Hz field, {seconds:g} s ...')
@@ -364,6 +447,8 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ['relay']:
         return _relay_main(argv[1:])
+    if argv[:1] == [FLOOR]:
+        return _step_only_main(argv[1:])
     parser = argparse.ArgumentParser(prog='python -m bench.raw_imu')
     parser.add_argument('--rate', type=float, default=1000.0, help='IMU rate, Hz')
     parser.add_argument('--mag-rate', type=float, default=100.0, help='field rate, Hz')
@@ -371,16 +456,21 @@ def main(argv=None):
     parser.add_argument('--rounds', type=int, default=3,
                         help='runs of each target, interleaved (relay, imu_filter, relay, ...)')
     parser.add_argument('--executor', choices=EXECUTORS, default='events')
+    parser.add_argument('--floor', action='store_true',
+                        help=f'also the {FLOOR} target: the estimate\'s arithmetic alone')
     parser.add_argument('--log-dir', default=os.path.join(REPO, 'out', 'bench'))
     parser.add_argument('--json', metavar='PATH', help='also write the results there')
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error('--rounds must be at least 1')
     result = compare(args.executor, args.rate, args.mag_rate, args.seconds, args.rounds,
-                     args.log_dir, lambda text: print(text, file=sys.stderr, flush=True))
+                     args.log_dir, lambda text: print(text, file=sys.stderr, flush=True),
+                     floor=args.floor)
     print(table(result))
     print()
     print(goal_line(result))
+    if floor_line(result):
+        print(floor_line(result))
     if args.json:
         with open(args.json, 'w') as out:
             json.dump(result, out, indent=1)
