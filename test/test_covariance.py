@@ -486,3 +486,13 @@ def test_while_the_calibration_learns_the_heading_sigma_says_what_it_has_learned
     else:
         # The held heading is the distorted field's, far off: σ stays large.
         assert np.abs(heading[learning]).max() > 20.0
+
+
+def test_the_bound_margin_is_a_share_of_each_range_and_the_smaller_counts():
+    from ext_observer.broad.covariance import bound_margin
+    centre = {'within_2sigma': 0.945, 'mean_z2': 1.0}
+    assert bound_margin(centre) == pytest.approx(0.5)
+    # On a bound: 0; outside: negative; the figure nearer its bound decides.
+    assert bound_margin({'within_2sigma': 0.90, 'mean_z2': 1.0}) == pytest.approx(0.0)
+    assert bound_margin({'within_2sigma': 0.945, 'mean_z2': 0.25}) == pytest.approx(-0.5)
+    assert bound_margin({'within_2sigma': 0.981, 'mean_z2': 1.0}) == pytest.approx(0.1)

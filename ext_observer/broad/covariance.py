@@ -377,6 +377,53 @@ def tuning_cost(summary):
     return cost
 
 
+def bound_margin(figures):
+    """
+    How deep a row's two figures lie inside issue 18's bounds: the smaller of the two.
+
+    The fraction within 2σ on a linear scale, the mean of ``e² / σ²`` on a
+    log scale, each as a share of its range: 0.5 in the middle of both, 0 on
+    a bound, negative outside.
+    """
+    lo, hi = FRACTION_RANGE
+    mlo, mhi = MEAN_RANGE
+    f, m = figures['within_2sigma'], figures['mean_z2']
+    inside = min(f - lo, hi - f) / (hi - lo)
+    centred = min(math.log(m / mlo), math.log(mhi / m)) / math.log(mhi / mlo)
+    return min(inside, centred)
+
+
+def choose_heading_floor(trials, runs, groups, floors, start=None, ahrs_params=None):
+    """
+    The ``heading_floor`` whose heading rows lie deepest inside the bounds.
+
+    For each candidate the logged runs are replayed with it (the other
+    parameters at ``start``), and the smallest :func:`bound_margin` over the
+    heading rows is kept; the candidate with the largest wins. Pass the dev
+    trials only: the held-out ones judge the result.
+
+    Returns
+    -------
+    floor : float
+    margins : dict
+        ``{candidate: smallest margin}``.
+
+    """
+    base = dict(start or UncertaintyParams.DEFAULTS)
+    keys = [(m, t.name) for m in runs for t in trials if t.name in runs[m]]
+    logged = [runs[m][name] for m, name in keys]
+    margins = {}
+    for floor in floors:
+        out = replay(logged, UncertaintyParams(**dict(base, heading_floor=floor)), ahrs_params)
+        variances = {m: {} for m in runs}
+        for (m, name), v in zip(keys, out):
+            variances[m][name] = v
+        summary = summarize(trials, runs, groups, variances)
+        margins[floor] = min(bound_margin(f) for key, f in summary.items()
+                             if key[1] != 'all' and key[3] == 'heading')
+    return max(margins, key=margins.get), margins
+
+
 def tune(trials, runs, groups, names, start=None, factors=(0.7, 0.85, 1.2, 1.4), rounds=2,
          ahrs_params=None, progress=None):
     """

@@ -148,7 +148,7 @@ class UncertaintyParams:
         acc_noise=3.2e-3,  # m/s²/√Hz, measured at rest
         mag_noise=1.3e-3,  # rad·√s (1.25° per sample at 286 Hz), measured at rest
         inclination_floor=8.0e-3,  # rad (0.46°)
-        heading_floor=2.35e-2,  # rad (1.35°)
+        heading_floor=2.1e-2,  # rad (1.20°)
         stamp_error=7.0e-4,  # s
     )
     # These keep every variance positive; the others may be 0 (off).
