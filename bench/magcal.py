@@ -426,6 +426,113 @@ def plot(trial, traces, level, seed, path):
     plt.close(fig)
 
 
+# --- what the all-samples figure allows (--floor) ----------------------------
+
+FLOOR_DRAWS = 200
+FLOOR_TIMES = (0.1, 0.25, 0.5, 1.0, 2.0)  # s of movement
+
+
+def _heading_deg(quat, vectors):
+    """Heading (deg) of body ``vectors`` (N, 3) in the world frame of ``quat`` (N, 4)."""
+    w, x, y, z = quat.T
+    # First two rows of R(q): the world's east and north components.
+    east = ((1 - 2 * (y * y + z * z)) * vectors[:, 0] + 2 * (x * y - w * z) * vectors[:, 1]
+            + 2 * (x * z + w * y) * vectors[:, 2])
+    north = (2 * (x * y + w * z) * vectors[:, 0] + (1 - 2 * (x * x + z * z)) * vectors[:, 1]
+             + 2 * (y * z - w * x) * vectors[:, 2])
+    return np.degrees(np.arctan2(east, north))
+
+
+def floor_figures(trials, levels=LEVELS, undistorted=1.59, seed=0):
+    """
+    What the issue's all-samples figure allows any causal estimator, from the data.
+
+    Before the body turns, no offset is observable: at rest the field as
+    given is one vector, and any heading has an offset that explains it. The
+    heading error an estimator starts the movement with is then that of the
+    field as given, ``S m + b``, against the field ``m``: measured here on
+    each trial's first second of movement (its own field and optical
+    attitude) over ``FLOOR_DRAWS`` distortions drawn as the benchmark draws
+    them. Even an estimator whose heading were perfect (as good as the
+    undistorted one, ``undistorted`` deg RMSE) from ``t`` s of movement on
+    scores at least ``√((t e² + (T − t) u²) / T)`` over a trial of ``T``
+    s of movement. Also: how far the body has turned after ``t`` s.
+
+    Returns
+    -------
+    dict
+        ``movement_s`` (per trial), ``start_error_deg`` (per level: RMS over
+        trials and draws), ``floor`` (``{level: {t: mean over trials of the
+        bound, deg}}``), ``needed_s`` (per level: the ``t`` at which the
+        bound reaches twice ``undistorted``), ``turned_deg`` (``{t: median over
+        trials of the angle turned, deg}``).
+
+    """
+    rng = np.random.default_rng(seed)
+    moves, starts, turned = [], {level: [] for level in levels}, {t: [] for t in FLOOR_TIMES}
+    for trial in trials:
+        idx = np.flatnonzero(trial.movement)
+        if idx.size == 0:
+            continue
+        moves.append(idx.size / trial.rate)
+        first = idx[:int(round(trial.rate))]
+        ok = first[np.all(np.isfinite(trial.quat[first]), axis=1)]
+        m, q = trial.mag[ok], trial.quat[ok]
+        norm = float(np.mean(np.linalg.norm(trial.mag, axis=1)))
+        truth = _heading_deg(q, m)
+        for level in levels:
+            errors = []
+            for _ in range(FLOOR_DRAWS):
+                u = rng.normal(size=3)
+                e = np.triu(rng.uniform(-SOFT_IRON, SOFT_IRON, (3, 3)))
+                soft = np.eye(3) + e + np.triu(e, 1).T
+                raw = m @ soft.T + level * norm * u / np.linalg.norm(u)
+                d = (_heading_deg(q, raw) - truth + 180.0) % 360.0 - 180.0
+                errors.append(np.mean(d * d))
+            starts[level].append(np.mean(errors))
+        rate = np.linalg.norm(trial.gyr[idx[0]:], axis=1)
+        angle = np.cumsum(rate) / trial.rate
+        for t in FLOOR_TIMES:
+            turned[t].append(math.degrees(angle[min(len(angle) - 1, int(t * trial.rate))]))
+    moves = np.array(moves)
+    out = {'movement_s': moves.tolist(), 'undistorted': undistorted,
+           'start_error_deg': {}, 'floor': {}, 'needed_s': {},
+           'turned_deg': {t: float(np.median(v)) for t, v in turned.items()}}
+    for level in levels:
+        e2 = float(np.mean(starts[level]))
+        out['start_error_deg'][level] = math.sqrt(e2)
+
+        def bound(t):
+            return float(np.mean(np.sqrt((t * e2 + (moves - t) * undistorted ** 2) / moves)))
+
+        out['floor'][level] = {t: bound(t) for t in FLOOR_TIMES}
+        lo, hi = 0.0, float(moves.min())
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if bound(mid) <= 2.0 * undistorted else (lo, mid)
+        out['needed_s'][level] = lo
+    return out
+
+
+def floor_report(f):
+    """The ``--floor`` figures as text (markdown)."""
+    u = f['undistorted']
+    lines = [f'{len(f["movement_s"])} trials, {min(f["movement_s"]):.0f} to '
+             f'{max(f["movement_s"]):.0f} s of movement each; the undistorted estimator '
+             f'{u:.2f}°, so the issue\'s all-samples goal is {2 * u:.2f}°.', '',
+             '| hard iron | heading error of the field as given, first second of movement '
+             '(RMS) | ' + ' | '.join(f'bound if right after {t:g} s' for t in FLOOR_TIMES)
+             + ' | right within this, for 2× |',
+             '|---|---:|' + '---:|' * len(FLOOR_TIMES) + '---:|']
+    for level, e in f['start_error_deg'].items():
+        lines.append(f'| {level:g} × \\|m\\| | {e:.0f}° | '
+                     + ' | '.join(f'{b:.2f}° ({b / u:.1f}×)' for b in f['floor'][level].values())
+                     + f' | {f["needed_s"][level]:.2f} s |')
+    lines += ['', 'Turned by then (median over the trials): '
+              + ', '.join(f'{t:g} s: {a:.1f}°' for t, a in f['turned_deg'].items()) + '.']
+    return '\n'.join(lines)
+
+
 def write_docs(docs_dir, section):
     """Put ``section`` between the markers of ``docs_dir/calibration.md``."""
     from bench.report import replace_section
@@ -447,9 +554,17 @@ def main(argv=None):
     parser.add_argument('--docs', default=None, metavar='DIR',
                         help='write DIR/calibration.md and DIR/figures/calibration_trial.png')
     parser.add_argument('--json', default=None, metavar='FILE')
+    parser.add_argument('--floor', action='store_true',
+                        help='only what the all-samples figure allows any causal estimator '
+                             '(seconds, no estimator runs)')
+    parser.add_argument('--undistorted', type=float, default=1.59,
+                        help='with --floor: the undistorted 9D total RMSE, deg')
     args = parser.parse_args(argv)
     folder = data_dir(args.data)
     trials = [load_trial(path, name) for name, path in find_trials(folder, args.trials)]
+    if args.floor:
+        print(floor_report(floor_figures(trials, args.levels, args.undistorted, args.seed)))
+        return 0
     anchors = () if args.no_anchors else ANCHORS
     start = time.perf_counter()
     result, traces = run(trials, args.levels, anchors, args.jobs, args.seed,
