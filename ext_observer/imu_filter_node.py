@@ -149,11 +149,13 @@ class ImuFilterNode(EstimatorNode):
 
     def imu_data_raw_callback(self, msg):
         """Take one IMU sample; publish the estimate of the step it closes."""
-        stamp = nanoseconds_from_stamp(msg.header.stamp)
+        # nanoseconds_from_stamp and vector_from_msg, written out: this runs
+        # for every sample (the fields of a message are Python ints and floats).
+        header_stamp = msg.header.stamp
+        stamp = header_stamp.sec * 1_000_000_000 + header_stamp.nanosec
+        v, a = msg.angular_velocity, msg.linear_acceleration
         # No clock is read: the steps wait for nothing.
-        outcome, estimate = self.pipeline.imu(
-            stamp, vector_from_msg(msg.angular_velocity),
-            vector_from_msg(msg.linear_acceleration))
+        outcome, estimate = self.pipeline.imu(stamp, (v.x, v.y, v.z), (a.x, a.y, a.z))
         if outcome == BACKWARD_JUMP:
             self._backward_jump(stamp, reset=False)
         if estimate is None:
@@ -165,7 +167,7 @@ class ImuFilterNode(EstimatorNode):
                                 count=False)
         w, x, y, z = estimate.state
         out = self._estimate_msg
-        out.header.stamp = msg.header.stamp
+        out.header.stamp = header_stamp
         q = out.quaternion
         q.w, q.x, q.y, q.z = w, x, y, z
         self.estimate_publisher.publish(out)

@@ -125,6 +125,9 @@ DROP_REASONS = INCREMENT_DROP_REASONS + MEASUREMENT_DROP_REASONS
 # Smallest accepted specific force (m/s²) and magnetic field (T): below,
 # the vector has no direction (a driver that leaves the field at zero).
 MIN_ACCELERATION = 1e-6
+# add_sample decides a sample at once only with |a|² above this (well clear
+# of MIN_ACCELERATION, where check_vector's hypot decides).
+_FAST_ACC2 = (4.0 * MIN_ACCELERATION) ** 2
 MIN_FIELD = 1e-9
 
 # Counted events that drop nothing.
@@ -335,6 +338,56 @@ class StepPairer:
             return self._drop(_VALUE_REASONS['increment'][reason])
         self._increments[start] = (theta, now + self.timeout, stamp)
         return None
+
+    def add_sample(self, stamp, omega, acceleration):
+        """
+        The raw IMU's path: take a sample and release the step it closes, in one call.
+
+        The same as :meth:`add_angular_velocity` (``now`` 0) followed by
+        :meth:`pop_ready` (0), for a caller whose steps wait for nothing
+        (``timeout`` 0) and pair nothing (the raw IMU, whose fields go through
+        :meth:`add_field`). The usual sample (finite, after the one that
+        waits, within ``max_dt``, no forward gap) is decided here at once;
+        any other goes the general way, so the outcome, the step and every
+        counter are those of the two calls (``test_pairing.py`` checks that on
+        arbitrary samples).
+
+        Returns
+        -------
+        outcome : str or None
+            As :meth:`add_angular_velocity`.
+        steps : tuple of Step
+            What :meth:`pop_ready` releases: the step this sample closed, if any.
+
+        """
+        pending = self._pending
+        if (pending is not None and self.timeout == 0 and not self._increments
+                and not self._measurements):
+            start, (v0, v1, v2) = pending
+            span = stamp - start
+            w0, w1, w2 = omega
+            a0, a1, a2 = acceleration
+            a2n = a0 * a0 + a1 * a1 + a2 * a2
+            previous = self._last_stamp
+            # Well clear of the zero-acceleration threshold (hypot there);
+            # a non-finite value fails the comparisons.
+            if (0 < span <= self.max_dt and _FAST_ACC2 < a2n < math.inf
+                    and math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)
+                    and (previous is None or start - previous <= self.forward_gap)):
+                dt = self.constant_dt if self.constant_dt > 0.0 else span * 1e-9
+                half = 0.5 * dt
+                t0, t1, t2 = (v0 + w0) * half, (v1 + w1) * half, (v2 + w2) * half
+                if t0 * t0 + t1 * t1 + t2 * t2 <= self.max_increment * self.max_increment:
+                    self.received['increment'] += 1
+                    self.processed['increment'] += 1
+                    self._pending = (stamp, omega)
+                    self._last_stamp = start
+                    self._last_end = stamp
+                    self._last_corrected = False
+                    return None, (Step(start, (t0, t1, t2), None, previous, False, False,
+                                       stamp),)
+        outcome = self.add_angular_velocity(stamp, omega, 0, acceleration)
+        return outcome, tuple(self.pop_ready(0))
 
     def add_field(self, stamp, field):
         """

@@ -271,7 +271,7 @@ class RawImuEstimator:
                      a[3] * field[0] + a[4] * field[1] + a[5] * field[2],
                      a[6] * field[0] + a[7] * field[1] + a[8] * field[2])
         self.latest_field = field
-        if self.core.q is not None:
+        if self.core.initialized:
             self.core.update_mag(field, dt)
             self._track_field(dt, field)
 
@@ -336,7 +336,7 @@ class RawImuEstimator:
 
         """
         core = self.core
-        starting = core.q is None
+        starting = not core.initialized
         try:
             q = core.update(gyr, acc, self.latest_field if starting else None, dt)
         except (ValueError, OverflowError, ZeroDivisionError):
@@ -521,12 +521,11 @@ class RawImuPipeline:
 
         """
         self.units.imu(gyr, acc)
-        pairer = self.pairer
-        outcome = pairer.add_angular_velocity(stamp, gyr, 0, acc)
+        outcome, steps = self.pairer.add_sample(stamp, gyr, acc)
         if outcome == BACKWARD_JUMP:
             self.reset('backward_jump')
         estimate = None
-        for step in pairer.pop_ready(0):
+        for step in steps:
             if step.end != stamp:
                 # Cannot happen: a step is released by the sample that closes it.
                 continue

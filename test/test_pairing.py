@@ -530,3 +530,60 @@ def test_raw_imu_samples_and_fields_are_accounted_for(ops, depth):
         assert pairer.waiting('increment') <= 1
         assert pairer.waiting('measurement') == 0
         assert_accounted(pairer)
+
+
+# The raw IMU's samples: a 5 ms stream, its steps drawn as differences
+# (mostly the usual one; duplicates, stale, jumps back, gaps and far stamps
+# among them), rates and accelerations good, bad and at the edges.
+sample_stamps = st.one_of(st.just(5 * MS), st.just(5 * MS), st.just(5 * MS),
+                          st.integers(1, 60 * MS),
+                          st.sampled_from([0, -MS, -3 * S, 600 * MS, 2 * S]),
+                          st.integers(-2 ** 40, 2 ** 40))
+rates = st.one_of(st.tuples(small_float, small_float, small_float),
+                  st.tuples(any_float, any_float, any_float),
+                  st.sampled_from([(1e3, 0.0, 0.0), (0.0, 0.0, 400.0)]))
+specific_forces = st.one_of(st.tuples(st.floats(-20, 20), st.floats(-20, 20), st.just(9.8)),
+                            st.tuples(any_float, any_float, any_float),
+                            st.sampled_from([(0.0, 0.0, 0.0), (1e-300, 0.0, 0.0),
+                                             (4e-6, 0.0, 0.0), (1e200, 1e200, 0.0)]))
+usual_sample = st.tuples(st.just('sample'), st.just(5 * MS),
+                         st.tuples(small_float, small_float, small_float),
+                         st.tuples(st.floats(-20, 20), st.floats(-20, 20), st.just(9.8)))
+sample_operations = st.lists(st.one_of(
+    usual_sample, usual_sample, usual_sample, usual_sample,
+    st.tuples(st.just('sample'), sample_stamps, rates, specific_forces),
+    st.tuples(st.just('sample'), sample_stamps, rates, specific_forces),
+    st.tuples(st.just('field'), sample_stamps, st.just((2e-5, 0.0, -4e-5)), st.none()),
+    st.tuples(st.just('restart'), st.none(), st.none(), st.none())), max_size=60)
+
+
+def _pairer_state(pairer):
+    return (dict(pairer.received), dict(pairer.processed), dict(pairer.drops),
+            dict(pairer.events), pairer.pending_stamp, pairer.last_stamp, pairer.field_stamp,
+            pairer.waiting('increment'), pairer.waiting('measurement'))
+
+
+@settings(max_examples=400, deadline=None)
+@given(sample_operations, st.sampled_from([0.0, 0.004]),
+       st.sampled_from([40 * MS, 300 * MS]))
+def test_add_sample_is_add_angular_velocity_then_pop_ready(ops, constant_dt, max_dt):
+    # The raw IMU's one-call path decides the usual sample itself: every
+    # outcome, step and counter is that of the two general calls.
+    settings_ = dict(timeout=0, depth=4, backward_jump=1 * S, forward_gap=500 * MS,
+                     max_dt=max_dt, constant_dt=constant_dt, max_increment=3.0)
+    fast, general = StepPairer(**settings_), StepPairer(**settings_)
+    stamp = 2 * S
+    for kind, delta, value, acc in ops:
+        if delta is not None:
+            stamp += delta
+        if kind == 'sample':
+            outcome, steps = fast.add_sample(stamp, value, acc)
+            expected = general.add_angular_velocity(stamp, value, 0, acc)
+            assert outcome == expected
+            assert list(steps) == general.pop_ready(0)
+        elif kind == 'field':
+            assert fast.add_field(stamp, value) == general.add_field(stamp, value)
+        else:
+            assert fast.restart() == general.restart()
+        assert _pairer_state(fast) == _pairer_state(general)
+    assert_accounted(fast)

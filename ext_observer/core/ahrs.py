@@ -264,6 +264,14 @@ class AhrsObserver:
         return np.array([s[slot] != 0.0 for s in self._states])
 
     @property
+    def initialized(self):
+        """Whether the first accelerometer sample has initialized the estimate (``q`` not None)."""
+        k = self._kernels.ahrs
+        if self.batch is None:
+            return self._states[0][k.S_INIT] != 0.0
+        return any(s[k.S_INIT] != 0.0 for s in self._states)
+
+    @property
     def q(self):
         """The ambient estimate ``(w, x, y, z)``; None before the first sample."""
         k = self._kernels.ahrs
