@@ -10,7 +10,8 @@ over the publishing window, in ``--rounds`` interleaved runs of each:
 
 - ``relay``: this module's :class:`ImuRelay`, the raw-IMU message path
   without the maths (per sample the node's two outputs, ``imu/data`` and
-  ``attitude_estimate``; the latest field kept);
+  ``attitude_estimate``; the latest field kept), with the node's QoS
+  (inputs best effort, outputs reliable, depth 100);
 - ``imu_filter``: the shipped ``imu_filter_node`` (the console script next
   to this interpreter, else ``python -m ext_observer.imu_filter_node``) with
   its defaults (``use_mag`` true);
@@ -55,6 +56,8 @@ FLOOR = 'step_only'
 # driver) fell behind: a target that dropped samples did less work per
 # sample published, and the ratio is no longer a clean measure.
 COMPLETE = 0.99
+# The relay's history depth: imu_filter_node's queue_depth default.
+RELAY_DEPTH = 100
 
 
 def verdict(ok):
@@ -75,19 +78,21 @@ class ImuRelay:
     def __init__(self, context):
         from geometry_msgs.msg import QuaternionStamped
         from rclpy.node import Node
-        from rclpy.qos import qos_profile_sensor_data
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import Imu, MagneticField
         self.node = Node('imu_relay', context=context)
         self.field = None
-        self.publisher = self.node.create_publisher(Imu, 'imu/data', 10)
+        # The node's QoS at its defaults (queue_depth 100): reliable outputs,
+        # best-effort inputs, so that neither side drops what the other takes.
+        out = QoSProfile(depth=RELAY_DEPTH)
+        self.publisher = self.node.create_publisher(Imu, 'imu/data', out)
         self.estimate_publisher = self.node.create_publisher(
-            QuaternionStamped, 'attitude_estimate', 10)
+            QuaternionStamped, 'attitude_estimate', out)
         self._estimate = QuaternionStamped()
         self._estimate.quaternion.w = 1.0
-        self.node.create_subscription(Imu, 'imu/data_raw', self.imu_data_raw_callback,
-                                      qos_profile_sensor_data)
-        self.node.create_subscription(MagneticField, 'imu/mag', self.imu_mag_callback,
-                                      qos_profile_sensor_data)
+        inputs = QoSProfile(depth=RELAY_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.node.create_subscription(Imu, 'imu/data_raw', self.imu_data_raw_callback, inputs)
+        self.node.create_subscription(MagneticField, 'imu/mag', self.imu_mag_callback, inputs)
         self._out = Imu()
         self._out.orientation.w = 1.0
 
