@@ -309,19 +309,26 @@ def start_plan():
     return 'background'
 
 
-def _child_setup():
-    # In the child, before exec: below the node in the scheduler's eyes (it
-    # must not slow the node's samples), and ended if the node that started
-    # it ends (killed, not only stopped: stop() ends it then).
+# The compiling child learns its parent from this variable (the node's pid).
+_PARENT = 'EXT_OBSERVER_COMPILE_PARENT'
+
+
+def _die_with_parent():
+    """
+    In the compiling child: end with the node that started it (also when it is killed).
+
+    Returns False if that node is gone already.
+    """
+    parent = os.environ.get(_PARENT)
+    if not parent:
+        return True
     import ctypes
-    try:
-        os.nice(10)
-    except OSError:
-        pass
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
+    # Set after the fork: a parent that died in between is not signalled.
+    return os.getppid() == int(parent)
 
 
 class BackgroundCompile:
@@ -336,8 +343,10 @@ class BackgroundCompile:
     running). :meth:`take` hands them over once, to the thread that runs the
     estimator.
 
-    Must be created from a thread that lives as long as the process (the
-    main thread): the child is ended when that thread ends.
+    The child runs at nice 10 and ends with this process (``prctl``'s
+    parent-death signal, set by the child itself), also when the process is
+    killed; strictly, with the thread that created this object, so create it
+    from the main thread.
 
     Attributes
     ----------
@@ -365,12 +374,17 @@ class BackgroundCompile:
         self._child = None
         self.pid = None
         if self.compiling:
-            env = dict(os.environ, EXT_OBSERVER_COMPILED='1')
+            env = dict(os.environ, EXT_OBSERVER_COMPILED='1', **{_PARENT: str(os.getpid())})
             self._child = subprocess.Popen(
                 [sys.executable, '-m', 'ext_observer.core.compiled', '--quiet'], env=env,
                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                start_new_session=True, preexec_fn=_child_setup)
+                start_new_session=True)
             self.pid = self._child.pid
+            # Below the node in the scheduler's eyes: it must not slow the samples.
+            try:
+                os.setpriority(os.PRIO_PROCESS, self.pid, 10)
+            except OSError:
+                pass
         self._thread = threading.Thread(target=self._run, name='ext_observer-kernels',
                                         daemon=True)
         self._thread.start()
@@ -430,6 +444,8 @@ def main(argv=None):
     reason when the kernels cannot be compiled.
     """
     argv = sys.argv[1:] if argv is None else argv
+    if not _die_with_parent():
+        return 1
     try:
         k = kernels(True)
     except CompiledUnavailable as error:
