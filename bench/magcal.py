@@ -432,15 +432,10 @@ FLOOR_DRAWS = 200
 FLOOR_TIMES = (0.1, 0.25, 0.5, 1.0, 2.0)  # s of movement
 
 
-def _heading_deg(quat, vectors):
-    """Heading (deg) of body ``vectors`` (N, 3) in the world frame of ``quat`` (N, 4)."""
-    w, x, y, z = quat.T
-    # First two rows of R(q): the world's east and north components.
-    east = ((1 - 2 * (y * y + z * z)) * vectors[:, 0] + 2 * (x * y - w * z) * vectors[:, 1]
-            + 2 * (x * z + w * y) * vectors[:, 2])
-    north = (2 * (x * y + w * z) * vectors[:, 0] + (1 - 2 * (x * x + z * z)) * vectors[:, 1]
-             + 2 * (y * z - w * x) * vectors[:, 2])
-    return np.degrees(np.arctan2(east, north))
+def _heading_deg(rotations, vectors):
+    """Heading (deg) of body ``vectors`` (N, 3) in the world frame, ``rotations`` (N, 3, 3)."""
+    world = np.einsum('nij,nj->ni', rotations, vectors)
+    return np.degrees(np.arctan2(world[:, 0], world[:, 1]))
 
 
 def floor_figures(trials, levels=LEVELS, undistorted=1.59, seed=0):
@@ -477,9 +472,9 @@ def floor_figures(trials, levels=LEVELS, undistorted=1.59, seed=0):
         moves.append(idx.size / trial.rate)
         first = idx[:int(round(trial.rate))]
         ok = first[np.all(np.isfinite(trial.quat[first]), axis=1)]
-        m, q = trial.mag[ok], trial.quat[ok]
+        m, r = trial.mag[ok], _rotation_matrices(trial.quat[ok])
         norm = float(np.mean(np.linalg.norm(trial.mag, axis=1)))
-        truth = _heading_deg(q, m)
+        truth = _heading_deg(r, m)
         for level in levels:
             errors = []
             for _ in range(FLOOR_DRAWS):
@@ -487,7 +482,7 @@ def floor_figures(trials, levels=LEVELS, undistorted=1.59, seed=0):
                 e = np.triu(rng.uniform(-SOFT_IRON, SOFT_IRON, (3, 3)))
                 soft = np.eye(3) + e + np.triu(e, 1).T
                 raw = m @ soft.T + level * norm * u / np.linalg.norm(u)
-                d = (_heading_deg(q, raw) - truth + 180.0) % 360.0 - 180.0
+                d = (_heading_deg(r, raw) - truth + 180.0) % 360.0 - 180.0
                 errors.append(np.mean(d * d))
             starts[level].append(np.mean(errors))
         rate = np.linalg.norm(trial.gyr[idx[0]:], axis=1)

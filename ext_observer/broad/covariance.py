@@ -410,18 +410,33 @@ def choose_heading_floor(trials, runs, groups, floors, start=None, ahrs_params=N
 
     """
     base = dict(start or UncertaintyParams.DEFAULTS)
-    keys = [(m, t.name) for m in runs for t in trials if t.name in runs[m]]
-    logged = [runs[m][name] for m, name in keys]
+    replayed = replayed_summary(trials, runs, groups, ahrs_params)
     margins = {}
     for floor in floors:
-        out = replay(logged, UncertaintyParams(**dict(base, heading_floor=floor)), ahrs_params)
-        variances = {m: {} for m in runs}
-        for (m, name), v in zip(keys, out):
-            variances[m][name] = v
-        summary = summarize(trials, runs, groups, variances)
+        summary = replayed(dict(base, heading_floor=floor))
         margins[floor] = min(bound_margin(f) for key, f in summary.items()
                              if key[1] != 'all' and key[3] == 'heading')
     return max(margins, key=margins.get), margins
+
+
+def replayed_summary(trials, runs, groups, ahrs_params=None):
+    """
+    Return ``summary(values)``: :func:`summarize` of the runs replayed with other parameters.
+
+    ``values`` is a dict of :class:`UncertaintyParams` values; the runs are
+    those of ``trials`` in ``runs`` (``{mode: {trial name: run}}``).
+    """
+    keys = [(m, t.name) for m in runs for t in trials if t.name in runs[m]]
+    logged = [runs[m][name] for m, name in keys]
+
+    def summary(values):
+        out = replay(logged, UncertaintyParams(**values), ahrs_params)
+        variances = {m: {} for m in runs}
+        for (m, name), v in zip(keys, out):
+            variances[m][name] = v
+        return summarize(trials, runs, groups, variances)
+
+    return summary
 
 
 def tune(trials, runs, groups, names, start=None, factors=(0.7, 0.85, 1.2, 1.4), rounds=2,
@@ -451,15 +466,10 @@ def tune(trials, runs, groups, names, start=None, factors=(0.7, 0.85, 1.2, 1.4),
 
     """
     values = dict(start or UncertaintyParams.DEFAULTS)
-    keys = [(m, t.name) for m in runs for t in trials if t.name in runs[m]]
-    logged = [runs[m][name] for m, name in keys]
+    replayed = replayed_summary(trials, runs, groups, ahrs_params)
 
     def cost(candidate):
-        out = replay(logged, UncertaintyParams(**candidate), ahrs_params)
-        variances = {m: {} for m in runs}
-        for (m, name), v in zip(keys, out):
-            variances[m][name] = v
-        return tuning_cost(summarize(trials, runs, groups, variances))
+        return tuning_cost(replayed(candidate))
 
     best = cost(values)
     for _ in range(rounds):
