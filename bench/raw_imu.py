@@ -33,6 +33,7 @@ the medians against the goal, ``met`` or ``not met``: within
 import argparse
 import glob
 import json
+import math
 import os
 import statistics
 import sys
@@ -117,8 +118,9 @@ def step_only_node():
     The node class of the ``step_only`` target: the estimate's arithmetic and nothing else.
 
     ``imu_filter_node`` with its sample callback cut down to what no raw-IMU
-    node can leave out: the stamp, one compiled step of the estimator, the
-    covariance's step, and the two outputs; the field straight to the
+    node can leave out: the stamp, one compiled call of the estimator's
+    and the covariance's step (``sample_step``, the covariance written into
+    the message), and the two outputs; the field straight to the
     estimator. No validation, no stamp checks, no unit checks, no
     counters: not a node to run, a floor to measure the node's own checks
     against (what they cost is the node's CPU above this one's).
@@ -140,15 +142,15 @@ def step_only_node():
                 return
             dt = (ns - previous) * 1e-9
             v, a = msg.angular_velocity, msg.linear_acceleration
-            gyr = (v.x, v.y, v.z)
             estimator = self.pipeline.estimator
             core, tracker = estimator.core, estimator.uncertainty
             if core.q is None:
-                core.update(gyr, (a.x, a.y, a.z), estimator.latest_field, dt)
+                core.update((v.x, v.y, v.z), (a.x, a.y, a.z), estimator.latest_field, dt)
                 tracker.start(dt)
                 return
-            w, x, y, z = q = core.update(gyr, (a.x, a.y, a.z), None, dt)
-            tracker.step(dt, gyr, q, False)
+            _, w, x, y, z = core.kernels.sample_step(
+                core.flat_state, tracker.state, msg.orientation_covariance, v.x, v.y, v.z,
+                a.x, a.y, a.z, dt, math.inf)
             out = self._estimate_msg
             out.header.stamp = stamp
             o = out.quaternion
@@ -157,7 +159,6 @@ def step_only_node():
             n = (w * w + x * x + y * y + z * z) ** 0.5
             o = msg.orientation
             o.w, o.x, o.y, o.z = w / n, x / n, y / n, z / n
-            msg.orientation_covariance[:] = tracker.covariance
             self.imu_publisher.publish(msg)
 
         def imu_mag_callback(self, msg):

@@ -154,8 +154,12 @@ class ImuFilterNode(EstimatorNode):
         header_stamp = msg.header.stamp
         stamp = header_stamp.sec * 1_000_000_000 + header_stamp.nanosec
         v, a = msg.angular_velocity, msg.linear_acceleration
+        # The estimated covariance is written straight into the message that
+        # goes out (its own float64 array): no copy.
+        covariance = msg.orientation_covariance if self._covariance_estimated else None
         # No clock is read: the steps wait for nothing.
-        outcome, estimate = self.pipeline.imu(stamp, (v.x, v.y, v.z), (a.x, a.y, a.z))
+        outcome, estimate = self.pipeline.imu(stamp, (v.x, v.y, v.z), (a.x, a.y, a.z),
+                                              covariance)
         if outcome == BACKWARD_JUMP:
             self._backward_jump(stamp, reset=False)
         if estimate is None:
@@ -178,9 +182,9 @@ class ImuFilterNode(EstimatorNode):
             n = (w * w + x * x + y * y + z * z) ** 0.5
             q = msg.orientation
             q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
-            # In place: the message's own float64 array (cheaper than a new one).
-            msg.orientation_covariance[:] = (estimate.covariance if self._covariance_estimated
-                                             else self._orientation_covariance)
+            if covariance is None:
+                # In place: the message's own float64 array (cheaper than a new one).
+                msg.orientation_covariance[:] = self._orientation_covariance
             self.imu_publisher.publish(msg)
 
     def imu_mag_callback(self, msg):
@@ -195,7 +199,7 @@ class ImuFilterNode(EstimatorNode):
         if kernels is not None:
             # Between two samples (one executor thread): the same state, the
             # same estimates from here on, faster.
-            self.pipeline.estimator.core.use_kernels(kernels)
+            self.pipeline.estimator.use_kernels(kernels)
             if compiler.compiling:
                 self.get_logger().info(f'compiled kernels ready after {compiler.seconds:.1f} '
                                        's: the estimator goes on with them')

@@ -38,10 +38,9 @@ Outputs
 
 Uncertainty
     Each estimate carries the covariance of its orientation error
-    (:class:`~ext_observer.core.uncertainty.AttitudeUncertainty`, fed after
-    every step with what the estimator did): 3×3, row-major, rad², about the
-    x, y, z axes of ``world_frame`` (a small rotation ``δ`` of the world
-    frame with the true attitude ``exp(δ) ⊗ q̂``): roll, pitch and yaw
+    (:class:`~ext_observer.core.uncertainty.AttitudeUncertainty`, stepped
+    with the estimator): 3×3, row-major, rad², about the x, y, z axes of
+    ``world_frame`` (the true attitude ``exp(δ) ⊗ q̂``): roll, pitch and yaw
     variances as ``sensor_msgs/Imu``'s ``orientation_covariance`` and
     robot_localization read them (REP 145). It is ``diag(V_t, V_t, V_h)``:
     the same in ENU, NWU and NED and after the declination and yaw offset.
@@ -65,6 +64,7 @@ from ext_observer.core.ahrs import AhrsObserver, AhrsParams, WORLD_FRAMES
 from ext_observer.core.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.core.uncertainty import AttitudeUncertainty, UncertaintyParams
+from ext_observer.core.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_OK, SAMPLE_RESIDUAL
 from ext_observer.core.validation import check_state
 from ext_observer.guard import GUARD_REASONS
 from ext_observer.pairing import BACKWARD_JUMP, StepPairer
@@ -179,6 +179,10 @@ def pairing_settings(settings):
                 constant_dt=settings['constant_dt'])
 
 
+# sample_step's outcomes as check_state's reasons (a step that raised: step_failed).
+_SAMPLE_REASONS = {SAMPLE_NON_FINITE: 'state_non_finite', SAMPLE_RESIDUAL: 'residual_too_large'}
+
+
 class RawImuEstimator:
     """
     The core's raw-IMU estimator with the node's frames: one call per sample or field.
@@ -208,6 +212,9 @@ class RawImuEstimator:
         self.core = AhrsObserver(params=params, use_mag=settings['use_mag'], compiled=compiled)
         self.uncertainty = AttitudeUncertainty.for_estimator(
             params, uncertainty_params(settings), use_mag=bool(settings['use_mag']))
+        self.uncertainty.use_kernels(self.core.kernels)
+        # Where sample_step writes the covariance when the caller gives no array.
+        self._covariance = np.zeros(9)
         self.world_frame = settings['world_frame']
         self.latest_field = None
         self._fields_used = 0
@@ -230,7 +237,7 @@ class RawImuEstimator:
             For a calibration that is not finite, not symmetric positive
             definite, or singular.
         """
-        self.max_residual = settings['divergence_max_residual']
+        self.max_residual = float(settings['divergence_max_residual'])
         bias, soft_iron = check_calibration(
             (settings['mag_bias_x'], settings['mag_bias_y'], settings['mag_bias_z']),
             settings['mag_soft_iron'])
@@ -314,9 +321,18 @@ class RawImuEstimator:
         self._fields_used += 1
         self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma)
 
-    def step(self, gyr, acc, dt):
+    def use_kernels(self, kernels):
+        """Go on with other kernels (plain or compiled): the core's and the covariance's."""
+        self.core.use_kernels(kernels)
+        self.uncertainty.use_kernels(kernels)
+
+    def step(self, gyr, acc, dt, covariance=None):
         """
-        Run one IMU sample.
+        Run one IMU sample: the usual one (an estimate exists) in one call.
+
+        :func:`~ext_observer.core.uncertainty_kernel.sample_step` runs the
+        core's step, the guard and the covariance's; any other sample goes
+        the general way (the same results).
 
         Parameters
         ----------
@@ -325,6 +341,8 @@ class RawImuEstimator:
             validated by the caller (finite, nonzero acceleration).
         dt : float
             Time since the previous sample, s.
+        covariance : array of 9 float64, optional
+            Where to write :attr:`covariance` (a message's own array).
 
         Returns
         -------
@@ -336,13 +354,33 @@ class RawImuEstimator:
 
         """
         core = self.core
-        starting = not core.initialized
         try:
-            q = core.update(gyr, acc, self.latest_field if starting else None, dt)
+            outcome, w, x, y, z = core.kernels.sample_step(
+                core.flat_state, self.uncertainty.state,
+                self._covariance if covariance is None else covariance,
+                gyr[0], gyr[1], gyr[2], acc[0], acc[1], acc[2], dt, self.max_residual)
         except (ValueError, OverflowError, ZeroDivisionError):
-            reason = 'step_failed'
-        else:
-            reason = check_state(q, None, self.max_residual)
+            outcome = None
+        if outcome == SAMPLE_OK:
+            return ((w, x, y, z) if self._frame is None
+                    else multiply_floats(self._frame, (w, x, y, z))), None
+        state, reason = self._general_step(  # failed the guard, or did not run
+            gyr, acc, dt, 'step_failed' if outcome is None else _SAMPLE_REASONS.get(outcome))
+        if covariance is not None:
+            covariance[:] = self.uncertainty.covariance
+        return state, reason
+
+    def _general_step(self, gyr, acc, dt, reason=None):
+        """The step one call at a time; with a ``reason``, the step failed: start again."""
+        core = self.core
+        starting = not core.initialized
+        if reason is None:
+            try:
+                q = core.update(gyr, acc, self.latest_field if starting else None, dt)
+            except (ValueError, OverflowError, ZeroDivisionError):
+                reason = 'step_failed'
+            else:
+                reason = check_state(q, None, self.max_residual)
         if reason is not None:
             core.reset()
             q = core.update(gyr, acc, self.latest_field, dt)
@@ -499,7 +537,7 @@ class RawImuPipeline:
         self.reset(cause)
         return discarded
 
-    def imu(self, stamp, gyr, acc):
+    def imu(self, stamp, gyr, acc, covariance=None):
         """
         Take one IMU sample and run the step it closes.
 
@@ -509,6 +547,8 @@ class RawImuPipeline:
             ns.
         gyr, acc : sequence of 3 float
             rad/s, m/s².
+        covariance : array of 9 float64, optional
+            Where to write the estimate's covariance (then the Estimate's).
 
         Returns
         -------
@@ -532,11 +572,12 @@ class RawImuPipeline:
             if step.gap and self._gap_resets:
                 self.reset('forward_gap')
             state, reason = self.estimator.step(
-                gyr, acc, self._constant_dt or (step.end - step.stamp) * 1e-9)
+                gyr, acc, self._constant_dt or (step.end - step.stamp) * 1e-9, covariance)
             if reason is not None:
                 self.reinitializations[reason] += 1
             estimate = Estimate(stamp, state, reason, step,
-                                self.estimator.uncertainty.covariance)
+                                self.estimator.uncertainty.covariance if covariance is None
+                                else covariance)
         return outcome, estimate
 
     def field(self, stamp, field):

@@ -62,14 +62,19 @@ class UnitCheck:
 
     def imu(self, gyr, acc):
         """Look at one IMU sample: angular velocity (rad/s), specific force (m/s²)."""
-        peak = max(abs(gyr[0]), abs(gyr[1]), abs(gyr[2]))
-        if peak > RATE_MAX and math.isfinite(peak):
-            self.counts['angular_velocity'] += 1
-            self.findings['angular_velocity'] = (
-                f'angular velocity {peak:.4g} on one axis, above the range of common '
-                f'gyros in rad/s ({RATE_MAX:g} rad/s = 2000 °/s): rad/s expected, is it '
-                'deg/s?')
-        norm = math.sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2])
+        g0, g1, g2 = gyr
+        # Every axis within the range (the usual sample) or NaN: nothing to say.
+        if not (-RATE_MAX <= g0 <= RATE_MAX and -RATE_MAX <= g1 <= RATE_MAX
+                and -RATE_MAX <= g2 <= RATE_MAX):
+            peak = max(abs(g0), abs(g1), abs(g2))
+            if peak > RATE_MAX and math.isfinite(peak):
+                self.counts['angular_velocity'] += 1
+                self.findings['angular_velocity'] = (
+                    f'angular velocity {peak:.4g} on one axis, above the range of common '
+                    f'gyros in rad/s ({RATE_MAX:g} rad/s = 2000 °/s): rad/s expected, is '
+                    'it deg/s?')
+        a0, a1, a2 = acc
+        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
         if not math.isfinite(norm):
             return
         self._acc_sum += norm

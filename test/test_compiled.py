@@ -155,3 +155,79 @@ def test_switching_kernels_mid_run_changes_no_estimate(mode):
         np.testing.assert_allclose(est.calibration.bias, reference.calibration.bias,
                                    rtol=0, atol=1e-12 * np.max(np.abs(mag)))
 
+
+
+def _pipeline_run(pipeline, gyr, acc, mag, rate, in_place, general=False, switch_at=None):
+    """The pipeline on an excerpt (a field every 10th sample): estimates and covariances."""
+    states, covariances = [], []
+    period = round(1e9 / rate)
+    for k in range(len(gyr)):
+        if switch_at is not None and k == switch_at:
+            pipeline.estimator.use_kernels(compiled_module.kernels(True))
+        stamp = 1_000_000_000 + k * period
+        if k % 10 == 0:
+            pipeline.field(stamp - period // 2, tuple(1e-6 * mag[k]))
+        if general:
+            # What the estimator did before sample_step: the core's step,
+            # the guard, then the covariance's, one call each.
+            est = pipeline.estimator
+            started = est.core.initialized
+            outcome, steps = pipeline.pairer.add_sample(stamp, tuple(gyr[k]), tuple(acc[k]))
+            for step in steps:
+                state, reason = est._general_step(tuple(gyr[k]), tuple(acc[k]),
+                                                  (step.end - step.stamp) * 1e-9)
+                assert reason is None or not started
+                states.append(state)
+                covariances.append(est.uncertainty.covariance)
+            continue
+        cov = np.zeros(9) if in_place else None
+        _, estimate = pipeline.imu(stamp, tuple(gyr[k]), tuple(acc[k]), cov)
+        if estimate is not None:
+            states.append(estimate.state)
+            covariances.append(tuple(estimate.covariance))
+            if in_place:
+                assert estimate.covariance is cov
+    return np.array(states), np.array(covariances)
+
+
+@pytest.mark.parametrize('compiled', [False, pytest.param(True, marks=needs_numba)])
+@pytest.mark.parametrize('mode', ['9D', '6D'])
+def test_the_one_call_sample_gives_what_the_steps_one_by_one_give(compiled, mode):
+    # sample_step (the core's step, the guard and the covariance's step in
+    # one call) against the three calls it replaces, and the covariance
+    # written into the caller's array against the tuple.
+    from test_covariance import node_settings
+    from ext_observer.raw_imu import RawImuPipeline
+    gyr, acc, mag, rate = _excerpt(EXCERPTS[0])
+    gyr, acc, mag = gyr[:4000], acc[:4000], mag[:4000]
+    settings = node_settings(use_mag=mode == '9D')
+    runs = [_pipeline_run(RawImuPipeline(settings, compiled=compiled), gyr, acc, mag, rate,
+                          in_place, general)
+            for in_place, general in ((False, False), (True, False), (False, True))]
+    for states, covariances in runs[1:]:
+        assert states.shape == runs[0][0].shape
+        assert np.max(np.abs(states - runs[0][0])) <= 1e-12
+        assert np.max(np.abs(covariances - runs[0][1])) <= 1e-12 * np.max(runs[0][1])
+    assert np.all(np.isfinite(runs[0][1])) and np.all(runs[0][1][:, [0, 4, 8]] > 0.0)
+
+
+@needs_numba
+def test_the_covariance_goes_along_when_the_kernels_change_mid_run():
+    # The node starts plain and switches to the compiled kernels between two
+    # samples: the covariance's state goes along (the same figures as a
+    # pipeline that ran plain throughout).
+    from test_covariance import node_settings
+    from ext_observer.raw_imu import RawImuPipeline
+    gyr, acc, mag, rate = _excerpt(EXCERPTS[1])
+    gyr, acc, mag = gyr[:3000], acc[:3000], mag[:3000]
+    reference = _pipeline_run(RawImuPipeline(node_settings(), compiled=False), gyr, acc, mag,
+                              rate, True)
+    pipeline = RawImuPipeline(node_settings(), compiled=False)
+    switched = _pipeline_run(pipeline, gyr, acc, mag, rate, True, switch_at=1500)
+    assert pipeline.estimator.core.compiled
+    assert isinstance(pipeline.estimator.uncertainty.state, np.ndarray)
+    assert np.max(np.abs(switched[0] - reference[0])) <= 1e-12
+    assert np.max(np.abs(switched[1] - reference[1])) <= 1e-12 * np.max(reference[1])
+    # The compiled sample_step is called past numba's dispatch (one signature).
+    k = compiled_module.kernels(True)
+    assert k.sample_step is not k.uncertainty.sample_step

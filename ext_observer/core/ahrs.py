@@ -243,6 +243,24 @@ class AhrsObserver:
             self.calibration.use_kernel(kernels.magcal,
                                         [(s, kernels.ahrs.MC0) for s in states])
 
+    @property
+    def kernels(self):
+        """The kernels it runs (:class:`~ext_observer.core.compiled.Kernels`)."""
+        return self._kernels
+
+    @property
+    def flat_state(self):
+        """
+        The flat state of a single estimate (ahrs_kernel's layout), for a caller that steps it.
+
+        :func:`~ext_observer.core.uncertainty_kernel.sample_step` runs the
+        estimator's step on it together with the covariance's. A new
+        container after :meth:`use_kernels`: ask again rather than keep it.
+        """
+        if self.batch is not None:
+            raise ValueError('flat_state is that of a single estimate, not of a batch')
+        return self._states[0]
+
     # --- state -------------------------------------------------------------
 
     def reset(self):
@@ -496,7 +514,10 @@ class AhrsObserver:
 
         """
         if dt is None:
-            dt = self._dt
+            # The last sample's interval, as the kernels hold it (a caller
+            # may step them directly: RawImuEstimator's sample_step).
+            dt = float(self._states[0][self._kernels.ahrs.C_DT])
+            _check_dt(dt)
         elif dt != self._mag_dt:
             _check_dt(dt)
             self._mag_dt = dt

@@ -50,7 +50,8 @@ __all__ = ['BackgroundCompile', 'CompiledUnavailable', 'Kernels', 'cache_ready',
            'compiled_available', 'kernels', 'start_plan']
 
 # In this order: each file's names are defined before the next one's functions use them.
-_SOURCES = ('magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py', 'ahrs_kernel.py')
+_SOURCES = ('magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py', 'ahrs_kernel.py',
+            'uncertainty_kernel.py')
 _ENV = 'EXT_OBSERVER_COMPILED'
 
 
@@ -64,19 +65,27 @@ class Kernels:
 
     Attributes
     ----------
-    ahrs, magcal : module
+    ahrs, magcal, uncertainty : module
         The functions and layout constants of
-        :mod:`~ext_observer.core.ahrs_kernel` and
-        :mod:`~ext_observer.core.magcal_kernel` (one joined module when
+        :mod:`~ext_observer.core.ahrs_kernel`,
+        :mod:`~ext_observer.core.magcal_kernel` and
+        :mod:`~ext_observer.core.uncertainty_kernel` (one joined module when
         compiled).
+    sample_step : callable
+        :func:`~ext_observer.core.uncertainty_kernel.sample_step`, the
+        node's call per sample; compiled, the machine code of its one
+        signature (float64 arrays and floats) called directly, without
+        numba's dispatch on the arguments' types (half the cost of a call).
     compiled : bool
     load_seconds : float
         How long getting them took (compiling, or loading numba's cache).
     """
 
-    def __init__(self, ahrs, magcal, compiled, load_seconds=0.0):
+    def __init__(self, ahrs, magcal, compiled, load_seconds=0.0, uncertainty=None):
         self.ahrs = ahrs
         self.magcal = magcal
+        self.uncertainty = uncertainty if uncertainty is not None else ahrs
+        self.sample_step = self.uncertainty.sample_step
         self.compiled = compiled
         self.load_seconds = load_seconds
 
@@ -93,8 +102,8 @@ _FAILURE = None
 def _plain():
     global _PLAIN
     if _PLAIN is None:
-        from . import ahrs_kernel, magcal_kernel
-        _PLAIN = Kernels(ahrs_kernel, magcal_kernel, False)
+        from . import ahrs_kernel, magcal_kernel, uncertainty_kernel
+        _PLAIN = Kernels(ahrs_kernel, magcal_kernel, False, uncertainty=uncertainty_kernel)
     return _PLAIN
 
 
@@ -252,8 +261,9 @@ def _load_compiled():
             if callable(value) and getattr(value, '__module__', None) == name \
                     and not isinstance(value, type):
                 setattr(module, key, numba.njit(cache=True)(value))
-        result = Kernels(module, module, True)
+        result = Kernels(module, module, True, uncertainty=module)
         _warm_up(result)
+        result.sample_step = _entry_point(module.sample_step)
         ready = os.path.join(folder, name + '.ready')
         if not os.path.exists(ready):
             with open(ready, 'w', encoding='utf-8') as f:
@@ -267,6 +277,7 @@ def _warm_up(k):
     """Compile (or load from the cache) what a node's estimator calls, now rather than mid-run."""
     from .ahrs import AhrsObserver
     from .ahrs_params import AhrsParams
+    from .uncertainty import AttitudeUncertainty
     global _COMPILED
     _COMPILED = k  # AhrsObserver(compiled=True) below asks for these
     try:
@@ -280,11 +291,36 @@ def _warm_up(k):
         _ = (cal.quality, cal.bias, cal.soft_iron, cal.field, cal.state, cal.counts,
              cal.heading_turn((20.0, 0.0, -40.0), (0.0, 0.0, 1.0)))
         est.update_mag((20.0, 0.0, -40.0), 0.02)
+        # The node's sample: the step, the guard and the covariance in one call.
+        tracker = AttitudeUncertainty()
+        tracker.use_kernels(k)
+        tracker.start(dt)
+        tracker.step(dt, (0.3, -0.2, 0.5), est.q, False)
+        tracker.field(0.02, 0.1, 0.0, np.nan)
+        _ = tracker.covariance
+        k.uncertainty.sample_step(est._states[0], tracker.state, np.zeros(9), 0.3, -0.2, 0.5,
+                                  0.1, 0.2, 9.8, dt, 0.1)
         est.reset()
         # The rest (the whole-recording loop, loading a calibration, the
         # single steps) compiles when first called: a node never calls it.
     finally:
         _COMPILED = None
+
+
+def _entry_point(dispatcher):
+    """
+    The compiled code of a dispatcher's one signature, called without the dispatch.
+
+    numba's dispatcher looks at every argument's type on every call to pick
+    the compiled version; the kernels the node calls per sample have one
+    (the warm-up's), so its entry point is called directly. The dispatcher
+    itself where it has more than one, or where numba keeps it elsewhere.
+    """
+    try:
+        (signature,) = dispatcher.signatures
+        return dispatcher.overloads[signature].entry_point
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return dispatcher
 
 
 def start_plan():

@@ -87,6 +87,13 @@ import math
 
 import numpy as np
 
+from . import uncertainty_kernel as _plain
+from .uncertainty_kernel import (
+    GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,
+    U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_K_ACC, U_K_REST, U_PH,
+    U_PHI, U_PT, U_Q_BIAS, U_Q_GYRO, U_Q_RATE, U_R_ACC, U_R_GYRO, U_SIZE, U_STAMP2, U_TAU_ACC,
+    U_TAU_REST, U_TILT_FLOOR, U_UNKNOWN, U_WH2, U_WZ2)
+
 __all__ = [
     'AttitudeUncertainty',
     'GRAVITY',
@@ -94,8 +101,6 @@ __all__ = [
     'UncertaintyParams',
 ]
 
-# Standard gravity, m/s²: turns the accelerometer's noise into a direction.
-GRAVITY = 9.80665
 # Variance of a heading known to be nothing better than uniform on (−π, π], rad².
 HEADING_UNKNOWN = math.pi * math.pi / 3.0
 
@@ -178,6 +183,25 @@ class UncertaintyParams:
         return f'UncertaintyParams({items})'
 
 
+class _Slot:
+    """An attribute kept in the tracker's flat state ``_u``: a float, or an array ``(B,)``."""
+
+    def __init__(self, index, flag=False):
+        self.index = index
+        self.flag = flag
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        value = obj._u[self.index]
+        if obj._compiled:  # a float64 array: a Python float (or bool) out
+            return value != 0.0 if self.flag else float(value)
+        return value
+
+    def __set__(self, obj, value):
+        obj._u[self.index] = value
+
+
 class AttitudeUncertainty:
     """
     The variance of the raw-IMU estimate's inclination and heading, step by step.
@@ -205,6 +229,25 @@ class AttitudeUncertainty:
 
     """
 
+    # The per-sample state and its constants live in the flat container
+    # ``_u`` (uncertainty_kernel's layout); these names read and write it.
+    _tilt_floor = _Slot(U_TILT_FLOOR)
+    _heading_floor = _Slot(U_HEADING_FLOOR)
+    _stamp2 = _Slot(U_STAMP2)
+    _dt = _Slot(U_DT)
+    _r_acc = _Slot(U_R_ACC)
+    _q_gyro = _Slot(U_Q_GYRO)
+    _pt = _Slot(U_PT)
+    _ct = _Slot(U_CT)
+    _ph = _Slot(U_PH)
+    _ch = _Slot(U_CH)
+    _b = _Slot(U_B)
+    _unknown = _Slot(U_UNKNOWN)
+    _calibration = _Slot(U_CALIBRATION)
+    heading_set = _Slot(U_HEADING_SET, flag=True)
+    _wz2 = _Slot(U_WZ2)
+    _wh2 = _Slot(U_WH2)
+
     def __init__(self, params=None, tau_acc=2.05, tau_mag=15.0, tau_rest=0.5, use_mag=True):
         self.params = params if params is not None else UncertaintyParams()
         for name, tau in (('tau_acc', tau_acc), ('tau_mag', tau_mag), ('tau_rest', tau_rest)):
@@ -213,11 +256,18 @@ class AttitudeUncertainty:
         self._tau = (float(tau_acc), float(tau_mag), float(tau_rest))
         self.use_mag = use_mag
         p = self.params
+        self._kernel = _plain
+        self._compiled = False
+        self._u = [0.0] * U_SIZE
+        u = self._u
+        u[U_TAU_ACC], u[U_TAU_REST] = self._tau[0], self._tau[2]
+        u[U_GYRO_NOISE], u[U_GYRO_RATE_NOISE] = p.gyro_noise, p.gyro_rate_noise
+        u[U_BIAS_STD], u[U_BIAS_TIME], u[U_ACC_NOISE] = p.bias_std, p.bias_time, p.acc_noise
         # What is added on output, rad² (the stamp's per (rad/s)²).
         self._tilt_floor = 0.5 * p.inclination_floor ** 2
         self._heading_floor = p.heading_floor ** 2
         self._stamp2 = p.stamp_error ** 2
-        self._dt = None
+        self._dt = math.nan  # no coefficients yet
         self._field_dt = None
         self._gain_dt = None
         self.reset()
@@ -228,6 +278,40 @@ class AttitudeUncertainty:
         return cls(params, tau_acc=ahrs_params.tau_acc + ahrs_params.tau_acc_gain,
                    tau_mag=ahrs_params.tau_mag, tau_rest=ahrs_params.tau_rest,
                    use_mag=use_mag)
+
+    def use_kernels(self, kernels):
+        """
+        Go on with other kernels (plain or compiled) from the same state.
+
+        As :meth:`AhrsObserver.use_kernels
+        <ext_observer.core.ahrs.AhrsObserver.use_kernels>`: the state is
+        copied into the new kernels' container; the variances go on as they
+        would have. The compiled kernels take one estimate (floats), not
+        arrays ``(B,)``.
+
+        Parameters
+        ----------
+        kernels : ext_observer.core.compiled.Kernels
+
+        Raises
+        ------
+        ValueError
+            For compiled kernels and a tracker of many recordings.
+
+        """
+        if kernels.uncertainty is self._kernel:
+            return
+        if kernels.compiled and any(np.ndim(v) for v in self._u + [self.use_mag]):
+            raise ValueError('the compiled kernels take one estimate, not arrays')
+        u = kernels.container(U_SIZE)
+        for i, value in enumerate(self._u):
+            u[i] = value if not kernels.compiled else float(value)
+        self._u, self._kernel, self._compiled = u, kernels.uncertainty, kernels.compiled
+
+    @property
+    def state(self):
+        """The flat state (uncertainty_kernel's layout): what :func:`sample_step` steps."""
+        return self._u
 
     # --- state -------------------------------------------------------------
 
@@ -268,24 +352,15 @@ class AttitudeUncertainty:
     def _coefficients(self, dt):
         if not (math.isfinite(dt) and dt > 0.0):
             raise ValueError(f'dt must be positive and finite, got {dt}')
-        p = self.params
-        tau_acc, _, tau_rest = self._tau
-        self._dt = dt
-        self._k_acc = 1.0 - math.exp(-dt / tau_acc)
-        self._k_rest = 1.0 - math.exp(-dt / tau_rest)
-        self._r_acc = (p.acc_noise / GRAVITY) ** 2 / dt
-        self._r_gyro = p.gyro_noise * p.gyro_noise / dt  # one sample's rate variance
-        self._q_gyro = p.gyro_noise * p.gyro_noise * dt
-        self._q_rate = p.gyro_rate_noise * p.gyro_rate_noise * dt
-        phi = math.exp(-dt / p.bias_time)
-        self._phi = phi
-        self._q_bias = p.bias_std * p.bias_std * (1.0 - phi * phi)
+        self._kernel.uncertainty_coefficients(self._u, float(dt))
 
     # --- the steps ---------------------------------------------------------
 
     def step(self, dt, gyr, q, rest):
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
+
+        (:func:`~ext_observer.core.uncertainty_kernel.uncertainty_step`.)
 
         Parameters
         ----------
@@ -300,37 +375,16 @@ class AttitudeUncertainty:
             Whether the estimator detected rest (and learned the bias).
 
         """
-        if dt != self._dt:
+        if dt != self._u[U_DT]:
             self._coefficients(dt)
         gx, gy, gz = gyr
-        w2 = gx * gx + gy * gy + gz * gz
-        q_theta = self._q_gyro + self._q_rate * w2
-        b, phi = self._b, self._phi
-        # [θ, β] ← F [θ, β] with F = [[1, dt], [0, φ]]: F P Fᵀ + Q, per axis.
-        bdt = b * dt
-        pt = self._pt + (2.0 * self._ct + bdt) * dt + q_theta
-        ph = self._ph + (2.0 * self._ch + bdt) * dt + q_theta
-        ct = phi * (self._ct + bdt)
-        ch = phi * (self._ch + bdt)
-        b = phi * phi * b + self._q_bias
-        # At rest the bias is the low-passed rate: β ← (1 − k_r) β + k_r n.
-        kr = self._k_rest * rest
-        a = 1.0 - kr
-        b = a * a * b + kr * kr * self._r_gyro
-        ct, ch = a * ct, a * ch
-        # The inclination correction of every sample.
-        k = self._k_acc
-        a = 1.0 - k
-        self._pt = a * a * pt + k * k * self._r_acc
-        self._ct = a * ct
-        self._ph, self._ch, self._b = ph, ch, b
-        # The rate about the world vertical: the third row of R(q), over |q|².
         w, x, y, z = q
-        n2 = w * w + x * x + y * y + z * z
-        wz = (2.0 * (x * z - w * y) * gx + 2.0 * (y * z + w * x) * gy
-              + (w * w - x * x - y * y + z * z) * gz) / n2
-        wz2 = wz * wz
-        self._wz2, self._wh2 = wz2, w2 - wz2
+        if self._compiled:
+            self._kernel.uncertainty_step(self._u, float(dt), float(gx), float(gy), float(gz),
+                                          float(w), float(x), float(y), float(z),
+                                          1.0 if rest else 0.0)
+        else:
+            self._kernel.uncertainty_step(self._u, dt, gx, gy, gz, w, x, y, z, rest)
 
     def field(self, dt, gain, calibration=0.0, reference=math.nan):
         """
@@ -406,13 +460,12 @@ class AttitudeUncertainty:
     @property
     def tilt_variance(self):
         """Variance of the tilt about each horizontal world axis, rad²."""
-        return self._pt + self._tilt_floor + 0.5 * self._stamp2 * self._wh2
+        return self._kernel.uncertainty_variances(self._u)[0]
 
     @property
     def heading_variance(self):
         """Variance of the heading (about the world vertical), rad²."""
-        floor = self.heading_set * (self._heading_floor + self._calibration)
-        return self._ph + self._unknown + floor + self._stamp2 * self._wz2
+        return self._kernel.uncertainty_variances(self._u)[1]
 
     @property
     def inclination_std(self):
@@ -435,9 +488,6 @@ class AttitudeUncertainty:
             ``(V_t, 0, 0, 0, V_t, 0, 0, 0, V_h)``, rad².
 
         """
-        t = self._pt + self._tilt_floor + 0.5 * self._stamp2 * self._wh2
-        h = (self._ph + self._unknown
-             + self.heading_set * (self._heading_floor + self._calibration)
-             + self._stamp2 * self._wz2)
+        t, h = self._kernel.uncertainty_variances(self._u)
         z = 0.0 * t
         return (t, z, z, z, t, z, z, z, h)
