@@ -78,6 +78,9 @@ What is published
     y entries is the same in ENU, NWU and NED and after any turn about the
     vertical (declination, yaw offset).
 
+The per-sample arithmetic is :mod:`~ext_observer.core.uncertainty_kernel`'s,
+on a flat state (plain, or compiled with the estimator's kernels).
+
 Units: rad, s, rad/s, m/s². Every quantity is a Python float, or a numpy
 array of shape ``(B,)`` for many recordings at once (the arithmetic is the
 same; flags multiply rather than branch).
@@ -195,7 +198,7 @@ class _Slot:
             return self
         value = obj._u[self.index]
         if obj._compiled:  # a float64 array: a Python float (or bool) out
-            return value != 0.0 if self.flag else float(value)
+            return float(value) != 0.0 if self.flag else float(value)
         return value
 
     def __set__(self, obj, value):
@@ -301,7 +304,7 @@ class AttitudeUncertainty:
         """
         if kernels.uncertainty is self._kernel:
             return
-        if kernels.compiled and any(np.ndim(v) for v in self._u + [self.use_mag]):
+        if kernels.compiled and any(np.ndim(v) for v in list(self._u) + [self.use_mag]):
             raise ValueError('the compiled kernels take one estimate, not arrays')
         u = kernels.container(U_SIZE)
         for i, value in enumerate(self._u):
@@ -420,25 +423,29 @@ class AttitudeUncertainty:
             self._r_mag = self.params.mag_noise ** 2 / dt
         used = gain > 0.0
         a = 1.0 - gain
+        # Each slot read and written once (a compiled state is an array).
+        st = self._u
+        unknown = st[U_UNKNOWN]
         # A correction pulls the whole heading error, the reference's part
         # included, to the field's; without one both stay.
-        self._ph = a * a * (self._ph + used * self._unknown) + gain * gain * self._r_mag
-        self._ch = a * self._ch
-        self._unknown = (1 - used) * self._unknown
+        st[U_PH] = a * a * (st[U_PH] + used * unknown) + gain * gain * self._r_mag
+        st[U_CH] = a * st[U_CH]
+        unknown = (1 - used) * unknown
         self.heading_set = self.heading_set | used
         c2 = calibration * calibration
-        u = reference + self._heading_floor
+        ref = reference + st[U_HEADING_FLOOR]
         if isinstance(c2, float):
             c2 = c2 if c2 <= HEADING_UNKNOWN else HEADING_UNKNOWN
         else:
             c2 = np.where(c2 <= HEADING_UNKNOWN, c2, HEADING_UNKNOWN)
-        if isinstance(u, float):
-            if u == u and not used:
-                self._unknown = u if u <= HEADING_UNKNOWN else HEADING_UNKNOWN
+        if isinstance(ref, float):
+            if ref == ref and not used:
+                unknown = ref if ref <= HEADING_UNKNOWN else HEADING_UNKNOWN
         else:
-            given = (u == u) & ~np.asarray(used)
-            self._unknown = np.where(given, np.minimum(u, HEADING_UNKNOWN), self._unknown)
-        self._calibration = used * c2 + (1 - used) * self._calibration
+            given = (ref == ref) & ~np.asarray(used)
+            unknown = np.where(given, np.minimum(ref, HEADING_UNKNOWN), unknown)
+        st[U_UNKNOWN] = unknown
+        st[U_CALIBRATION] = used * c2 + (1 - used) * st[U_CALIBRATION]
 
     def heading_gain(self, count, dt=None):
         """
