@@ -22,12 +22,12 @@ import time
 from bench import machine, report
 from bench.procs import REPO, reserved_domain_id, ros_env
 
-SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu')
+SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu', 'compiled')
 # The raw-IMU benchmarks, each a command of its own that prints its figures
 # and verdict (its output goes to stderr here) and writes them with --json.
 RAW_IMU = (
     ('node_events', ['bench.raw_imu', '--executor', 'events', '--seconds', '8',
-                     '--rounds', '5']),
+                     '--rounds', '5', '--floor']),
     ('node_single', ['bench.raw_imu', '--executor', 'single', '--seconds', '8',
                      '--rounds', '3']),
     ('direct', ['bench.raw_imu_direct']),
@@ -134,6 +134,22 @@ def _raw_imu(quick, log_dir):
     return result
 
 
+def _compiled(quick):
+    """Issue 19's figures: ``python -m bench.compiled --json`` (the node's CPU is section 6's)."""
+    args = ['bench.compiled'] + (['--sections', 'steps'] if quick else [])
+    _log(f'compiled kernels: python -m {" ".join(args)} ...')
+    with tempfile.TemporaryDirectory(prefix='bench-') as tmp:
+        out = os.path.join(tmp, 'compiled.json')
+        with reserved_domain_id(40) as domain_id:
+            done = subprocess.run([sys.executable, '-m', *args, '--json', out], cwd=REPO,
+                                  env=ros_env(domain_id), stdout=subprocess.DEVNULL)
+        if not os.path.exists(out):
+            return {'error': f'`python -m {" ".join(args)}` ended with exit code '
+                             f'{done.returncode} and no result'}
+        with open(out) as f:
+            return json.load(f)
+
+
 def build_parser():
     """Return the parser of ``python -m bench``."""
     parser = argparse.ArgumentParser(
@@ -194,6 +210,8 @@ def main(argv=None):
             notes.append(f'profile failed: {error.args[0].splitlines()[0]}')
     if 'raw_imu' in sections:
         results['raw_imu'] = _raw_imu(args.quick, args.log_dir)
+    if 'compiled' in sections:
+        results['compiled'] = _compiled(args.quick)
     notes.append(f'The whole run took {time.monotonic() - start:.0f} s.')
     results['machine']['load_end'] = machine.load()
     results['notes'] = notes

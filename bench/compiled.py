@@ -26,6 +26,7 @@ The node's CPU per sample against a bare relay is ``python -m bench.raw_imu``
 """
 
 import argparse
+import json
 import os
 import shutil
 import subprocess
@@ -330,6 +331,8 @@ def main(argv=None):
     parser.add_argument('--node', action='store_true',
                         help='also python -m bench.raw_imu (the node against a relay)')
     parser.add_argument('--docs', default=None, metavar='DIR', help='write DIR/compiled.md')
+    parser.add_argument('--json', metavar='PATH',
+                        help='also write the figures there (what make bench reports)')
     args = parser.parse_args(argv)
     sections = set(args.sections.split(','))
     folder = data_dir(args.data)
@@ -365,7 +368,21 @@ def main(argv=None):
     print(section)
     if args.docs:
         progress(f'wrote {write_docs(args.docs, section)}')
+    if args.json:
+        with open(args.json, 'w', encoding='utf-8') as out:
+            json.dump(as_json(broad, steps, starts, section), out, indent=1)
     return 0
+
+
+def as_json(broad, steps, starts, section):
+    """The figures as JSON: a step's key as ``'9D update compiled'``, a start ``[cold, warm]``."""
+    return {'broad': broad,
+            'steps': None if steps is None else {
+                key if isinstance(key, str) else
+                f'{key[0]} {key[1]} {"compiled" if key[2] else "plain"}': value
+                for key, value in steps.items()},
+            'starts': None if starts is None else {k: list(v) for k, v in starts.items()},
+            'section': section}
 
 
 if __name__ == '__main__':

@@ -1,6 +1,6 @@
 """Render the benchmark's results as Markdown (docs/performance.md)."""
 
-from bench import report_raw_imu
+from bench import report_compiled, report_raw_imu
 from bench.nodes import LATENCY_RATE, SHIPPED, SUSTAINED_MEDIAN_MS, sustained_rate
 
 BATCH_TARGET = 20e6  # updates/s at batch size 100 000
@@ -586,6 +586,8 @@ def render(r):
     raw = r.get('raw_imu')
     if raw and report_raw_imu.targets_section(raw):
         sections.append(report_raw_imu.targets_section(raw))
+    if report_compiled.targets_section(r.get('compiled'), raw):
+        sections.append(report_compiled.targets_section(r.get('compiled'), raw))
     if r.get('batch'):
         sections.append(batch_section(r['batch']))
     if r.get('nodes') is not None:
@@ -599,6 +601,8 @@ def render(r):
                                         r.get('profile_loops', [])))
     if raw:
         sections.append(report_raw_imu.section(raw))
+    if r.get('compiled'):
+        sections.append(report_compiled.section(r['compiled']))
     sections.append(analysis_section(r))
     if r.get('notes'):
         sections.append('## Notes\n\n' + '\n'.join(f'- {n}' for n in r['notes']))

@@ -13,7 +13,7 @@ import statistics
 
 from bench.broad_batch import BATCH_GOAL
 from bench.machine import load_range
-from bench.raw_imu import NODE_GOAL, short_text, verdict
+from bench.raw_imu import FLOOR, NODE_GOAL, short_text, verdict
 
 HEADING = '6. Raw-IMU estimator (imu_filter_node)'
 EXECUTOR_NAMES = {'events': 'EventsExecutor (the default)', 'single': 'SingleThreadedExecutor'}
@@ -92,7 +92,7 @@ def _anchor(heading):
 
 def _node_rows(node, executor):
     rows = []
-    for label in ('imu_filter', 'relay'):
+    for label in [t for t in ('imu_filter', FLOOR, 'relay') if t in node['runs']]:
         runs = node['runs'][label]
         cpu = ', '.join(f'{r["cpu_us_per_sample"]:.0f}' for r in runs)
         rows.append([f'{label} ({executor})', f'{node["medians"][label]:.1f} µs ({cpu})',
@@ -119,7 +119,9 @@ def section(raw):
             'system time of the target\'s process over the publishing window, divided by the '
             f'samples; {first["seconds"]:g} s per run, relay and filter runs interleaved, '
             'medians. `python -m bench.raw_imu --executor events|single --seconds '
-            f'{first["seconds"]:g} --rounds N` prints the same table and the verdict.', '',
+            f'{first["seconds"]:g} --rounds N` prints the same table and the verdict; with '
+            f'`--floor` (the events runs here) also `{FLOOR}`, the node cut down to the '
+            'estimate\'s arithmetic and its outputs (`bench.raw_imu.step_only_node`).', '',
             _table(['target (executor)', 'CPU per IMU sample, median (runs)',
                     'outputs received (fewest) / samples', 'achieved rate (slowest)'], rows), '']
         for executor, node in nodes:
