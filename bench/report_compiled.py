@@ -42,7 +42,8 @@ def _broad_rows(b):
              f'{two:.2f} s on 2 processes, {one:.2f} s on 1, VQF {vqf:.2f} s: '
              f'{two / vqf:.2f}×', verdict(two <= BROAD_GOAL * vqf) + aim),
             ('the scores unchanged to 1e-9 (compiled against plain)',
-             f'largest difference {b["max_dscore"]:.1e}° (largest |Δq| {b["max_dq"]:.1e})',
+             f'largest difference {b["max_dscore"]:.1e}° (of a quaternion component: '
+             f'{b["max_dq"]:.1e})',
              verdict(b['max_dscore'] <= SCORE_TOLERANCE))]
 
 
