@@ -63,7 +63,7 @@ import numpy as np
 from ext_observer.core.ahrs import AhrsObserver, AhrsParams, WORLD_FRAMES
 from ext_observer.core.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
-from ext_observer.core.uncertainty import AttitudeUncertainty, UncertaintyParams
+from ext_observer.core.uncertainty import AttitudeUncertainty, covariance_out, UncertaintyParams
 from ext_observer.core.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_OK, SAMPLE_RESIDUAL
 from ext_observer.core.validation import check_state
 from ext_observer.guard import GUARD_REASONS
@@ -342,7 +342,7 @@ class RawImuEstimator:
         dt : float
             Time since the previous sample, s.
         covariance : array of 9 float64, optional
-            Where to write :attr:`covariance` (a message's own array).
+            Where to write :attr:`covariance`, as :func:`covariance_out` accepts.
 
         Returns
         -------
@@ -354,10 +354,10 @@ class RawImuEstimator:
 
         """
         core = self.core
+        cov = self._covariance if covariance is None else covariance_out(covariance)
         try:
             outcome, w, x, y, z = core.kernels.sample_step(
-                core.flat_state, self.uncertainty.state,
-                self._covariance if covariance is None else covariance,
+                core.flat_state, self.uncertainty.state, cov,
                 gyr[0], gyr[1], gyr[2], acc[0], acc[1], acc[2], dt, self.max_residual)
         except (ValueError, OverflowError, ZeroDivisionError):
             outcome = None

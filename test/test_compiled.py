@@ -235,3 +235,24 @@ def test_the_covariance_goes_along_when_the_kernels_change_mid_run():
     # The compiled sample_step is called past numba's dispatch (one signature).
     k = compiled_module.kernels(True)
     assert k.sample_step is not k.uncertainty.sample_step
+
+
+@pytest.mark.parametrize('compiled', [False, pytest.param(True, marks=needs_numba)])
+def test_a_covariance_array_the_kernels_cannot_write_is_refused(compiled):
+    # The compiled kernels write into the array's memory as 9 contiguous
+    # float64, unchecked: anything else is refused before a step runs.
+    from test_covariance import node_settings
+    from ext_observer.raw_imu import RawImuPipeline
+    pipeline = RawImuPipeline(node_settings(), compiled=compiled)
+    for k in range(3):
+        pipeline.imu(1_000_000_000 + k * 1_000_000, (0.1, 0.0, 0.0), (0.0, 0.0, 9.8),
+                     np.zeros(9))
+    readonly = np.zeros(9)
+    readonly.flags.writeable = False
+    state = pipeline.estimator.state
+    wide = np.zeros(18)
+    for bad in (np.zeros(9, dtype=np.float32), [0.0] * 9, wide[::2], np.zeros(8),
+                np.zeros((3, 3)), readonly):
+        with pytest.raises(ValueError, match='C-contiguous float64 array of 9'):
+            pipeline.estimator.step((0.1, 0.0, 0.0), (0.0, 0.0, 9.8), 0.001, bad)
+    assert pipeline.estimator.state == state and not wide.any()

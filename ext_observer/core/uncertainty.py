@@ -102,10 +102,27 @@ __all__ = [
     'GRAVITY',
     'HEADING_UNKNOWN',
     'UncertaintyParams',
+    'covariance_out',
 ]
 
 # Variance of a heading known to be nothing better than uniform on (−π, π], rad².
 HEADING_UNKNOWN = math.pi * math.pi / 3.0
+_FLOAT64 = np.dtype(np.float64)
+
+
+def covariance_out(array):
+    """
+    Return ``array`` if the kernels may write a covariance into it, else raise ValueError.
+
+    A writable C-contiguous float64 array of 9 (a ``sensor_msgs/Imu``
+    message's ``orientation_covariance`` is one): the compiled kernels write
+    into its memory as that, unchecked.
+    """
+    if not (array.__class__ is np.ndarray and array.flags.c_contiguous
+            and array.dtype is _FLOAT64 and array.shape == (9,) and array.flags.writeable):
+        raise ValueError('a covariance is written into a writable C-contiguous float64 '
+                         f'array of 9, got {array!r}')
+    return array
 
 
 class UncertaintyParams:
