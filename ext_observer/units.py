@@ -63,7 +63,7 @@ class UnitCheck:
     def imu(self, gyr, acc):
         """Look at one IMU sample: angular velocity (rad/s), specific force (m/s²)."""
         g0, g1, g2 = gyr
-        # Every axis within the range (the usual sample) or NaN: nothing to say.
+        # Every axis within the range (the usual sample): nothing to look at.
         if not (-RATE_MAX <= g0 <= RATE_MAX and -RATE_MAX <= g1 <= RATE_MAX
                 and -RATE_MAX <= g2 <= RATE_MAX):
             peak = max(abs(g0), abs(g1), abs(g2))
