@@ -55,7 +55,7 @@ test: $(TEST_STAMP)
 # tests start are not traced), then the report of core/ahrs.py and raw_imu.py.
 coverage: $(TEST_STAMP)
 	$(PY) -m coverage run --source=ext_observer -m pytest -q -p no:cacheprovider $(PYTEST_ARGS) test
-	$(PY) -m coverage report -m --include='ext_observer/core/ahrs.py,ext_observer/core/magcal.py,ext_observer/core/uncertainty.py,ext_observer/raw_imu.py'
+	$(PY) -m coverage report -m --include='ext_observer/core/ahrs/estimator.py,ext_observer/core/ahrs/magcal.py,ext_observer/core/ahrs/uncertainty.py,ext_observer/pipeline/raw_imu.py'
 
 # The paper's figures and Table 1, regenerated into docs/reproduction.md.
 reproduce: $(RUNTIME_STAMP)

@@ -26,10 +26,10 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'gyro_node = ext_observer.gyro_node:main',
-            'observer_node = ext_observer.observer_node:main',
-            'imu_filter_node = ext_observer.imu_filter_node:main',
-            'monitor_node = ext_observer.monitor_node:main',
+            'gyro_node = ext_observer.nodes.gyro_node:main',
+            'observer_node = ext_observer.nodes.observer_node:main',
+            'imu_filter_node = ext_observer.nodes.imu_filter_node:main',
+            'monitor_node = ext_observer.nodes.monitor_node:main',
         ],
     },
 )

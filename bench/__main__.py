@@ -72,10 +72,10 @@ def _nodes(quick, log_dir):
              'subscriptions are never spun, one 2 ms timer on the '
              'EventsExecutor takes every waiting message and pairs them (fewer '
              'wake-ups, messages taken in batches; up to 2 ms added latency).']
-    if os.path.exists(os.path.join(REPO, 'ext_observer', 'observer_node.py')):
+    if os.path.exists(os.path.join(REPO, 'ext_observer', 'nodes', 'observer_node.py')):
         targets += nodes.observer_targets()
         notes.append('observer/single and observer/events are the shipped entry '
-                     'point (`python -m ext_observer.observer_node --executor '
+                     'point (`python -m ext_observer.nodes.observer_node --executor '
                      'single|events -p queue_depth:=10`); observer/events-depth100 '
                      'is the entry point as shipped, with its defaults '
                      '(EventsExecutor, `queue_depth` 100); observer/multi hosts '
@@ -99,7 +99,7 @@ def _nodes(quick, log_dir):
 
 def _profile(log_dir):
     from bench import profile_node
-    if not os.path.exists(os.path.join(REPO, 'ext_observer', 'observer_node.py')):
+    if not os.path.exists(os.path.join(REPO, 'ext_observer', 'nodes', 'observer_node.py')):
         return None, []
     _log('profile: the node\'s callbacks, direct ...')
     direct = profile_node.profile_direct(index=10, log_dir=log_dir)

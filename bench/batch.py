@@ -170,7 +170,7 @@ def accuracy(runs=1000, epochs=100, seed=0):
 
     1000 runs × 100 epochs, ``SimulatedGyro(increment_max=10,
     noise_std=0.1)``, observers started at 1 against a uniform true attitude
-    (:func:`ext_observer.core.experiments.observer_runs`), next to the limit
+    (:func:`ext_observer.core.paper.experiments.observer_runs`), next to the limit
     ``σ E[χ₃] / √K`` for exact increments.
 
     Returns
@@ -180,9 +180,9 @@ def accuracy(runs=1000, epochs=100, seed=0):
         ``seconds`` (wall time of the runs).
 
     """
-    from ext_observer.core.experiments import (accuracy_limit, ObserverSpec,
+    from ext_observer.core.paper.experiments import (accuracy_limit, ObserverSpec,
                                                observer_runs)
-    from ext_observer.core.observer import GAIN_MODES
+    from ext_observer.core.paper.observer import GAIN_MODES
     specs = [ObserverSpec(variant, mode) for mode in GAIN_MODES
              for variant in VARIANTS]
     start = time.perf_counter()
@@ -217,7 +217,7 @@ def reproduce_time(seeds=5, no_plots=False, timeout=300.0):
     if no_plots:
         command.append('--no-plots')
     shown = ' '.join(['python'] + command[1:])
-    if not os.path.exists(os.path.join(repo, 'ext_observer', 'reproduce.py')):
+    if not os.path.exists(os.path.join(repo, 'ext_observer', 'paper', 'reproduce.py')):
         return {'command': shown, 'note': 'not measured: reproduce is missing'}
     env = dict(os.environ)
     env['PYTHONPATH'] = repo + (os.pathsep + env['PYTHONPATH']

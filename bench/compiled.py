@@ -56,8 +56,8 @@ def broad_figures(trials, progress=print):
     """Wall times on the trials (both modes) and the compiled/plain agreement."""
     from ext_observer.broad import score
     from ext_observer.broad.anchors import anchor_estimates
-    from ext_observer.core.ahrs_batch import estimate_batch
-    from ext_observer.core.compiled import kernels
+    from ext_observer.core.ahrs.ahrs_batch import estimate_batch
+    from ext_observer.core.ahrs.compiled import kernels
     kernels(True)  # warm
     rate = trials[0].rate
     out = {'samples': int(sum(len(t.gyr) for t in trials)), 'trials': len(trials)}
@@ -107,7 +107,7 @@ def broad_figures(trials, progress=print):
 
 def step_figures():
     """µs per sample of ``update`` (compiled, plain) and of the compiled loop."""
-    from ext_observer.core.ahrs import AhrsObserver, AhrsParams
+    from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
     d = np.load(EXCERPT)
     gyr, acc, mag, dt = d['gyr'], d['acc'], d['mag'], 1.0 / float(d['rate'])
     g, a, m = gyr.tolist(), acc.tolist(), mag.tolist()
@@ -138,7 +138,7 @@ def step_figures():
 def _kernel_process(cache):
     start = time.perf_counter()
     subprocess.run([sys.executable, '-c',
-                    'from ext_observer.core.compiled import kernels; kernels(True)'],
+                    'from ext_observer.core.ahrs.compiled import kernels; kernels(True)'],
                    check=True, env=_env(EXT_OBSERVER_CACHE=cache), timeout=600)
     return time.perf_counter() - start
 

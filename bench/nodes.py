@@ -336,7 +336,7 @@ def observer_targets(executors=('single', 'multi', 'events'), deep=True):
     """
     Return the observer node on each executor, and as shipped.
 
-    The shipped entry point (``python -m ext_observer.observer_node``) runs
+    The shipped entry point (``python -m ext_observer.nodes.observer_node``) runs
     ``--executor single`` and ``--executor events``; the MultiThreadedExecutor,
     which the node does not offer, hosts the same node class in
     :mod:`bench.observer_host`. With ``deep``, the entry point with its
@@ -345,7 +345,7 @@ def observer_targets(executors=('single', 'multi', 'events'), deep=True):
     targets = []
     for ex in executors:
         if ex in ('single', 'events'):
-            args = ['-m', 'ext_observer.observer_node', '--executor', ex]
+            args = ['-m', 'ext_observer.nodes.observer_node', '--executor', ex]
             note = f'shipped entry point, --executor {ex}'
         else:
             args = ['-m', 'bench.observer_host', '--executor', ex]
@@ -356,6 +356,6 @@ def observer_targets(executors=('single', 'multi', 'events'), deep=True):
     if deep and 'events' in executors:
         targets.append(Target(
             'observer', f'events-depth{DEEP_QUEUE}',
-            ['-m', 'ext_observer.observer_node'] + list(OBSERVER_ROS_ARGS),
+            ['-m', 'ext_observer.nodes.observer_node'] + list(OBSERVER_ROS_ARGS),
             stamp_offset=1, note='shipped entry point, its defaults'))
     return targets

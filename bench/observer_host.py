@@ -23,7 +23,7 @@ def main(argv=None):
     import rclpy
     from rclpy.context import Context
 
-    from ext_observer.observer_node import ObserverNode
+    from ext_observer.nodes.observer_node import ObserverNode
     context = Context()
     rclpy.init(args=['observer_host'] + ros_args, context=context)
     node = ObserverNode(context=context)

@@ -116,9 +116,9 @@ def direct(steps=DIRECT_STEPS):
     from rclpy.context import Context
 
     from bench.relay import RelayNode
-    from ext_observer.conversions import quaternion_stamped
+    from ext_observer.nodes.conversions import quaternion_stamped
     from ext_observer.core import normalize, SingleObserver
-    from ext_observer.observer_node import ObserverNode
+    from ext_observer.nodes.observer_node import ObserverNode
     context = Context()
     rclpy.init(context=context)
     try:
@@ -271,7 +271,7 @@ def loop(executor_kind, out_path, seconds, node_kind='observer'):
     from rclpy.context import Context
 
     from bench.relay import RelayNode
-    from ext_observer.observer_node import ObserverNode
+    from ext_observer.nodes.observer_node import ObserverNode
     context = Context()
     rclpy.init(context=context)
     if node_kind == 'relay':

@@ -13,7 +13,7 @@ over the publishing window, in ``--rounds`` interleaved runs of each:
   ``attitude_estimate``; the latest field kept), with the node's QoS
   (inputs best effort, outputs reliable, depth 100);
 - ``imu_filter``: the shipped ``imu_filter_node`` (the console script next
-  to this interpreter, else ``python -m ext_observer.imu_filter_node``) with
+  to this interpreter, else ``python -m ext_observer.nodes.imu_filter_node``) with
   its defaults (``use_mag`` true);
 - with ``--floor``, ``step_only`` between them: :func:`step_only_node`, the
   node cut down to the estimate's arithmetic (no input checks): what the
@@ -125,7 +125,7 @@ def step_only_node():
     counters: not a node to run, a floor to measure the node's own checks
     against (what they cost is the node's CPU above this one's).
     """
-    from ext_observer.imu_filter_node import ImuFilterNode
+    from ext_observer.nodes.imu_filter_node import ImuFilterNode
 
     class StepOnly(ImuFilterNode):
 
@@ -173,7 +173,7 @@ def step_only_node():
 
 
 def _step_only_main(argv):
-    from ext_observer.node_common import run_node
+    from ext_observer.nodes.node_common import run_node
     return run_node(step_only_node(), argv)
 
 
@@ -202,7 +202,7 @@ def target_args(label, executor):
         return ['-m', 'bench.raw_imu', FLOOR, '--executor', executor, '--ros-args', '-p',
                 'use_mag:=true']
     script = os.path.join(os.path.dirname(sys.executable), 'imu_filter_node')
-    command = [script] if os.path.exists(script) else ['-m', 'ext_observer.imu_filter_node']
+    command = [script] if os.path.exists(script) else ['-m', 'ext_observer.nodes.imu_filter_node']
     return command + ['--executor', executor, '--ros-args', '-p', 'use_mag:=true']
 
 

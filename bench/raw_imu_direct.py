@@ -9,9 +9,9 @@ DDS receive, warm caches). Publishing is replaced by a no-op in both, and
 the node publishes ``imu/data`` as if subscribed, so both build their two
 outputs per sample and send none: what is timed is each node's own Python
 work. Beside them, each part timed alone: the node's ROS-free pipeline
-(:class:`~ext_observer.raw_imu.RawImuPipeline`: input checks, stamps, the
+(:class:`~ext_observer.pipeline.raw_imu.RawImuPipeline`: input checks, stamps, the
 estimator), the core's float step
-(:class:`~ext_observer.core.ahrs.AhrsObserver`), one real ``publish`` of
+(:class:`~ext_observer.core.ahrs.estimator.AhrsObserver`), one real ``publish`` of
 each output with no subscriber; and the functions on the callbacks' path
 that use numpy (:mod:`bench.numpy_use`). Each figure is the best of a few
 passes, µs per IMU sample. Run in a child process by ``python -m bench``.
@@ -133,9 +133,9 @@ def direct(count=SAMPLES):
     import rclpy
     from rclpy.context import Context
 
-    from ext_observer.core.ahrs import AhrsObserver
-    from ext_observer.imu_filter_node import ImuFilterNode
-    from ext_observer.raw_imu import RawImuPipeline
+    from ext_observer.core.ahrs.estimator import AhrsObserver
+    from ext_observer.nodes.imu_filter_node import ImuFilterNode
+    from ext_observer.pipeline.raw_imu import RawImuPipeline
     samples = load_samples()
     context = Context()
     rclpy.init(context=context)

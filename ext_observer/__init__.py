@@ -13,6 +13,6 @@ def __getattr__(name):
     # ext_observer.attitude_from_imu, the Python call for one recording
     # (docs/library.md), imported on first use so that the package stays light.
     if name == 'attitude_from_imu':
-        from ext_observer.recording import attitude_from_imu
+        from ext_observer.recordings.recording import attitude_from_imu
         return attitude_from_imu
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

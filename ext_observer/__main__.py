@@ -81,7 +81,7 @@ def build_parser():
     reproduce = sub.add_parser(
         'reproduce', add_help=False,
         help="the paper's Figure 1, Figure 2 and Table 1 (see reproduce -h)")
-    reproduce.set_defaults(func=None, module='ext_observer.reproduce')
+    reproduce.set_defaults(func=None, module='ext_observer.paper.reproduce')
     demo = sub.add_parser(
         'demo', add_help=False,
         help='gyro → observer → monitor pipeline (see demo -h)')
@@ -101,7 +101,7 @@ def build_parser():
             ('calibrate', 'calibrate',
              'the magnetometer calibration learned from a recording, as a params file')):
         sub.add_parser(name, add_help=False, help=f'{text} (see {name} -h)').set_defaults(
-            func=None, module=f'ext_observer.{module}')
+            func=None, module=f'ext_observer.recordings.{module}')
     return parser
 
 

@@ -107,7 +107,7 @@ def run_demo(steps=150, rate=30.0, seed=7, variant='extended', increment_max=10.
 
     Raises
     ------
-    ext_observer.node_common.ParameterError
+    ext_observer.nodes.node_common.ParameterError
         If a node refuses a setting.
 
     """
@@ -120,9 +120,9 @@ def run_demo(steps=150, rate=30.0, seed=7, variant='extended', increment_max=10.
     from rclpy.parameter import Parameter
 
     from ext_observer.core import attitude_error, manifold_distance
-    from ext_observer.gyro_node import GyroNode
-    from ext_observer.monitor_node import MonitorNode, STATUS_NAME
-    from ext_observer.observer_node import ObserverNode
+    from ext_observer.nodes.gyro_node import GyroNode
+    from ext_observer.nodes.monitor_node import MonitorNode, STATUS_NAME
+    from ext_observer.nodes.observer_node import ObserverNode
 
     context = Context()
     init_kwargs = {} if domain_id is None else {'domain_id': domain_id}
@@ -236,7 +236,7 @@ def _make_recorder(context, status_name):
     from geometry_msgs.msg import QuaternionStamped
     from rclpy.node import Node
 
-    from ext_observer.conversions import nanoseconds_from_stamp, quaternion_from_msg
+    from ext_observer.nodes.conversions import nanoseconds_from_stamp, quaternion_from_msg
 
     class Recorder(Node):
         """Keep every estimate, ground truth and monitor status."""
@@ -268,7 +268,7 @@ def _make_recorder(context, status_name):
 
 
 def _print_progress(total):
-    from ext_observer.node_common import LEVEL_NAMES
+    from ext_observer.nodes.node_common import LEVEL_NAMES
 
     def show(elapsed, done, status):
         print(f'[{elapsed:5.1f} s] step {done:4d}/{total}  monitor '
@@ -337,7 +337,7 @@ def main(argv=None):
 
     """
     args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
-    from ext_observer.node_common import ParameterError
+    from ext_observer.nodes.node_common import ParameterError
     from rclpy.executors import ExternalShutdownException
 
     print(f'ext_observer demo: {args.variant} observer, {args.steps} steps at '

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from ext_observer.guard import carried
+from ext_observer.pipeline.guard import carried
 
 SECOND = 1_000_000_000
 FINE = 100_000  # ns, the truth's integration step

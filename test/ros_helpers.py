@@ -10,7 +10,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
-from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
+from ext_observer.nodes.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
                                       quaternion_stamped, vector_from_msg, vector_stamped)
 from ext_observer.core.validation import check_measurement
 

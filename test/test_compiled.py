@@ -15,9 +15,9 @@ import sys
 import numpy as np
 import pytest
 
-from ext_observer.core import compiled as compiled_module
-from ext_observer.core.ahrs import AhrsObserver, AhrsParams
-from ext_observer.core.ahrs_batch import estimate_batch
+from ext_observer.core.ahrs import compiled as compiled_module
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_batch import estimate_batch
 
 DATA = os.path.join(os.path.dirname(__file__), 'data')
 EXCERPTS = sorted(f for f in os.listdir(DATA) if f.endswith('.npz'))
@@ -83,7 +83,7 @@ def test_the_whole_recording_loop_gives_the_per_sample_estimates(compiled):
 
 def test_the_joined_source_holds_every_kernel_function():
     text, digest = compiled_module.joined_source()
-    from ext_observer.core import ahrs_kernel, magcal_filter, magcal_kernel
+    from ext_observer.core.ahrs import ahrs_kernel, magcal_filter, magcal_kernel
     for module in (ahrs_kernel, magcal_filter, magcal_kernel):
         names = [n for n, v in vars(module).items()
                  if callable(v) and getattr(v, '__module__', '') == module.__name__]
@@ -100,8 +100,8 @@ def test_without_numba_the_estimator_runs_plain():
     code = '\n'.join([
         'import sys',
         "sys.modules['numba'] = None",
-        'from ext_observer.core.ahrs import AhrsObserver',
-        'from ext_observer.core.compiled import CompiledUnavailable, compiled_available',
+        'from ext_observer.core.ahrs.estimator import AhrsObserver',
+        'from ext_observer.core.ahrs.compiled import CompiledUnavailable, compiled_available',
         'assert not compiled_available()',
         'est = AhrsObserver()',
         'assert not est.compiled',
@@ -197,7 +197,7 @@ def test_the_one_call_sample_gives_what_the_steps_one_by_one_give(compiled, mode
     # one call) against the three calls it replaces, and the covariance
     # written into the caller's array against the tuple.
     from test_covariance import node_settings
-    from ext_observer.raw_imu import RawImuPipeline
+    from ext_observer.pipeline.raw_imu import RawImuPipeline
     gyr, acc, mag, rate = _excerpt(EXCERPTS[0])
     gyr, acc, mag = gyr[:4000], acc[:4000], mag[:4000]
     settings = node_settings(use_mag=mode == '9D')
@@ -217,7 +217,7 @@ def test_the_covariance_goes_along_when_the_kernels_change_mid_run():
     # samples: the covariance's state goes along (the same figures as a
     # pipeline that ran plain throughout).
     from test_covariance import node_settings
-    from ext_observer.raw_imu import RawImuPipeline
+    from ext_observer.pipeline.raw_imu import RawImuPipeline
     gyr, acc, mag, rate = _excerpt(EXCERPTS[1])
     gyr, acc, mag = gyr[:3000], acc[:3000], mag[:3000]
     reference = _pipeline_run(RawImuPipeline(node_settings(), compiled=False), gyr, acc, mag,
@@ -242,7 +242,7 @@ def test_a_covariance_array_the_kernels_cannot_write_is_refused(compiled):
     # The compiled kernels write into the array's memory as 9 contiguous
     # float64, unchecked: anything else is refused before a step runs.
     from test_covariance import node_settings
-    from ext_observer.raw_imu import RawImuPipeline
+    from ext_observer.pipeline.raw_imu import RawImuPipeline
     pipeline = RawImuPipeline(node_settings(), compiled=compiled)
     for k in range(3):
         pipeline.imu(1_000_000_000 + k * 1_000_000, (0.1, 0.0, 0.0), (0.0, 0.0, 9.8),

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-from ext_observer.conversions import (
+from ext_observer.nodes.conversions import (
     msg_from_quaternion, msg_from_vector, nanoseconds_from_stamp, quaternion_from_msg,
     quaternion_stamped, stamp_from_nanoseconds, STAMP_MAX, vector_from_msg, vector_stamped)
 from ext_observer.core import quaternion_from_rotation_vector

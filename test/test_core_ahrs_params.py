@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from ext_observer.core.ahrs import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 
 G = 9.81
 RATE = 100.0

@@ -15,10 +15,10 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
-from ext_observer import calibrate
+from ext_observer.recordings import calibrate
 from ext_observer.core import quaternion as quat
-from ext_observer.core.ahrs import AhrsObserver, AhrsParams, estimate_batch
-from ext_observer.core.magcal import check_calibration, MagCalibrator
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams, estimate_batch
+from ext_observer.core.ahrs.magcal import check_calibration, MagCalibrator
 from test_core_ahrs import errors_deg, FIELD, RATE, rotate, synthetic
 
 DATA = os.path.join(os.path.dirname(__file__), 'data')
@@ -304,7 +304,7 @@ def test_the_command_refuses_what_it_cannot_use(tmp_path, capsys):
 
 
 def test_a_csv_and_a_bag_with_an_offset_calibrate_as_the_node_would(tmp_path, capsys):
-    from ext_observer import example_data
+    from ext_observer.recordings import example_data
 
     recording = example_data.excerpt(example_data.load_excerpt())
     field = recording['field']

@@ -16,7 +16,7 @@ from ext_observer.core import quaternion as quat
 
 def test_core_imports_no_ros():
     # In a fresh interpreter: the ROS tests of this run import rclpy here.
-    code = ('import sys, ext_observer.core, ext_observer.reproduce; '
+    code = ('import sys, ext_observer.core, ext_observer.paper.reproduce; '
             'bad = [m for m in sys.modules if m.split(".")[0] in '
             '("rclpy", "rcl_interfaces", "geometry_msgs")]; '
             'assert not bad, bad')

@@ -93,8 +93,8 @@ def test_the_bag_command_on_a_whole_trial_reproduces_the_page(tmp_path):
     reference topic is the page's figure for the trial, to the page's
     rounding plus what the field's order moves (0.003° on this trial).
     """
-    from ext_observer.bag import run_bag
-    from ext_observer.example_data import excerpt, REFERENCE_TOPIC, write_bag
+    from ext_observer.recordings.bag import run_bag
+    from ext_observer.recordings.example_data import excerpt, REFERENCE_TOPIC, write_bag
 
     name = TRIALS[0]
     with open(PAGE, encoding='utf-8') as f:

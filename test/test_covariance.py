@@ -21,11 +21,11 @@ from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 
-from ext_observer.core.ahrs import AhrsParams
-from ext_observer.core.uncertainty import (AttitudeUncertainty, HEADING_UNKNOWN,
+from ext_observer.core.ahrs.estimator import AhrsParams
+from ext_observer.core.ahrs.uncertainty import (AttitudeUncertainty, HEADING_UNKNOWN,
                                            UncertaintyParams)
-from ext_observer.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
-from ext_observer.raw_imu import RawImuPipeline
+from ext_observer.nodes.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+from ext_observer.pipeline.raw_imu import RawImuPipeline
 
 SECOND = 1_000_000_000
 START = 1000 * SECOND
@@ -344,7 +344,7 @@ def test_estimate_mode_publishes_the_pipelines_covariance_and_diagnostics(ros_co
 
 
 def test_diagnostics_before_the_first_step_say_nan(ros_context):
-    from ext_observer.imu_filter_node import ImuFilterNode
+    from ext_observer.nodes.imu_filter_node import ImuFilterNode
 
     node = ImuFilterNode(node_name='fresh', context=ros_context)
     try:

@@ -187,8 +187,8 @@ def test_docs_command_checks_and_regenerates(tmp_path, capsys):
 # Diagnostics and faults -----------------------------------------------------
 
 def test_every_diagnostics_key_is_documented():
-    from ext_observer.monitor_node import COUNTER_KEYS, DIAGNOSTIC_KEYS, ERROR_KEYS
-    from ext_observer.observer_node import DROP_REASONS, GUARD_REASONS, RESET_CAUSES
+    from ext_observer.nodes.monitor_node import COUNTER_KEYS, DIAGNOSTIC_KEYS, ERROR_KEYS
+    from ext_observer.nodes.observer_node import DROP_REASONS, GUARD_REASONS, RESET_CAUSES
 
     text = _read(os.path.join(DOCS, 'diagnostics.md'))
     missing = [key for key in DIAGNOSTIC_KEYS + ERROR_KEYS + COUNTER_KEYS
@@ -198,8 +198,8 @@ def test_every_diagnostics_key_is_documented():
 
 
 def test_every_fault_counter_has_a_row_in_the_fault_table():
-    from ext_observer.monitor_node import DROP_REASONS as MONITOR_DROP_REASONS
-    from ext_observer.observer_node import DROP_REASONS, GUARD_REASONS, RESET_CAUSES
+    from ext_observer.nodes.monitor_node import DROP_REASONS as MONITOR_DROP_REASONS
+    from ext_observer.nodes.observer_node import DROP_REASONS, GUARD_REASONS, RESET_CAUSES
 
     rows = [line for _, line in _prose_lines(_read(os.path.join(DOCS, 'faults.md')))
             if line.startswith('|')]

@@ -19,12 +19,12 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from ext_observer.conversions import (quaternion_stamped, stamp_from_nanoseconds,
+from ext_observer.nodes.conversions import (quaternion_stamped, stamp_from_nanoseconds,
                                       vector_stamped)
 from ext_observer.core import attitude_error, SimulatedGyro, SingleObserver
-from ext_observer.gyro_node import GyroNode
-from ext_observer.monitor_node import MonitorNode, STATUS_NAME
-from ext_observer.observer_node import ObserverNode
+from ext_observer.nodes.gyro_node import GyroNode
+from ext_observer.nodes.monitor_node import MonitorNode, STATUS_NAME
+from ext_observer.nodes.observer_node import ObserverNode
 from ros_helpers import overrides, Probe, SECOND, unit, values_of, wait_for_subscribers
 
 nan, inf = float('nan'), float('inf')

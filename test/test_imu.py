@@ -18,10 +18,10 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu
 
-from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
+from ext_observer.nodes.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
                                       stamp_from_nanoseconds, vector_from_msg)
-from ext_observer.node_common import ParameterError
-from ext_observer.observer_node import ObserverNode
+from ext_observer.nodes.node_common import ParameterError
+from ext_observer.nodes.observer_node import ObserverNode
 from imu_replay import angle, generate, SECOND
 from ros_helpers import overrides, values_of
 

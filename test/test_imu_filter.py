@@ -18,13 +18,13 @@ import pytest
 from sensor_msgs.msg import Imu
 
 from broad_replay import errors_deg, load, offline as core_offline, rmse, START, TRIALS
-from ext_observer.conversions import nanoseconds_from_stamp, quaternion_from_msg
-from ext_observer.core.ahrs import world_from_enu
+from ext_observer.nodes.conversions import nanoseconds_from_stamp, quaternion_from_msg
+from ext_observer.core.ahrs.estimator import world_from_enu
 from ext_observer.core.quaternion import multiply_floats
-from ext_observer.imu_filter_node import ImuFilterNode
-from ext_observer.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
-from ext_observer.raw_imu import heading_factor, RawImuPipeline
-from ext_observer.units import ACC_WINDOW, UnitCheck
+from ext_observer.nodes.imu_filter_node import ImuFilterNode
+from ext_observer.nodes.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+from ext_observer.pipeline.raw_imu import heading_factor, RawImuPipeline
+from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
 from ros_helpers import installed, overrides, SECOND, values_of
 from test_raw_imu import (connect, Driver, MAG_EVERY, published, replay_lockstep,
                           TOLERANCE)
@@ -322,8 +322,8 @@ def test_a_saved_calibration_is_loaded_refined_saved_and_refused_when_bad(
         ros_context, spinner, tmp_path):
     from std_srvs.srv import Trigger
 
-    from ext_observer.calibrate import read_params
-    from ext_observer.node_common import ParameterError
+    from ext_observer.recordings.calibrate import read_params
+    from ext_observer.nodes.node_common import ParameterError
 
     bias = (3e-5, -2e-5, 1e-5)
     soft = [1.05, 0.02, -0.01, 0.02, 0.97, 0.03, -0.01, 0.03, 1.02]
@@ -534,7 +534,7 @@ def test_a_clock_switch_resets_and_the_guard_reinitializes(ros_context, spinner)
 
 
 def test_a_silent_imu_is_named_in_its_own_words_and_never_rounded_up(ros_context):
-    from ext_observer.estimator_node import floor_text
+    from ext_observer.nodes.estimator_node import floor_text
 
     # 4.99997 s of silence is "4.99 s or more", never "5 s": the text states
     # no more than was measured.

@@ -16,10 +16,10 @@ import rclpy
 from rclpy.context import Context
 from rclpy.node import Node
 
-from ext_observer.gyro_node import GyroNode
-from ext_observer.imu_filter_node import ImuFilterNode
-from ext_observer.monitor_node import MonitorNode
-from ext_observer.observer_node import ObserverNode
+from ext_observer.nodes.gyro_node import GyroNode
+from ext_observer.nodes.imu_filter_node import ImuFilterNode
+from ext_observer.nodes.monitor_node import MonitorNode
+from ext_observer.nodes.observer_node import ObserverNode
 
 NODES = (GyroNode, ObserverNode, MonitorNode, ImuFilterNode)
 

@@ -14,8 +14,8 @@ from hypothesis import example, given, settings, strategies as st
 import pytest
 
 from ext_observer.core import GAIN_MODES, SingleObserver, VARIANTS
-from ext_observer.guard import GUARD_REASONS, GuardedObserver
-from ext_observer.pairing import BACKWARD_JUMP, DROP_REASONS, KINDS, StepPairer
+from ext_observer.pipeline.guard import GUARD_REASONS, GuardedObserver
+from ext_observer.pipeline.pairing import BACKWARD_JUMP, DROP_REASONS, KINDS, StepPairer
 
 MS = 1_000_000
 S = 1_000_000_000
@@ -408,7 +408,7 @@ def test_fields_are_checked_against_the_previous_field_only():
 
 
 def rotate(q, theta):
-    from ext_observer.guard import carried
+    from ext_observer.pipeline.guard import carried
     return carried(q, theta)
 
 

@@ -21,8 +21,8 @@ from rcl_interfaces.srv import GetParameters, SetParameters
 
 from conftest import CONFIG
 from ext_observer.core import attitude_error, manifold_distance
-from ext_observer.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, STATUS_NAME
-from ext_observer.node_common import LEVEL_NAMES
+from ext_observer.nodes.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, STATUS_NAME
+from ext_observer.nodes.node_common import LEVEL_NAMES
 from ros_helpers import installed, Probe, values_of
 
 
@@ -211,7 +211,7 @@ import time
 import rclpy
 from rclpy.node import Node
 from std_msgs.msg import Float64
-from ext_observer.node_common import run_node
+from ext_observer.nodes.node_common import run_node
 
 class Node_(Node):
     NODE_NAME = 'busy'

@@ -31,15 +31,15 @@ from geometry_msgs.msg import QuaternionStamped
 from broad_replay import (errors_deg, fields_tesla, load, offline, rmse, stamps, START,
                           TRIALS)
 from conftest import REPO, Spinner
-from ext_observer.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
+from ext_observer.nodes.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
                                       stamp_from_nanoseconds)
-from ext_observer.core.ahrs import AhrsParams, world_from_enu
-from ext_observer.core.compiled import compiled_available
-from ext_observer.node_common import ParameterError
-from ext_observer.imu_filter_node import ImuFilterNode
-from ext_observer.imu_filter_parameters import IMU_FILTER_PARAMETERS
-from ext_observer.observer_node import ObserverNode
-from ext_observer.raw_imu import AHRS_PREFIX, RawImuEstimator
+from ext_observer.core.ahrs.estimator import AhrsParams, world_from_enu
+from ext_observer.core.ahrs.compiled import compiled_available
+from ext_observer.nodes.node_common import ParameterError
+from ext_observer.nodes.imu_filter_node import ImuFilterNode
+from ext_observer.nodes.imu_filter_parameters import IMU_FILTER_PARAMETERS
+from ext_observer.nodes.observer_node import ObserverNode
+from ext_observer.pipeline.raw_imu import AHRS_PREFIX, RawImuEstimator
 from ros_helpers import installed, overrides, SECOND, values_of
 
 BEST_EFFORT = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)

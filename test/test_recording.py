@@ -4,7 +4,7 @@ Your own recordings: the Python call, the bag command and the CSV command.
 A bag written from a shipped BROAD excerpt (``test/data``, the first
 12 s), in both storage formats, goes through the bag command; its
 ``attitude_estimate`` and ``imu/data``, read back with ``rosbags``' own
-deserializer, equal :func:`~ext_observer.recording.attitude_from_imu` on the
+deserializer, equal :func:`~ext_observer.recordings.recording.attitude_from_imu` on the
 same arrays and ``test/broad_replay.py``'s offline run (which
 ``test_raw_imu.py`` proves equal to the node through DDS). ``--compare``
 against the optical reference as a topic gives the scores
@@ -26,12 +26,13 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 
 from broad_replay import fields_tesla, load, offline, stamps as broad_stamps, TRIALS
-from ext_observer import bag_io, cdr
-from ext_observer.bag import _Progress, compare, main as bag_main, run_bag
+from ext_observer.recordings import bag_io
+from ext_observer.recordings import cdr
+from ext_observer.recordings.bag import _Progress, compare, main as bag_main, run_bag
 from ext_observer.broad import score
-from ext_observer.csvio import main as csv_main, read_columns, read_recording
-from ext_observer.example_data import excerpt, LATENCY, REFERENCE_TOPIC, write_bag, write_csv
-from ext_observer.recording import (attitude_from_imu, node_settings, parameters_from_yaml,
+from ext_observer.recordings.csvio import main as csv_main, read_columns, read_recording
+from ext_observer.recordings.example_data import excerpt, LATENCY, REFERENCE_TOPIC, write_bag, write_csv
+from ext_observer.recordings.recording import (attitude_from_imu, node_settings, parameters_from_yaml,
                                     roll_pitch_yaw)
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -411,9 +412,9 @@ def test_imu_data_carries_the_estimates_own_covariance_when_the_node_does(
         tmp_path, recording, monkeypatch, parallel):
     """With orientation_covariance_mode 'estimate', imu/data's covariance is the estimate's."""
     import collections
-    import ext_observer.bag as bag_module
-    import ext_observer.bag_worker as worker_module
-    from ext_observer.recording import PipelineRun
+    import ext_observer.recordings.bag as bag_module
+    import ext_observer.recordings.bag_worker as worker_module
+    from ext_observer.recordings.recording import PipelineRun
 
     Wide = collections.namedtuple('Wide', 'state covariance')
 
@@ -530,7 +531,7 @@ def test_progress_on_long_bags():
 
 
 def test_example_data_command_and_the_speed_measure(tmp_path):
-    from ext_observer.example_data import main as example_main
+    from ext_observer.recordings.example_data import main as example_main
     out = io.StringIO()
     # Both sides with the same parameters (here the calibration off).
     params = tmp_path / 'params.yaml'

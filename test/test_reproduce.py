@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from ext_observer import reproduce
+from ext_observer.paper import reproduce
 
 
 @pytest.fixture(scope='module')

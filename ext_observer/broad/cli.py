@@ -31,7 +31,7 @@ from ext_observer.broad.run import log, run
 # Trial shown over time in the report: magnetically disturbed.
 PLOT_TRIAL = '28_disturbed_stationary_magnet_A'
 # What the figures depend on, for the "uncommitted changes" note.
-_ESTIMATOR_FILES = ('ext_observer/core/ahrs.py', 'ext_observer/broad')
+_ESTIMATOR_FILES = ('ext_observer/core/ahrs/estimator.py', 'ext_observer/broad')
 
 
 def build_parser():
@@ -138,7 +138,7 @@ def _covariance(args, argv, source, folder, trials, groups, progress):
                 data=shown_path(folder), machine=_machine())
     # The covariance is the node's: its pipeline and uncertainty model count too.
     meta['dirty'] = bool(_git('status', '--porcelain', '--', *_ESTIMATOR_FILES,
-                              'ext_observer/core/uncertainty.py', 'ext_observer/raw_imu.py'))
+                              'ext_observer/core/ahrs/uncertainty.py', 'ext_observer/pipeline/raw_imu.py'))
     modes = MODES if args.mode == 'both' else (args.mode,)
     report(trials, groups, meta, modes, workers=args.workers, docs=args.docs,
            json_path=args.json, progress=progress)
@@ -160,7 +160,7 @@ def _check(args, anchors):
 
 def _source():
     """The commit, whether the estimator has uncommitted changes, the date, the params."""
-    from ext_observer.core.ahrs import AhrsParams
+    from ext_observer.core.ahrs.estimator import AhrsParams
     return {
         'commit': _git('rev-parse', '--short', 'HEAD') or 'unknown',
         'dirty': bool(_git('status', '--porcelain', '--', *_ESTIMATOR_FILES)),

@@ -2,7 +2,7 @@
 Is the published orientation covariance honest? The BROAD trials say.
 
 ``python -m ext_observer broad --covariance`` runs every trial in 9D and 6D
-through :class:`~ext_observer.raw_imu.RawImuPipeline`, exactly as
+through :class:`~ext_observer.pipeline.raw_imu.RawImuPipeline`, exactly as
 ``imu_filter_node`` runs it (stamps 1/rate apart, the field after each
 sample), keeps each estimate and its covariance, and compares the claimed
 σ with the error against the optical reference over the scored
@@ -14,7 +14,7 @@ sample), keeps each estimate and its covariance, and compares the claimed
 
 for each component (inclination; heading in 9D), per group (undisturbed,
 disturbed) and per split: the even-numbered trials chose the defaults of
-:class:`~ext_observer.core.uncertainty.UncertaintyParams` (``dev``), the
+:class:`~ext_observer.core.ahrs.uncertainty.UncertaintyParams` (``dev``), the
 odd-numbered ones did not (``held-out``). Issue 18 asks for 90–99 % and
 0.5–2.
 
@@ -29,7 +29,7 @@ import multiprocessing
 import numpy as np
 
 from ext_observer.broad.scoring import error_angles
-from ext_observer.core.uncertainty import AttitudeUncertainty, UncertaintyParams
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, UncertaintyParams
 
 MODES = ('9D', '6D')
 GROUPS = ('undisturbed', 'disturbed')
@@ -54,7 +54,7 @@ def split_of(name):
 
 def node_settings(mode, values=None):
     """``imu_filter_node``'s settings with its defaults, 9D or 6D (and ``values``)."""
-    from ext_observer.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+    from ext_observer.nodes.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
     settings = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
     settings.update(values or {})
     settings['use_mag'] = mode == '9D'
@@ -85,7 +85,7 @@ def run_trial(trial, mode, values=None):
         ``rejected`` (a field came and did not correct the heading), ``dt``.
 
     """
-    from ext_observer.raw_imu import RawImuPipeline
+    from ext_observer.pipeline.raw_imu import RawImuPipeline
     pipeline = RawImuPipeline(node_settings(mode, values))
     core, tracker = pipeline.estimator.core, pipeline.estimator.uncertainty
     n = len(trial)
@@ -131,7 +131,7 @@ def replay(runs, params=None, ahrs_params=None):
     runs : list of dict
         :func:`run_trial`'s outputs, one mode each; all with the same ``dt``.
     params : UncertaintyParams, optional
-    ahrs_params : ext_observer.core.ahrs.AhrsParams, optional
+    ahrs_params : ext_observer.core.ahrs.estimator.AhrsParams, optional
         The estimator's (its time constants); default its defaults.
 
     Returns
@@ -140,7 +140,7 @@ def replay(runs, params=None, ahrs_params=None):
         The variances each run would publish with ``params``.
 
     """
-    from ext_observer.core.ahrs import AhrsParams
+    from ext_observer.core.ahrs.estimator import AhrsParams
     dt = runs[0]['dt']
     lengths = [len(r['tilt']) for r in runs]
     n = max(lengths)

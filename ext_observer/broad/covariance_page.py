@@ -15,7 +15,7 @@ import os
 import numpy as np
 
 from ext_observer.broad import covariance as cv
-from ext_observer.core.uncertainty import UncertaintyParams
+from ext_observer.core.ahrs.uncertainty import UncertaintyParams
 
 # A trial whose field is rejected for long stretches (a magnet on the sensor).
 MAGNET_TRIALS = ('32_disturbed_attached_magnet_1cm', '28_disturbed_stationary_magnet_A')
@@ -312,7 +312,7 @@ _INTRO = [
 _MODEL = [
     '## The model',
     '',
-    '`AttitudeUncertainty` (`ext_observer/core/uncertainty.py`, numpy only) runs beside '
+    '`AttitudeUncertainty` (`ext_observer/core/ahrs/uncertainty.py`, numpy only) runs beside '
     'the estimator and is told after each step what it did: the interval, the gyro\'s '
     'rate, rest, and for each field the heading gain it applied (0 when rejected). It '
     'propagates the variance of the attitude error as the covariance step of an '

@@ -2,7 +2,7 @@
 The run: our estimator and the anchors on the trials, each estimate scored.
 
 Our estimator runs as one batched call over every trial and mode
-(``estimate_batch`` of :mod:`ext_observer.core.ahrs`, with its shipped
+(``estimate_batch`` of :mod:`ext_observer.core.ahrs.estimator`, with its shipped
 defaults); the anchors run one recording per task, in processes when
 ``jobs > 1``. Only the scores, the norms of our raw estimates, the times and
 the per-sample errors of one trial (for the figure) are kept.
@@ -47,7 +47,7 @@ def estimate_ours(trials, modes, variant, workers=1):
         Wall clock of the call.
 
     """
-    from ext_observer.core.ahrs import estimate_batch
+    from ext_observer.core.ahrs.estimator import estimate_batch
     streams = [(t, m) for m in modes for t in trials]
     start = time.perf_counter()
     out = estimate_batch([t.gyr for t, _ in streams], [t.acc for t, _ in streams],

@@ -32,9 +32,9 @@ from .certificate import (GainCertificate, certified_alpha_max,
 from .extension import (ConstraintExtension, TransversalExtension,
                         so3_extension, sphere_extension, sphere_grad_V,
                         sphere_hessian_V, sphere_V)
-from .gyro_model import GyroSample, SimulatedGyro, Trajectory
-from .magcal import check_calibration, MagCalibrator
-from .observer import (GAIN_MODES, LuenbergerObserver, ObserverConfig,
+from .paper.gyro_model import GyroSample, SimulatedGyro, Trajectory
+from .ahrs.magcal import check_calibration, MagCalibrator
+from .paper.observer import (GAIN_MODES, LuenbergerObserver, ObserverConfig,
                        PAPER_ALPHA, PAPER_GAIN, SingleObserver, VARIANTS)
 from .quaternion import (attitude_error, check_quaternions, check_vectors,
                          conjugate, constraint_residual, exp, IDENTITY, log,

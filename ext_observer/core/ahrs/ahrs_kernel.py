@@ -1,0 +1,538 @@
+"""
+The raw-IMU estimator's steps as functions on one flat state: the one source.
+
+:class:`~ext_observer.core.ahrs.estimator.AhrsObserver` keeps the state of one
+estimate in a flat container ``s`` (the slots below, then the magnetometer
+calibration's block, :mod:`~ext_observer.core.ahrs.magcal_kernel`) and runs the
+functions of this module on it. They are written in the part of Python that
+numba's ``nopython`` mode compiles: float arithmetic, ``math``, indexing,
+loops, tuples and calls to each other. So the same source runs
+
+- as it is, on a Python ``list`` of floats (no compiler needed), and
+- compiled, when numba is installed (:mod:`~ext_observer.core.ahrs.compiled`
+  loads this file a second time and compiles every function), on a float64
+  numpy array:
+
+one estimator, not two copies to keep in sync; the two agree to rounding
+(``test_compiled.py``). Flags are stored as 0.0 or 1.0, ``None`` as a flag
+of its own (``S_INIT``: the estimate exists; ``S_HAS_REF``: the field
+references exist).
+
+The maths, step by step, is :mod:`~ext_observer.core.ahrs.estimator`'s docstring;
+here each function says which step it is. Quaternions ``(w, x, y, z)``,
+sensor → ENU.
+"""
+
+import math
+
+from .magcal_kernel import (MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn,
+                            mc_restart)
+
+# --- the layout ----------------------------------------------------------------
+
+# Parameters (set once by the wrapper).
+P_ALPHA = 0
+P_TAU_ACC = 1
+P_TAU_ACC_GAIN = 2
+P_TAU_MAG = 3
+P_TAU_BIAS = 4
+P_BIAS_MAX = 5
+P_REST_GYR = 6
+P_REST_ACC = 7
+P_REST_TIME = 8
+P_TAU_REST = 9
+P_MAG_NORM_TH = 10
+P_MAG_DIP_TH = 11
+P_MAG_NEW_TIME = 12
+P_MAG_NEW_GYR = 13
+P_TAU_MAG_REF = 14
+P_USE_MAG = 15
+P_EXTENDED = 16  # variant 'extended' (1) or 'plain' (0)
+P_HAS_CAL = 17  # a magnetometer calibration runs (mag_cal and 9D)
+P_CAL_PERIOD = 18  # s: learn from a field at most this often
+P_MOTION_BIAS = 19  # tau_bias > 0
+# Coefficients of the current intervals (NaN: not computed yet).
+C_DT = 20
+C_BW = 21  # 5: b0, b1, b2, a1, a2
+C_K_ACC = 26
+C_K_REST = 27
+C_MAG_DT = 28
+C_K_MAG = 29
+C_K_REF = 30
+# The estimate and what it remembers.
+S_INIT = 31
+S_Q = 32  # 4
+S_BIAS = 36  # 3
+S_REST = 39
+S_REST_TIME = 40
+S_REST_GYR = 41  # 3
+S_REST_ACC = 44  # 3
+S_LP = 47  # 6: the Butterworth states s1 (3), s2 (3)
+S_ACC_STILL = 53
+S_MAG_DIST = 54
+S_HAS_REF = 55
+S_REF = 56  # 2: norm, dip
+S_CAND = 58  # 2: norm, dip of a new field
+S_CAND_TIME = 60
+S_MAG_USED = 61
+S_CAL_TURN = 62  # 4: body rotation since the field last learned from
+S_CAL_RATE = 66  # 3: the latest angular rate, bias removed
+S_CAL_WAIT = 69
+S_CAL_MOVED = 70
+S_CAL_SINCE = 71
+S_CAL_LOADED = 72
+A_SIZE = 73
+MC0 = A_SIZE  # the calibration's block starts here
+
+PARAMETERS = ('alpha', 'tau_acc', 'tau_acc_gain', 'tau_mag', 'tau_bias', 'bias_max',
+              'rest_gyr', 'rest_acc', 'rest_time', 'tau_rest', 'mag_norm_th', 'mag_dip_th',
+              'mag_new_time', 'mag_new_gyr', 'tau_mag_ref')
+
+_TINY = 1e-300
+# After a calibration is applied, the heading's time constant is this share
+# of the time since, and at least this (s), until it reaches tau_mag.
+_REFINE_SHARE = 0.5
+_REFINE_SHORTEST = 1.0
+_SQRT2 = math.sqrt(2.0)
+
+
+# --- arithmetic ------------------------------------------------------------------
+
+def rotate(w, x, y, z, vx, vy, vz):
+    """``q v q̄ / |q|²``: vector ``v`` rotated by the rotation of ``q ≠ 0``."""
+    # v(w² − |u|²) + 2(u·v)u + 2w(u × v), over |q|².
+    n2 = w * w + x * x + y * y + z * z
+    s = (w * w - x * x - y * y - z * z)
+    d = 2.0 * (x * vx + y * vy + z * vz)
+    w2 = 2.0 * w
+    cx = y * vz - z * vy
+    cy = z * vx - x * vz
+    cz = x * vy - y * vx
+    return ((s * vx + d * x + w2 * cx) / n2,
+            (s * vy + d * y + w2 * cy) / n2,
+            (s * vz + d * z + w2 * cz) / n2)
+
+
+def _clip(v, lo, hi):
+    return lo if v < lo else hi if v > hi else v
+
+
+def _gain(tau, dt):
+    """Per-sample gain of a first-order filter with time constant ``tau``."""
+    return 1.0 - math.exp(-dt / tau)
+
+
+def first_attitude(ax, ay, az, has_mag, mx, my, mz, use_mag):
+    """
+    A first attitude from gravity (and the field's heading), ENU: a unit quaternion.
+
+    Without a field (``has_mag`` 0) the heading is that of the smallest
+    rotation taking the accelerometer's axis to the vertical.
+    """
+    n = math.sqrt(ax * ax + ay * ay + az * az)
+    n = n if n > 0.0 else 1.0
+    ax, ay, az = ax / n, ay / n, az / n
+    w, x, y = 1.0 + az, ay, -ax
+    d = math.sqrt(w * w + x * x + y * y)
+    flip = d < 1e-9
+    d = 1.0 if flip else d
+    w, x, y = (0.0, 1.0, 0.0) if flip else (w / d, x / d, y / d)
+    z = 0.0 * w
+    if not has_mag:
+        return w, x, y, z
+    hx, hy, _ = rotate(w, x, y, z, mx, my, mz)
+    psi = math.atan2(hx, hy) if use_mag else 0.0
+    c, s = math.cos(0.5 * psi), math.sin(0.5 * psi)
+    return c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w
+
+
+# --- state -----------------------------------------------------------------------
+
+def ahrs_reset(s):
+    """Forget the estimate: the next accelerometer sample initializes."""
+    s[S_INIT] = 0.0
+    for i in range(4):
+        s[S_Q + i] = 0.0
+    for i in range(3):
+        s[S_BIAS + i] = 0.0
+    s[S_REST] = 0.0
+    s[S_REST_TIME] = 0.0
+    s[S_MAG_DIST] = 0.0
+    s[S_HAS_REF] = 0.0
+    s[S_CAND_TIME] = 0.0
+    s[S_MAG_USED] = 0.0
+    if s[P_HAS_CAL] != 0.0:
+        # The learned calibration stays; the field is followed afresh.
+        mc_restart(s, MC0)
+        s[S_CAL_TURN] = 1.0
+        for i in range(1, 4):
+            s[S_CAL_TURN + i] = 0.0
+        for i in range(3):
+            s[S_CAL_RATE + i] = 0.0
+        s[S_CAL_WAIT] = math.inf
+        s[S_CAL_MOVED] = 0.0  # the body has not turned yet
+        s[S_CAL_SINCE] = math.inf  # time since a calibration was applied
+        s[S_CAL_LOADED] = 0.0
+
+
+def ahrs_coefficients(s, dt):
+    """The filters' coefficients for the IMU interval ``dt`` (checked by the caller)."""
+    s[C_DT] = dt
+    # Second-order Butterworth low-pass (bilinear, prewarped), cutoff 1/(2π τ).
+    wc = math.tan(0.5 * dt / s[P_TAU_ACC])
+    k = _SQRT2 * wc
+    a0 = 1.0 + k + wc * wc
+    b0 = wc * wc / a0
+    s[C_BW] = b0
+    s[C_BW + 1] = 2.0 * b0
+    s[C_BW + 2] = b0
+    s[C_BW + 3] = 2.0 * (wc * wc - 1.0) / a0
+    s[C_BW + 4] = (1.0 - k + wc * wc) / a0
+    s[C_K_ACC] = _gain(s[P_TAU_ACC_GAIN], dt)
+    s[C_K_REST] = _gain(s[P_TAU_REST], dt)
+
+
+def ahrs_mag_coefficients(s, dt):
+    """The heading's and the field references' gains for the field interval ``dt``."""
+    s[C_MAG_DT] = dt
+    s[C_K_MAG] = _gain(s[P_TAU_MAG], dt)
+    s[C_K_REF] = _gain(s[P_TAU_MAG_REF], dt)
+
+
+# --- the three steps ---------------------------------------------------------------
+
+def ahrs_update(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
+    """One IMU sample: gyro, then accelerometer, then magnetometer (``has_mag``); the estimate."""
+    if dt != s[C_DT]:
+        ahrs_coefficients(s, dt)
+    if s[S_INIT] == 0.0:
+        if has_mag and s[P_HAS_CAL] != 0.0:
+            # Identity until the calibration is converged or loaded.
+            mx, my, mz = mc_apply(s, MC0, mx, my, mz)
+        w, x, y, z = first_attitude(ax, ay, az, has_mag and s[P_USE_MAG] != 0.0, mx, my, mz,
+                                    s[P_USE_MAG] != 0.0)
+        s[S_Q] = w
+        s[S_Q + 1] = x
+        s[S_Q + 2] = y
+        s[S_Q + 3] = z
+        s[S_INIT] = 1.0
+        _init_filters(s, gx, gy, gz, ax, ay, az)
+    else:
+        ahrs_update_gyr(s, gx, gy, gz)
+    ahrs_update_acc(s, ax, ay, az)
+    if has_mag and s[P_USE_MAG] != 0.0:
+        ahrs_update_mag(s, mx, my, mz, s[C_DT])
+    return s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+
+
+def _init_filters(s, gx, gy, gz, ax, ay, az):
+    vx, vy, vz = rotate(s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3], ax, ay, az)
+    b1, b2, a1, a2 = s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
+    # Steady state of the transposed direct form II for a constant input.
+    s[S_LP + 3] = (b2 - a2) * vx
+    s[S_LP + 4] = (b2 - a2) * vy
+    s[S_LP + 5] = (b2 - a2) * vz
+    s[S_LP] = (b1 - a1) * vx + s[S_LP + 3]
+    s[S_LP + 1] = (b1 - a1) * vy + s[S_LP + 4]
+    s[S_LP + 2] = (b1 - a1) * vz + s[S_LP + 5]
+    s[S_REST_GYR] = gx
+    s[S_REST_GYR + 1] = gy
+    s[S_REST_GYR + 2] = gz
+    s[S_REST_ACC] = ax
+    s[S_REST_ACC + 1] = ay
+    s[S_REST_ACC + 2] = az
+
+
+def ahrs_update_gyr(s, gx, gy, gz):
+    """Propagate with ``exp((ω − b̂) dt / 2)`` and apply the extension term."""
+    dt = s[C_DT]
+    bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
+    ux = (gx - bx) * dt
+    uy = (gy - by) * dt
+    uz = (gz - bz) * dt
+    # exp of the half increment: (cos(θ/2), sin(θ/2)/θ · u), θ = |u|; the
+    # tiny term only keeps θ = 0 (then u = 0) from dividing by zero.
+    t = math.sqrt(ux * ux + uy * uy + uz * uz)
+    c = math.cos(0.5 * t)
+    sn = math.sin(0.5 * t) / (t + _TINY)
+    ex, ey, ez = ux * sn, uy * sn, uz * sn
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    pw = w * c - x * ex - y * ey - z * ez
+    px = w * ex + x * c + y * ez - z * ey
+    py = w * ey - x * ez + y * c + z * ex
+    pz = w * ez + x * ey - y * ex + z * c
+    if s[P_HAS_CAL] != 0.0:
+        tw, tx, ty, tz = s[S_CAL_TURN], s[S_CAL_TURN + 1], s[S_CAL_TURN + 2], s[S_CAL_TURN + 3]
+        s[S_CAL_TURN] = tw * c - tx * ex - ty * ey - tz * ez
+        s[S_CAL_TURN + 1] = tw * ex + tx * c + ty * ez - tz * ey
+        s[S_CAL_TURN + 2] = tw * ey - tx * ez + ty * c + tz * ex
+        s[S_CAL_TURN + 3] = tw * ez + tx * ey - ty * ex + tz * c
+        s[S_CAL_RATE] = gx - bx
+        s[S_CAL_RATE + 1] = gy - by
+        s[S_CAL_RATE + 2] = gz - bz
+        lx, ly, lz = s[S_REST_GYR] - bx, s[S_REST_GYR + 1] - by, s[S_REST_GYR + 2] - bz
+        if lx * lx + ly * ly + lz * lz >= s[P_REST_GYR] ** 2:
+            s[S_CAL_MOVED] = 1.0
+    if s[P_EXTENDED] != 0.0:
+        # p − α ∇V(p), ∇V(p) = 4 p (p̄p − 1).
+        f = 1.0 - 4.0 * s[P_ALPHA] * (pw * pw + px * px + py * py + pz * pz - 1.0)
+        pw, px, py, pz = pw * f, px * f, py * f, pz * f
+    s[S_Q] = pw
+    s[S_Q + 1] = px
+    s[S_Q + 2] = py
+    s[S_Q + 3] = pz
+    _detect_rest(s, gx, gy, gz)
+
+
+def _detect_rest(s, gx, gy, gz):
+    k = s[C_K_REST]
+    lx, ly, lz = s[S_REST_GYR], s[S_REST_GYR + 1], s[S_REST_GYR + 2]
+    lx, ly, lz = lx + k * (gx - lx), ly + k * (gy - ly), lz + k * (gz - lz)
+    s[S_REST_GYR] = lx
+    s[S_REST_GYR + 1] = ly
+    s[S_REST_GYR + 2] = lz
+    bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
+    ex, ey, ez = gx - lx, gy - ly, gz - lz
+    dev = ex * ex + ey * ey + ez * ez
+    mx, my, mz = lx - bx, ly - by, lz - bz
+    mean = mx * mx + my * my + mz * mz
+    th = s[P_REST_GYR] * s[P_REST_GYR]
+    still = (dev < th) and (mean < th) and s[S_ACC_STILL] != 0.0
+    s[S_REST_TIME] = (s[S_REST_TIME] + s[C_DT]) if still else 0.0
+    rest = s[S_REST_TIME] >= s[P_REST_TIME]
+    s[S_REST] = 1.0 if rest else 0.0
+    # At rest the bias is the low-passed rate, within bias_max per axis
+    # as in motion.
+    kr = k if rest else 0.0
+    m = s[P_BIAS_MAX]
+    s[S_BIAS] = _clip(bx + kr * mx, -m, m)
+    s[S_BIAS + 1] = _clip(by + kr * my, -m, m)
+    s[S_BIAS + 2] = _clip(bz + kr * mz, -m, m)
+
+
+def ahrs_update_acc(s, ax, ay, az):
+    """Correct the inclination from the world-frame filtered specific force."""
+    # Rest detection needs the accelerometer's deviation from its mean.
+    k = s[C_K_REST]
+    rx, ry, rz = s[S_REST_ACC], s[S_REST_ACC + 1], s[S_REST_ACC + 2]
+    rx, ry, rz = rx + k * (ax - rx), ry + k * (ay - ry), rz + k * (az - rz)
+    s[S_REST_ACC] = rx
+    s[S_REST_ACC + 1] = ry
+    s[S_REST_ACC + 2] = rz
+    ex, ey, ez = ax - rx, ay - ry, az - rz
+    s[S_ACC_STILL] = 1.0 if (ex * ex + ey * ey + ez * ez) < s[P_REST_ACC] * s[P_REST_ACC] else 0.0
+
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    vx, vy, vz = rotate(w, x, y, z, ax, ay, az)
+    b0, b1, b2, a1, a2 = s[C_BW], s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
+    s1x, s1y, s1z = s[S_LP], s[S_LP + 1], s[S_LP + 2]
+    s2x, s2y, s2z = s[S_LP + 3], s[S_LP + 4], s[S_LP + 5]
+    fx, fy, fz = b0 * vx + s1x, b0 * vy + s1y, b0 * vz + s1z
+    s1x, s1y, s1z = (b1 * vx - a1 * fx + s2x, b1 * vy - a1 * fy + s2y,
+                     b1 * vz - a1 * fz + s2z)
+    s2x, s2y, s2z = b2 * vx - a2 * fx, b2 * vy - a2 * fy, b2 * vz - a2 * fz
+
+    # δ: the rotation taking f/|f| to the vertical, [1 + u_z, u_y, −u_x, 0].
+    # (A filtered vector pointing straight down, |δ| = 0, only shrinks the
+    # estimate; the extension term restores it.)
+    n = math.sqrt(fx * fx + fy * fy + fz * fz) + _TINY
+    dw, dx, dy = 1.0 + fz / n, fy / n, -fx / n
+    dn = math.sqrt(dw * dw + dx * dx + dy * dy) + _TINY
+    dw, dx, dy = dw / dn, dx / dn, dy / dn
+    # q̂ + κ (δ ⊗ q̂ − q̂) = r ⊗ q̂ with r = (1 − κ) + κ δ.
+    kap = s[C_K_ACC]
+    rw, rx, ry = 1.0 - kap + kap * dw, kap * dx, kap * dy
+    s[S_Q] = rw * w - rx * x - ry * y
+    s[S_Q + 1] = rw * x + rx * w + ry * z
+    s[S_Q + 2] = rw * y + ry * w - rx * z
+    s[S_Q + 3] = rw * z + rx * y - ry * x
+    # The filter's states follow the applied rotation (r need not be unit).
+    s[S_LP], s[S_LP + 1], s[S_LP + 2] = rotate(rw, rx, ry, 0.0, s1x, s1y, s1z)
+    s[S_LP + 3], s[S_LP + 4], s[S_LP + 5] = rotate(rw, rx, ry, 0.0, s2x, s2y, s2z)
+    if s[P_MOTION_BIAS] != 0.0:
+        _learn_bias(s, rw, rx, ry, 0.0)
+
+
+def _learn_bias(s, rw, rx, ry, rz):
+    """In motion: the correction ``r`` (world) averages ``−(b − b̂) dt`` (body)."""
+    tb = s[P_TAU_BIAS]
+    # Small-angle rotation vector of r, in the body frame.
+    cx, cy, cz = 2.0 * rx / rw, 2.0 * ry / rw, 2.0 * rz / rw
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    cx, cy, cz = rotate(w, -x, -y, -z, cx, cy, cz)
+    k = 0.0 if (s[S_REST] != 0.0 or tb <= 0.0) else 1.0 / (tb if tb > 0.0 else 1.0)
+    m = s[P_BIAS_MAX]
+    s[S_BIAS] = _clip(s[S_BIAS] - k * cx, -m, m)
+    s[S_BIAS + 1] = _clip(s[S_BIAS + 1] - k * cy, -m, m)
+    s[S_BIAS + 2] = _clip(s[S_BIAS + 2] - k * cz, -m, m)
+
+
+def ahrs_update_mag(s, mx, my, mz, dt):
+    """Correct the heading from the magnetometer (interval ``dt``), rejecting disturbed fields."""
+    if dt != s[C_MAG_DT]:
+        ahrs_mag_coefficients(s, dt)
+    has_cal = s[P_HAS_CAL] != 0.0
+    if has_cal:
+        mx, my, mz = _calibrate(s, mx, my, mz, dt)
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    mx, my, mz = rotate(w, x, y, z, mx, my, mz)
+    h = math.sqrt(mx * mx + my * my)
+    norm = math.sqrt(h * h + mz * mz)
+    valid = (h > 0.0) and (norm > 0.0)
+    dip = math.atan2(mz, h)
+    psi = math.atan2(mx, my)
+
+    if s[S_HAS_REF] == 0.0:
+        s[S_REF] = norm
+        s[S_REF + 1] = dip
+        s[S_CAND] = norm
+        s[S_CAND + 1] = dip
+        s[S_HAS_REF] = 1.0
+    ref_n, ref_d = s[S_REF], s[S_REF + 1]
+    th_n, th_d = s[P_MAG_NORM_TH], s[P_MAG_DIP_TH]
+    disturbed = (abs(norm - ref_n) > th_n * ref_n) or (abs(dip - ref_d) > th_d)
+    # A new field: consistent with the candidate while the body turns.
+    cand_n, cand_d = s[S_CAND], s[S_CAND + 1]
+    consistent = (abs(norm - cand_n) < th_n * cand_n) and (abs(dip - cand_d) < th_d)
+    gx, gy, gz = s[S_REST_GYR], s[S_REST_GYR + 1], s[S_REST_GYR + 2]
+    turning = gx * gx + gy * gy + gz * gz > s[P_MAG_NEW_GYR] ** 2
+    s[S_CAND_TIME] = (s[S_CAND_TIME] + dt) if (disturbed and consistent and turning) else 0.0
+    kr = s[C_K_REF]
+    if consistent:
+        s[S_CAND] = cand_n + kr * (norm - cand_n)
+        s[S_CAND + 1] = cand_d + kr * (dip - cand_d)
+    else:
+        s[S_CAND] = norm
+        s[S_CAND + 1] = dip
+    accept_new = disturbed and (s[S_CAND_TIME] >= s[P_MAG_NEW_TIME])
+    if accept_new:
+        ref_n, ref_d = s[S_CAND], s[S_CAND + 1]
+    disturbed = disturbed and not accept_new
+    use = valid and not disturbed and s[P_USE_MAG] != 0.0
+    if use:
+        s[S_REF] = ref_n + kr * (norm - ref_n)
+        s[S_REF + 1] = ref_d + kr * (dip - ref_d)
+    else:
+        s[S_REF] = ref_n
+        s[S_REF + 1] = ref_d
+    s[S_MAG_DIST] = 1.0 if disturbed else 0.0
+    if has_cal:
+        # The heading waits for the calibration; before the body has
+        # first moved it is the field's as given, averaged (the start).
+        use = use and (s[MC0 + MC_READY] != 0.0 or s[S_CAL_MOVED] == 0.0)
+
+    # Heading measurement y = R_z(ψ) ⊗ q̂; gain κ_m, a running average at first.
+    used = s[S_MAG_USED] + (1.0 if use else 0.0)
+    s[S_MAG_USED] = used
+    k_mag = s[C_K_MAG]
+    if not has_cal:
+        kap = max(k_mag, 1.0 / max(used, 1.0)) if use else 0.0
+    else:
+        # A calibration applied t ago improves still: the heading follows
+        # it with the time constant t/2 (at least 1 s) until that reaches
+        # tau_mag; the fields of older calibrations weigh less.
+        since = s[S_CAL_SINCE] + dt
+        s[S_CAL_SINCE] = since
+        follow = 1.0 - math.exp(-dt / max(_REFINE_SHORTEST, _REFINE_SHARE * since))
+        kap = max(max(k_mag, 1.0 / max(used, 1.0)), follow) if use else 0.0
+    half = 0.5 * psi
+    rw, rz = 1.0 - kap + kap * math.cos(half), kap * math.sin(half)
+    _turn_heading(s, rw, rz)
+    if s[P_MOTION_BIAS] != 0.0:
+        # Only corrections of the steady phase teach the bias.
+        _learn_bias(s, rw, 0.0, 0.0, rz if used * k_mag > 1.0 else 0.0)
+
+
+def _turn_heading(s, rw, rz):
+    """``q̂ ← r ⊗ q̂`` for ``r = (rw, 0, 0, rz)`` (not unit), the filter's states with it."""
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    s[S_Q] = rw * w - rz * z
+    s[S_Q + 1] = rw * x - rz * y
+    s[S_Q + 2] = rw * y + rz * x
+    s[S_Q + 3] = rw * z + rz * w
+    # The filter's states turn with it about the vertical: (c, s) of 2θ.
+    n2 = rw * rw + rz * rz
+    c, sn = (rw * rw - rz * rz) / n2, 2.0 * rw * rz / n2
+    for i in (0, 3):
+        a, b = s[S_LP + i], s[S_LP + i + 1]
+        s[S_LP + i] = c * a - sn * b
+        s[S_LP + i + 1] = sn * a + c * b
+
+
+def _norm_dip(s, mx, my, mz):
+    """Norm and dip angle of a body-frame field in the world frame."""
+    mx, my, mz = rotate(s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3], mx, my, mz)
+    h = math.sqrt(mx * mx + my * my)
+    return math.sqrt(h * h + mz * mz), math.atan2(mz, h)
+
+
+def _calibrate(s, mx, my, mz, dt):
+    """Teach the calibration this field; return the field the heading logic uses."""
+    s[S_CAL_WAIT] += dt
+    if s[S_CAL_WAIT] < s[P_CAL_PERIOD]:
+        return mc_apply(s, MC0, mx, my, mz)  # learn at most at mag_cal_rate
+    ready = s[MC0 + MC_READY] != 0.0
+    applied = s[MC0 + MC_APPLIED] != 0.0
+    allow = True
+    has_ref = s[S_HAS_REF] != 0.0
+    if has_ref and ready:
+        # A field the norm/dip test rejects does not teach.
+        cx, cy, cz = mc_apply(s, MC0, mx, my, mz)
+        norm, dip = _norm_dip(s, cx, cy, cz)
+        ref_n, ref_d = s[S_REF], s[S_REF + 1]
+        disturbed = ((abs(norm - ref_n) > s[P_MAG_NORM_TH] * ref_n)
+                     or (abs(dip - ref_d) > s[P_MAG_DIP_TH]))
+        allow = not disturbed
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    n2 = w * w + x * x + y * y + z * z
+    mc_learn(s, MC0, mx, my, mz, s[S_CAL_TURN], s[S_CAL_TURN + 1], s[S_CAL_TURN + 2],
+             s[S_CAL_TURN + 3], s[S_CAL_WAIT], s[S_CAL_RATE], s[S_CAL_RATE + 1],
+             s[S_CAL_RATE + 2], 1.0, 2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
+             (w * w - x * x - y * y + z * z) / n2, 1.0 if allow else 0.0)
+    s[S_CAL_TURN] = 1.0
+    for i in range(1, 4):
+        s[S_CAL_TURN + i] = 0.0
+    s[S_CAL_WAIT] = 0.0
+    # A learned calibration applied: the heading is set once from the
+    # calibrated field as the calibration tracks it (its noise averaged
+    # over many fields); then it follows the calibrated fields.
+    switched = s[MC0 + MC_APPLIED] != 0.0 and (not applied or s[S_CAL_LOADED] != 0.0)
+    s[S_CAL_LOADED] = 0.0
+    if switched and has_ref:
+        fx, fy, fz = mc_field(s, MC0)
+        hx, hy, hz = rotate(w, x, y, z, fx, fy, fz)
+        half = 0.5 * math.atan2(hx, hy)
+        _turn_heading(s, math.cos(half), math.sin(half))
+        # No initial averaging: the refinement's gain follows.
+        s[S_MAG_USED] = math.inf
+        s[S_CAL_SINCE] = 0.0
+        # The references become the calibrated field's norm and dip.
+        h = math.sqrt(hx * hx + hy * hy)
+        s[S_REF] = math.sqrt(h * h + hz * hz)
+        s[S_REF + 1] = math.atan2(hz, h)
+        s[S_CAND] = s[S_REF]
+        s[S_CAND + 1] = s[S_REF + 1]
+        s[S_CAND_TIME] = 0.0
+    return mc_apply(s, MC0, mx, my, mz)
+
+
+# --- a whole recording -----------------------------------------------------------------
+
+def ahrs_run(s, gyr, acc, mag, count, has_mag, dt, out):
+    """
+    ``count`` samples at one interval ``dt``: ``out[k]`` the estimate after sample ``k``.
+
+    ``gyr``, ``acc``, ``mag`` and ``out`` are indexed ``[k][i]``: lists of
+    lists on the plain path, (N, 3) and (N, 4) arrays compiled; ``mag`` any
+    of them when ``has_mag`` is false.
+    """
+    for k in range(count):
+        g = gyr[k]
+        a = acc[k]
+        m = mag[k]  # the caller passes any (N, 3) when has_mag is false
+        ahrs_update(s, g[0], g[1], g[2], a[0], a[1], a[2], has_mag, m[0], m[1], m[2], dt)
+        o = out[k]
+        o[0] = s[S_Q]
+        o[1] = s[S_Q + 1]
+        o[2] = s[S_Q + 2]
+        o[3] = s[S_Q + 3]

@@ -1,0 +1,528 @@
+"""
+Attitude from a raw IMU: gyro + accelerometer (+ magnetometer), ambient form.
+
+The estimate ``q̂`` lives in R⁴ as in the paper's observer; nothing here
+renormalizes it. Each sample runs three steps, each a short function:
+
+``update_gyr``
+    Propagation with the bias-corrected body-frame increment,
+    ``p = q̂ ⊗ exp((ω − b̂) dt / 2)``, then the extension term of
+    Corollary 1, ``p − α ∇V(p)`` with ``V(x) = (x̄x − 1)²``, which pulls the
+    estimate back towards S³ (``|exp(·)| = 1``, so the gyro step preserves
+    ``V`` and the theorem applies with the S³ certificate).
+``update_acc``
+    Inclination. The specific force is rotated into the world frame with the
+    current estimate and low-pass filtered there (second-order Butterworth,
+    time constant ``tau_acc``); the filter's states are rotated along with
+    every correction, so they live in a frame that only the gyro moves and
+    translational accelerations average out. The measurement is
+    ``y = δ ⊗ q̂``, with ``δ`` the rotation that makes the filtered vector
+    vertical, and the update is the paper's Luenberger form with a scalar
+    gain, ``q̂ + κ_a (y − q̂)``.
+``update_mag``
+    Heading only. The field is rotated into the world frame and its
+    horizontal direction gives the heading error ``ψ``; the measurement is
+    ``y = R_z(ψ) ⊗ q̂`` (a rotation about the world vertical, so a disturbed
+    magnetometer can never tilt the estimate), with gain ``κ_m`` from
+    ``tau_mag``. A field whose norm or dip angle leaves its learned reference
+    is rejected; a new field that stays consistent while the body moves is
+    accepted after ``mag_new_time``.
+
+The gyro bias is learned at rest (rest detected from the gyro and the
+accelerometer) and, with ``tau_bias > 0`` (off by default), in motion from
+the corrections: a constant bias makes the estimate drift, so the body-frame
+correction averages ``−(b − b̂) dt``.
+
+In 9D the magnetometer is calibrated online (``mag_cal``, on by default):
+:class:`~ext_observer.core.ahrs.magcal.MagCalibrator` learns the hard-iron
+offset and the soft-iron matrix from the fields and the gyro's rotation
+between them. Until its quality (the heading error its uncertainty would
+cause) is below ``mag_cal_heading`` the heading does not follow the field:
+it starts from the field as given (averaged until the body first moves, as
+without calibration) and then follows the gyro alone (6D), while the
+disturbance test watches the raw field. Once converged, a learned
+calibration that turns the heading by more than ``mag_cal_deadband`` (RMS)
+from the field as given, and by more than its uncertainty could, is
+applied: the heading is set once from the calibrated field (as the
+calibration tracks it, its noise averaged), the field references become the
+calibrated field's, and 9D runs on calibrated fields, the heading following
+them with a time constant of half the time since (at least 1 s) until that
+reaches ``tau_mag``, as the calibration still improves. One that turns it
+less (the sensor was calibrated already) is watched, and the field is used
+as given. A field the norm/dip test rejects does not teach the
+calibration. ``calibration_state`` says which phase runs;
+:meth:`AhrsObserver.load_calibration` starts from a saved calibration.
+
+Credit: several ideas here are VQF's (D. Laidig and T. Seel, "VQF: Highly
+accurate IMU orientation estimation with bias estimation and magnetic
+disturbance rejection", Information Fusion 90, 2023): the parameter set and
+its first defaults (time constants in seconds, thresholds in physical
+units), the accelerometer low-passed in a frame that only the gyro moves
+(VQF's inertial frame), rest detection from the low-passed gyro and
+accelerometer with the bias learned at rest, and the rejection of a field
+whose norm or dip leaves its learned reference, with a candidate field that
+is accepted after it has lasted while the body turns. The equations and the
+code are ours (the extension term and the Luenberger form are the paper's).
+
+Conventions: quaternions scalar first ``(w, x, y, z)``, sensor → world; the
+world frame is ENU (x east, y north, z up, REP-103); at rest the
+accelerometer reads about ``+9.81`` along the world vertical. Angular rate in
+rad/s, acceleration in m/s², the magnetic field in any unit (only its
+direction and its norm relative to the reference are used), time in s.
+
+The steps are written once, as functions on a flat state in
+:mod:`~ext_observer.core.ahrs.ahrs_kernel` (the calibration's in
+:mod:`~ext_observer.core.ahrs.magcal_kernel`): compiled by numba where it is
+installed, plain Python otherwise (:mod:`~ext_observer.core.ahrs.compiled`), the
+same estimates. :class:`AhrsObserver` wraps them for one estimate on floats
+or a batch of ``(B,)`` arrays (each estimate stepping on floats in turn).
+The ROS node runs it on floats; :func:`estimate_batch`
+(:mod:`~ext_observer.core.ahrs.ahrs_batch`) runs many recordings. The
+parameters: :class:`AhrsParams` (:mod:`~ext_observer.core.ahrs.ahrs_params`).
+"""
+
+import math
+
+import numpy as np
+
+from .ahrs_math import _check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
+from .ahrs_params import AhrsParams
+from .compiled import kernels
+from .magcal import MagCalibrator
+
+__all__ = [
+    'AhrsObserver',
+    'AhrsParams',
+    'MODES',
+    'WORLD_FRAMES',
+    'estimate_batch',
+    'initial_attitude',
+    'world_from_enu',
+]
+
+MODES = ('6D', '9D')
+
+
+class AhrsObserver:
+    """
+    The raw-IMU estimator on floats (one estimate) or on ``(B,)`` arrays.
+
+    The steps are the functions of :mod:`~ext_observer.core.ahrs.ahrs_kernel` on
+    one flat state per estimate: compiled by numba when it is installed
+    (:mod:`~ext_observer.core.ahrs.compiled`), plain Python otherwise, one source
+    and the same results to rounding. With ``batch``, the estimates step one
+    after the other.
+
+    Parameters
+    ----------
+    params : AhrsParams, optional
+        With ``batch``, a value may be an array of shape ``(B,)``: one per
+        estimate (``mag_cal_rate``: the largest counts for all).
+    use_mag : bool or ndarray of bool, shape (B,)
+        9D (heading from the magnetometer) where true, 6D elsewhere.
+    batch : int, optional
+        ``None`` for one estimate on floats; ``B`` for arrays of shape (B,).
+    variant : {'extended', 'plain'}
+        ``plain`` drops the extension term (for comparison only).
+    compiled : bool, optional
+        Run the compiled steps (an error if numba is not installed), or the
+        plain ones; default: compiled where numba is installed, unless the
+        environment sets ``EXT_OBSERVER_COMPILED=0``.
+
+    Attributes
+    ----------
+    q : tuple of 4
+        The ambient estimate ``(w, x, y, z)``, sensor → ENU; ``None`` until
+        the first accelerometer sample initializes it.
+    bias : tuple of 3
+        The gyro bias estimate (rad/s), body frame.
+    rest : bool or ndarray
+        Whether rest is detected.
+    mag_disturbed : bool or ndarray
+        Whether the last magnetometer sample was rejected.
+    calibration : MagCalibrator or None
+        The online magnetometer calibration (``None`` when ``mag_cal`` is
+        false or no element runs 9D): ``bias``, ``soft_iron``, ``quality``,
+        ``counts``.
+    compiled : bool
+        Whether the compiled steps run.
+
+    """
+
+    def __init__(self, params=None, use_mag=True, batch=None, variant='extended', compiled=None):
+        if variant not in ('extended', 'plain'):
+            raise ValueError(f"variant must be 'extended' or 'plain', got {variant!r}")
+        self.params = params if params is not None else AhrsParams()
+        self.batch = batch
+        self.variant = variant
+        n = 1 if batch is None else int(batch)
+        self._n = n
+        if batch is None:
+            self.use_mag = bool(use_mag)
+            uses = [self.use_mag]
+        else:
+            self.use_mag = np.broadcast_to(np.asarray(use_mag, dtype=bool), (n,)).copy()
+            uses = [bool(u) for u in self.use_mag]
+        self._kernels = kernels(compiled)
+        self.compiled = self._kernels.compiled
+        k = self._kernels.ahrs
+        p = self.params
+        values = p.as_dict()
+
+        def each(name, i):
+            value = values[name]
+            return float(value[i]) if np.ndim(value) else float(value)
+
+        calibrate = [bool(np.asarray(p.mag_cal)[i] if np.ndim(p.mag_cal) else p.mag_cal)
+                     and uses[i] for i in range(n)]
+        size = k.A_SIZE + (self._kernels.magcal.MC_SIZE if any(calibrate) else 0)
+        self._states = []
+        for i in range(n):
+            s = self._kernels.container(size)
+            for slot, name in enumerate(k.PARAMETERS):
+                s[slot] = each(name, i)
+            s[k.P_USE_MAG] = 1.0 if uses[i] else 0.0
+            s[k.P_EXTENDED] = 1.0 if variant == 'extended' else 0.0
+            s[k.P_HAS_CAL] = 1.0 if calibrate[i] else 0.0
+            s[k.P_MOTION_BIAS] = 1.0 if each('tau_bias', i) > 0.0 else 0.0
+            s[k.C_DT] = s[k.C_MAG_DT] = math.nan
+            s[k.S_ACC_STILL] = 1.0
+            self._states.append(s)
+        self._dt = None
+        self._mag_dt = None
+        self.calibration = None
+        if any(calibrate):
+            self.calibration = MagCalibrator(
+                batch, enabled=calibrate, noise=p.mag_cal_noise, field_rw=p.mag_cal_field_rw,
+                soft_iron=p.mag_cal_soft_iron, delay=p.mag_cal_delay,
+                heading=p.mag_cal_heading, deadband=p.mag_cal_deadband,
+                drift=p.mag_cal_drift, kernel=self._kernels.magcal,
+                blocks=[(s, k.MC0) for s in self._states])
+            # Slightly early, so that a field rate at mag_cal_rate learns from each.
+            period = 0.999 / float(np.max(p.mag_cal_rate))
+            for s in self._states:
+                s[k.P_CAL_PERIOD] = period
+        self.reset()
+
+    def __getstate__(self):
+        # The kernels hold modules: a copy or a pickle asks for them again.
+        state = self.__dict__.copy()
+        del state['_kernels']
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._kernels = kernels(self.compiled)
+
+    def use_kernels(self, kernels):
+        """
+        Go on with other kernels (plain or compiled) from the same state.
+
+        The state is copied into the new kernels' container; the estimates
+        go on as they would have (compiled and plain agree to the bit). A
+        node that started on the plain kernels while the compiled ones were
+        being compiled switches with this between two samples.
+
+        Parameters
+        ----------
+        kernels : ext_observer.core.ahrs.compiled.Kernels
+
+        """
+        if kernels is self._kernels:
+            return
+        states = []
+        for s in self._states:
+            c = kernels.container(len(s))
+            for i in range(len(s)):
+                c[i] = float(s[i])
+            states.append(c)
+        self._states = states
+        self._kernels = kernels
+        self.compiled = kernels.compiled
+        if self.calibration is not None:
+            self.calibration.use_kernel(kernels.magcal,
+                                        [(s, kernels.ahrs.MC0) for s in states])
+
+    @property
+    def kernels(self):
+        """The kernels it runs (:class:`~ext_observer.core.ahrs.compiled.Kernels`)."""
+        return self._kernels
+
+    @property
+    def flat_state(self):
+        """
+        The flat state of a single estimate (ahrs_kernel's layout), for a caller that steps it.
+
+        :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step` runs the
+        estimator's step on it together with the covariance's. A new
+        container after :meth:`use_kernels`: ask again rather than keep it.
+        """
+        if self.batch is not None:
+            raise ValueError('flat_state is that of a single estimate, not of a batch')
+        return self._states[0]
+
+    # --- state -------------------------------------------------------------
+
+    def reset(self):
+        """Forget everything: the next accelerometer sample initializes."""
+        for s in self._states:
+            self._kernels.ahrs.ahrs_reset(s)
+
+    def _slots(self, start, count):
+        """Slots of the state(s): floats, or arrays (B,) with ``batch``."""
+        if self.batch is None:
+            s = self._states[0]
+            return tuple(float(s[start + i]) for i in range(count))
+        return tuple(np.array([float(s[start + i]) for s in self._states])
+                     for i in range(count))
+
+    def _flag(self, slot):
+        if self.batch is None:
+            return bool(self._states[0][slot] != 0.0)
+        return np.array([s[slot] != 0.0 for s in self._states])
+
+    @property
+    def initialized(self):
+        """Whether the first accelerometer sample has initialized the estimate (``q`` not None)."""
+        k = self._kernels.ahrs
+        if self.batch is None:
+            return self._states[0][k.S_INIT] != 0.0
+        return any(s[k.S_INIT] != 0.0 for s in self._states)
+
+    @property
+    def q(self):
+        """The ambient estimate ``(w, x, y, z)``; None before the first sample."""
+        k = self._kernels.ahrs
+        if self.batch is None:  # the node's path, read every sample: no generator
+            s = self._states[0]
+            if s[k.S_INIT] == 0.0:
+                return None
+            i = k.S_Q
+            return float(s[i]), float(s[i + 1]), float(s[i + 2]), float(s[i + 3])
+        if not any(s[k.S_INIT] != 0.0 for s in self._states):
+            return None
+        return self._slots(k.S_Q, 4)
+
+    @q.setter
+    def q(self, value):
+        k = self._kernels.ahrs
+        for i, s in enumerate(self._states):
+            if value is None:
+                s[k.S_INIT] = 0.0
+                continue
+            for j in range(4):
+                s[k.S_Q + j] = float(value[j] if self.batch is None else value[j][i])
+            s[k.S_INIT] = 1.0
+
+    @property
+    def bias(self):
+        """The gyro bias estimate (rad/s), body frame."""
+        return self._slots(self._kernels.ahrs.S_BIAS, 3)
+
+    @property
+    def rest(self):
+        """Whether rest is detected."""
+        return self._flag(self._kernels.ahrs.S_REST)
+
+    @property
+    def rest_time(self):
+        """Time (s) below the rest thresholds."""
+        return self._slots(self._kernels.ahrs.S_REST_TIME, 1)[0]
+
+    @property
+    def mag_disturbed(self):
+        """Whether the last magnetometer sample was rejected."""
+        return self._flag(self._kernels.ahrs.S_MAG_DIST)
+
+    @property
+    def _lp(self):
+        return self._slots(self._kernels.ahrs.S_LP, 6)
+
+    @property
+    def _mag_used(self):
+        return self._slots(self._kernels.ahrs.S_MAG_USED, 1)[0]
+
+    @_mag_used.setter
+    def _mag_used(self, value):
+        for i, s in enumerate(self._states):
+            s[self._kernels.ahrs.S_MAG_USED] = float(np.broadcast_to(value, (self._n,))[i])
+
+    @property
+    def _mag_ref(self):
+        k = self._kernels.ahrs
+        if not any(s[k.S_HAS_REF] != 0.0 for s in self._states):
+            return None
+        return self._slots(k.S_REF, 2)
+
+    @property
+    def _k_acc(self):
+        return self._slots(self._kernels.ahrs.C_K_ACC, 1)[0]
+
+    @property
+    def _k_mag(self):
+        return self._slots(self._kernels.ahrs.C_K_MAG, 1)[0]
+
+    @property
+    def calibration_state(self):
+        """``'off'``, ``'learning'``, ``'converged'`` or ``'loaded'`` (a list with ``batch``)."""
+        if self.calibration is None:
+            return 'off' if self.batch is None else ['off'] * self.batch
+        return self.calibration.state
+
+    def load_calibration(self, bias, soft_iron):
+        """
+        Start from a saved magnetometer calibration, refined online.
+
+        Parameters
+        ----------
+        bias : sequence of 3 floats
+            Hard-iron offset ``b`` in the field's unit.
+        soft_iron : sequence of 9 floats or array_like, shape (3, 3)
+            Soft-iron matrix ``S`` (row-major) of ``m_raw = S m + b``.
+
+        Raises
+        ------
+        ValueError
+            When the calibration is off (``mag_cal`` false, or 6D), or for a
+            non-finite, asymmetric, singular or indefinite value.
+
+        """
+        if self.calibration is None:
+            raise ValueError('the magnetometer calibration is off (mag_cal false or 6D); '
+                             'subtract a fixed offset before the estimator instead')
+        self.calibration.load(bias, soft_iron)
+        # Loaded while running: the heading and the references are taken
+        # from the calibrated field at the next field (before the first
+        # field, the start does that).
+        k = self._kernels.ahrs
+        for s in self._states:
+            s[k.S_CAL_LOADED] = s[k.S_HAS_REF]
+
+    # --- the three steps ---------------------------------------------------
+
+    def _interval(self, dt):
+        if dt != self._dt:
+            _check_dt(dt)
+            self._dt = float(dt)  # a numpy scalar would make every later quantity one
+        return self._dt
+
+    def update(self, gyr, acc, mag=None, dt=None):
+        """
+        One IMU sample: gyro, then accelerometer, then magnetometer.
+
+        Parameters
+        ----------
+        gyr, acc, mag : sequence of 3 floats or of 3 arrays (B,)
+            rad/s, m/s², field (``mag`` ignored where ``use_mag`` is false).
+        dt : float
+            Time since the previous sample (s).
+
+        Returns
+        -------
+        tuple of 4
+            The estimate ``q``.
+
+        """
+        dt = self._interval(dt)
+        step = self._kernels.ahrs.ahrs_update
+        if self.batch is None:
+            s = self._states[0]
+            if mag is None:
+                return step(s, gyr[0], gyr[1], gyr[2], acc[0], acc[1], acc[2], False,
+                            0.0, 0.0, 0.0, dt)
+            return step(s, gyr[0], gyr[1], gyr[2], acc[0], acc[1], acc[2], True,
+                        mag[0], mag[1], mag[2], dt)
+        g = np.asarray(gyr, dtype=float).reshape(3, self._n)
+        a = np.asarray(acc, dtype=float).reshape(3, self._n)
+        m = None if mag is None else np.asarray(mag, dtype=float).reshape(3, self._n)
+        out = np.empty((self._n, 4))
+        for i, s in enumerate(self._states):
+            if m is None:
+                out[i] = step(s, g[0, i], g[1, i], g[2, i], a[0, i], a[1, i], a[2, i], False,
+                              0.0, 0.0, 0.0, dt)
+            else:
+                out[i] = step(s, g[0, i], g[1, i], g[2, i], a[0, i], a[1, i], a[2, i], True,
+                              m[0, i], m[1, i], m[2, i], dt)
+        return tuple(out.T.copy())
+
+    def run(self, gyr, acc, mag=None, dt=None):
+        """
+        A whole recording at one interval, from where the estimate is.
+
+        One call of the kernel's loop (compiled: the whole recording in
+        numba; plain: the same loop in Python), as :meth:`update` per sample.
+
+        Parameters
+        ----------
+        gyr, acc : array_like, shape (N, 3)
+        mag : array_like, shape (N, 3), optional
+        dt : float
+
+        Returns
+        -------
+        ndarray, shape (N, 4)
+            The estimate after each sample.
+
+        """
+        if self.batch is not None:
+            raise ValueError('run is for one estimate (batch=None); use estimate_batch')
+        dt = self._interval(dt)
+        g = np.ascontiguousarray(gyr, dtype=float).reshape(-1, 3)
+        a = np.ascontiguousarray(acc, dtype=float).reshape(-1, 3)
+        if len(a) != len(g) or (mag is not None and len(mag) != len(g)):
+            raise ValueError('gyr, acc and mag must have one row per sample')
+        m = g if mag is None else np.ascontiguousarray(mag, dtype=float).reshape(-1, 3)
+        count = len(g)
+        run = self._kernels.ahrs.ahrs_run
+        s = self._states[0]
+        if self.compiled:
+            out = np.empty((count, 4))
+            run(s, g, a, m, count, mag is not None, dt, out)
+            return out
+        out = [[0.0] * 4 for _ in range(count)]
+        run(s, g.tolist(), a.tolist(), m.tolist(), count, mag is not None, dt, out)
+        return np.array(out)
+
+    def _each(self, func, vector, *extra):
+        if self.batch is None:
+            func(self._states[0], *vector, *extra)
+            return
+        v = np.asarray(vector, dtype=float).reshape(len(vector), self._n)
+        for i, s in enumerate(self._states):
+            func(s, *(float(c) for c in v[:, i]), *extra)
+
+    def update_gyr(self, gyr):
+        """Propagate with ``exp((ω − b̂) dt / 2)`` and apply the extension term."""
+        self._each(self._kernels.ahrs.ahrs_update_gyr, gyr)
+
+    def update_acc(self, acc):
+        """Correct the inclination from the world-frame filtered specific force."""
+        self._each(self._kernels.ahrs.ahrs_update_acc, acc)
+
+    def update_mag(self, mag, dt=None):
+        """
+        Correct the heading from the magnetometer, rejecting disturbed fields.
+
+        Parameters
+        ----------
+        mag : sequence of 3 floats or of 3 arrays (B,)
+            The field, body frame, any unit.
+        dt : float, optional
+            Time since the previous field (s); default: the IMU's ``dt``
+            (a field with every sample). The gains of a field that arrives
+            at its own rate follow from its own interval.
+
+        """
+        if dt is None:
+            # The last sample's interval, as the kernels hold it (a caller
+            # may step them directly: RawImuEstimator's sample_step).
+            dt = float(self._states[0][self._kernels.ahrs.C_DT])
+            _check_dt(dt)
+        elif dt != self._mag_dt:
+            _check_dt(dt)
+            self._mag_dt = dt
+        self._each(self._kernels.ahrs.ahrs_update_mag, mag, float(dt))
+
+
+# The batch runs AhrsObserver, so it is imported once that is defined.
+from .ahrs_batch import estimate_batch  # noqa: E402

@@ -1,0 +1,517 @@
+"""
+How good the raw-IMU estimate is now: a variance for its inclination and one for its heading.
+
+:class:`AttitudeUncertainty` runs beside
+:class:`~ext_observer.core.ahrs.estimator.AhrsObserver` and is told, after each step,
+what the estimator did: the interval, the gyro's rate, whether rest was
+detected, the gain of a heading correction from the field (0 when the field
+was rejected or there is none). From that alone it propagates the variance
+of the attitude error, as the covariance step of an error-state Kalman
+filter for attitude does (Markley 2003, "Attitude error representations for
+Kalman filtering", JGCD 26(2); Solà 2017, "Quaternion kinematics for the
+error-state Kalman filter", arXiv:1711.02508), except that the gains are
+not computed from the covariance: they are the estimator's, fixed time
+constants, and the covariance only follows what they do to the error.
+
+The error
+    ``δ``, a small rotation of the world frame: the true attitude is
+    ``exp(δ) ⊗ q̂`` (BROAD's error ``q̂ ⊗ q_ref⁻¹`` is ``exp(−δ)``).
+    Its x and y components are the inclination error, z the heading error.
+    The estimator treats every horizontal direction alike, so the model keeps
+    one variance ``P_t`` per horizontal axis, one ``P_h`` for the vertical,
+    and no correlation between them (the body's turning mixes the body-frame
+    causes; only their size is kept).
+
+Per axis, two states
+    the angle error ``θ`` and the gyro bias error ``β`` (rad/s), with a 2×2
+    covariance ``[[P, C], [C, B]]``. Between samples (interval ``dt``)::
+
+        θ ← θ + β dt + w,      var(w) = (gyro_noise² + (gyro_rate_noise |ω|)²) dt
+        β ← φ β + v,           φ = exp(−dt / bias_time),  var(v) = bias_std² (1 − φ²)
+
+    the bias error a first-order Gauss-Markov process (it wanders by
+    ``bias_std`` with correlation time ``bias_time``; ``B`` starts at
+    ``bias_init²``). At rest the estimator learns the bias (gain ``k_r`` of
+    ``tau_rest``): ``β ← (1 − k_r) β + k_r n``, ``n`` one gyro sample's
+    noise. A complementary correction with gain ``k`` pulls the angle to a
+    measurement with error ``e``: ``θ ← (1 − k) θ + k e``, so
+    ``P ← (1 − k)² P + k² R`` and ``C ← (1 − k) C``. Each update is a
+    congruence plus a positive term, so the 2×2 stays positive definite.
+
+The corrections
+    Inclination: every sample, ``k = 1 − exp(−dt / (tau_acc + tau_acc_gain))``
+    (the world-frame low-pass in series with the Luenberger gain),
+    ``R = (acc_noise / g)² / dt``, one sample's direction noise. For small
+    ``k`` the steady state is ``P ≈ q τ / 2 + R dt / (2 τ)`` for a process
+    noise density ``q`` and a correction of time constant ``τ``: the
+    complementary filter's trade-off in closed form. Heading: only with a
+    field that corrected it, with the gain the estimator applied
+    (``R = mag_noise² / dt_field``). Without one (6D, fields rejected, a
+    magnetometer still being calibrated) nothing shrinks ``P_h``: it grows
+    without bound.
+
+The reference of the heading
+    In 9D the heading's error is the drift ``P_h`` plus the error of the
+    field the heading was taken from, ``U``: unknown at the start
+    (``HEADING_UNKNOWN``, a uniform angle), 0 once a field known to be good
+    corrects it (``U`` joins ``P_h`` and the correction shrinks both).
+    While the magnetometer calibration learns, the estimator holds the
+    heading it took from the field as given, and the caller may say what
+    the calibration learned so far makes of that field: ``U = min(U₀,
+    turn² + quality² + heading_floor²)``, with ``turn`` the angle by which
+    the calibration learned so far turns the field's heading (0 for a
+    sensor that is calibrated already) and ``quality`` that calibration's
+    own heading σ (infinite before it has learned anything).
+
+What is published
+    The variances plus what the propagation does not model, each in
+    physical units: ``inclination_floor`` (the smallest inclination σ:
+    translational acceleration, accelerometer calibration, mounting),
+    ``heading_floor`` (a field bent where it is accepted, once a field has
+    set the heading), the magnetometer calibration's own heading
+    uncertainty when given (``raw_imu`` gives it where the calibration is
+    applied), and the error of a stamp off by ``stamp_error``
+    seconds, ``|ω| stamp_error``, split over the world axes by the world
+    rate. The 3×3 covariance about the world frame's x, y, z axes is
+    ``diag(V_t, V_t, V_h)``; the inclination σ is ``√(2 V_t)`` (the RMS of
+    the tilt angle), the heading σ is ``√V_h``. A diagonal with equal x and
+    y entries is the same in ENU, NWU and NED and after any turn about the
+    vertical (declination, yaw offset).
+
+The per-sample arithmetic is :mod:`~ext_observer.core.ahrs.uncertainty_kernel`'s,
+on a flat state (plain, or compiled with the estimator's kernels).
+
+Units: rad, s, rad/s, m/s². Every quantity is a Python float, or a numpy
+array of shape ``(B,)`` for many recordings at once (the arithmetic is the
+same; flags multiply rather than branch).
+"""
+
+import math
+
+import numpy as np
+
+from . import uncertainty_kernel as _plain
+from .uncertainty_kernel import (
+    GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,
+    U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_K_ACC, U_K_REST, U_PH,
+    U_PHI, U_PT, U_Q_BIAS, U_Q_GYRO, U_Q_RATE, U_R_ACC, U_R_GYRO, U_SIZE, U_STAMP2, U_TAU_ACC,
+    U_TAU_REST, U_TILT_FLOOR, U_UNKNOWN, U_WH2, U_WZ2)
+
+__all__ = [
+    'AttitudeUncertainty',
+    'GRAVITY',
+    'HEADING_UNKNOWN',
+    'UncertaintyParams',
+    'covariance_out',
+]
+
+# Variance of a heading known to be nothing better than uniform on (−π, π], rad².
+HEADING_UNKNOWN = math.pi * math.pi / 3.0
+_FLOAT64 = np.dtype(np.float64)
+
+
+def covariance_out(array):
+    """
+    Return ``array`` if the kernels may write a covariance into it, else raise ValueError.
+
+    A writable C-contiguous float64 array of 9 (a ``sensor_msgs/Imu``
+    message's ``orientation_covariance`` is one): the compiled kernels write
+    into its memory as that, unchecked.
+    """
+    if not (array.__class__ is np.ndarray and array.flags.c_contiguous
+            and array.dtype is _FLOAT64 and array.shape == (9,) and array.flags.writeable):
+        raise ValueError('a covariance is written into a writable C-contiguous float64 '
+                         f'array of 9, got {array!r}')
+    return array
+
+
+class UncertaintyParams:
+    """
+    The noise of the sensors and of what the estimator does not model, in physical units.
+
+    The defaults were chosen on the even-numbered BROAD trials
+    (``docs/covariance.md`` says how, and what they give on the odd ones).
+
+    Parameters
+    ----------
+    gyro_noise : float
+        White noise density of the gyro, rad/s/√Hz (angle random walk).
+    gyro_rate_noise : float
+        Noise density of the gyro's error proportional to the rate (scale
+        factor, misalignment, vibration), (rad/s per rad/s)/√Hz.
+    bias_std : float
+        How far the gyro bias wanders from what the estimator learned,
+        rad/s (steady-state σ of a first-order Gauss-Markov process).
+    bias_time : float
+        Correlation time of that wander, s.
+    bias_init : float
+        Gyro bias uncertainty before the first rest, rad/s, per axis.
+    acc_noise : float
+        Accelerometer noise density, m/s²/√Hz.
+    mag_noise : float
+        Noise density of the field's horizontal direction, rad·√s.
+    inclination_floor : float
+        The smallest inclination σ, rad.
+    heading_floor : float
+        The smallest heading σ once a field has set the heading, rad.
+    stamp_error : float
+        Timing error of a sample's stamp, s.
+
+    Raises
+    ------
+    ValueError
+        With the name and the reason, for any invalid value.
+
+    """
+
+    DEFAULTS = dict(
+        gyro_noise=1.0e-4,  # rad/s/√Hz (0.006 °/s/√Hz), measured at rest
+        gyro_rate_noise=1.3e-3,  # 1/√Hz
+        bias_std=1.4e-3,  # rad/s (0.08 °/s)
+        bias_time=250.0,  # s
+        bias_init=4.1e-3,  # rad/s (0.24 °/s), the biases learned at the first rest
+        acc_noise=3.2e-3,  # m/s²/√Hz, measured at rest
+        mag_noise=1.3e-3,  # rad·√s (1.25° per sample at 286 Hz), measured at rest
+        inclination_floor=8.0e-3,  # rad (0.46°)
+        heading_floor=2.1e-2,  # rad (1.20°)
+        stamp_error=7.0e-4,  # s
+    )
+    # These keep every variance positive; the others may be 0 (off).
+    POSITIVE = ('gyro_noise', 'bias_time', 'acc_noise', 'mag_noise')
+
+    def __init__(self, **values):
+        unknown = set(values) - set(self.DEFAULTS)
+        if unknown:
+            raise ValueError(f'unknown parameters: {sorted(unknown)}')
+        for name, value in dict(self.DEFAULTS, **values).items():
+            value = float(value)
+            if not math.isfinite(value):
+                raise ValueError(f'{name} must be finite, got {value}')
+            if name in self.POSITIVE:
+                if not value > 0.0:
+                    raise ValueError(f'{name} must be positive, got {value}')
+            elif value < 0.0:
+                raise ValueError(f'{name} must be >= 0 (0: off), got {value}')
+            setattr(self, name, value)
+
+    def as_dict(self):
+        """Return the parameters as a dict."""
+        return {name: getattr(self, name) for name in self.DEFAULTS}
+
+    def __repr__(self):
+        items = ', '.join(f'{k}={v:g}' for k, v in self.as_dict().items())
+        return f'UncertaintyParams({items})'
+
+
+class _Slot:
+    """An attribute kept in the tracker's flat state ``_u``: a float, or an array ``(B,)``."""
+
+    def __init__(self, index, flag=False):
+        self.index = index
+        self.flag = flag
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        value = obj._u[self.index]
+        if obj._compiled:  # a float64 array: a Python float (or bool) out
+            return float(value) != 0.0 if self.flag else float(value)
+        return value
+
+    def __set__(self, obj, value):
+        obj._u[self.index] = value
+
+
+class AttitudeUncertainty:
+    """
+    The variance of the raw-IMU estimate's inclination and heading, step by step.
+
+    Parameters
+    ----------
+    params : UncertaintyParams, optional
+    tau_acc, tau_mag, tau_rest : float
+        The estimator's time constants (s): the inclination correction
+        (``tau_acc + tau_acc_gain`` of :class:`~ext_observer.core.ahrs.estimator.AhrsParams`),
+        the heading correction and the bias learned at rest.
+    use_mag : bool or ndarray of bool
+        9D (the heading is unknown until a field sets it) or 6D (the heading
+        is the estimator's own start, known exactly then, and drifts).
+
+    Attributes
+    ----------
+    started : bool
+        Whether :meth:`start` has run since the last :meth:`reset`.
+    heading_set : bool or ndarray
+        Whether a field has corrected the heading since the start.
+    last_field : tuple or None
+        The latest :meth:`field`'s interval, gain, calibration σ and
+        reference variance, as given (a run can be replayed from them).
+
+    """
+
+    # The per-sample state and its constants live in the flat container
+    # ``_u`` (uncertainty_kernel's layout); these names read and write it.
+    _tilt_floor = _Slot(U_TILT_FLOOR)
+    _heading_floor = _Slot(U_HEADING_FLOOR)
+    _stamp2 = _Slot(U_STAMP2)
+    _dt = _Slot(U_DT)
+    _r_acc = _Slot(U_R_ACC)
+    _q_gyro = _Slot(U_Q_GYRO)
+    _pt = _Slot(U_PT)
+    _ct = _Slot(U_CT)
+    _ph = _Slot(U_PH)
+    _ch = _Slot(U_CH)
+    _b = _Slot(U_B)
+    _unknown = _Slot(U_UNKNOWN)
+    _calibration = _Slot(U_CALIBRATION)
+    heading_set = _Slot(U_HEADING_SET, flag=True)
+    _wz2 = _Slot(U_WZ2)
+    _wh2 = _Slot(U_WH2)
+
+    def __init__(self, params=None, tau_acc=2.05, tau_mag=15.0, tau_rest=0.5, use_mag=True):
+        self.params = params if params is not None else UncertaintyParams()
+        for name, tau in (('tau_acc', tau_acc), ('tau_mag', tau_mag), ('tau_rest', tau_rest)):
+            if not (math.isfinite(tau) and tau > 0.0):
+                raise ValueError(f'{name} must be positive and finite, got {tau}')
+        self._tau = (float(tau_acc), float(tau_mag), float(tau_rest))
+        self.use_mag = use_mag
+        p = self.params
+        self._kernel = _plain
+        self._compiled = False
+        self._u = [0.0] * U_SIZE
+        u = self._u
+        u[U_TAU_ACC], u[U_TAU_REST] = self._tau[0], self._tau[2]
+        u[U_GYRO_NOISE], u[U_GYRO_RATE_NOISE] = p.gyro_noise, p.gyro_rate_noise
+        u[U_BIAS_STD], u[U_BIAS_TIME], u[U_ACC_NOISE] = p.bias_std, p.bias_time, p.acc_noise
+        # What is added on output, rad² (the stamp's per (rad/s)²).
+        self._tilt_floor = 0.5 * p.inclination_floor ** 2
+        self._heading_floor = p.heading_floor ** 2
+        self._stamp2 = p.stamp_error ** 2
+        self._dt = math.nan  # no coefficients yet
+        self._field_dt = None
+        self._gain_dt = None
+        self.reset()
+
+    @classmethod
+    def for_estimator(cls, ahrs_params, params=None, use_mag=True):
+        """Return the tracker for an estimator with these :class:`AhrsParams`."""
+        return cls(params, tau_acc=ahrs_params.tau_acc + ahrs_params.tau_acc_gain,
+                   tau_mag=ahrs_params.tau_mag, tau_rest=ahrs_params.tau_rest,
+                   use_mag=use_mag)
+
+    def use_kernels(self, kernels):
+        """
+        Go on with other kernels (plain or compiled) from the same state.
+
+        As :meth:`AhrsObserver.use_kernels
+        <ext_observer.core.ahrs.estimator.AhrsObserver.use_kernels>`: the state is
+        copied into the new kernels' container; the variances go on as they
+        would have. The compiled kernels take one estimate (floats), not
+        arrays ``(B,)``.
+
+        Parameters
+        ----------
+        kernels : ext_observer.core.ahrs.compiled.Kernels
+
+        Raises
+        ------
+        ValueError
+            For compiled kernels and a tracker of many recordings.
+
+        """
+        if kernels.uncertainty is self._kernel:
+            return
+        if kernels.compiled and any(np.ndim(v) for v in list(self._u) + [self.use_mag]):
+            raise ValueError('the compiled kernels take one estimate, not arrays')
+        u = kernels.container(U_SIZE)
+        for i, value in enumerate(self._u):
+            u[i] = value if not kernels.compiled else float(value)
+        self._u, self._kernel, self._compiled = u, kernels.uncertainty, kernels.compiled
+
+    @property
+    def state(self):
+        """The flat state (uncertainty_kernel's layout): what :func:`sample_step` steps."""
+        return self._u
+
+    # --- state -------------------------------------------------------------
+
+    def reset(self):
+        """Forget everything: nothing is known until :meth:`start`."""
+        self.started = False
+        self.heading_set = False
+        self.last_field = None
+        self._pt = self._ct = self._ph = self._ch = self._b = 0.0
+        self._unknown = 0.0
+        self._calibration = 0.0
+        self._wh2 = self._wz2 = 0.0
+
+    def start(self, dt):
+        """
+        The estimator has just initialized from one accelerometer sample.
+
+        The inclination is that sample's direction; in 9D the heading is
+        unknown until a field corrects it (:meth:`field`, gain 1 for the
+        first); in 6D the heading is the estimator's own start, and only
+        its drift from there is counted. The bias is unknown
+        (``bias_init``).
+        """
+        self._coefficients(dt)
+        p = self.params
+        self.started = True
+        self.heading_set = self.use_mag & False
+        self._pt = self._r_acc
+        self._ct = self._ch = 0.0 * self._pt
+        self._b = p.bias_init * p.bias_init + 0.0 * self._pt
+        # 9D: only the reference is unknown, the drift starts now; 6D: the
+        # heading is the start's, one sample's drift.
+        self._ph = (1 - self.use_mag) * self._q_gyro
+        self._unknown = self.use_mag * HEADING_UNKNOWN
+        self._calibration = 0.0
+        self._wh2 = self._wz2 = 0.0
+
+    def _coefficients(self, dt):
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise ValueError(f'dt must be positive and finite, got {dt}')
+        self._kernel.uncertainty_coefficients(self._u, float(dt))
+
+    # --- the steps ---------------------------------------------------------
+
+    def step(self, dt, gyr, q, rest):
+        """
+        One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
+
+        (:func:`~ext_observer.core.ahrs.uncertainty_kernel.uncertainty_step`.)
+
+        Parameters
+        ----------
+        dt : float
+            Interval, s (as given to the estimator).
+        gyr : sequence of 3
+            The measured rate, rad/s, body frame.
+        q : sequence of 4
+            The estimate after the step, ``(w, x, y, z)``, sensor → world,
+            any nonzero norm (for the rate's world components).
+        rest : bool or ndarray
+            Whether the estimator detected rest (and learned the bias).
+
+        """
+        if dt != self._u[U_DT]:
+            self._coefficients(dt)
+        gx, gy, gz = gyr
+        w, x, y, z = q
+        if self._compiled:
+            self._kernel.uncertainty_step(self._u, float(dt), float(gx), float(gy), float(gz),
+                                          float(w), float(x), float(y), float(z),
+                                          1.0 if rest else 0.0)
+        else:
+            self._kernel.uncertainty_step(self._u, dt, gx, gy, gz, w, x, y, z, rest)
+
+    def field(self, dt, gain, calibration=0.0, reference=math.nan):
+        """
+        A field, and the gain with which it corrected the heading.
+
+        Parameters
+        ----------
+        dt : float or None
+            Interval since the previous field, s; None: the IMU's.
+        gain : float or ndarray
+            The estimator's heading gain for this field, in [0, 1]; 0 when
+            it was rejected (or the magnetometer is not calibrated yet).
+        calibration : float or ndarray
+            The magnetometer calibration's heading σ now, rad (0 without
+            one; at most that of an unknown heading is counted, also for
+            an infinite or NaN σ); counted while the heading follows the
+            field.
+        reference : float or ndarray
+            Where the field did not correct the heading (gain 0) and the
+            heading still rests on a field whose calibration is being
+            learned: ``turn² + quality²`` of that calibration for this field,
+            rad² (see the module's docstring; at most that of an unknown
+            heading is counted, also for inf). NaN: nothing new (the
+            default).
+
+        """
+        dt = self._dt if dt is None else dt
+        self.last_field = (dt, gain, calibration, reference)
+        if dt != self._field_dt:
+            if not (math.isfinite(dt) and dt > 0.0):
+                raise ValueError(f'dt must be positive and finite, got {dt}')
+            self._field_dt = dt
+            self._r_mag = self.params.mag_noise ** 2 / dt
+        used = gain > 0.0
+        a = 1.0 - gain
+        # Each slot read and written once (a compiled state is an array).
+        st = self._u
+        unknown = st[U_UNKNOWN]
+        # A correction pulls the whole heading error, the reference's part
+        # included, to the field's; without one both stay.
+        st[U_PH] = a * a * (st[U_PH] + used * unknown) + gain * gain * self._r_mag
+        st[U_CH] = a * st[U_CH]
+        unknown = (1 - used) * unknown
+        self.heading_set = self.heading_set | used
+        c2 = calibration * calibration
+        ref = reference + st[U_HEADING_FLOOR]
+        if isinstance(c2, float):
+            c2 = c2 if c2 <= HEADING_UNKNOWN else HEADING_UNKNOWN
+        else:
+            c2 = np.where(c2 <= HEADING_UNKNOWN, c2, HEADING_UNKNOWN)
+        if isinstance(ref, float):
+            if ref == ref and not used:
+                unknown = ref if ref <= HEADING_UNKNOWN else HEADING_UNKNOWN
+        else:
+            given = (ref == ref) & ~np.asarray(used)
+            unknown = np.where(given, np.minimum(ref, HEADING_UNKNOWN), unknown)
+        st[U_UNKNOWN] = unknown
+        st[U_CALIBRATION] = used * c2 + (1 - used) * st[U_CALIBRATION]
+
+    def heading_gain(self, count, dt=None):
+        """
+        The estimator's heading gain for the ``count``-th field used since the start.
+
+        ``max(1 − exp(−dt / tau_mag), 1 / count)``: a running mean of the
+        first fields, then the first-order correction (as
+        :class:`~ext_observer.core.ahrs.estimator.AhrsObserver` does).
+        """
+        dt = self._dt if dt is None else dt
+        if dt != self._gain_dt:
+            self._gain_dt = dt
+            self._k_mag = 1.0 - math.exp(-dt / self._tau[1])
+        k = self._k_mag
+        return (k if k * count > 1.0 else 1.0 / count) if count >= 1 else 0.0
+
+    # --- outputs -----------------------------------------------------------
+
+    @property
+    def tilt_variance(self):
+        """Variance of the tilt about each horizontal world axis, rad²."""
+        return self._kernel.uncertainty_variances(self._u)[0]
+
+    @property
+    def heading_variance(self):
+        """Variance of the heading (about the world vertical), rad²."""
+        return self._kernel.uncertainty_variances(self._u)[1]
+
+    @property
+    def inclination_std(self):
+        """σ of the inclination angle, rad: ``√(2 V_t)``."""
+        return (2.0 * self.tilt_variance) ** 0.5
+
+    @property
+    def heading_std(self):
+        """σ of the heading, rad."""
+        return self.heading_variance ** 0.5
+
+    @property
+    def covariance(self):
+        """
+        The 3×3 covariance about the world frame's x, y, z axes, row-major.
+
+        Returns
+        -------
+        tuple of 9
+            ``(V_t, 0, 0, 0, V_t, 0, 0, 0, V_h)``, rad².
+
+        """
+        t, h = self._kernel.uncertainty_variances(self._u)
+        z = 0.0 * t
+        return (t, z, z, z, t, z, z, z, h)

@@ -1,0 +1,192 @@
+"""
+The covariance's step as functions on one flat state, and the raw-IMU sample in one call.
+
+:class:`~ext_observer.core.ahrs.uncertainty.AttitudeUncertainty` keeps its
+per-sample state in a flat container ``u`` (the slots below) and runs
+:func:`uncertainty_step` on it: the same source plain (a Python ``list``,
+whose items may also be numpy arrays ``(B,)`` for many recordings at once:
+the arithmetic has no branch on them) or compiled by numba on a float64
+array (:mod:`~ext_observer.core.ahrs.compiled` joins this file to the
+estimator's kernels), as :mod:`~ext_observer.core.ahrs.ahrs_kernel` is. The
+model is :mod:`~ext_observer.core.ahrs.uncertainty`'s docstring.
+
+:func:`sample_step` is what the node runs for the usual sample of an
+estimate that exists: the estimator's step
+(:func:`~ext_observer.core.ahrs.ahrs_kernel.ahrs_update`), the divergence guard
+of :func:`~ext_observer.core.validation.check_state`, the covariance's step
+and the published covariance, in one call instead of one per part: with
+the compiled kernels, one crossing from Python per sample.
+"""
+
+import math
+
+from .ahrs_kernel import S_INIT, S_REST, ahrs_update
+
+# Standard gravity, m/s²: turns the accelerometer's noise into a direction.
+GRAVITY = 9.80665
+
+# --- the layout ----------------------------------------------------------------
+
+# Constants (set once by the wrapper): the estimator's time constants (s),
+# the noises of UncertaintyParams, and what is added on output (rad²; the
+# stamp's per (rad/s)²).
+U_TAU_ACC = 0
+U_TAU_REST = 1
+U_GYRO_NOISE = 2
+U_GYRO_RATE_NOISE = 3
+U_BIAS_STD = 4
+U_BIAS_TIME = 5
+U_ACC_NOISE = 6
+U_TILT_FLOOR = 7
+U_HEADING_FLOOR = 8
+U_STAMP2 = 9
+# Coefficients of the interval U_DT (NaN: none yet).
+U_DT = 10
+U_K_ACC = 11
+U_K_REST = 12
+U_R_ACC = 13
+U_R_GYRO = 14
+U_Q_GYRO = 15
+U_Q_RATE = 16
+U_PHI = 17
+U_Q_BIAS = 18
+# The state: per axis [[P, C], [C, B]] (tilt t, heading h, one B), the
+# reference's variance, the calibration's, whether a field set the heading,
+# the rate's squared world components (vertical, horizontal).
+U_PT = 19
+U_CT = 20
+U_PH = 21
+U_CH = 22
+U_B = 23
+U_UNKNOWN = 24
+U_CALIBRATION = 25
+U_HEADING_SET = 26
+U_WZ2 = 27
+U_WH2 = 28
+U_SIZE = 29
+
+# sample_step's outcomes: 0 the step ran; else the estimator stepped but the
+# estimate failed the guard (the caller reinitializes), or nothing ran: the
+# interval was not one to step with, or there is no estimate yet.
+SAMPLE_OK = 0
+SAMPLE_NON_FINITE = 1
+SAMPLE_RESIDUAL = 2
+SAMPLE_BAD_DT = 3
+SAMPLE_NOT_STARTED = 4
+
+
+def uncertainty_coefficients(u, dt):
+    """The coefficients of the interval ``dt`` (s, positive and finite: checked by the caller)."""
+    u[U_DT] = dt
+    u[U_K_ACC] = 1.0 - math.exp(-dt / u[U_TAU_ACC])
+    u[U_K_REST] = 1.0 - math.exp(-dt / u[U_TAU_REST])
+    a = u[U_ACC_NOISE] / GRAVITY
+    u[U_R_ACC] = a * a / dt
+    g = u[U_GYRO_NOISE]
+    u[U_R_GYRO] = g * g / dt  # one sample's rate variance
+    u[U_Q_GYRO] = g * g * dt
+    r = u[U_GYRO_RATE_NOISE]
+    u[U_Q_RATE] = r * r * dt
+    phi = math.exp(-dt / u[U_BIAS_TIME])
+    u[U_PHI] = phi
+    b = u[U_BIAS_STD]
+    u[U_Q_BIAS] = b * b * (1.0 - phi * phi)
+
+
+def uncertainty_step(u, dt, gx, gy, gz, w, x, y, z, rest):
+    """
+    One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
+
+    ``dt`` the interval (s; its coefficients recomputed when it changed),
+    ``g`` the measured rate (rad/s, body frame), ``(w, x, y, z)`` the
+    estimate after the step (any nonzero norm), ``rest`` 1.0 (or True)
+    where the estimator detected rest and learned the bias, else 0.0.
+    """
+    if dt != u[U_DT]:
+        uncertainty_coefficients(u, dt)
+    w2 = gx * gx + gy * gy + gz * gz
+    q_theta = u[U_Q_GYRO] + u[U_Q_RATE] * w2
+    b = u[U_B]
+    phi = u[U_PHI]
+    # [θ, β] ← F [θ, β] with F = [[1, dt], [0, φ]]: F P Fᵀ + Q, per axis.
+    bdt = b * dt
+    pt = u[U_PT] + (2.0 * u[U_CT] + bdt) * dt + q_theta
+    ph = u[U_PH] + (2.0 * u[U_CH] + bdt) * dt + q_theta
+    ct = phi * (u[U_CT] + bdt)
+    ch = phi * (u[U_CH] + bdt)
+    b = phi * phi * b + u[U_Q_BIAS]
+    # At rest the bias is the low-passed rate: β ← (1 − k_r) β + k_r n.
+    kr = u[U_K_REST] * rest
+    a = 1.0 - kr
+    b = a * a * b + kr * kr * u[U_R_GYRO]
+    ct = a * ct
+    ch = a * ch
+    # The inclination correction of every sample.
+    k = u[U_K_ACC]
+    a = 1.0 - k
+    u[U_PT] = a * a * pt + k * k * u[U_R_ACC]
+    u[U_CT] = a * ct
+    u[U_PH] = ph
+    u[U_CH] = ch
+    u[U_B] = b
+    # The rate about the world vertical: the third row of R(q), over |q|².
+    n2 = w * w + x * x + y * y + z * z
+    wz = (2.0 * (x * z - w * y) * gx + 2.0 * (y * z + w * x) * gy
+          + (w * w - x * x - y * y + z * z) * gz) / n2
+    wz2 = wz * wz
+    u[U_WZ2] = wz2
+    u[U_WH2] = w2 - wz2
+
+
+def uncertainty_variances(u):
+    """The published variances: ``(V_t, V_h)``, rad² (tilt per horizontal axis, heading)."""
+    t = u[U_PT] + u[U_TILT_FLOOR] + 0.5 * u[U_STAMP2] * u[U_WH2]
+    h = (u[U_PH] + u[U_UNKNOWN]
+         + u[U_HEADING_SET] * (u[U_HEADING_FLOOR] + u[U_CALIBRATION])
+         + u[U_STAMP2] * u[U_WZ2])
+    return t, h
+
+
+def sample_step(s, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
+    """
+    The usual raw-IMU sample of an estimate that exists, in one call.
+
+    The estimator's step without a field (``s``), the guard (the estimate
+    finite, ``|q̂̄q̂ − 1| ≤ max_residual``), and where it passes the
+    covariance's step (``u``) and the 3×3 covariance written into ``cov``
+    (9 slots, row-major: ``diag(V_t, V_t, V_h)``).
+
+    Returns
+    -------
+    outcome : int
+        ``SAMPLE_OK``; ``SAMPLE_NON_FINITE`` or ``SAMPLE_RESIDUAL`` (the
+        estimator stepped; ``u`` and ``cov`` are untouched); nothing ran:
+        ``SAMPLE_BAD_DT`` (``dt`` not positive and finite) or
+        ``SAMPLE_NOT_STARTED`` (no estimate yet: the first step initializes).
+    w, x, y, z : float
+        The estimate after the step (ambient, sensor → ENU).
+
+    """
+    if s[S_INIT] == 0.0:
+        return SAMPLE_NOT_STARTED, 0.0, 0.0, 0.0, 0.0
+    if not (dt > 0.0 and dt < math.inf):
+        return SAMPLE_BAD_DT, 0.0, 0.0, 0.0, 0.0
+    w, x, y, z = ahrs_update(s, gx, gy, gz, ax, ay, az, False, 0.0, 0.0, 0.0, dt)
+    n2 = w * w + x * x + y * y + z * z
+    if not math.isfinite(n2):
+        return SAMPLE_NON_FINITE, w, x, y, z
+    if abs(n2 - 1.0) > max_residual:
+        return SAMPLE_RESIDUAL, w, x, y, z
+    uncertainty_step(u, dt, gx, gy, gz, w, x, y, z, 1.0 if s[S_REST] != 0.0 else 0.0)
+    t, h = uncertainty_variances(u)
+    zero = 0.0 * t
+    cov[0] = t
+    cov[1] = zero
+    cov[2] = zero
+    cov[3] = zero
+    cov[4] = t
+    cov[5] = zero
+    cov[6] = zero
+    cov[7] = zero
+    cov[8] = h
+    return SAMPLE_OK, w, x, y, z

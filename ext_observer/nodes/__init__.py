@@ -1,0 +1,6 @@
+"""
+Everything that imports rclpy or message types: one module per executable
+(``gyro_node``, ``observer_node``, ``monitor_node``, ``imu_filter_node``),
+the machinery they share (``estimator_node``, ``node_common``,
+``parameters``) and the message conversions (``conversions``).
+"""

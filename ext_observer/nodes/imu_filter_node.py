@@ -1,0 +1,346 @@
+"""
+The ``imu_filter`` node: attitude from a raw IMU, the drop-in for imu_filter_madgwick.
+
+Inputs: ``imu/data_raw`` (``sensor_msgs/Imu``: angular velocity, rad/s, and
+linear acceleration, m/s²; the orientation is ignored) and, with
+``use_mag``, ``imu/mag`` (``sensor_msgs/MagneticField``, T) at its own rate;
+both subscribed with the sensor-data QoS (best effort, volatile: reliable
+and best-effort drivers both connect), overridable with ``qos_overrides``.
+Outputs, one per IMU sample and stamped with it: ``imu/data``
+(``sensor_msgs/Imu``: the sample with its orientation filled in, normalized,
+and ``orientation_covariance`` the estimate's own, row-major about the world
+frame's axes, or ``orientation_stddev``'s where ``orientation_covariance_mode``
+says so (``fixed``; ``auto``, the default, when it is set); only while
+subscribed) and ``attitude_estimate``
+(``QuaternionStamped``, the ambient estimate, not normalized: its distance
+to S³ is what the extension term holds small); ``/diagnostics`` every
+``diagnostic_period``; the service ``~/reset`` (``std_srvs/Trigger``).
+
+The estimator is :class:`~ext_observer.pipeline.raw_imu.RawImuPipeline` (validation,
+stamps, the core's :class:`~ext_observer.core.ahrs.estimator.AhrsObserver`); this node
+turns messages into its inputs and its estimates into messages, and says
+what went wrong: drops, resets, a silent IMU, a missing magnetometer, and
+values that only a wrong unit explains (:mod:`ext_observer.pipeline.units`). The
+parameters are :data:`~ext_observer.nodes.imu_filter_parameters.IMU_FILTER_PARAMETERS`,
+imu_filter_madgwick's among them (``docs/raw_imu.md``).
+"""
+
+import os
+
+from geometry_msgs.msg import QuaternionStamped
+from sensor_msgs.msg import Imu, MagneticField
+from std_srvs.srv import Trigger
+
+from ext_observer.recordings.calibrate import write_params
+from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
+from ext_observer.core.ahrs.compiled import BackgroundCompile, start_plan
+from ext_observer.nodes.estimator_node import EstimatorNode
+from ext_observer.nodes.imu_filter_parameters import (IMU_FILTER_PARAMETERS, imu_filter_settings,
+                                                MADGWICK_UNUSED)
+from ext_observer.nodes.node_common import run_node
+from ext_observer.pipeline.pairing import BACKWARD_JUMP
+from ext_observer.pipeline.raw_imu import RawImuPipeline
+
+__all__ = ['IMU_FILTER_PARAMETERS', 'ImuFilterNode', 'IMU_TOPIC', 'MAG_TOPIC', 'main']
+
+IMU_TOPIC = 'imu/data_raw'
+MAG_TOPIC = 'imu/mag'
+
+
+class ImuFilterNode(EstimatorNode):
+    """
+    Estimate the attitude from a raw IMU (gyro, accelerometer, magnetometer).
+
+    Parameters
+    ----------
+    node_name : str
+        Default ``imu_filter``, as imu_filter_madgwick's.
+    **kwargs
+        Passed to ``rclpy.node.Node``.
+
+    Attributes
+    ----------
+    pipeline : ext_observer.pipeline.raw_imu.RawImuPipeline
+        The estimator with its input checks and counters.
+    pairer : ext_observer.pipeline.pairing.StepPairer
+        The pipeline's.
+
+    Raises
+    ------
+    ParameterError
+        If a parameter is refused at start-up.
+
+    """
+
+    NODE_NAME = 'imu_filter'
+    INPUT_WORDS = {'increment': 'IMU samples', 'measurement': 'magnetic fields'}
+
+    def __init__(self, node_name=NODE_NAME, **kwargs):
+        super().__init__(node_name, IMU_FILTER_PARAMETERS, imu_filter_settings, **kwargs)
+        settings = self.parameters.settings
+        # The compiled kernels where numba is installed, but the node waits
+        # neither for the compiler (a cold cache) nor for loading them: it
+        # starts on the plain ones, the same estimates (docs/compiled.md).
+        plan = start_plan()
+        self.pipeline = RawImuPipeline(settings, depth=settings['queue_depth'],
+                                       compiled=False if plan == 'background' else None)
+        self.pairer = self.pipeline.pairer
+        # One set of counters: the pipeline counts the resets it makes
+        # itself (stamps), the node those it is told of (clock, service).
+        self.resets = self.pipeline.resets
+        self.reinitializations = self.pipeline.reinitializations
+        self.increment_subscription = self._subscribe(Imu, IMU_TOPIC, self.imu_data_raw_callback)
+        self.measurement_subscription = (
+            self._subscribe(MagneticField, MAG_TOPIC, self.imu_mag_callback)
+            if settings['use_mag'] else None)
+        self._estimate_msg = QuaternionStamped()
+        self._status_steps = self._status_fields = 0
+        self._said = set()
+        self._unit_counts = dict(self.pipeline.units.counts)
+        self._calibration_state = None  # as last reported
+        self.save_calibration_service = self.create_service(
+            Trigger, '~/save_calibration', self.save_calibration_callback)
+        self._cache_settings(settings)
+        logger = self.get_logger()
+        logger.info(
+            f'raw IMU on {self.increment_subscription.topic_name}'
+            + (f' and {self.measurement_subscription.topic_name}' if settings['use_mag']
+               else ' (use_mag false: heading free)')
+            + f', world frame {settings["world_frame"]}, '
+            f'{self.pipeline.estimator.core.params}')
+        self.compiler = None
+        if plan == 'background':
+            self.compiler = BackgroundCompile()
+            self._compile_timer = self.create_timer(0.1, self.compile_timer_callback)
+            if self.compiler.compiling:
+                logger.info(f'compiling the estimator\'s kernels in the background (pid '
+                            f'{self.compiler.pid}, once per install or upgrade): the '
+                            'plain kernels run meanwhile, with the same estimates')
+        unused = [spec.name for spec in MADGWICK_UNUSED if spec.name in self.parameters.given]
+        if unused:
+            logger.warning(
+                'parameters of imu_filter_madgwick accepted but not used here: '
+                + ', '.join(f'{name}={self.parameters.values[name]!r}' for name in unused)
+                + ' (docs/raw_imu.md says why; the gains are the ahrs.* parameters)')
+
+    @property
+    def state(self):
+        """The current estimate in ``world_frame`` (ambient; None before the first step)."""
+        return self.pipeline.estimator.state
+
+    @property
+    def observer(self):
+        """The core's estimator, :class:`~ext_observer.core.ahrs.estimator.AhrsObserver`."""
+        return self.pipeline.estimator.core
+
+    @property
+    def drops(self):
+        """Inputs dropped, by reason."""
+        return self.pairer.drops
+
+    @property
+    def counts(self):
+        """``imu_samples`` and ``fields`` received, ``fields_used``."""
+        received, processed = self.pairer.received, self.pairer.processed
+        return {'imu_samples': received['increment'], 'fields': received['measurement'],
+                'fields_used': processed['measurement']}
+
+    # Inputs ---------------------------------------------------------------
+
+    def imu_data_raw_callback(self, msg):
+        """Take one IMU sample; publish the estimate of the step it closes."""
+        # nanoseconds_from_stamp and vector_from_msg, written out: this runs
+        # for every sample (the fields of a message are Python ints and floats).
+        header_stamp = msg.header.stamp
+        stamp = header_stamp.sec * 1_000_000_000 + header_stamp.nanosec
+        v, a = msg.angular_velocity, msg.linear_acceleration
+        # The estimated covariance is written straight into the message that
+        # goes out (its own float64 array): no copy.
+        covariance = msg.orientation_covariance if self._covariance_estimated else None
+        # No clock is read: the steps wait for nothing.
+        outcome, estimate = self.pipeline.imu(stamp, (v.x, v.y, v.z), (a.x, a.y, a.z),
+                                              covariance)
+        if outcome == BACKWARD_JUMP:
+            self._backward_jump(stamp, reset=False)
+        if estimate is None:
+            return
+        if estimate.step.gap:
+            self._forward_gap(estimate.step, reset=False)
+        if estimate.reason is not None:
+            self._reinitialized(estimate.reason, estimate.step.stamp, 'the sample',
+                                count=False)
+        w, x, y, z = estimate.state
+        out = self._estimate_msg
+        out.header.stamp = header_stamp
+        q = out.quaternion
+        q.w, q.x, q.y, q.z = w, x, y, z
+        self.estimate_publisher.publish(out)
+        if self._publish_imu:
+            # The sample itself goes out, its header, rates and covariances
+            # passed through (as imu_filter_madgwick does): the message is
+            # this node's once its callback has run.
+            n = (w * w + x * x + y * y + z * z) ** 0.5
+            q = msg.orientation
+            q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
+            if covariance is None:
+                # In place: the message's own float64 array (cheaper than a new one).
+                msg.orientation_covariance[:] = self._orientation_covariance
+            self.imu_publisher.publish(msg)
+
+    def imu_mag_callback(self, msg):
+        """Take a magnetic field (T) and correct the heading with it at once."""
+        self.pipeline.field(nanoseconds_from_stamp(msg.header.stamp),
+                            vector_from_msg(msg.magnetic_field))
+
+    def compile_timer_callback(self):
+        """Go on with the compiled kernels once the background compile has them."""
+        compiler = self.compiler
+        kernels = compiler.take()
+        if kernels is not None:
+            # Between two samples (one executor thread): the same state, the
+            # same estimates from here on, faster.
+            self.pipeline.estimator.use_kernels(kernels)
+            if compiler.compiling:
+                self.get_logger().info(f'compiled kernels ready after {compiler.seconds:.1f} '
+                                       's: the estimator goes on with them')
+        elif compiler.error is not None:
+            self.get_logger().warning(f'compiled kernels unavailable, the plain ones go on: '
+                                      f'{compiler.error}')
+        elif compiler.running:
+            return
+        self._compile_timer.cancel()
+        self.destroy_timer(self._compile_timer)
+        compiler.stop()
+        self.compiler = None
+
+    def destroy_node(self):
+        """End a background compile, then destroy the node."""
+        if getattr(self, 'compiler', None) is not None:
+            self.compiler.stop()
+            self.compiler = None
+        super().destroy_node()
+
+    # Resets (EstimatorNode) -------------------------------------------------
+
+    def _reset_estimator(self):
+        self.pipeline.estimator.reset()
+
+    def _reset_message(self):
+        return 'raw-IMU estimator reset: the next sample initializes it from gravity'
+
+    # Parameters -----------------------------------------------------------
+
+    def _cache_settings(self, settings):
+        variance = settings['orientation_stddev'] ** 2
+        self._orientation_covariance = [variance, 0.0, 0.0, 0.0, variance, 0.0,
+                                        0.0, 0.0, variance]
+        self._covariance_estimated = settings['covariance_estimated']
+        self._estimate_msg.header.frame_id = settings['frame_id']
+
+    def _apply_parameters(self, settings, changed):
+        super()._apply_parameters(settings, changed)
+        self.pipeline.configure(settings)
+        self._cache_settings(settings)
+
+    # Diagnostics (EstimatorNode) ------------------------------------------
+
+    def _estimator_values(self):
+        units = self.pipeline.units.counts
+        values = self.pipeline.estimator.key_values()
+        if self.compiler is not None:
+            now = 'plain (compiling)' if self.compiler.compiling else 'plain (loading)'
+            values = [(key, now if key == 'kernels' else value) for key, value in values]
+        return values + [(f'implausible_{kind}', count) for kind, count in units.items()]
+
+    def _problems(self, steps):
+        parts = []
+        fields = self.pairer.processed['measurement']
+        if (self.measurement_subscription is not None and steps > self._status_steps
+                and fields == self._status_fields):
+            text = (f'no magnetic field on {self.measurement_subscription.topic_name} '
+                    'since the last status: heading not corrected')
+            parts.append(text)
+            if fields == 0 and 'no_field' not in self._said:
+                # Said once in the log; /diagnostics says it at every status.
+                self._said.add('no_field')
+                self.get_logger().warning(text + ' (use_mag true: is the magnetometer '
+                                          'publishing there?)')
+        self._status_steps, self._status_fields = steps, fields
+        units = self.pipeline.units
+        topics = {'field': MAG_TOPIC, 'acceleration': IMU_TOPIC,
+                  'angular_velocity': IMU_TOPIC}
+        for kind, count in units.counts.items():
+            if count == self._unit_counts[kind]:
+                continue
+            text = f'{self.resolve_topic_name(topics[kind])}: {units.findings[kind]}'
+            parts.append(text)
+            if kind not in self._said:
+                self._said.add(kind)
+                self.get_logger().warning(
+                    text + ' (the samples are used as they are; counted in '
+                    f'/diagnostics as implausible_{kind})')
+        self._unit_counts = dict(units.counts)
+        parts.extend(self._calibration_problems())
+        return parts
+
+    def _calibration_problems(self):
+        # The online magnetometer calibration: WARN while it learns from the
+        # fields that came (the heading is held on the gyro), a line in the
+        # log at each change.
+        core = self.pipeline.estimator.core
+        state = core.calibration_state
+        if state == 'learning' and not self.pairer.processed['measurement']:
+            state = None
+        if state == 'converged' and core.calibration.applied:
+            state = 'applied'
+        if state != self._calibration_state:
+            logger = self.get_logger()
+            if state == 'applied':
+                logger.info('magnetometer calibration converged and applied: the heading was '
+                            'aligned once to the calibrated field and follows it from now '
+                            'on; ~/save_calibration writes it to '
+                            f'{self.parameters.settings["calibration_file"]}')
+            elif state == 'converged':
+                logger.info('magnetometer calibration converged: it turns the heading by '
+                            'less than ahrs.mag_cal_deadband, so the field is used as given '
+                            '(the sensor looks calibrated); applied if that changes')
+            elif state == 'learning':
+                logger.warning('magnetometer calibration learning: the heading is held on '
+                               'the gyro until it converges (turn the sensor about several '
+                               'axes)')
+            elif state == 'loaded':
+                logger.info('magnetometer calibration: started from the saved one '
+                            '(mag_bias_*, mag_soft_iron), refined online')
+            self._calibration_state = state
+        if state == 'learning':
+            return ['magnetometer calibration learning: heading held on the gyro until it '
+                    'converges']
+        return []
+
+    def save_calibration_callback(self, request, response):
+        """Service ``~/save_calibration``: write the calibration as a params file."""
+        path = self.parameters.settings['calibration_file']
+        try:
+            bias, soft_iron = self.pipeline.estimator.calibration()
+            write_params(path, bias, soft_iron, node=self.get_name(),
+                         comment=f'The magnetometer calibration {self.get_fully_qualified_name()} '
+                         'learned; load it with --params-file.')
+        except (ValueError, OSError) as error:
+            response.success = False
+            response.message = str(error)
+            self.get_logger().warning(f'~/save_calibration: {error}')
+            return response
+        response.success = True
+        response.message = f'saved to {os.path.abspath(path)}'
+        self.get_logger().info(f'magnetometer calibration {response.message}')
+        return response
+
+
+def main(args=None):
+    """Run the ``imu_filter`` node (``ros2 run ext_observer imu_filter_node``)."""
+    return run_node(ImuFilterNode, args)
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())

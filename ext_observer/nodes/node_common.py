@@ -1,0 +1,379 @@
+"""
+What the nodes share beyond their parameters: diagnostics, QoS, ``main``.
+
+The parameter machinery (:class:`ParameterSpec`, :class:`NodeParameters`)
+lives in :mod:`ext_observer.nodes.parameters` and is re-exported here; the input
+machinery of the two estimator nodes (stamps, checks, silence, resets,
+status) in :mod:`ext_observer.nodes.estimator_node`.
+"""
+
+import sys
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import rclpy
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.qos import (DurabilityPolicy, qos_check_compatible, qos_policy_name_from_kind,
+                       QoSCompatibility, ReliabilityPolicy)
+
+from ext_observer.nodes.parameters import (markdown_table, NodeParameters, ParameterError,
+                                     ParameterSpec, yaml_section)
+
+__all__ = [
+    'EXECUTORS',
+    'LEVEL_NAMES',
+    'CounterDeltas',
+    'ParameterError',
+    'ParameterSpec',
+    'NodeParameters',
+    'QosWatch',
+    'diagnostic_array',
+    'executor_from_args',
+    'key_values',
+    'markdown_table',
+    'run_node',
+    'yaml_section',
+]
+
+
+def key_values(pairs):
+    """
+    Return diagnostic key values; floats are written with 6 significant digits.
+
+    Parameters
+    ----------
+    pairs : iterable of (str, object)
+
+    Returns
+    -------
+    values : list of diagnostic_msgs.msg.KeyValue
+
+    """
+    result = []
+    for key, value in pairs:
+        if isinstance(value, float):
+            text = f'{value:.6g}'
+        elif isinstance(value, bool):
+            text = 'true' if value else 'false'
+        else:
+            text = str(value)
+        result.append(KeyValue(key=key, value=text))
+    return result
+
+
+def diagnostic_array(stamp, statuses):
+    """
+    Return a ``DiagnosticArray`` stamped ``stamp``.
+
+    Parameters
+    ----------
+    stamp : builtin_interfaces.msg.Time
+    statuses : sequence of diagnostic_msgs.msg.DiagnosticStatus
+
+    """
+    array = DiagnosticArray()
+    array.header.stamp = stamp
+    array.status = list(statuses)
+    return array
+
+
+class CounterDeltas:
+    """
+    What rose since the last diagnostic period.
+
+    ``deltas(counters)`` returns ``{name: increase}`` for the counters that
+    rose since the previous call (all of them count from 0 at the first call).
+    """
+
+    def __init__(self):
+        self._reported = {}
+
+    def deltas(self, counters):
+        """Return the counters of ``counters`` that rose, with their increase."""
+        rose = {name: value - self._reported.get(name, 0)
+                for name, value in counters.items()
+                if value != self._reported.get(name, 0)}
+        self._reported = dict(counters)
+        return rose
+
+
+# What the graph reports for an endpoint whose node discovery has not named yet.
+UNNAMED = '_NODE_NAME_UNKNOWN_'
+
+
+def _endpoint_name(info):
+    if info.node_name == UNNAMED:
+        return '(a node discovery has not named yet)'
+    namespace = info.node_namespace.rstrip('/')
+    return f'{namespace}/{info.node_name}'
+
+
+def _policy_fix(role, ours, theirs, hint):
+    """Return ``(problem, fix)`` in words for two incompatible profiles."""
+    publisher, subscription = (ours, theirs) if role == 'publisher' else (theirs, ours)
+    peer = 'subscription' if role == 'publisher' else 'publisher'
+    if (publisher.reliability == ReliabilityPolicy.BEST_EFFORT
+            and subscription.reliability == ReliabilityPolicy.RELIABLE):
+        problem = 'publisher is BEST_EFFORT, subscription is RELIABLE'
+        fix = ('publish with RELIABLE reliability' if role == 'subscription'
+               else 'subscribe with BEST_EFFORT reliability')
+    elif (publisher.durability == DurabilityPolicy.VOLATILE
+          and subscription.durability == DurabilityPolicy.TRANSIENT_LOCAL):
+        problem = 'publisher is VOLATILE, subscription is TRANSIENT_LOCAL'
+        fix = ('publish with TRANSIENT_LOCAL durability' if role == 'subscription'
+               else 'subscribe with VOLATILE durability')
+    else:
+        _, reason = qos_check_compatible(publisher, subscription)
+        problem = reason.strip().rstrip(';') or 'incompatible QoS'
+        fix = f'make the {peer}\'s QoS match this {role}\'s'
+    if hint:
+        fix += f', or {hint}'
+    return problem, fix
+
+
+class QosWatch:
+    """
+    Incompatible QoS on a node's endpoints, from the rclpy QoS event callbacks.
+
+    Pass :meth:`subscription` / :meth:`publisher` as ``event_callbacks`` when
+    creating each endpoint. An ``incompatible_qos`` event (a peer that will
+    never be matched) is logged with the fix named, counted, and kept in
+    :attr:`problems` for the diagnostics; :meth:`refresh` (each diagnostic
+    period) looks at the graph again and forgets a problem once no
+    incompatible peer remains on that topic.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+
+    Attributes
+    ----------
+    events : int
+        Incompatible peers reported so far.
+    problems : dict
+        ``topic -> text`` (who, what, the fix) for every topic that has an
+        incompatible peer now.
+
+    """
+
+    def __init__(self, node):
+        self._node = node
+        self._endpoints = {}
+        self.events = 0
+        self.problems = {}
+        # The text last logged per topic: logged again once discovery names
+        # a peer it could not name at the event.
+        self._logged = {}
+
+    def subscription(self, topic, qos, hint=''):
+        """Return ``SubscriptionEventCallbacks`` for a subscription on ``topic``."""
+        name = self._node.resolve_topic_name(topic)
+        self._endpoints[name] = ('subscription', qos, hint)
+        return SubscriptionEventCallbacks(
+            incompatible_qos=lambda event: self._incompatible(name, event))
+
+    def publisher(self, topic, qos, hint='', matched=None):
+        """
+        Return ``PublisherEventCallbacks`` for a publisher on ``topic``.
+
+        ``matched(info)``, if given, is called when a subscription is matched
+        or unmatched (``info.current_count`` subscriptions now).
+        """
+        name = self._node.resolve_topic_name(topic)
+        self._endpoints[name] = ('publisher', qos, hint)
+        return PublisherEventCallbacks(
+            incompatible_qos=lambda event: self._incompatible(name, event),
+            matched=matched)
+
+    def _incompatible(self, topic, event):
+        self.events += max(1, event.total_count_change)
+        text = self._describe(topic)
+        if text is None:
+            role = self._endpoints[topic][0]
+            peer = 'subscription' if role == 'publisher' else 'publisher'
+            policy = qos_policy_name_from_kind(event.last_policy_kind)
+            text = (f'a {peer} on {topic} has an incompatible {policy} policy; '
+                    f'match the QoS of this {role}')
+        self.problems[topic] = text
+        self._logged[topic] = text
+        self._node.get_logger().warning(f'incompatible QoS: {text}')
+
+    def _describe(self, topic):
+        role, ours, hint = self._endpoints[topic]
+        if role == 'subscription':
+            peers = self._node.get_publishers_info_by_topic(topic)
+            mine = self._node.get_subscriptions_info_by_topic(topic)
+        else:
+            peers = self._node.get_subscriptions_info_by_topic(topic)
+            mine = self._node.get_publishers_info_by_topic(topic)
+        # Compare profiles as the graph reports them (an unset deadline in a
+        # QoSProfile is "infinite" in the graph).
+        name = (self._node.get_name(), self._node.get_namespace())
+        for info in mine:
+            if (info.node_name, info.node_namespace) == name:
+                ours = info.qos_profile
+                break
+        texts = []
+        for info in peers:
+            theirs = info.qos_profile
+            compatibility, _ = (qos_check_compatible(theirs, ours) if role == 'subscription'
+                                else qos_check_compatible(ours, theirs))
+            if compatibility != QoSCompatibility.ERROR:
+                continue
+            problem, fix = _policy_fix(role, ours, theirs, hint)
+            peer = 'subscription' if role == 'publisher' else 'publisher'
+            texts.append(f'{peer} {_endpoint_name(info)} on {topic}: {problem}: {fix}')
+        return '; '.join(texts) if texts else None
+
+    def refresh(self):
+        """Check the topics with problems again; keep only the current ones."""
+        for topic in list(self.problems):
+            text = self._describe(topic)
+            if text is None:
+                del self.problems[topic]
+                continue
+            self.problems[topic] = text
+            if text != self._logged.get(topic) and 'not named yet' in self._logged.get(
+                    topic, ''):
+                self._logged[topic] = text
+                self._node.get_logger().warning(f'incompatible QoS: {text}')
+
+    def key_values(self):
+        """Return the diagnostic pairs: the event count and one per problem topic."""
+        return ([('qos_incompatible_events', self.events)]
+                + [(f'qos_incompatible:{topic}', text)
+                   for topic, text in sorted(self.problems.items())])
+
+
+LEVEL_NAMES = {
+    DiagnosticStatus.OK: 'OK',
+    DiagnosticStatus.WARN: 'WARN',
+    DiagnosticStatus.ERROR: 'ERROR',
+    DiagnosticStatus.STALE: 'STALE',
+}
+
+
+# Executors of the nodes' main (``--executor``); the first is the default.
+EXECUTORS = ('events', 'single')
+# Spin timeout of the EventsExecutor loop, s. rclpy 7.1's EventsExecutor
+# busy-waits when spun without a timeout; with a finite one it sleeps.
+EVENTS_SPIN_TIMEOUT = 0.1
+
+
+def executor_from_args(args):
+    """
+    Return the executor named by ``--executor`` among the non-ROS arguments.
+
+    Parameters
+    ----------
+    args : list of str
+        The command line (``sys.argv`` or what ``main`` was given), ROS
+        arguments included; ``--executor NAME`` or ``--executor=NAME`` is
+        looked for outside ``--ros-args ... --``.
+
+    Returns
+    -------
+    executor : str
+        One of :data:`EXECUTORS`; the first when the option is absent.
+
+    Raises
+    ------
+    ValueError
+        For an unknown executor or a missing value.
+
+    """
+    from rclpy.utilities import remove_ros_args
+    words = remove_ros_args(list(args))
+    kind = EXECUTORS[0]
+    for index, word in enumerate(words):
+        if word == '--executor':
+            if index + 1 >= len(words):
+                raise ValueError(f'--executor needs a value, one of {EXECUTORS}')
+            kind = words[index + 1]
+        elif word.startswith('--executor='):
+            kind = word.split('=', 1)[1]
+    if kind not in EXECUTORS:
+        raise ValueError(f'--executor must be one of {EXECUTORS}, got {kind!r}')
+    return kind
+
+
+def _spin(node, kind):
+    context = node.context
+    if kind == 'single':
+        executor = SingleThreadedExecutor(context=context)
+    else:
+        from rclpy.experimental import EventsExecutor
+        executor = EventsExecutor(context=context)
+    executor.add_node(node)
+    try:
+        if kind == 'single':
+            executor.spin()
+        else:
+            while context.ok():
+                executor.spin_once(timeout_sec=EVENTS_SPIN_TIMEOUT)
+    finally:
+        executor.shutdown()
+
+
+def run_node(node_class, args=None):
+    """
+    Run one node until Ctrl-C or shutdown; the body of each node's ``main``.
+
+    As ``demo_nodes_py``'s talker: spin inside ``try``, treat
+    ``KeyboardInterrupt`` and ``ExternalShutdownException`` as a normal end
+    (and any error raised once the context is down: Ctrl-C shuts it down
+    under whatever spin was doing, publishing or taking a message), and
+    always destroy the node and shut rclpy down.
+
+    The executor is chosen on the command line, before ``--ros-args``:
+    ``--executor events`` (the default: ``rclpy.experimental.EventsExecutor``
+    spun with ``spin_once(timeout_sec=0.1)`` in a loop while the context is
+    up) or ``--executor single`` (``SingleThreadedExecutor``, what
+    ``rclpy.spin`` uses).
+
+    Parameters
+    ----------
+    node_class : type
+        A node class constructible with no arguments.
+    args : list of str, optional
+        Command line arguments for ``rclpy.init`` (default ``sys.argv``).
+
+    Returns
+    -------
+    exit_code : int
+        0 on a normal end, 2 when the parameters or the executor were
+        refused at start-up.
+
+    """
+    argv = sys.argv if args is None else args
+    try:
+        kind = executor_from_args(argv)
+    except ValueError as error:
+        rclpy.logging.get_logger(node_class.NODE_NAME).fatal(f'not starting: {error}')
+        return 2
+    rclpy.init(args=args)
+    node = None
+    exit_code = 0
+    try:
+        node = node_class()
+        _spin(node, kind)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ParameterError as error:
+        rclpy.logging.get_logger(node_class.NODE_NAME).fatal(
+            f'invalid parameters, not starting: {error}')
+        exit_code = 2
+    except Exception as error:
+        # Ctrl-C shuts the context down at once, under whatever spin was
+        # doing: a callback publishing fails with RCLError, a message being
+        # taken with RuntimeError. That is the end we asked for; with the
+        # context still up, the error is real.
+        if rclpy.ok():
+            raise
+        rclpy.logging.get_logger(node_class.NODE_NAME).debug(
+            f'stopped under a callback: {error!r}')
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return exit_code

@@ -1,0 +1,1 @@
+"""The paper's commands: ``python -m ext_observer reproduce`` (``reproduce``)."""

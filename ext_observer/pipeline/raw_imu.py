@@ -1,0 +1,600 @@
+"""
+The raw-IMU estimator as ``imu_filter_node`` runs it, without ROS.
+
+:class:`RawImuPipeline` takes the samples of a raw IMU as the node receives
+them, stamped (integer nanoseconds), in any order and of any quality, and
+returns the estimates the node publishes. The node is a thin shell around
+it (messages in, messages out, logs and diagnostics), so that anything else
+that wants the node's exact output (a recording, a bag, a test) calls the
+same code.
+
+Inputs
+    IMU samples: the angular velocity (rad/s) and the linear acceleration
+    (m/s², the specific force: about +9.81 up at rest) of one sample. Fields
+    (T), at their own rate, when ``use_mag``. Both go through
+    :class:`~ext_observer.pipeline.pairing.StepPairer` first (values and stamps
+    checked, every input counted by what came of it).
+
+Steps
+    Sample ``k`` runs :meth:`AhrsObserver.update
+    <ext_observer.core.ahrs.estimator.AhrsObserver.update>` with its own angular
+    velocity and acceleration and ``dt = t_k − t_{k−1}`` (``constant_dt``
+    when set); the first sample of a time line only sets ``t_0``, the second
+    initializes the estimate from gravity (and the latest field). A field
+    corrects the heading when it arrives
+    (:meth:`~ext_observer.core.ahrs.estimator.AhrsObserver.update_mag`, the latest field
+    only, with the hard-iron offset ``mag_bias_*`` removed and the interval
+    since the previous field, from their stamps, as its ``dt``); before the
+    first step it is kept for the initialization. Nothing normalizes the
+    estimate on this path: the extension term of the core holds it near S³.
+
+Outputs
+    The core's estimate is sensor → ENU (magnetic north). It goes out turned
+    to true north by ``declination`` (rad, east positive), then into
+    ``world_frame`` (``C`` of :data:`~ext_observer.core.ahrs.estimator.WORLD_FRAMES`),
+    then turned by ``yaw_offset`` (rad) about that frame's z axis:
+    ``q = R_z(yaw_offset) ⊗ C ⊗ R_up(−declination) ⊗ q_enu``. For ENU and
+    NWU this is imu_filter_madgwick's ``R_z(yaw_offset − declination) ⊗ q``.
+
+Uncertainty
+    Each estimate carries the covariance of its orientation error
+    (:class:`~ext_observer.core.ahrs.uncertainty.AttitudeUncertainty`, stepped
+    with the estimator): 3×3, row-major, rad², about the x, y, z axes of
+    ``world_frame`` (the true attitude ``exp(δ) ⊗ q̂``): roll, pitch and yaw
+    variances as ``sensor_msgs/Imu``'s ``orientation_covariance`` and
+    robot_localization read them (REP 145). It is ``diag(V_t, V_t, V_h)``:
+    the same in ENU, NWU and NED and after the declination and yaw offset.
+
+Faults
+    A stamp older than the last step by more than ``backward_jump_threshold``
+    restarts the time line and the estimator; a step after a forward gap
+    resets it when ``forward_gap_action`` is ``reset``; an estimate that is
+    not finite or whose residual ``|q̂̄q̂ − 1|`` exceeds
+    ``divergence_max_residual`` is reinitialized from the sample at hand.
+    Each is counted (:attr:`RawImuPipeline.resets`,
+    :attr:`RawImuPipeline.reinitializations`).
+"""
+
+from collections import namedtuple
+import math
+
+import numpy as np
+
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams, WORLD_FRAMES
+from ext_observer.core.ahrs.magcal import check_calibration
+from ext_observer.core.quaternion import multiply_floats
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, covariance_out, UncertaintyParams
+from ext_observer.core.ahrs.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_OK, SAMPLE_RESIDUAL
+from ext_observer.core.validation import check_state
+from ext_observer.pipeline.guard import GUARD_REASONS
+from ext_observer.pipeline.pairing import BACKWARD_JUMP, StepPairer
+from ext_observer.pipeline.units import UnitCheck
+
+__all__ = ['AHRS_PREFIX', 'COVARIANCE_PREFIX', 'Estimate', 'RESET_CAUSES', 'RawImuEstimator',
+           'RawImuPipeline', 'ahrs_params', 'heading_factor', 'pairing_settings',
+           'uncertainty_params']
+
+# The core's parameters are the node's parameters ahrs.<name>.
+AHRS_PREFIX = 'ahrs.'
+# The uncertainty model's are covariance.<name>.
+COVARIANCE_PREFIX = 'covariance.'
+
+# Why the estimator restarted (the same causes as the nodes').
+RESET_CAUSES = ('backward_jump', 'clock_jump', 'forward_gap', 'service')
+
+SECOND = 1_000_000_000
+# The soft-iron matrix of no distortion, row-major.
+_IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+# Largest accepted ‖θ‖ of one sample interval, rad (StepPairer).
+MAX_INCREMENT = 20.0
+
+# One estimate: the sample's stamp (ns), the ambient estimate in
+# world_frame (4 floats), the guard's reason if it reinitialized the
+# estimator on this sample (else None), the released step (its gap flag),
+# and the covariance of the orientation (9 floats, row-major, rad², about
+# world_frame's x, y, z axes).
+Estimate = namedtuple('Estimate', 'stamp state reason step covariance')
+
+
+def _prefixed(values, prefix, cls):
+    given = {name[len(prefix):]: value for name, value in values.items()
+             if name.startswith(prefix)}
+    try:
+        return cls(**given)
+    except ValueError as error:
+        raise ValueError(f'{prefix}*: {error}') from None
+
+
+def ahrs_params(values):
+    """
+    Return the core's parameters from the node's ``ahrs.*`` values.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter values by name (the node's).
+
+    Returns
+    -------
+    params : ext_observer.core.ahrs.estimator.AhrsParams
+
+    Raises
+    ------
+    ValueError
+        With the parameter's name and the core's reason.
+
+    """
+    return _prefixed(values, AHRS_PREFIX, AhrsParams)
+
+
+def uncertainty_params(values):
+    """
+    Return the uncertainty model's parameters from the node's ``covariance.*`` values.
+
+    Returns
+    -------
+    params : ext_observer.core.ahrs.uncertainty.UncertaintyParams
+
+    Raises
+    ------
+    ValueError
+        With the parameter's name and the reason.
+
+    """
+    return _prefixed(values, COVARIANCE_PREFIX, UncertaintyParams)
+
+
+def _about_z(angle):
+    return (math.cos(0.5 * angle), 0.0, 0.0, math.sin(0.5 * angle))
+
+
+def heading_factor(world_frame, declination=0.0, yaw_offset=0.0):
+    """
+    Return the left factor from the core's ENU estimate to the published one.
+
+    ``R_z(yaw_offset) ⊗ C ⊗ R_up(−declination)``, with ``C`` the frame's
+    factor of :data:`~ext_observer.core.ahrs.estimator.WORLD_FRAMES`.
+
+    Returns
+    -------
+    factor : tuple of 4 float or None
+        None when it is the identity (ENU, no offsets): nothing to multiply.
+
+    """
+    if world_frame == 'enu' and declination == 0.0 and yaw_offset == 0.0:
+        return None
+    factor = multiply_floats(WORLD_FRAMES[world_frame], _about_z(-declination))
+    return multiply_floats(_about_z(yaw_offset), factor)
+
+
+def pairing_settings(settings):
+    """Return the :class:`StepPairer` settings of the raw IMU's parameters."""
+    # The steps wait for nothing: the accelerometer comes with the sample,
+    # the field is used when it arrives.
+    return dict(timeout=0, max_increment=MAX_INCREMENT,
+                norm_tolerance=0.1,
+                backward_jump=round(settings['backward_jump_threshold'] * SECOND),
+                forward_gap=round(settings['forward_gap_threshold'] * SECOND),
+                max_dt=round(settings['max_dt'] * SECOND),
+                constant_dt=settings['constant_dt'])
+
+
+# sample_step's outcomes as check_state's reasons (a step that raised: step_failed).
+_SAMPLE_REASONS = {SAMPLE_NON_FINITE: 'state_non_finite', SAMPLE_RESIDUAL: 'residual_too_large'}
+
+
+class RawImuEstimator:
+    """
+    The core's raw-IMU estimator with the node's frames: one call per sample or field.
+
+    Parameters
+    ----------
+    settings : dict
+        ``ahrs.*``, ``covariance.*`` (those missing take their defaults),
+        ``use_mag``, ``world_frame``, ``declination``, ``yaw_offset``,
+        ``mag_bias_*``, ``divergence_max_residual``.
+    compiled : bool, optional
+        The core's kernels (:class:`~ext_observer.core.ahrs.estimator.AhrsObserver`'s
+        ``compiled``): default, compiled where numba is installed.
+
+    Attributes
+    ----------
+    core : ext_observer.core.ahrs.estimator.AhrsObserver
+    uncertainty : ext_observer.core.ahrs.uncertainty.AttitudeUncertainty
+        The variance of the estimate's inclination and heading.
+    latest_field : tuple of 3 float or None
+        The latest field (T, hard-iron offset removed).
+
+    """
+
+    def __init__(self, settings, compiled=None):
+        params = ahrs_params(settings)
+        self.core = AhrsObserver(params=params, use_mag=settings['use_mag'], compiled=compiled)
+        self.uncertainty = AttitudeUncertainty.for_estimator(
+            params, uncertainty_params(settings), use_mag=bool(settings['use_mag']))
+        self.uncertainty.use_kernels(self.core.kernels)
+        # Where sample_step writes the covariance when the caller gives no array.
+        self._covariance = np.zeros(9)
+        self.world_frame = settings['world_frame']
+        self.latest_field = None
+        self._fields_used = 0
+        self._calibrated = True
+        self.configure(settings)
+
+    def configure(self, settings):
+        """
+        Take the settings that may change at runtime.
+
+        A saved magnetometer calibration (``mag_bias_*``, ``mag_soft_iron``,
+        ``m_raw = S m + b``) starts the online calibration where it has one
+        (9D, ``ahrs.mag_cal``), which goes on refining it; without one it is
+        applied as it is, ``m = S⁻¹ (m_raw − b)`` (imu_filter_madgwick's
+        ``mag_bias_*`` with ``S = I``).
+
+        Raises
+        ------
+        ValueError
+            For a calibration that is not finite, not symmetric positive
+            definite, or singular.
+        """
+        self.max_residual = float(settings['divergence_max_residual'])
+        bias, soft_iron = check_calibration(
+            (settings['mag_bias_x'], settings['mag_bias_y'], settings['mag_bias_z']),
+            settings['mag_soft_iron'])
+        saved = (tuple(bias.tolist()), tuple(soft_iron.ravel().tolist()))
+        given = saved != ((0.0, 0.0, 0.0), _IDENTITY)
+        if self.core.calibration is not None:
+            self._mag_bias = (0.0, 0.0, 0.0)
+            self._unskew = None
+            if given and saved != getattr(self, '_loaded', None):
+                self.core.load_calibration(*saved)
+                self._loaded = saved
+        else:
+            self._mag_bias = saved[0]
+            self._unskew = (None if saved[1] == _IDENTITY
+                            else tuple(np.linalg.inv(soft_iron).ravel().tolist()))
+        self._frame = heading_factor(self.world_frame, settings['declination'],
+                                     settings['yaw_offset'])
+
+    def field(self, field, dt=None):
+        """
+        Correct the heading with a field; before the first step, only keep it.
+
+        Parameters
+        ----------
+        field : sequence of 3 float
+            T, as measured (validated by the caller); the hard-iron offset is
+            removed here.
+        dt : float, optional
+            Time since the previous field, s; None (the first field of a time
+            line): the IMU's interval.
+
+        """
+        bx, by, bz = self._mag_bias
+        field = (field[0] - bx, field[1] - by, field[2] - bz)
+        if self._unskew is not None:
+            a = self._unskew
+            field = (a[0] * field[0] + a[1] * field[1] + a[2] * field[2],
+                     a[3] * field[0] + a[4] * field[1] + a[5] * field[2],
+                     a[6] * field[0] + a[7] * field[1] + a[8] * field[2])
+        self.latest_field = field
+        if self.core.initialized:
+            self.core.update_mag(field, dt)
+            self._track_field(dt, field)
+
+    def _track_field(self, dt, field):
+        """Tell the uncertainty what the core's last field did to the heading."""
+        core = self.core
+        # Issue 17's calibrator, where the core has one: until it is ready the
+        # heading does not follow the field, and once ready the next used
+        # field sets it again (a running mean from 1).
+        calibration = getattr(core, 'calibration', None)
+        calibrated = calibration is None or bool(calibration.ready)
+        if calibrated and not self._calibrated:
+            self._fields_used = 0
+        self._calibrated = calibrated
+        # The calibration's own heading σ counts where the heading follows
+        # the calibrated field; a calibration not applied (the sensor looked
+        # calibrated, the field is used as given) does not move the heading,
+        # and the field's own error is heading_floor's.
+        sigma = (float(calibration.quality) if calibration is not None and calibration.applied
+                 else 0.0)
+        if not (core.use_mag and calibrated and not core.mag_disturbed):
+            reference = math.nan
+            if not calibrated and core.use_mag and not core.mag_disturbed:
+                # Learning: the heading rests on the field as given; how far
+                # the calibration learned so far turns this field's heading
+                # says how wrong that may be (a disturbed field says nothing).
+                quality = float(calibration.quality)
+                if math.isfinite(quality):
+                    w, x, y, z = core.q
+                    turn = calibration.heading_turn(field, (
+                        2.0 * (x * z - w * y), 2.0 * (y * z + w * x),
+                        w * w - x * x - y * y + z * z))
+                    reference = turn * turn + quality * quality
+                else:
+                    reference = math.inf
+            self.uncertainty.field(dt, 0.0, 0.0, reference)
+            return
+        # AhrsObserver.update_mag: a running mean of the first fields, then
+        # 1 − exp(−dt / tau_mag).
+        self._fields_used += 1
+        self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma)
+
+    def use_kernels(self, kernels):
+        """Go on with other kernels (plain or compiled): the core's and the covariance's."""
+        self.core.use_kernels(kernels)
+        self.uncertainty.use_kernels(kernels)
+
+    def step(self, gyr, acc, dt, covariance=None):
+        """
+        Run one IMU sample: the usual one (an estimate exists) in one call.
+
+        :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step` runs the
+        core's step, the guard and the covariance's; any other sample goes
+        the general way (the same results).
+
+        Parameters
+        ----------
+        gyr, acc : sequence of 3 float
+            Angular velocity (rad/s) and specific force (m/s²) of the sample,
+            validated by the caller (finite, nonzero acceleration).
+        dt : float
+            Time since the previous sample, s.
+        covariance : array of 9 float64, optional
+            Where to write :attr:`covariance`, as :func:`covariance_out` accepts.
+
+        Returns
+        -------
+        state : tuple of 4 float
+            The ambient estimate in ``world_frame``, finite.
+        reason : str or None
+            Why the estimator was reinitialized from this sample
+            (:data:`~ext_observer.pipeline.guard.GUARD_REASONS`), else None.
+
+        """
+        core = self.core
+        cov = self._covariance if covariance is None else covariance_out(covariance)
+        try:
+            outcome, w, x, y, z = core.kernels.sample_step(
+                core.flat_state, self.uncertainty.state, cov,
+                gyr[0], gyr[1], gyr[2], acc[0], acc[1], acc[2], dt, self.max_residual)
+        except (ValueError, OverflowError, ZeroDivisionError):
+            outcome = None
+        if outcome == SAMPLE_OK:
+            return ((w, x, y, z) if self._frame is None
+                    else multiply_floats(self._frame, (w, x, y, z))), None
+        state, reason = self._general_step(  # failed the guard, or did not run
+            gyr, acc, dt, 'step_failed' if outcome is None else _SAMPLE_REASONS.get(outcome))
+        if covariance is not None:
+            covariance[:] = self.uncertainty.covariance
+        return state, reason
+
+    def _general_step(self, gyr, acc, dt, reason=None):
+        """The step one call at a time; with a ``reason``, the step failed: start again."""
+        core = self.core
+        starting = not core.initialized
+        if reason is None:
+            try:
+                q = core.update(gyr, acc, self.latest_field if starting else None, dt)
+            except (ValueError, OverflowError, ZeroDivisionError):
+                reason = 'step_failed'
+            else:
+                reason = check_state(q, None, self.max_residual)
+        if reason is not None:
+            core.reset()
+            q = core.update(gyr, acc, self.latest_field, dt)
+            starting = True
+        if starting:
+            self._start(dt)
+        else:
+            self.uncertainty.step(dt, gyr, q, core.rest)
+        # The state property's value, from the q the step returned.
+        return (q if self._frame is None else multiply_floats(self._frame, q)), reason
+
+    def _start(self, dt):
+        """The core has just initialized (and used the latest field, if any)."""
+        self.uncertainty.start(dt)
+        self._fields_used = 0
+        self._calibrated = True
+        if self.latest_field is not None and self.core.use_mag:
+            self._track_field(None, self.latest_field)
+
+    @property
+    def state(self):
+        """The estimate in ``world_frame`` (ambient), or None before the first step."""
+        q = self.core.q
+        if q is None or self._frame is None:
+            return q
+        return multiply_floats(self._frame, q)
+
+    def reset(self):
+        """Forget the estimate: the next step initializes it again."""
+        self.core.reset()
+        self.uncertainty.reset()
+
+    @property
+    def covariance(self):
+        """The orientation's covariance (9 floats, row-major, rad², world axes), or None."""
+        return self.uncertainty.covariance if self.uncertainty.started else None
+
+    def key_values(self):
+        """
+        Return the diagnostic pairs of the estimator.
+
+        ``world_frame``, ``use_mag``, ``initialized``, ``bias_x``, ``bias_y``,
+        ``bias_z`` (rad/s), ``rest``, ``mag_disturbed``, ``residual``
+        (``|q̂̄q̂ − 1|``), ``inclination_std_deg`` and ``heading_std_deg``
+        (the σ of the published covariance, degrees); NaN before the first
+        step.
+        """
+        core = self.core
+        q = core.q
+        residual = math.nan if q is None else abs(
+            q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] - 1.0)
+        bx, by, bz = core.bias
+        tracker = self.uncertainty
+        started = q is not None and tracker.started
+        return [('world_frame', self.world_frame), ('use_mag', bool(core.use_mag)),
+                ('initialized', q is not None), ('bias_x', float(bx)),
+                ('bias_y', float(by)), ('bias_z', float(bz)), ('rest', bool(core.rest)),
+                ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
+                ('inclination_std_deg',
+                 math.degrees(tracker.inclination_std) if started else math.nan),
+                ('heading_std_deg', math.degrees(tracker.heading_std) if started else math.nan),
+                ('calibration', core.calibration_state),
+                ('kernels', 'compiled' if core.compiled else 'plain')] + self._calibration_values()
+
+    def _calibration_values(self):
+        calibration = self.core.calibration
+        if calibration is None:
+            return []
+        b = calibration.bias
+        return [('calibration_heading_std_deg', math.degrees(calibration.quality)),
+                ('calibration_bias_x', float(b[0])), ('calibration_bias_y', float(b[1])),
+                ('calibration_bias_z', float(b[2])),
+                ('calibration_soft_iron', ' '.join(
+                    f'{v:.6g}' for v in calibration.soft_iron.ravel()))]
+
+    def calibration(self):
+        """
+        Return the calibration learned or loaded, as the params file holds it.
+
+        Returns
+        -------
+        bias : tuple of 3 float
+            ``mag_bias_*``, T.
+        soft_iron : tuple of 9 float
+            ``mag_soft_iron``, row-major.
+
+        Raises
+        ------
+        ValueError
+            When there is none yet (off, or still learning).
+        """
+        calibration = self.core.calibration
+        state = self.core.calibration_state
+        if calibration is None or state not in ('converged', 'loaded'):
+            raise ValueError(f'no magnetometer calibration to save: it is {state}'
+                             + (' (turn the sensor about several axes)'
+                                if state == 'learning' else ''))
+        return (tuple(float(v) for v in calibration.bias),
+                tuple(float(v) for v in calibration.soft_iron.ravel()))
+
+
+class RawImuPipeline:
+    """
+    Stamped raw-IMU samples in, the node's estimates out; every input counted.
+
+    Parameters
+    ----------
+    settings : dict
+        The settings of ``imu_filter_node`` (:func:`~ext_observer.nodes.imu_filter_parameters.
+        imu_filter_settings`).
+    depth : int
+        Most inputs waiting (the node's ``queue_depth``).
+    compiled : bool, optional
+        The estimator's kernels (:class:`RawImuEstimator`).
+
+    Attributes
+    ----------
+    estimator : RawImuEstimator
+    pairer : ext_observer.pipeline.pairing.StepPairer
+        Validation, stamps, and the input counters.
+    units : ext_observer.pipeline.units.UnitCheck
+        Magnitudes that only a wrong unit explains.
+    resets : dict
+        By cause (:data:`RESET_CAUSES`).
+    reinitializations : dict
+        By the divergence guard, by reason.
+
+    """
+
+    def __init__(self, settings, depth=100, compiled=None):
+        self.estimator = RawImuEstimator(settings, compiled)
+        self.pairer = StepPairer(depth=depth, **pairing_settings(settings))
+        self.units = UnitCheck()
+        self.resets = dict.fromkeys(RESET_CAUSES, 0)
+        self.reinitializations = dict.fromkeys(GUARD_REASONS, 0)
+        self._constant_dt = settings['constant_dt']
+        self._gap_resets = settings['forward_gap_action'] == 'reset'
+
+    def configure(self, settings):
+        """Take the settings that may change at runtime."""
+        self.estimator.configure(settings)
+        self.pairer.configure(**pairing_settings(settings))
+        self._constant_dt = settings['constant_dt']
+        self._gap_resets = settings['forward_gap_action'] == 'reset'
+
+    def reset(self, cause):
+        """Restart the estimator (the next sample initializes it), counted as ``cause``."""
+        self.estimator.reset()
+        self.resets[cause] += 1
+
+    def restart(self, cause):
+        """Start a new time line and restart the estimator; return the inputs discarded."""
+        discarded = self.pairer.restart()
+        self.reset(cause)
+        return discarded
+
+    def imu(self, stamp, gyr, acc, covariance=None):
+        """
+        Take one IMU sample and run the step it closes.
+
+        Parameters
+        ----------
+        stamp : int
+            ns.
+        gyr, acc : sequence of 3 float
+            rad/s, m/s².
+        covariance : array of 9 float64, optional
+            Where to write the estimate's covariance (then the Estimate's).
+
+        Returns
+        -------
+        outcome : str or None
+            As :meth:`StepPairer.add_angular_velocity
+            <ext_observer.pipeline.pairing.StepPairer.add_angular_velocity>`: None, a
+            drop reason, or ``'backward_jump'`` (the estimator was reset).
+        estimate : Estimate or None
+            The estimate of this sample, when it ran a step.
+
+        """
+        self.units.imu(gyr, acc)
+        outcome, steps = self.pairer.add_sample(stamp, gyr, acc)
+        if outcome == BACKWARD_JUMP:
+            self.reset('backward_jump')
+        estimate = None
+        for step in steps:
+            if step.end != stamp:
+                # Cannot happen: a step is released by the sample that closes it.
+                continue
+            if step.gap and self._gap_resets:
+                self.reset('forward_gap')
+            state, reason = self.estimator.step(
+                gyr, acc, self._constant_dt or (step.end - step.stamp) * 1e-9, covariance)
+            if reason is not None:
+                self.reinitializations[reason] += 1
+            estimate = Estimate(stamp, state, reason, step,
+                                self.estimator.uncertainty.covariance if covariance is None
+                                else covariance)
+        return outcome, estimate
+
+    def field(self, stamp, field):
+        """
+        Take one magnetometer sample (T) and correct the heading with it at once.
+
+        Returns
+        -------
+        outcome : str or None
+            None when used, else the drop reason.
+
+        """
+        self.units.field(field)
+        previous = self.pairer.field_stamp
+        outcome = self.pairer.add_field(stamp, field)
+        if outcome is None:
+            # The first field of a time line (or after a jump back) has no interval.
+            self.estimator.field(field, None if previous is None or stamp <= previous
+                                 else (stamp - previous) * 1e-9)
+        return outcome
