@@ -96,3 +96,117 @@ def test_imu_filter_madgwick_own_file_starts_with_a_covariance_and_names_publish
     assert "orientation_covariance of imu/data: the estimate's own" in out, out
     assert 'orientation_stddev 0.0 means not given' in out, out
     assert 'publish_tf' in out, out
+
+
+# constant_dt: every sample, in the order it comes ---------------------------------
+
+def test_constant_dt_pairs_every_sample_in_arrival_order():
+    from ext_observer.pipeline.pairing import BACKWARD_JUMP, StepPairer
+
+    ms = 1_000_000
+    pairer = StepPairer(timeout=0, max_dt=50 * ms, constant_dt=0.01, arrival_order=True)
+    stamps = [2 * SECOND, 2 * SECOND, 2 * SECOND + 20 * ms, 2 * SECOND + 10 * ms,
+              2 * SECOND - 500 * ms, 2 * SECOND + 900 * ms]
+    steps = []
+    for k, stamp in enumerate(stamps):
+        outcome, released = pairer.add_sample(stamp, (0.0, 0.0, 1.0), (0.0, 0.0, 9.8))
+        assert outcome is None, (k, outcome)
+        steps += released
+    # Repeated, older and far stamps: each closes the interval of the one
+    # before, Δt = constant_dt (max_dt is the stamps' rule, not used).
+    assert [s.end for s in steps] == stamps[1:]
+    assert all(s.increment == pytest.approx((0.0, 0.0, 0.01)) for s in steps)
+    assert pairer.processed['increment'] == len(stamps) - 1
+    assert not any(pairer.drops.values())
+    # A driver that never stamps: all zero, all used.
+    unstamped = StepPairer(timeout=0, constant_dt=0.01, arrival_order=True)
+    assert [len(unstamped.add_sample(0, (0.0, 0.0, 1.0), (0.0, 0.0, 9.8))[1])
+            for _ in range(4)] == [0, 1, 1, 1]
+    # Only non-finite values are dropped; a jump back by more than
+    # backward_jump still starts a new time line.
+    assert pairer.add_sample(3 * SECOND, (math.nan, 0.0, 0.0), (0.0, 0.0, 9.8))[0] == (
+        'non_finite_increment')
+    assert pairer.add_sample(3 * SECOND, (0.0, 0.0, 1.0), (0.0, 0.0, math.inf))[0] == (
+        'non_finite_acceleration')
+    assert pairer.add_sample(SECOND // 2, (0.0, 0.0, 1.0), (0.0, 0.0, 9.8))[0] == BACKWARD_JUMP
+    assert pairer.accounted('increment') == pairer.received['increment']
+    # Without arrival_order the same stamps are dropped as before.
+    strict = StepPairer(timeout=0, max_dt=50 * ms, constant_dt=0.01)
+    outcomes = [strict.add_sample(t, (0.0, 0.0, 1.0), (0.0, 0.0, 9.8))[0] for t in stamps]
+    assert outcomes[1] == 'duplicate_increment' and outcomes[3] == 'stale_increment'
+
+
+def burst_samples(count, rate=1.0):
+    """Samples stamped in pairs (a driver that stamps in bursts), turning about z."""
+    return [(START + (k // 2) * 2 * SECOND // 100, (0.0, 0.0, rate), (0.0, 0.0, 9.81))
+            for k in range(count)]
+
+
+def yaw_of(q):
+    w, x, y, z = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def test_constant_dt_integrates_every_sample_of_same_stamp_pairs_over_dds(
+        ros_context, spinner):
+    from ext_observer.nodes.imu_filter_node import ImuFilterNode
+    from ros_helpers import overrides
+    from test_raw_imu import connect
+
+    node = spinner.add(ImuFilterNode(
+        node_name='bursts', context=ros_context,
+        parameter_overrides=overrides(constant_dt=0.01, use_mag=False,
+                                      **{'ahrs.tau_bias': 0.0})))
+    driver = spinner.add(Driver(ros_context))
+    received = []
+    driver.create_subscription(Imu, 'imu/data', received.append, 1000)
+    connect(spinner, driver, node)
+    samples = burst_samples(200)
+    for k, (stamp, gyr, acc) in enumerate(samples):
+        driver.send_imu(stamp, gyr, acc)
+        spinner.spin_until(lambda: len(received) == k + 1, 10.0, f'estimate {k}')
+    assert len(received) == 200
+    assert not any(node.drops.values()), node.drops
+    # 199 intervals of 0.01 s at 1 rad/s: 1.99 rad about z (the first sample
+    # initializes the estimate).
+    first = received[0].orientation
+    last = received[-1].orientation
+    turn = yaw_of((last.w, last.x, last.y, last.z)) - yaw_of((first.w, first.x, first.y,
+                                                              first.z))
+    assert turn == pytest.approx(1.99, abs=0.005), turn
+
+
+def test_arrival_order_add_sample_is_add_angular_velocity_then_pop_ready():
+    # The one-call path and the general one agree in arrival order too, on
+    # test_pairing's arbitrary streams (duplicates, stale, jumps, gaps).
+    from hypothesis import given, settings
+
+    from ext_observer.pipeline.pairing import StepPairer
+    from test_pairing import _pairer_state, assert_accounted, sample_operations
+
+    @settings(max_examples=300, deadline=None)
+    @given(sample_operations)
+    def check(ops):
+        options = dict(timeout=0, depth=4, backward_jump=SECOND,
+                       forward_gap=SECOND // 2, max_dt=SECOND // 25, constant_dt=0.004,
+                       max_increment=3.0, arrival_order=True)
+        fast, general = StepPairer(**options), StepPairer(**options)
+        stamp = 2 * SECOND
+        for kind, delta, value, acc in ops:
+            if delta is not None:
+                stamp += delta
+            if kind == 'sample':
+                outcome, steps = fast.add_sample(stamp, value, acc)
+                assert outcome == general.add_angular_velocity(stamp, value, 0, acc)
+                assert list(steps) == general.pop_ready(0)
+                assert outcome in (None, 'backward_jump', 'non_finite_increment',
+                                   'non_finite_acceleration', 'zero_acceleration',
+                                   'increment_too_large'), outcome
+            elif kind == 'field':
+                assert fast.add_field(stamp, value) == general.add_field(stamp, value)
+            else:
+                assert fast.restart() == general.restart()
+            assert _pairer_state(fast) == _pairer_state(general)
+        assert_accounted(fast)
+
+    check()

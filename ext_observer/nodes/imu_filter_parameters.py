@@ -200,8 +200,9 @@ IMU_FILTER_OWN = (
                   "estimate's own covariance; with 'fixed': zeros.",
                   (0.0, 10.0)),
     ParameterSpec('constant_dt', 0.0,
-                  'Δt of every sample, s, instead of the interval between the stamps; 0 = '
-                  'from the stamps (as imu_filter_madgwick).', (0.0, 10.0)),
+                  'Δt of every sample, s, instead of the interval between the stamps: '
+                  'every sample is used, in the order it arrives, repeated or older stamps '
+                  'included (as imu_filter_madgwick); 0 = from the stamps.', (0.0, 10.0)),
     ParameterSpec('max_dt', 0.1,
                   'Largest interval between two IMU samples, s; after a longer one the '
                   'estimator goes on from the new sample (dropped: dt_too_large).',
