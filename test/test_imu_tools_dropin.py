@@ -17,8 +17,8 @@ import pytest
 from sensor_msgs.msg import Imu
 
 from ext_observer.nodes.conversions import nanoseconds_from_stamp
-from ext_observer.nodes.imu_filter_parameters import (covariance_estimated,
-                                                      IMU_FILTER_PARAMETERS)
+from ext_observer.pipeline.imu_filter_parameters import (covariance_estimated,
+                                                         IMU_FILTER_PARAMETERS)
 from ros_helpers import installed, SECOND
 from test_raw_imu import Driver
 
