@@ -22,7 +22,7 @@ from ext_observer.nodes.conversions import nanoseconds_from_stamp, quaternion_fr
 from ext_observer.core.ahrs.estimator import world_from_enu
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
-from ext_observer.nodes.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import heading_factor, RawImuPipeline
 from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
 from ros_helpers import installed, overrides, SECOND, values_of

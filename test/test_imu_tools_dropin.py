@@ -17,8 +17,8 @@ import pytest
 from sensor_msgs.msg import Imu
 
 from ext_observer.nodes.conversions import nanoseconds_from_stamp
-from ext_observer.nodes.imu_filter_parameters import (covariance_estimated,
-                                                      IMU_FILTER_PARAMETERS)
+from ext_observer.pipeline.imu_filter_parameters import (covariance_estimated,
+                                                         IMU_FILTER_PARAMETERS)
 from ros_helpers import installed, SECOND
 from test_raw_imu import Driver
 
@@ -406,7 +406,7 @@ def test_a_saved_gyro_bias_reloads_and_applies_from_the_first_sample(
     from std_srvs.srv import Trigger
 
     from ext_observer.nodes.imu_filter_node import ImuFilterNode
-    from ext_observer.nodes.imu_filter_parameters import imu_filter_settings
+    from ext_observer.pipeline.imu_filter_parameters import imu_filter_settings
     from ext_observer.pipeline.raw_imu import RawImuPipeline
     from ros_helpers import overrides
     from test_raw_imu import connect

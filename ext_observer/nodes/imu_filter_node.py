@@ -21,7 +21,7 @@ stamps, the core's :class:`~ext_observer.core.ahrs.estimator.AhrsObserver`); thi
 turns messages into its inputs and its estimates into messages, and says
 what went wrong: drops, resets, a silent IMU, a missing magnetometer, and
 values that only a wrong unit explains (:mod:`ext_observer.pipeline.units`). The
-parameters are :data:`~ext_observer.nodes.imu_filter_parameters.IMU_FILTER_PARAMETERS`,
+parameters are :data:`~ext_observer.pipeline.imu_filter_parameters.IMU_FILTER_PARAMETERS`,
 imu_filter_madgwick's among them (``docs/raw_imu.md``).
 """
 
@@ -37,8 +37,8 @@ from ext_observer.recordings.calibrate import write_params
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
 from ext_observer.core.ahrs.compiled import BackgroundCompile, start_plan
 from ext_observer.nodes.estimator_node import EstimatorNode
-from ext_observer.nodes.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
-                                                      imu_filter_settings, unused_text)
+from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
+                                                         imu_filter_settings, unused_text)
 from ext_observer.nodes.node_common import run_node
 from ext_observer.pipeline.imu_tools import (raw_attitude, rpy_from_quaternion,
                                              transform_from_estimate, without_gravity)

@@ -529,7 +529,7 @@ class RawImuPipeline:
     Parameters
     ----------
     settings : dict
-        The settings of ``imu_filter_node`` (:func:`~ext_observer.nodes.imu_filter_parameters.
+        The settings of ``imu_filter_node`` (:func:`~ext_observer.pipeline.imu_filter_parameters.
         imu_filter_settings`).
     depth : int
         Most inputs waiting (the node's ``queue_depth``).
