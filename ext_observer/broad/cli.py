@@ -27,6 +27,7 @@ from ext_observer.broad.page import markdown
 from ext_observer.broad.plots import plot
 from ext_observer.broad.report import text_report, write_json
 from ext_observer.broad.run import log, run
+from ext_observer.core.ahrs.compiled import warn_if_plain
 
 # Trial shown over time in the report: magnetically disturbed.
 PLOT_TRIAL = '28_disturbed_stationary_magnet_A'
@@ -80,6 +81,7 @@ def main(argv=None):
     """Run ``broad``; return the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    warn_if_plain()
     progress = (lambda text: None) if args.quiet else log
     anchors = () if args.no_anchors or args.covariance else ANCHORS
     problem = _check(args, anchors)

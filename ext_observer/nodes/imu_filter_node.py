@@ -33,7 +33,7 @@ from std_srvs.srv import Trigger
 
 from ext_observer.recordings.calibrate import write_params
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
-from ext_observer.core.ahrs.compiled import BackgroundCompile, start_plan
+from ext_observer.core.ahrs.compiled import BackgroundCompile, plain_warning, start_plan
 from ext_observer.nodes.estimator_node import EstimatorNode
 from ext_observer.nodes.imu_filter_parameters import (IMU_FILTER_PARAMETERS, imu_filter_settings,
                                                 MADGWICK_UNUSED)
@@ -109,6 +109,8 @@ class ImuFilterNode(EstimatorNode):
             + f', world frame {settings["world_frame"]}, '
             f'{self.pipeline.estimator.core.params}')
         self.compiler = None
+        if plan == 'plain' and plain_warning():
+            logger.warning(plain_warning())
         if plan == 'background':
             self.compiler = BackgroundCompile()
             self._compile_timer = self.create_timer(0.1, self.compile_timer_callback)
