@@ -188,3 +188,23 @@ def test_the_fetch_runs_on_the_standard_library_alone(tmp_path):
     done = subprocess.run([sys.executable, '-I', '-S', fetch.__file__, '--help'],
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and 'EXT_OBSERVER_BROAD_URL' in done.stdout
+
+
+def test_trials_read_in_a_child_meanwhile_equal_those_read_here(tmp_path):
+    # The broad command reads the trials in a forked child while it loads
+    # its kernels (broad.data.load_trials): the same arrays as load_trial.
+    for i, name in enumerate(ALL[:3]):
+        _write_trial(str(tmp_path / f'{name}.hdf5'), n=40 + i)
+    found = broad.find_trials(str(tmp_path))
+    called = []
+    trials = data.load_trials(found, meanwhile=lambda: called.append(os.getpid()))
+    assert called == [os.getpid()]
+    for (name, path), trial in zip(found, trials):
+        alone = broad.load_trial(path, name)
+        assert trial.name == name and trial.rate == alone.rate
+        for key in ('gyr', 'acc', 'mag', 'quat', 'movement'):
+            np.testing.assert_array_equal(getattr(trial, key), getattr(alone, key))
+    # A file that is not HDF5: the reader's error, as with load_trial.
+    (tmp_path / 'broken.hdf5').write_bytes(b'not hdf5')
+    with pytest.raises(OSError):
+        data.load_trials(broad.find_trials(str(tmp_path)))
