@@ -25,8 +25,10 @@ from ext_observer.broad import data, fetch
 ALLOW_NO_DATA = 'EXT_OBSERVER_ALLOW_NO_BROAD'
 # Every trial a test reads: what make test fetches. A test that reads
 # another must add it here (broad_data_dir says so).
-TRIALS = ('01_undisturbed_slow_rotation_A', '14_undisturbed_slow_translation_with_breaks_B',
-          '28_disturbed_stationary_magnet_A', '32_disturbed_attached_magnet_1cm')
+TRIALS = ('01_undisturbed_slow_rotation_A', '09_undisturbed_fast_rotation_with_breaks_B',
+          '14_undisturbed_slow_translation_with_breaks_B', '15_undisturbed_fast_translation_A',
+          '18_undisturbed_fast_translation_with_breaks_B', '28_disturbed_stationary_magnet_A',
+          '29_disturbed_stationary_magnet_B', '32_disturbed_attached_magnet_1cm')
 
 
 def _missing(folder, trials):
