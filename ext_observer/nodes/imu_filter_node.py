@@ -39,7 +39,7 @@ from std_srvs.srv import Trigger
 
 from ext_observer.recordings.calibrate import write_params
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
-from ext_observer.core.ahrs.compiled import BackgroundCompile, start_plan
+from ext_observer.core.ahrs.compiled import BackgroundCompile, plain_warning, start_plan
 from ext_observer.nodes.estimator_node import EstimatorNode
 from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
                                                          imu_filter_settings, unused_text)
@@ -149,6 +149,8 @@ class ImuFilterNode(EstimatorNode):
             f'{self.pipeline.estimator.core.params}')
         logger.info(covariance_text(settings))
         self.compiler = None
+        if plan == 'plain' and plain_warning():
+            logger.warning(plain_warning())
         if plan == 'background':
             self.compiler = BackgroundCompile()
             self._compile_timer = self.create_timer(0.1, self.compile_timer_callback)
