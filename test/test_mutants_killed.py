@@ -7,9 +7,12 @@ heading variance's growth with the gyro's noise, the interval bound of a
 step, the step a measurement at a step's end belongs to.
 """
 
+import math
+
+import numpy as np
 import pytest
 
-from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, UncertaintyParams
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, GRAVITY, UncertaintyParams
 from ext_observer.pipeline.pairing import StepPairer
 
 MS = 1_000_000
@@ -60,3 +63,57 @@ def test_a_measurement_at_a_steps_end_corrects_the_next_step():
     steps = pairer.pop_ready(1 * S)
     assert [(s.stamp, s.measurement) for s in steps] == [
         (t0, None), (t0 + 10 * MS, Y), (t0 + 20 * MS, None)]
+
+
+def _rotation(q):
+    """The rotation matrix of ``q`` (any nonzero norm), body → world."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def test_the_uncertainty_is_its_documented_model_in_matrix_form():
+    # core/ahrs/uncertainty.py's model, written here as 2×2 matrices per axis
+    # (x = [θ, β]: F P Fᵀ + Q between samples, the rest and the inclination
+    # corrections as congruences plus their noise), against the kernel's
+    # scalar arithmetic, over samples of changing intervals, rates,
+    # attitudes and rest: equal to rounding. 6D: nothing corrects the heading.
+    params = UncertaintyParams(gyro_noise=3e-3, gyro_rate_noise=2e-2, bias_std=4e-3,
+                               bias_time=30.0, bias_init=1e-2, acc_noise=0.05,
+                               inclination_floor=0.0, heading_floor=0.0, stamp_error=2e-3)
+    tau_acc, tau_rest = 1.5, 0.7
+    tracker = AttitudeUncertainty(params, tau_acc=tau_acc, tau_rest=tau_rest, use_mag=False)
+    rng = np.random.default_rng(31)
+    dt = 0.01
+    tracker.start(dt)
+    r_acc = (0.05 / GRAVITY) ** 2
+    tilt = np.array([[r_acc / dt, 0.0], [0.0, 1e-2 ** 2]])
+    heading = np.array([[3e-3 ** 2 * dt, 0.0], [0.0, 1e-2 ** 2]])
+    for k in range(400):
+        dt = (0.01, 0.005, 0.02)[k // 100 % 3]
+        rate = rng.normal(0.0, 1.0, 3)
+        q = rng.normal(0.0, 1.0, 4)
+        rest = k % 50 < 20
+        tracker.step(dt, tuple(rate), tuple(q), rest)
+        phi = math.exp(-dt / 30.0)
+        f = np.array([[1.0, dt], [0.0, phi]])
+        noise = np.diag([(3e-3 ** 2 + (2e-2 * np.linalg.norm(rate)) ** 2) * dt,
+                         4e-3 ** 2 * (1.0 - phi * phi)])
+        tilt = f @ tilt @ f.T + noise
+        heading = f @ heading @ f.T + noise
+        if rest:
+            kr = 1.0 - math.exp(-dt / tau_rest)
+            g = np.diag([1.0, 1.0 - kr])
+            learned = np.diag([0.0, kr * kr * 3e-3 ** 2 / dt])
+            tilt = g @ tilt @ g.T + learned
+            heading = g @ heading @ g.T + learned
+        ka = 1.0 - math.exp(-dt / tau_acc)
+        h = np.diag([1.0 - ka, 1.0])
+        tilt = h @ tilt @ h.T + np.diag([ka * ka * r_acc / dt, 0.0])
+        vertical = (_rotation(q) @ rate)[2]
+        stamp2 = 2e-3 ** 2
+        assert tracker.tilt_variance == pytest.approx(
+            tilt[0, 0] + 0.5 * stamp2 * (rate @ rate - vertical ** 2), rel=1e-9)
+        assert tracker.heading_variance == pytest.approx(
+            heading[0, 0] + stamp2 * vertical ** 2, rel=1e-9)
