@@ -7,11 +7,14 @@ heading variance's growth with the gyro's noise, the interval bound of a
 step, the step a measurement at a step's end belongs to.
 """
 
+import copy
 import math
 
 import numpy as np
 import pytest
 
+from ext_observer.core.ahrs import uncertainty_kernel
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, GRAVITY, UncertaintyParams
 from ext_observer.pipeline.pairing import StepPairer
 
@@ -117,3 +120,61 @@ def test_the_uncertainty_is_its_documented_model_in_matrix_form():
             tilt[0, 0] + 0.5 * stamp2 * (rate @ rate - vertical ** 2), rel=1e-9)
         assert tracker.heading_variance == pytest.approx(
             heading[0, 0] + stamp2 * vertical ** 2, rel=1e-9)
+
+
+def _pair():
+    """An estimator and its uncertainty, 6D, started from one still sample (100 Hz)."""
+    est = AhrsObserver(AhrsParams(), use_mag=False)
+    tracker = AttitudeUncertainty.for_estimator(est.params, use_mag=False)
+    est.update((0.0, 0.0, 0.0), (0.0, 0.0, 9.81), None, 0.01)
+    tracker.start(0.01)
+    return est, tracker
+
+
+def test_the_one_call_sample_step_is_the_general_steps():
+    # sample_step (the node's usual sample in one call) against the steps
+    # one at a time: the estimate, and the covariance it writes (diag(V_t,
+    # V_t, V_h), zeros elsewhere), through rest (the bias learned) and motion.
+    one, one_tracker = _pair()
+    general, tracker = _pair()
+    cov = np.full(9, np.nan)
+    rng = np.random.default_rng(5)
+    for k in range(600):
+        moving = k >= 300
+        gyr = tuple(rng.normal(0.0, 0.5 if moving else 0.002, 3))
+        acc = tuple(np.array([0.0, 0.0, 9.81]) + rng.normal(0.0, 0.05, 3))
+        outcome, *q = uncertainty_kernel.sample_step(
+            one.flat_state, one_tracker.state, cov, *gyr, *acc, 0.01, 0.01)
+        assert outcome == uncertainty_kernel.SAMPLE_OK
+        expected = general.update(gyr, acc, None, 0.01)
+        tracker.step(0.01, gyr, expected, general.rest)
+        assert tuple(q) == tuple(expected)
+        assert tuple(cov) == tuple(tracker.covariance)
+        t, h = tracker.tilt_variance, tracker.heading_variance
+        assert tuple(cov) == (t, 0.0, 0.0, 0.0, t, 0.0, 0.0, 0.0, h)
+    assert general.rest is False and tracker.heading_variance > 0.0
+
+
+def test_the_one_call_sample_step_refuses_what_it_cannot_run():
+    est = AhrsObserver(AhrsParams(), use_mag=False)
+    tracker = AttitudeUncertainty.for_estimator(est.params, use_mag=False)
+    cov = np.zeros(9)
+    step = uncertainty_kernel.sample_step
+    still = (0.0, 0.0, 0.0, 0.0, 0.0, 9.81)
+    assert step(est.flat_state, tracker.state, cov, *still, 0.01, 0.01)[0] == (
+        uncertainty_kernel.SAMPLE_NOT_STARTED)
+    est, tracker = _pair()
+    for dt in (0.0, -0.01, math.inf, math.nan):
+        assert step(est.flat_state, tracker.state, cov, *still, dt, 0.01)[0] == (
+            uncertainty_kernel.SAMPLE_BAD_DT), dt
+    assert not cov.any()  # nothing written
+    # The guard: |q̂̄q̂ − 1| above max_residual fails, at it passes.
+    turn = (3.0, -2.0, 1.0, 0.0, 0.0, 9.81)
+    _, *q = step(copy.copy(est.flat_state), copy.copy(tracker.state), cov, *turn, 0.01, 1.0)
+    residual = abs(sum(v * v for v in q) - 1.0)
+    assert residual > 0.0
+    for max_residual, expected in ((residual, uncertainty_kernel.SAMPLE_OK),
+                                   (0.5 * residual, uncertainty_kernel.SAMPLE_RESIDUAL)):
+        outcome = step(copy.copy(est.flat_state), copy.copy(tracker.state), cov, *turn, 0.01,
+                       max_residual)[0]
+        assert outcome == expected
