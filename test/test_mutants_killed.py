@@ -134,20 +134,22 @@ def _pair():
 def test_the_one_call_sample_step_is_the_general_steps():
     # sample_step (the node's usual sample in one call) against the steps
     # one at a time: the estimate, and the covariance it writes (diag(V_t,
-    # V_t, V_h), zeros elsewhere), through rest (the bias learned) and motion.
+    # V_t, V_h), zeros elsewhere), through rest (the bias learned) and motion,
+    # the interval changing now and then.
     one, one_tracker = _pair()
     general, tracker = _pair()
     cov = np.full(9, np.nan)
     rng = np.random.default_rng(5)
     for k in range(600):
         moving = k >= 300
+        dt = (0.01, 0.005, 0.02)[k // 50 % 3]
         gyr = tuple(rng.normal(0.0, 0.5 if moving else 0.002, 3))
         acc = tuple(np.array([0.0, 0.0, 9.81]) + rng.normal(0.0, 0.05, 3))
         outcome, *q = uncertainty_kernel.sample_step(
-            one.flat_state, one_tracker.state, cov, *gyr, *acc, 0.01, 0.01)
+            one.flat_state, one_tracker.state, cov, *gyr, *acc, dt, 0.01)
         assert outcome == uncertainty_kernel.SAMPLE_OK
-        expected = general.update(gyr, acc, None, 0.01)
-        tracker.step(0.01, gyr, expected, general.rest)
+        expected = general.update(gyr, acc, None, dt)
+        tracker.step(dt, gyr, expected, general.rest)
         assert tuple(q) == tuple(expected)
         assert tuple(cov) == tuple(tracker.covariance)
         t, h = tracker.tilt_variance, tracker.heading_variance
