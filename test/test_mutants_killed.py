@@ -122,11 +122,14 @@ def test_the_uncertainty_is_its_documented_model_in_matrix_form():
             heading[0, 0] + stamp2 * vertical ** 2, rel=1e-9)
 
 
+ROLLED = (0.0, 6.9367, 6.9367)  # m/s²: gravity seen rolled by 45°
+
+
 def _pair():
-    """An estimator and its uncertainty, 6D, started from one still sample (100 Hz)."""
+    """An estimator and its uncertainty, 6D, started from one still sample rolled 45° (100 Hz)."""
     est = AhrsObserver(AhrsParams(), use_mag=False)
     tracker = AttitudeUncertainty.for_estimator(est.params, use_mag=False)
-    est.update((0.0, 0.0, 0.0), (0.0, 0.0, 9.81), None, 0.01)
+    est.update((0.0, 0.0, 0.0), ROLLED, None, 0.01)
     tracker.start(0.01)
     return est, tracker
 
@@ -134,7 +137,8 @@ def _pair():
 def test_the_one_call_sample_step_is_the_general_steps():
     # sample_step (the node's usual sample in one call) against the steps
     # one at a time: the estimate, and the covariance it writes (diag(V_t,
-    # V_t, V_h), zeros elsewhere), through rest (the bias learned) and motion,
+    # V_t, V_h), zeros elsewhere), through rest (the bias learned) and a turn
+    # of 1.75 rad about the body's z (every component of the estimate large),
     # the interval changing now and then.
     one, one_tracker = _pair()
     general, tracker = _pair()
@@ -143,8 +147,8 @@ def test_the_one_call_sample_step_is_the_general_steps():
     for k in range(600):
         moving = k >= 300
         dt = (0.01, 0.005, 0.02)[k // 50 % 3]
-        gyr = tuple(rng.normal(0.0, 0.5 if moving else 0.002, 3))
-        acc = tuple(np.array([0.0, 0.0, 9.81]) + rng.normal(0.0, 0.05, 3))
+        gyr = tuple(rng.normal(0.0, 0.002, 3) + (0.0, 0.0, 0.5 if moving else 0.0))
+        acc = tuple(np.array(ROLLED) + rng.normal(0.0, 0.05, 3))
         outcome, *q = uncertainty_kernel.sample_step(
             one.flat_state, one_tracker.state, cov, *gyr, *acc, dt, 0.01)
         assert outcome == uncertainty_kernel.SAMPLE_OK
@@ -155,6 +159,7 @@ def test_the_one_call_sample_step_is_the_general_steps():
         t, h = tracker.tilt_variance, tracker.heading_variance
         assert tuple(cov) == (t, 0.0, 0.0, 0.0, t, 0.0, 0.0, 0.0, h)
     assert general.rest is False and tracker.heading_variance > 0.0
+    assert min(abs(v) for v in general.q) > 0.15
 
 
 def test_the_one_call_sample_step_refuses_what_it_cannot_run():
@@ -162,7 +167,7 @@ def test_the_one_call_sample_step_refuses_what_it_cannot_run():
     tracker = AttitudeUncertainty.for_estimator(est.params, use_mag=False)
     cov = np.zeros(9)
     step = uncertainty_kernel.sample_step
-    still = (0.0, 0.0, 0.0, 0.0, 0.0, 9.81)
+    still = (0.0, 0.0, 0.0) + ROLLED
     assert step(est.flat_state, tracker.state, cov, *still, 0.01, 0.01)[0] == (
         uncertainty_kernel.SAMPLE_NOT_STARTED)
     est, tracker = _pair()
@@ -171,7 +176,7 @@ def test_the_one_call_sample_step_refuses_what_it_cannot_run():
             uncertainty_kernel.SAMPLE_BAD_DT), dt
     assert not cov.any()  # nothing written
     # The guard: |q̂̄q̂ − 1| above max_residual fails, at it passes.
-    turn = (3.0, -2.0, 1.0, 0.0, 0.0, 9.81)
+    turn = (3.0, -2.0, 1.0) + ROLLED
     _, *q = step(copy.copy(est.flat_state), copy.copy(tracker.state), cov, *turn, 0.01, 1.0)
     residual = abs(sum(v * v for v in q) - 1.0)
     assert residual > 0.0
