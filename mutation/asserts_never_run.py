@@ -9,7 +9,8 @@ holds one under it (a loop or branch whose body never ran: a branch never
 taken leaves its first line unrun). The helpers' error paths (a
 ``pytest.fail`` in a fixture, a timeout's message) are not asserts and are
 not listed, nor the functions the run never entered (a test deselected or
-skipped as a whole: the soak, the two-host bed). The test files must be as
+skipped as a whole: the soak, the two-host bed) or that ended in a skip
+(``importorskip`` of a package PyPI does not have). The test files must be as
 they were during the run. Exits 1 when it lists anything.
 """
 
@@ -26,8 +27,8 @@ def assert_lines(path):
     """
     ``{line: what}`` of ``path``'s asserts and of the statements with one in them, per function.
 
-    Returns ``[(body_lines, {line: what})]``, one per function (the lines of
-    its own body, nested functions apart), so that a function the run never
+    Returns ``[(body_lines, {line: what}, skip_lines)]``, one per function
+    (the lines of its own body, nested functions apart), so that a function the run never
     entered (a test deselected or skipped on purpose: the soak, the two-host
     bed) can be told from a loop or branch that did not run inside one that did.
     """
@@ -37,7 +38,7 @@ def assert_lines(path):
     for function in ast.walk(tree):
         if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef)):
             continue
-        body, lines = set(), {}
+        body, lines, skips = set(), {}, set()
         stack = list(function.body)
         while stack:
             node = stack.pop()
@@ -54,8 +55,10 @@ def assert_lines(path):
                 name = getattr(node.func, 'attr', getattr(node.func, 'id', ''))
                 if name.startswith('assert_') or name == 'raises':
                     lines.setdefault(node.lineno, name)
+                elif name in ('skip', 'importorskip'):
+                    skips.add(node.lineno)
             stack.extend(ast.iter_child_nodes(node))
-        functions.append((body, lines))
+        functions.append((body, lines, skips))
     return functions
 
 
@@ -71,9 +74,11 @@ def main(argv=None):
         path = name if os.path.isabs(name) else os.path.join(REPO, name)
         executed = set(data.get('executed_lines', []))
         missing = set(data.get('missing_lines', []))
-        for body, asserts in assert_lines(path):
+        for body, asserts, skips in assert_lines(path):
             if not body & executed:
                 continue  # never entered: deselected or skipped as a whole
+            if max(body & executed) in skips:
+                continue  # skipped where it stands (pytest.skip, importorskip)
             for line in sorted(missing & set(asserts)):
                 found.append(f'{name}:{line}: never runs ({asserts[line]})')
     for line in found:
