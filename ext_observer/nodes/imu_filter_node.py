@@ -33,10 +33,10 @@ from std_srvs.srv import Trigger
 
 from ext_observer.recordings.calibrate import write_params
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
-from ext_observer.core.ahrs.compiled import BackgroundCompile, start_plan
+from ext_observer.pipeline.kernel_cache import BackgroundCompile, start_plan
 from ext_observer.nodes.estimator_node import EstimatorNode
-from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS, imu_filter_settings,
-                                                MADGWICK_UNUSED)
+from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS,
+                                                         imu_filter_settings, MADGWICK_UNUSED)
 from ext_observer.nodes.node_common import run_node
 from ext_observer.pipeline.pairing import BACKWARD_JUMP
 from ext_observer.pipeline.raw_imu import RawImuPipeline

@@ -85,7 +85,7 @@ import math
 
 import numpy as np
 
-from .ahrs_math import _check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
+from .ahrs_math import check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
 from .ahrs_params import AhrsParams
 from .compiled import kernels
 from .magcal import MagCalibrator
@@ -95,7 +95,6 @@ __all__ = [
     'AhrsParams',
     'MODES',
     'WORLD_FRAMES',
-    'estimate_batch',
     'initial_attitude',
     'world_from_enu',
 ]
@@ -390,7 +389,7 @@ class AhrsObserver:
 
     def _interval(self, dt):
         if dt != self._dt:
-            _check_dt(dt)
+            check_dt(dt)
             self._dt = float(dt)  # a numpy scalar would make every later quantity one
         return self._dt
 
@@ -505,12 +504,9 @@ class AhrsObserver:
             # The last sample's interval, as the kernels hold it (a caller
             # may step them directly: RawImuEstimator's sample_step).
             dt = float(self._states[0][self._kernels.ahrs.C_DT])
-            _check_dt(dt)
+            check_dt(dt)
         elif dt != self._mag_dt:
-            _check_dt(dt)
+            check_dt(dt)
             self._mag_dt = dt
         self._each(self._kernels.ahrs.ahrs_update_mag, mag, float(dt))
 
-
-# The batch runs AhrsObserver, so it is imported once that is defined.
-from .ahrs_batch import estimate_batch  # noqa: E402
