@@ -17,8 +17,8 @@ import dataclasses
 import textwrap
 from typing import Any, Optional, Tuple
 
-__all__ = ['COMMON_PARAMETERS', 'FORWARD_GAP_ACTIONS', 'ParameterSpec', 'common_settings', 'markdown_table', 'ros_type_name', 'spec_from_tunable',
-           'yaml_section']
+__all__ = ['COMMON_PARAMETERS', 'FORWARD_GAP_ACTIONS', 'ParameterSpec', 'common_settings',
+           'markdown_table', 'ros_type_name', 'spec_from_tunable', 'yaml_section']
 
 
 @dataclasses.dataclass(frozen=True)
