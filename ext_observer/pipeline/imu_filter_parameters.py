@@ -25,8 +25,9 @@ from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_set
 from ext_observer.pipeline.raw_imu import (AHRS_PREFIX, ahrs_params, COVARIANCE_PREFIX,
                                            uncertainty_params)
 
-__all__ = ['COVARIANCE_MODES', 'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'MADGWICK_UNUSED',
-           'covariance_estimated', 'covariance_text', 'imu_filter_settings']
+__all__ = ['COMPLEMENTARY_UNUSED', 'COVARIANCE_MODES', 'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS',
+           'IMU_TOOLS_OPTIONS', 'IMU_TOOLS_UNUSED', 'MADGWICK_UNUSED', 'REPLACED_BY',
+           'covariance_estimated', 'covariance_text', 'imu_filter_settings', 'unused_text']
 
 # orientation_covariance of imu/data: the estimate's own, or orientation_stddev²;
 # 'auto' is 'fixed' when orientation_stddev is set to a positive value other
@@ -35,6 +36,33 @@ __all__ = ['COVARIANCE_MODES', 'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'MADGW
 COVARIANCE_MODES = ('auto', 'estimate', 'fixed')
 ORIENTATION_STDDEV = 0.05
 
+# imu_tools' options that this node honours as imu_filter_madgwick does.
+IMU_TOOLS_OPTIONS = (
+    ParameterSpec('publish_debug_topics', False,
+                  'Publish imu/rpy/filtered and imu/rpy/raw (geometry_msgs/Vector3Stamped: '
+                  "roll, pitch, yaw, rad, about fixed x, y, z as tf2's getRPY), as "
+                  "imu_filter_madgwick: filtered is imu/data's orientation, with its header; "
+                  "raw the attitude of the sample's accelerometer and the latest field alone "
+                  '(no filter), in the same world frame. Also imu/steady_state '
+                  "(std_msgs/Bool: rest detected), as imu_complementary_filter's.",
+                  read_only=True),
+    ParameterSpec('publish_tf', False,
+                  "Broadcast the orientation of imu/data on /tf, as imu_filter_madgwick: from "
+                  "fixed_frame to the sample's frame_id, stamped with the sample, no "
+                  'translation. Needs tf2_ros (a ROS installation); without it (the pip '
+                  'wheels) one WARN at start says so. Default false here (true in '
+                  "imu_filter_madgwick, whose own params file sets it).", read_only=True),
+    ParameterSpec('reverse_tf', False,
+                  'With publish_tf: the inverse transform, from the sensor frame to '
+                  'fixed_frame (as imu_filter_madgwick).'),
+    ParameterSpec('fixed_frame', 'odom', 'With publish_tf: the parent frame of the transform '
+                  '(as imu_filter_madgwick).'),
+    ParameterSpec('remove_gravity_vector', False,
+                  'linear_acceleration of imu/data without gravity (9.80665 m/s² along the '
+                  'estimated vertical), in the sensor frame, as imu_filter_madgwick; false: '
+                  'as measured.'),
+)
+
 # imu_filter_madgwick's parameters that this node accepts and does not use,
 # with the value that says what this node does (or Madgwick's default).
 MADGWICK_UNUSED = (
@@ -42,17 +70,36 @@ MADGWICK_UNUSED = (
                   'gains here are the ahrs.* time constants).'),
     ParameterSpec('zeta', 0.0, "imu_filter_madgwick's gyro drift gain: not used (the bias "
                   'is learned at rest, ahrs.tau_rest; in motion, ahrs.tau_bias).'),
-    ParameterSpec('publish_tf', False, "imu_filter_madgwick's TF broadcast: not used (no "
-                  'TF is published; orientation only, on imu/data).'),
-    ParameterSpec('reverse_tf', False, "imu_filter_madgwick's TF direction: not used."),
-    ParameterSpec('fixed_frame', 'odom', "imu_filter_madgwick's TF parent frame: not used."),
-    ParameterSpec('publish_debug_topics', False,
-                  "imu_filter_madgwick's roll/pitch/yaw debug topics: not used."),
-    ParameterSpec('stateless', False, "imu_filter_madgwick's stateless mode: not used."),
-    ParameterSpec('remove_gravity_vector', False,
-                  "imu_filter_madgwick's gravity removal from imu/data: not used (the "
-                  'acceleration goes out as measured).'),
+    ParameterSpec('stateless', False, "imu_filter_madgwick's stateless mode: not used "
+                  '(imu/rpy/raw gives the attitude of each sample alone).'),
 )
+
+# imu_complementary_filter's own parameters: accepted, not used, and named
+# whenever given ('' is "not given": its users' files repeat its defaults,
+# and they are told what replaces each all the same).
+NOT_GIVEN = ''
+COMPLEMENTARY_UNUSED = tuple(
+    ParameterSpec(name, NOT_GIVEN, f"imu_complementary_filter's {what}: not used "
+                  f"(docs/raw_imu.md); '' = not given.", dynamic=True)
+    for name, what in (('gain_acc', 'accelerometer gain'),
+                       ('gain_mag', 'magnetometer gain'),
+                       ('bias_alpha', 'gyro bias gain'),
+                       ('do_bias_estimation', 'gyro bias estimation switch'),
+                       ('do_adaptive_gain', 'adaptive accelerometer gain switch')))
+
+# What replaces each parameter of imu_tools' filters that is not used here
+# (the start-up warning says it beside the name).
+REPLACED_BY = {
+    'gain': 'ahrs.tau_acc_gain and ahrs.tau_mag, time constants in s',
+    'zeta': 'the gyro bias learned at rest, ahrs.tau_rest, and in motion, ahrs.tau_bias',
+    'stateless': 'none: always filtered; imu/rpy/raw is the attitude of each sample alone',
+    'gain_acc': 'ahrs.tau_acc_gain, s',
+    'gain_mag': 'ahrs.tau_mag, s',
+    'bias_alpha': 'ahrs.tau_rest, s',
+    'do_bias_estimation': 'the gyro bias learned at rest and in motion, ahrs.tau_bias',
+    'do_adaptive_gain': 'the accelerometer low-passed in a frame the gyro moves, '
+                        'ahrs.tau_acc: no gain to adapt',
+}
 
 # The node's own parameters (config/imu_filter.yaml lists these).
 IMU_FILTER_OWN = (
@@ -86,8 +133,22 @@ IMU_FILTER_OWN = (
                   constraints='9 finite numbers: symmetric, positive definite.'),
     ParameterSpec('calibration_file', 'mag_calibration.yaml',
                   'Where ~/save_calibration writes the learned calibration (a params '
-                  'file for this node: mag_bias_*, mag_soft_iron), relative to the '
+                  'file for this node: mag_bias_*, mag_soft_iron once the magnetometer '
+                  'calibration has one, and gyro_bias_*), relative to the '
                   "node's working directory."),
+    ParameterSpec('gyro_bias_x', 0.0,
+                  'Gyro bias the estimate starts from (at start and after each reset), x, '
+                  'rad/s, body frame: a saved or known one (~/save_calibration writes the '
+                  "learned one; VQF's setBiasEstimate). Learned from there while "
+                  'gyro_bias_learning; set at runtime, it replaces the current estimate.',
+                  (-1.0, 1.0), constraints='Within ±ahrs.bias_max.'),
+    ParameterSpec('gyro_bias_y', 0.0, 'The same, y, rad/s.', (-1.0, 1.0),
+                  constraints='Within ±ahrs.bias_max.'),
+    ParameterSpec('gyro_bias_z', 0.0, 'The same, z, rad/s.', (-1.0, 1.0),
+                  constraints='Within ±ahrs.bias_max.'),
+    ParameterSpec('gyro_bias_learning', True,
+                  'Learn the gyro bias (at rest, and in motion with ahrs.tau_bias); false '
+                  'holds it where it is (ros2 param set switches it at runtime).'),
     ParameterSpec('orientation_covariance_mode', 'auto',
                   "orientation_covariance of imu/data: 'estimate' (the estimate's own "
                   'covariance, row-major, rad², about the world frame\'s x, y, z axes: '
@@ -125,7 +186,9 @@ IMU_FILTER_OWN = (
     spec_from_tunable(row, COVARIANCE_PREFIX, 'Covariance model (docs/covariance.md)')
     for row in UNCERTAINTY_TABLE)
 
-IMU_FILTER_PARAMETERS = IMU_FILTER_OWN + MADGWICK_UNUSED
+IMU_FILTER_PARAMETERS = (IMU_FILTER_OWN + IMU_TOOLS_OPTIONS + MADGWICK_UNUSED
+                         + COMPLEMENTARY_UNUSED)
+IMU_TOOLS_UNUSED = MADGWICK_UNUSED + COMPLEMENTARY_UNUSED
 
 
 def imu_filter_settings(values):
@@ -161,7 +224,11 @@ def imu_filter_settings(values):
     if values['orientation_covariance_mode'] not in COVARIANCE_MODES:
         raise ValueError(f'orientation_covariance_mode must be one of {COVARIANCE_MODES}, '
                          f'got {values["orientation_covariance_mode"]!r}')
-    ahrs_params(values)
+    params = ahrs_params(values)
+    for axis in 'xyz':
+        if abs(values[f'gyro_bias_{axis}']) > params.bias_max:
+            raise ValueError(f'gyro_bias_{axis} must lie within ±ahrs.bias_max '
+                             f'({params.bias_max:g} rad/s), got {values[f"gyro_bias_{axis}"]}')
     uncertainty_params(values)
     settings = dict(values)
     settings['covariance_estimated'] = covariance_estimated(values)
@@ -198,3 +265,28 @@ def covariance_text(values):
     else:
         why = f'orientation_covariance_mode {mode}'
     return f"orientation_covariance of imu/data: the estimate's own ({why})"
+
+
+def unused_text(values, given):
+    """
+    Name the parameters of imu_tools' filters given and not used, with what replaces each.
+
+    Parameters
+    ----------
+    values : dict
+        Every parameter's value by name.
+    given : set
+        The names given at start-up with a value other than the default.
+
+    Returns
+    -------
+    text : str or None
+        The start-up warning; None when there is nothing to say.
+
+    """
+    names = [spec.name for spec in IMU_TOOLS_UNUSED if spec.name in given]
+    if not names:
+        return None
+    return ("parameters of imu_tools' filters accepted but not used here: "
+            + '; '.join(f'{name}={values[name]!r} (→ {REPLACED_BY[name]})' for name in names)
+            + ' (docs/raw_imu.md)')
