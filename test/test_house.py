@@ -308,3 +308,14 @@ def test_the_offline_path_runs_without_ros(tmp_path):
                           env=env, timeout=300, cwd=str(tmp_path))
     assert done.returncode == 0, done.stdout + done.stderr
     assert 'offline path ran without ROS' in done.stdout
+
+
+def test_the_tree_shows_the_architecture():
+    # At most 8 modules at the top; each subpackage says what lives there.
+    assert len(list(PACKAGE.glob('*.py'))) <= 8
+    for init in PACKAGE.rglob('__init__.py'):
+        text = ast.get_docstring(ast.parse(init.read_text(encoding='utf-8')))
+        assert text and len(text.splitlines()) <= 40, init.relative_to(ROOT)
+    layout = (ROOT / 'docs' / 'layout.md').read_text(encoding='utf-8')
+    for folder in ('core/', 'ahrs/', 'paper/', 'pipeline/', 'nodes/', 'recordings/', 'broad/'):
+        assert folder in layout, folder
