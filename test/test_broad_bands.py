@@ -64,7 +64,7 @@ def test_the_band_is_five_percent_of_the_pages_figure():
 
 @pytest.mark.timeout(300)
 def test_the_discriminating_trials_are_within_five_percent_of_the_page():
-    folder = broad_data_dir()
+    folder = broad_data_dir(TRIALS)
     with open(PAGE, encoding='utf-8') as f:
         reported = page_figures(f.read())
     missing = [t for t in TRIALS if t not in reported]

@@ -535,3 +535,51 @@ def test_publish_tf_broadcasts_the_orientation_where_tf2_ros_imports(ros_context
 def rclpy_time_zero():
     from rclpy.time import Time
     return Time()
+
+
+# The launch file -------------------------------------------------------------------
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+LAUNCH_FILE = os.path.join(REPO, 'launch', 'imu_filter.launch.py')
+
+
+def test_the_launch_file_is_imu_tools_shape_and_installed_by_setup():
+    import ast
+
+    tree = ast.parse(open(LAUNCH_FILE).read())
+    calls = {node.func.attr: node for node in ast.walk(tree)
+             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)}
+    keywords = {k.arg: k.value for k in calls['Node'].keywords}
+    assert {k: ast.literal_eval(keywords[k]) for k in ('package', 'executable', 'name')} == {
+        'package': 'ext_observer', 'executable': 'imu_filter_node', 'name': 'imu_filter'}
+    # imu_tools' shape: the installed config/imu_filter.yaml, overridable.
+    assert ast.literal_eval(calls['DeclareLaunchArgument'].args[0]) == 'params_file'
+    assert "'config'" in ast.unparse(tree) and "'imu_filter.yaml'" in ast.unparse(tree)
+    setup = open(os.path.join(REPO, 'setup.py')).read()
+    assert "'imu_filter_node = ext_observer.nodes.imu_filter_node:main'" in setup
+    assert "glob('launch/*.launch.py')" in setup
+
+
+def test_ros2_launch_starts_the_node_where_launch_ros_imports(ros_processes):
+    import shutil
+
+    pytest.importorskip('launch_ros', reason='launch_ros is not on PyPI: the launch file '
+                        'needs a ROS 2 installation (colcon)')
+    from ament_index_python.packages import (get_package_share_directory,
+                                             PackageNotFoundError)
+    try:
+        share = get_package_share_directory('ext_observer')
+    except PackageNotFoundError:
+        pytest.skip('ext_observer is not installed with colcon in this environment')
+    ros2 = shutil.which('ros2')
+    if ros2 is None:
+        pytest.skip('the ros2 command is not on PATH')
+    assert os.path.exists(os.path.join(share, 'launch', 'imu_filter.launch.py'))
+    process = ros_processes([ros2, 'launch', 'ext_observer', 'imu_filter.launch.py',
+                             f'params_file:={MADGWICK_FILE}'])
+    deadline = time.monotonic() + 30.0
+    while 'raw IMU on /imu/data_raw' not in process.output:
+        assert process.process.poll() is None, process.output
+        assert time.monotonic() < deadline, process.output
+        time.sleep(0.1)
+    assert "the estimate's own" in process.output

@@ -1,14 +1,15 @@
 """
-The parameters of ``imu_filter_node``: the raw-IMU estimator's, and imu_filter_madgwick's.
+The parameters of ``imu_filter_node``: the raw-IMU estimator's, and imu_tools'.
 
-A params file or launch file written for ``imu_filter_madgwick_node`` starts
-``imu_filter_node`` unchanged: every parameter of imu_filter_madgwick is
-declared here. Those with the same meaning are honoured (``use_mag``,
-``world_frame``, ``constant_dt``, ``mag_bias_*``, ``orientation_stddev``,
-``declination``, ``yaw_offset``); those of Madgwick's filter or of features
-this node does not have (:data:`MADGWICK_UNUSED`: ``gain``, ``zeta``,
-``publish_tf``, ...) are accepted, and named in one start-up warning when
-given. The estimator's own gains are the ``ahrs.*`` parameters and the
+A params file or launch file written for ``imu_filter_madgwick_node`` or
+imu_complementary_filter's ``complementary_filter_node`` starts
+``imu_filter_node`` unchanged: every parameter of both is declared here.
+Those with the same meaning are honoured (``use_mag``, ``world_frame``,
+``constant_dt``, ``mag_bias_*``, ``orientation_stddev``, ``declination``,
+``yaw_offset``, :data:`IMU_TOOLS_OPTIONS`); those of their filters' gains
+(:data:`IMU_TOOLS_UNUSED`: ``gain``, ``zeta``, ``gain_acc``,
+``do_bias_estimation``, ...) are accepted, and named in one start-up warning
+with what replaces each (:func:`unused_text`). The estimator's own gains are the ``ahrs.*`` parameters and the
 noise of the model behind the published covariance the ``covariance.*``
 ones: each a row of the core's table
 (:data:`~ext_observer.core.ahrs.ahrs_params.AHRS_TABLE`,

@@ -30,7 +30,7 @@ from ext_observer.core.ahrs.ahrs_params import AhrsParams
 from ext_observer.core.ahrs.estimator import AhrsObserver
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty
 
-__all__ = ['BackgroundCompile', 'cache_ready', 'load', 'main', 'start_plan']
+__all__ = ['BackgroundCompile', 'cache_ready', 'load', 'main', 'preload', 'start_plan']
 
 _LOADED = None
 
@@ -80,6 +80,23 @@ def load():
     k.load_seconds = time.perf_counter() - start
     _LOADED = k
     return k
+
+
+def preload():
+    """
+    The kernels this process will run (``EXT_OBSERVER_COMPILED``), compiled ones ready now.
+
+    :func:`load` where the compiled kernels are wanted; the plain ones where
+    they are not, or where numba fails and they are not required.
+    """
+    want, required = compiled.wanted(None)
+    if want:
+        try:
+            return load()
+        except Exception:  # numba missing or failing: as kernels() falls back
+            if required:
+                raise
+    return compiled.kernels()
 
 
 def _warm_up(k):

@@ -46,6 +46,7 @@ import time
 
 import numpy as np
 
+from ext_observer.core.ahrs.compiled import warn_if_plain
 from ext_observer.recordings.bag_io import BagReader, STORAGES
 from ext_observer.recordings.bag_worker import (BagEstimator, BagSide, fork_context, forked,
                                                in_process)
@@ -355,6 +356,7 @@ def report(run, out):
 def main(argv=None):
     """Run ``python -m ext_observer bag``; return the exit code."""
     args = build_parser().parse_args(argv)
+    warn_if_plain()
     try:
         parameters = parameters_from_options(args)
         run = run_bag(args.bag, args.out, imu_topic=args.imu_topic, mag_topic=args.mag_topic,
