@@ -43,7 +43,7 @@ demo: $(RUNTIME_STAMP)
 # Then the estimator's own tests again on the plain kernels (no numba):
 # the compiled kernels are used wherever numba is installed, and the plain
 # path is what a pip install without numba runs.
-PLAIN_TESTS := test/test_core_ahrs.py test/test_core_ahrs_params.py test/test_core_magcal.py \
+PLAIN_TESTS := test/test_core_ahrs.py test/test_core_ahrs_params.py test/test_core_ahrs_robust.py test/test_core_magcal.py \
 	test/test_raw_imu.py test/test_compiled.py test/test_covariance.py test/test_recording.py
 
 test: $(TEST_STAMP)

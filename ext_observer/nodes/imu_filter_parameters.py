@@ -44,9 +44,18 @@ _AHRS_DOCS = {
     'tau_mag': ('time constant of the heading correction from the magnetometer (κ_m), s '
                 '(the gain of each field follows from the interval since the previous '
                 'field).', (0.0, 1e4), 'Positive.'),
-    'tau_bias': ('time constant of the gyro bias estimate in motion, s; 0 turns it off.',
-                 (0.0, 1e6), 'At least 0.'),
+    'tau_bias': ('time constant of the gyro bias estimate in steady motion (a Kalman filter '
+                 'on the inclination and heading corrections), s; 0 turns learning in '
+                 'motion off.', (0.0, 1e6), 'At least 0.'),
     'bias_max': ('largest gyro bias estimate per axis, rad/s.', (0.0, 10.0), 'Positive.'),
+    'bias_sigma_init': ('σ of the gyro bias before anything is learned, rad/s per axis '
+                        '(the most its uncertainty grows to).', (0.0, 10.0), 'Positive.'),
+    'bias_sigma_motion': ('σ of the gyro bias estimate in steady motion, rad/s: with '
+                          'tau_bias, how noisy a correction is taken to be.', (0.0, 10.0),
+                          'Positive.'),
+    'gyro_range': ("the gyro's measuring range per axis, rad/s, where the driver knows it "
+                   '(a sample at it is clipped); 0: unknown, a rate stuck at the largest '
+                   'magnitude seen is taken as clipped.', (0.0, 1e3), 'At least 0.'),
     'rest_gyr': ('rest detection: threshold on the angular rate, rad/s.', (0.0, 10.0),
                  'Positive.'),
     'rest_acc': ('rest detection: threshold on the deviation of the specific force, '

@@ -28,12 +28,23 @@ class AhrsParams:
     tau_mag : float
         Time constant (s) of the heading correction (``κ_m``).
     tau_bias : float
-        Time constant (s) of the bias estimate in motion; 0 (the default)
-        turns it off: under rotation the filtered corrections average the
-        bias over many body orientations, and on the tuning trials it did
-        not help (docs/broad_tuning.md). The bias is then learned at rest.
+        Time constant (s) of the bias estimate in steady motion: a Kalman
+        filter on the inclination (and in 9D heading) corrections (VQF's
+        idea), whose bias may wander by ``bias_sigma_motion`` in this time;
+        0 turns learning in motion off (the bias is then learned at rest
+        only).
     bias_max : float
         Largest bias estimate (rad/s), per axis.
+    bias_sigma_init : float
+        σ of the gyro bias before anything is learned (rad/s, per axis), and
+        the most it grows to.
+    bias_sigma_motion : float
+        σ of the bias estimate in steady motion (rad/s): with ``tau_bias``
+        it sets how noisy a correction rate is taken to be.
+    gyro_range : float
+        The gyro's measuring range (rad/s, per axis) where the driver knows
+        it; a sample at it is clipped. 0: unknown (a rate stuck at the
+        largest magnitude seen is taken as clipped).
     rest_gyr : float
         Rest threshold on the angular rate (rad/s).
     rest_acc : float
@@ -100,8 +111,11 @@ class AhrsParams:
         tau_acc=2.0,
         tau_acc_gain=0.05,
         tau_mag=15.0,
-        tau_bias=0.0,
+        tau_bias=100.0,
         bias_max=math.radians(2.0),
+        bias_sigma_init=math.radians(0.5),
+        bias_sigma_motion=math.radians(0.07),
+        gyro_range=0.0,
         rest_gyr=math.radians(2.0),
         rest_acc=0.5,
         rest_time=1.5,
@@ -136,7 +150,7 @@ class AhrsParams:
             value = float(value)
             if not math.isfinite(value):
                 raise ValueError(f'{name} must be finite, got {value}')
-            if name in ('tau_bias', 'mag_cal_delay', 'mag_cal_drift'):
+            if name in ('tau_bias', 'mag_cal_delay', 'mag_cal_drift', 'gyro_range'):
                 if value < 0.0:
                     raise ValueError(f'{name} must be >= 0 (0: off), got {value}')
             elif not value > 0.0:
