@@ -13,7 +13,8 @@ BENCH_STAMP := $(VENV)/.ext_observer-bench
 # Every process that starts a ROS node stays on this machine.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-.PHONY: all venv demo test coverage reproduce bench broad broad-data docs test-hosts hosts-report clean
+.PHONY: all venv demo test coverage reproduce bench broad broad-data docs test-hosts hosts-report clean \
+	mutation mutation-list
 
 all: test
 
@@ -113,6 +114,28 @@ test-hosts:
 
 hosts-report: $(RUNTIME_STAMP)
 	$(PY) test/hosts_report.py
+
+# Faults that matter (issue 31, docs/tests.md#mutation): `make mutation-list`
+# applies each mutant of mutation/mutants.toml in a copy of the tree and runs
+# its tests (every one must be killed; about 5 minutes; MUTANTS="name ..."
+# runs some). `make mutation` runs mutmut over the raw-IMU kernels, the
+# calibration, the uncertainty and the pairing rules with their fast tests,
+# in out/mutmut/ (resumable; hours for all of it on 2 cores:
+# MUTATION_ARGS="pairing.py" runs one module, "--report" prints the score).
+# Neither is part of make test or CI.
+MUTATION_STAMP := $(VENV)/.ext_observer-mutation
+MUTANTS ?=
+MUTATION_ARGS ?=
+
+$(MUTATION_STAMP): requirements-mutation.txt $(TEST_STAMP)
+	$(PIP) install -r requirements-mutation.txt
+	touch $@
+
+mutation-list: $(TEST_STAMP)
+	$(PY) mutation/run_mutants.py $(MUTANTS)
+
+mutation: $(MUTATION_STAMP)
+	$(PY) mutation/run_mutmut.py $(MUTATION_ARGS)
 
 clean:
 	rm -rf $(VENV) build install log out .pytest_cache .hypothesis *.egg-info

@@ -18,9 +18,12 @@ Inputs
 Steps
     Sample ``k`` runs :meth:`AhrsObserver.update
     <ext_observer.core.ahrs.estimator.AhrsObserver.update>` with its own angular
-    velocity and acceleration and ``dt = t_k − t_{k−1}`` (``constant_dt``
-    when set); the first sample of a time line only sets ``t_0``, the second
-    initializes the estimate from gravity (and the latest field). A field
+    velocity and acceleration and ``dt = t_k − t_{k−1}``; the first sample of
+    a time line only sets ``t_0``, the second initializes the estimate from
+    gravity (and the latest field). With ``constant_dt > 0`` every sample
+    answers, in the order it arrives, whatever its stamp (imu_filter_madgwick's
+    ``constant_dt``): the first of a time line initializes the estimate, each
+    further one runs a step of ``dt = constant_dt``. A field
     corrects the heading when it arrives
     (:meth:`~ext_observer.core.ahrs.estimator.AhrsObserver.update_mag`, the latest field
     only, with the hard-iron offset ``mag_bias_*`` removed and the interval
@@ -67,7 +70,7 @@ from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, covariance_o
 from ext_observer.core.ahrs.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_OK, SAMPLE_RESIDUAL
 from ext_observer.core.validation import check_state
 from ext_observer.pipeline.guard import GUARD_REASONS
-from ext_observer.pipeline.pairing import BACKWARD_JUMP, StepPairer
+from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
 
 __all__ = ['AHRS_PREFIX', 'COVARIANCE_PREFIX', 'Estimate', 'RESET_CAUSES', 'RawImuEstimator',
@@ -176,7 +179,8 @@ def pairing_settings(settings):
                 backward_jump=round(settings['backward_jump_threshold'] * SECOND),
                 forward_gap=round(settings['forward_gap_threshold'] * SECOND),
                 max_dt=round(settings['max_dt'] * SECOND),
-                constant_dt=settings['constant_dt'])
+                constant_dt=settings['constant_dt'],
+                arrival_order=settings['constant_dt'] > 0.0)
 
 
 # sample_step's outcomes as check_state's reasons (a step that raised: step_failed).
@@ -219,6 +223,8 @@ class RawImuEstimator:
         self.latest_field = None
         self._fields_used = 0
         self._calibrated = True
+        self._gyro_bias = None
+        self._held_bias = None
         self.configure(settings)
 
     def configure(self, settings):
@@ -255,6 +261,19 @@ class RawImuEstimator:
                             else tuple(np.linalg.inv(soft_iron).ravel().tolist()))
         self._frame = heading_factor(self.world_frame, settings['declination'],
                                      settings['yaw_offset'])
+        # The gyro bias given (gyro_bias_*, rad/s): the estimate starts from
+        # it, now and after each reset; gyro_bias_learning false holds the
+        # bias where it is.
+        gyro_bias = tuple(float(settings.get(f'gyro_bias_{axis}', 0.0)) for axis in 'xyz')
+        if gyro_bias != self._gyro_bias:
+            self._gyro_bias = gyro_bias
+            self.core.bias = gyro_bias
+            if self._held_bias is not None:
+                self._held_bias = gyro_bias
+        if settings.get('gyro_bias_learning', True):
+            self._held_bias = None
+        elif self._held_bias is None:
+            self._held_bias = self.core.bias
 
     def field(self, field, dt=None):
         """
@@ -362,12 +381,16 @@ class RawImuEstimator:
         except (ValueError, OverflowError, ZeroDivisionError):
             outcome = None
         if outcome == SAMPLE_OK:
+            if self._held_bias is not None:
+                core.bias = self._held_bias
             return ((w, x, y, z) if self._frame is None
                     else multiply_floats(self._frame, (w, x, y, z))), None
         state, reason = self._general_step(  # failed the guard, or did not run
             gyr, acc, dt, 'step_failed' if outcome is None else _SAMPLE_REASONS.get(outcome))
         if covariance is not None:
             covariance[:] = self.uncertainty.covariance
+        if self._held_bias is not None:
+            core.bias = self._held_bias
         return state, reason
 
     def _general_step(self, gyr, acc, dt, reason=None):
@@ -383,6 +406,7 @@ class RawImuEstimator:
                 reason = check_state(q, None, self.max_residual)
         if reason is not None:
             core.reset()
+            core.bias = self._start_bias
             q = core.update(gyr, acc, self.latest_field, dt)
             starting = True
         if starting:
@@ -401,6 +425,11 @@ class RawImuEstimator:
             self._track_field(None, self.latest_field)
 
     @property
+    def frame(self):
+        """The left factor from the core's ENU estimate to the published one (None: identity)."""
+        return self._frame
+
+    @property
     def state(self):
         """The estimate in ``world_frame`` (ambient), or None before the first step."""
         q = self.core.q
@@ -409,9 +438,19 @@ class RawImuEstimator:
         return multiply_floats(self._frame, q)
 
     def reset(self):
-        """Forget the estimate: the next step initializes it again."""
+        """Forget the estimate: the next step initializes it again (from the bias given)."""
         self.core.reset()
+        self.core.bias = self._start_bias
         self.uncertainty.reset()
+
+    @property
+    def _start_bias(self):
+        return self._gyro_bias if self._held_bias is None else self._held_bias
+
+    @property
+    def bias_learning(self):
+        """Whether the gyro bias is learned (``gyro_bias_learning``), else held."""
+        return self._held_bias is None
 
     @property
     def covariance(self):
@@ -441,6 +480,7 @@ class RawImuEstimator:
                 ('initialized', q is not None), ('bias_x', float(bx)),
                 ('bias_y', float(by)), ('bias_z', float(bz)), ('bias_std_x', float(sx)),
                 ('bias_std_y', float(sy)), ('bias_std_z', float(sz)), ('rest', bool(core.rest)),
+                ('bias_learning', self._held_bias is None),
                 ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
                 ('inclination_std_deg',
                  math.degrees(tracker.inclination_std) if started else math.nan),
@@ -492,7 +532,7 @@ class RawImuPipeline:
     Parameters
     ----------
     settings : dict
-        The settings of ``imu_filter_node`` (:func:`~ext_observer.nodes.imu_filter_parameters.
+        The settings of ``imu_filter_node`` (:func:`~ext_observer.pipeline.imu_filter_parameters.
         imu_filter_settings`).
     depth : int
         Most inputs waiting (the node's ``queue_depth``).
@@ -564,10 +604,20 @@ class RawImuPipeline:
 
         """
         self.units.imu(gyr, acc)
-        outcome, steps = self.pairer.add_sample(stamp, gyr, acc)
+        pairer = self.pairer
+        outcome, steps = pairer.add_sample(stamp, gyr, acc)
         if outcome == BACKWARD_JUMP:
             self.reset('backward_jump')
         estimate = None
+        if (not steps and self._constant_dt > 0.0 and outcome in (None, BACKWARD_JUMP)
+                and pairer.last_stamp is None and pairer.pending_stamp == stamp):
+            # constant_dt: the first sample of a time line answers too, the
+            # estimate initialized from it (the next one steps from there).
+            step = Step(stamp, (0.0, 0.0, 0.0), None, None, False, False, stamp)
+            state, reason = self.estimator.step(gyr, acc, self._constant_dt, covariance)
+            return outcome, Estimate(stamp, state, reason, step,
+                                     self.estimator.uncertainty.covariance
+                                     if covariance is None else covariance)
         for step in steps:
             if step.end != stamp:
                 # Cannot happen: a step is released by the sample that closes it.
