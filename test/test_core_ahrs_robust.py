@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
-from test_core_ahrs_params import DT, qexp, RATE, simulate, still, tilt_deg, turning, wandering
+from test_core_ahrs_params import (angle_deg, DT, FIELD, first_index, qexp, RATE, rotated_field,
+                                   simulate, still, tilt_deg, turning, wandering)
 
 DEG = math.pi / 180.0
 
@@ -97,3 +98,25 @@ def test_a_slow_constant_turn_in_6d():
     out = biases(AhrsObserver(AhrsParams(rest_gyr=0.5 * DEG), use_mag=False), gyr, acc)
     assert not any(rest for _, rest in out[:turn_end + 1])
     assert max(abs(b[2]) for b, _ in out[:turn_end + 1]) == 0.0
+
+
+def test_references_from_a_start_beside_a_magnet_are_replaced_soon():
+    # The body starts turning beside a magnet (the field 40 % stronger and
+    # 25° off for its first 0.5 s), then goes on in the true field: the
+    # references the first field set were confirmed for 0.5 s only, so the
+    # true field replaces them after about that long (not mag_new_time,
+    # 20 s), and the heading follows it.
+    near = rotated_field((0.0, 0.0, 1.0), math.radians(25.0), 1.4)
+
+    def field(k):
+        return near if k * DT < 0.5 else FIELD
+
+    truth, gyr, acc, mag = simulate(turning(6.0, 0.5), q0=qexp((0.2, 0.1, 0.0)), field=field)
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True)
+    out = [(est.update(gyr[k], acc[k], mag[k], DT), est.mag_disturbed) for k in range(len(gyr))]
+    disturbed = [d for _, d in out]
+    assert disturbed[round(0.6 * RATE)]
+    accepted = first_index(disturbed[round(0.6 * RATE):], False) * DT + 0.6
+    assert 0.9 < accepted < 1.3
+    assert max(angle_deg(q, truth[k]) for k, (q, _) in enumerate(out)
+               if k * DT > 5.0) < 2.0

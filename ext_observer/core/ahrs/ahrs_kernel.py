@@ -603,6 +603,10 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     accept_new = disturbed and (s[S_CAND_TIME] >= min(s[P_MAG_NEW_TIME], s[S_REF_AGE]))
     if accept_new:
         ref_n, ref_d = s[S_CAND], s[S_CAND + 1]
+        if s[S_REF_AGE] < s[P_MAG_NEW_TIME]:
+            # The fields the heading followed so far were the disturbed
+            # ones: its running mean starts again from the new field.
+            s[S_MAG_USED] = 0.0
         s[S_REF_AGE] = s[S_CAND_TIME]
     disturbed = disturbed and not accept_new
     use = valid and not disturbed and s[P_USE_MAG] != 0.0
