@@ -14,7 +14,11 @@ says so (``fixed``; ``auto``, the default, when it is set); only while
 subscribed) and ``attitude_estimate``
 (``QuaternionStamped``, the ambient estimate, not normalized: its distance
 to S³ is what the extension term holds small); ``/diagnostics`` every
-``diagnostic_period``; the service ``~/reset`` (``std_srvs/Trigger``).
+``diagnostic_period``; as imu_filter_madgwick, with ``publish_debug_topics``
+``imu/rpy/filtered``, ``imu/rpy/raw`` (and ``imu/steady_state``), with
+``publish_tf`` the orientation on ``/tf`` where tf2_ros imports; the services
+``~/reset`` and ``~/save_calibration`` (``std_srvs/Trigger``: the gyro bias and
+the magnetometer calibration as a params file).
 
 The estimator is :class:`~ext_observer.pipeline.raw_imu.RawImuPipeline` (validation,
 stamps, the core's :class:`~ext_observer.core.ahrs.estimator.AhrsObserver`); this node
@@ -22,7 +26,7 @@ turns messages into its inputs and its estimates into messages, and says
 what went wrong: drops, resets, a silent IMU, a missing magnetometer, and
 values that only a wrong unit explains (:mod:`ext_observer.pipeline.units`). The
 parameters are :data:`~ext_observer.pipeline.imu_filter_parameters.IMU_FILTER_PARAMETERS`,
-imu_filter_madgwick's among them (``docs/raw_imu.md``).
+imu_tools' two filters' among them (``docs/raw_imu.md``).
 """
 
 import os
@@ -35,7 +39,7 @@ from std_srvs.srv import Trigger
 
 from ext_observer.recordings.calibrate import write_params
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
-from ext_observer.core.ahrs.compiled import BackgroundCompile, start_plan
+from ext_observer.core.ahrs.compiled import BackgroundCompile, plain_warning, start_plan
 from ext_observer.nodes.estimator_node import EstimatorNode
 from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
                                                          imu_filter_settings, unused_text)
@@ -145,6 +149,8 @@ class ImuFilterNode(EstimatorNode):
             f'{self.pipeline.estimator.core.params}')
         logger.info(covariance_text(settings))
         self.compiler = None
+        if plan == 'plain' and plain_warning():
+            logger.warning(plain_warning())
         if plan == 'background':
             self.compiler = BackgroundCompile()
             self._compile_timer = self.create_timer(0.1, self.compile_timer_callback)

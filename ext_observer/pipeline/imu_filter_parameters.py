@@ -1,14 +1,15 @@
 """
-The parameters of ``imu_filter_node``: the raw-IMU estimator's, and imu_filter_madgwick's.
+The parameters of ``imu_filter_node``: the raw-IMU estimator's, and imu_tools'.
 
-A params file or launch file written for ``imu_filter_madgwick_node`` starts
-``imu_filter_node`` unchanged: every parameter of imu_filter_madgwick is
-declared here. Those with the same meaning are honoured (``use_mag``,
-``world_frame``, ``constant_dt``, ``mag_bias_*``, ``orientation_stddev``,
-``declination``, ``yaw_offset``); those of Madgwick's filter or of features
-this node does not have (:data:`MADGWICK_UNUSED`: ``gain``, ``zeta``,
-``publish_tf``, ...) are accepted, and named in one start-up warning when
-given. The estimator's own gains are the ``ahrs.*`` parameters and the
+A params file or launch file written for ``imu_filter_madgwick_node`` or
+imu_complementary_filter's ``complementary_filter_node`` starts
+``imu_filter_node`` unchanged: every parameter of both is declared here.
+Those with the same meaning are honoured (``use_mag``, ``world_frame``,
+``constant_dt``, ``mag_bias_*``, ``orientation_stddev``, ``declination``,
+``yaw_offset``, :data:`IMU_TOOLS_OPTIONS`); those of their filters' gains
+(:data:`IMU_TOOLS_UNUSED`: ``gain``, ``zeta``, ``gain_acc``,
+``do_bias_estimation``, ...) are accepted, and named in one start-up warning
+with what replaces each (:func:`unused_text`). The estimator's own gains are the ``ahrs.*`` parameters and the
 noise of the model behind the published covariance the ``covariance.*``
 ones: each a row of the core's table
 (:data:`~ext_observer.core.ahrs.ahrs_params.AHRS_TABLE`,
@@ -91,12 +92,14 @@ COMPLEMENTARY_UNUSED = tuple(
 # (the start-up warning says it beside the name).
 REPLACED_BY = {
     'gain': 'ahrs.tau_acc_gain and ahrs.tau_mag, time constants in s',
-    'zeta': 'the gyro bias learned at rest, ahrs.tau_rest, and in motion, ahrs.tau_bias',
+    'zeta': 'the gyro bias learned at rest, ahrs.tau_rest, and in motion, ahrs.tau_bias; '
+            'gyro_bias_learning switches it',
     'stateless': 'none: always filtered; imu/rpy/raw is the attitude of each sample alone',
     'gain_acc': 'ahrs.tau_acc_gain, s',
     'gain_mag': 'ahrs.tau_mag, s',
     'bias_alpha': 'ahrs.tau_rest, s',
-    'do_bias_estimation': 'the gyro bias learned at rest and in motion, ahrs.tau_bias',
+    'do_bias_estimation': 'the gyro bias learned at rest and in motion, ahrs.tau_bias; '
+                          'gyro_bias_learning switches it',
     'do_adaptive_gain': 'the accelerometer low-passed in a frame the gyro moves, '
                         'ahrs.tau_acc: no gain to adapt',
 }
