@@ -11,8 +11,10 @@ tests fail, *survived* when they pass. Every snippet is checked first: one
 that is not found exactly once stops the run (exit 2) before anything runs,
 so a list that no longer fits the code cannot pass silently.
 
-Prints one line per mutant and a summary; exits 0 only when every mutant
-run was killed. ``--json FILE`` writes the results. Needs BROAD for a test
+First the tests of all the mutants run once on the tree as it is, the same
+way (they must pass, or a kill would say nothing; ``--no-baseline`` skips
+it). Prints one line per mutant and a summary; exits 0 only when every
+mutant run was killed. ``--json FILE`` writes the results. Needs BROAD for a test
 on real data (the folder the tests would use, passed on).
 """
 
@@ -103,7 +105,8 @@ def run_one(mutant, timeout, extra=()):
     """Return ``(outcome, seconds, tail of the output)``: killed, survived, timeout or error."""
     with tempfile.TemporaryDirectory(prefix=f"mutant-{mutant['name']}-") as tree:
         copy_tree(tree)
-        apply(mutant, tree)
+        if mutant['original'] is not None:
+            apply(mutant, tree)
         env = environment(tree)
         # The copy, not the editable install, must be what runs.
         where = subprocess.run([sys.executable, '-c', 'import ext_observer; '
@@ -132,6 +135,8 @@ def main(argv=None):
     parser.add_argument('--list', action='store_true', help='check and list, run nothing')
     parser.add_argument('--timeout', type=float, default=1200.0, help='per mutant (s)')
     parser.add_argument('--json', help='write the results here')
+    parser.add_argument('--no-baseline', action='store_true',
+                        help='skip the run of the tests on the tree as it is')
     args = parser.parse_args(argv)
     mutants = load()
     problems = check(mutants)
@@ -148,6 +153,18 @@ def main(argv=None):
         for m in mutants:
             print(f"{m['name']}: {m['file']} ({' '.join(m['tests'])})")
         return 0
+    if not args.no_baseline:
+        # The tests must pass on the tree as it is, the same way, or a
+        # "kill" says nothing.
+        tests = sorted({t for m in mutants for t in m['tests']})
+        outcome, seconds, tail = run_one(dict(name='baseline', original=None, tests=tests),
+                                         args.timeout)
+        verdict = 'pass' if outcome == 'survived' else outcome
+        print(f'baseline: the tests on the tree as it is: {verdict} ({seconds:.0f} s)',
+              flush=True)
+        if outcome != 'survived':
+            print('    ' + tail.replace('\n', '\n    '))
+            return 2
     results = []
     for m in mutants:
         outcome, seconds, tail = run_one(m, args.timeout)

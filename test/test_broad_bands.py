@@ -4,9 +4,10 @@ The BROAD trials that move most when the estimator breaks, each held to ±5 % of
 Chosen by a measured criterion (docs/tests.md#real-data-that-discriminates,
 ``mutation/trial_sensitivity.py``): for each estimator mutant of
 mutation/mutants.toml that moves some trial beyond the band but does not
-break every trial, the two trials it moves most. The expected values are read from the per-trial table of
-docs/broad.md when the test runs, never typed here: whoever changes the
-estimator regenerates the page (``make broad``) and the bands move with it.
+break every trial, the two trials it moves most. The expected values are
+read from the per-trial table of docs/broad.md when the test runs, never
+typed here: whoever changes the estimator regenerates the page
+(``make broad``) and the bands move with it.
 The 9D total RMSE and the 6D inclination RMSE of each trial, our estimator
 with its shipped defaults through the benchmark's own path, must be within
 5 % of the page's figure (plus its rounding to 0.01°).
@@ -54,7 +55,8 @@ def test_the_band_is_five_percent_of_the_pages_figure():
                       COLUMNS[('6D', 'inclination_rmse_deg')]: '1.00'}}
 
     def measured(total, inclination):
-        return {'a': {'9D': {'total_rmse_deg': total}, '6D': {'inclination_rmse_deg': inclination}}}
+        return {'a': {'9D': {'total_rmse_deg': total},
+                      '6D': {'inclination_rmse_deg': inclination}}}
 
     assert outside(measured(2.0 * 1.05 + 0.004, 1.0), reported) == []
     assert outside(measured(2.0 * 0.95 - 0.004, 1.0 * 1.05), reported) == []

@@ -29,9 +29,13 @@ renormalizes it. Each sample runs three steps, each a short function:
     accepted after ``mag_new_time``.
 
 The gyro bias is learned at rest (rest detected from the gyro and the
-accelerometer) and, with ``tau_bias > 0`` (off by default), in motion from
-the corrections: a constant bias makes the estimate drift, so the body-frame
-correction averages ``−(b − b̂) dt``.
+accelerometer) and, with ``tau_bias > 0`` (the default), in motion by a
+Kalman filter on the bias (VQF's idea; its own 3×3 covariance, σ
+``bias_std``): a bias error ``β`` turns the estimate by ``R β dt`` per
+sample, the inclination corrections take it back through the
+accelerometer's low-pass, so the correction rate measures ``β`` through
+the low-passed ``R`` (in 9D the heading's corrections through its vertical
+row); see docs/raw_imu.md for what 6D cannot tell apart.
 
 In 9D the magnetometer is calibrated online (``mag_cal``, on by default):
 :class:`~ext_observer.core.ahrs.magcal.MagCalibrator` learns hard and soft
@@ -330,6 +334,30 @@ class AhrsObserver:
         for i, s in enumerate(self._states):
             for j in range(size):
                 s[offset + j] = float(value[j] if self.batch is None else value[j][i])
+
+    @property
+    def bias_std(self):
+        """σ of the gyro bias estimate per body axis (rad/s): its Kalman filter's."""
+        k = self._kernels.ahrs
+        if self.batch is None:
+            s = self._states[0]
+            return tuple(math.sqrt(max(float(k.bias_variance(s, i, i)), 0.0)) for i in range(3))
+        return tuple(np.array([math.sqrt(max(float(k.bias_variance(s, i, i)), 0.0))
+                               for s in self._states]) for i in range(3))
+
+    @property
+    def bias_variance(self):
+        """
+        The mean variance of the bias estimate over the body axes, (rad/s)²; None when off.
+
+        None where the bias is not learned in motion (``tau_bias`` 0): the
+        covariance then keeps its own model of it.
+        """
+        if not self.params.tau_bias > 0.0 if self.batch is None else not np.all(
+                np.asarray(self.params.tau_bias) > 0.0):
+            return None
+        x, y, z = self.bias_std
+        return (x * x + y * y + z * z) / 3.0
 
     @property
     def rest(self):

@@ -283,7 +283,7 @@ class AttitudeUncertainty:
 
     # --- the steps ---------------------------------------------------------
 
-    def step(self, dt, gyr, q, rest):
+    def step(self, dt, gyr, q, rest, bias_var=None):
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
@@ -300,6 +300,11 @@ class AttitudeUncertainty:
             any nonzero norm (for the rate's world components).
         rest : bool or ndarray
             Whether the estimator detected rest (and learned the bias).
+        bias_var : float or ndarray, optional
+            The estimator's own bias variance, (rad/s)² per axis (its
+            Kalman filter's, :attr:`AhrsObserver.bias_std
+            <ext_observer.core.ahrs.estimator.AhrsObserver.bias_std>`): the
+            model's is at least that. None: the model's alone.
 
         """
         if dt != self._u[U_DT]:
@@ -312,6 +317,9 @@ class AttitudeUncertainty:
                                           1.0 if rest else 0.0)
         else:
             self._kernel.uncertainty_step(self._u, dt, gx, gy, gz, w, x, y, z, rest)
+        if bias_var is not None:
+            self._kernel.uncertainty_bias(
+                self._u, float(bias_var) if self._compiled else bias_var)
 
     def field(self, dt, gain, calibration=0.0, reference=math.nan):
         """
