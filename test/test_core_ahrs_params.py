@@ -1,5 +1,5 @@
 """
-Known answers for the raw-IMU estimator's parameters (core/ahrs.py), no ROS.
+Known answers for the raw-IMU estimator's parameters (core/ahrs/estimator.py), no ROS.
 
 Each test builds synthetic samples with a known truth (noise-free, or with a
 seeded rng), runs :class:`AhrsObserver` on floats with explicit parameters,

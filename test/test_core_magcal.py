@@ -1,5 +1,5 @@
 """
-The online magnetometer calibration (core/magcal.py), in the estimator and offline.
+The online magnetometer calibration (core/ahrs/magcal.py), in the estimator and offline.
 
 Synthetic motion with a known distortion ``m_raw = S m + b``, a world-fixed
 disturbance, bad samples and bad saved values, the estimator with the
@@ -17,7 +17,8 @@ import pytest
 
 from ext_observer.recordings import calibrate
 from ext_observer.core import quaternion as quat
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams, estimate_batch
+from ext_observer.core.ahrs.ahrs_batch import estimate_batch
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.magcal import check_calibration, MagCalibrator
 from test_core_ahrs import errors_deg, FIELD, RATE, rotate, synthetic
 

@@ -8,7 +8,7 @@ whose items may also be numpy arrays ``(B,)`` for many recordings at once:
 the arithmetic has no branch on them) or compiled by numba on a float64
 array (:mod:`~ext_observer.core.ahrs.compiled` joins this file to the
 estimator's kernels), as :mod:`~ext_observer.core.ahrs.ahrs_kernel` is. The
-model is :mod:`~ext_observer.core.ahrs.uncertainty`'s docstring.
+model is docs/covariance.md's ("The model").
 
 :func:`sample_step` is what the node runs for the usual sample of an
 estimate that exists: the estimator's step
