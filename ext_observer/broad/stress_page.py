@@ -125,17 +125,30 @@ def _variants():
     ]
 
 
+_ANCHOR_NOTES = {
+    'VQF': 'VQF (`vqf`, causal `updateBatch`)',
+    'BasicVQF': 'BasicVQF (`vqf`)',
+    'Madgwick': f'Madgwick (`ahrs`, β = {MADGWICK_BETA}, started from the first sample)',
+    'Mahony': 'Mahony (`ahrs`)',
+    'Fusion': 'Fusion (`imufusion`)',
+}
+
+
 def _scoring(meta):
-    anchors = ', '.join(a for a in meta.get('anchors', ()))
+    anchors = [_ANCHOR_NOTES[a] for a in meta.get('anchors', ())]
+    params = meta.get('params')
+    ours = 'ours with its shipped defaults (`AhrsParams()`' + (
+        ': ' + ', '.join(f'{k} = {v:g}' for k, v in params.items()) if params else '') + ')'
     return [
-        '**Scoring**, as in [broad.md](broad.md): BROAD\'s RMSE over the `movement` samples '
+        "**Scoring**, as in [broad.md](broad.md): BROAD's RMSE over the `movement` samples "
         'of each trial, in degrees: in 6D (no magnetometer) the inclination error, in 9D '
         'the total error; then the mean over the trials. Trials are split by the number '
         'their name starts with: choose on the even-numbered ones (tuning), report on the '
-        'odd-numbered ones. '
-        f'**Algorithms**: ours with its shipped defaults (`AhrsParams()`), and {anchors or "no anchor"} '
-        f'as in broad.md (VQF and BasicVQF from `vqf`, Madgwick from `ahrs` with β = '
-        f'{MADGWICK_BETA}), all on the same variant in the same run. Versions: '
+        'odd-numbered ones.',
+        '',
+        f'**Algorithms**, all on the same variant in the same run: {ours}; '
+        + (', '.join(anchors) + ', as in [broad.md](broad.md)' if anchors else 'no anchor')
+        + '. Versions: '
         + ', '.join(f'{k} {v}' for k, v in meta.get('versions', {}).items()) + '.',
         '',
     ]
