@@ -228,6 +228,6 @@ def test_stress_command_end_to_end_on_two_short_trials(tmp_path):
 
 
 def test_stress_options_that_do_not_go_together(capsys):
-    assert broad.main(['--stress', '--plain']) == 2
+    assert broad.main(['--stress', '--covariance']) == 2
     assert broad.main(['--variants', 'b']) == 2
     assert '--variants goes with --stress' in capsys.readouterr().err

@@ -78,8 +78,9 @@ def build_parser():
     parser.add_argument('--stress', action='store_true',
                         help='instead: the robustness benchmark, each trial (a) as recorded, '
                              '(b) cut at its first movement sample, (c) (b) plus a 1 °/s gyro '
-                             'bias, (d) (c) at 50 Hz, (e) gyro clipped at ±250 °/s; with '
-                             '--docs, DOCS_DIR/robustness.md and figures/robustness.png')
+                             'bias, (d) (c) at 50 Hz, (e) gyro clipped at ±250 °/s (--plain '
+                             'is ignored); with --docs, DOCS_DIR/robustness.md and '
+                             'DOCS_DIR/figures/robustness.png')
     parser.add_argument('--variants', nargs='+', choices=VARIANTS, metavar='KEY',
                         help='with --stress: only these variants (a to e; default all)')
     parser.add_argument('--anchors', nargs='+', choices=ANCHORS, metavar='NAME',
@@ -197,8 +198,8 @@ def _stress(args, argv, source, folder, trials, anchors, progress):
 
 def _check(args, anchors):
     """Return what is wrong with the options before anything runs, or None."""
-    if args.stress and (args.covariance or args.plain):
-        return '--stress runs alone: not with --covariance nor --plain'
+    if args.stress and args.covariance:
+        return '--stress and --covariance are two benchmarks: one at a time'
     if args.variants and not args.stress:
         return '--variants goes with --stress'
     if args.jobs < 1 or args.workers < 1:

@@ -188,15 +188,20 @@ def _times(out, meta):
 def _reproduce(meta):
     return [
         '## Reproduce', '',
-        '```',
-        'python -m ext_observer broad --stress --json out/robustness.json --docs docs',
+        '```shell',
+        'make broad-data   # once: BROAD into data/broad/',
+        'make broad BROAD_ARGS="--stress --json out/robustness.json"',
         '```',
         '',
-        'With `--data DIR` for BROAD elsewhere (`make broad-data` fetches it), `--variants b c` '
-        'for some variants only, `--anchors VQF` for fewer anchors (Madgwick is pure Python '
-        'and the slowest), `--no-anchors` for ours alone. From a script: '
-        '`ext_observer.broad.stress.variant(trial, key)` returns variant `key` of a trial read '
-        'by `ext_observer.broad.load_trial`.',
+        'runs `python -m ext_observer broad --stress --json out/robustness.json --docs docs` '
+        '(with `--data DIR` when `BROAD_DATA=DIR` is given; see [broad.md](broad.md) for '
+        'where the data is looked for). Options: `--variants b c` for some variants only, '
+        '`--anchors VQF` for fewer anchors (Madgwick is pure Python and the slowest), '
+        '`--no-anchors` for ours alone, `--mode 6D|9D|both`, `--trials NAME...`, `--jobs N` '
+        "and `--workers N` as for `broad`. From a script, "
+        '`ext_observer.broad.variant(trial, key)` returns variant `key` of a trial read by '
+        '`ext_observer.broad.load_trial`, and `ext_observer.broad.run_stress(trials)` '
+        'scores them all.',
         '',
     ]
 
