@@ -211,7 +211,7 @@ def test_stress_command_end_to_end_on_two_short_trials(tmp_path):
     done = subprocess.run(
         [sys.executable, '-m', 'ext_observer', 'broad', '--stress', '--data', folder,
          '--trials', *trials, '--head', '50', '--anchors', 'VQF', '--variants', 'b', 'd',
-         '--json', str(out), '--docs', str(docs), '--quiet'],
+         '--param', 'tau_bias=100', '--json', str(out), '--docs', str(docs), '--quiet'],
         cwd=REPO, capture_output=True, text=True, timeout=230)
     assert done.returncode == 0, done.stderr
     assert 'ours/VQF' in done.stdout and '(d) (c) at 50 Hz' in done.stdout
@@ -224,10 +224,16 @@ def test_stress_command_end_to_end_on_two_short_trials(tmp_path):
             assert set(figures['scores'][key][broad.OURS][mode]) == set(trials)
             assert figures['ratio_to_vqf'][key][mode]['all'] > 0.0
     page = (docs / 'robustness.md').read_text()
+    assert '`--param tau_bias=100`' in page and 'tau_bias = 100,' in page
     assert 'Quick check only' in page and (docs / 'figures' / 'robustness.png').is_file()
 
 
 def test_stress_options_that_do_not_go_together(capsys):
     assert broad.main(['--stress', '--covariance']) == 2
     assert broad.main(['--variants', 'b']) == 2
-    assert '--variants goes with --stress' in capsys.readouterr().err
+    assert broad.main(['--param', 'tau_bias=100']) == 2
+    assert '--variants and --param go with --stress' in capsys.readouterr().err
+    assert broad.main(['--stress', '--param', 'no_such=1']) == 2
+    assert 'unknown parameters' in capsys.readouterr().err
+    assert broad.main(['--stress', '--param', 'tau_bias']) == 2
+    assert 'NAME=VALUE' in capsys.readouterr().err

@@ -83,6 +83,10 @@ def build_parser():
                              'DOCS_DIR/figures/robustness.png')
     parser.add_argument('--variants', nargs='+', choices=VARIANTS, metavar='KEY',
                         help='with --stress: only these variants (a to e; default all)')
+    parser.add_argument('--param', action='append', default=[], metavar='NAME=VALUE',
+                        help="with --stress: one of our estimator's parameters (AhrsParams) "
+                             'set for this run, e.g. --param tau_bias=100; repeatable; the '
+                             'page lists the parameters used')
     parser.add_argument('--anchors', nargs='+', choices=ANCHORS, metavar='NAME',
                         help=f'the anchors to run (of {", ".join(ANCHORS)}; default all, '
                              f'with --stress {", ".join(STRESS_ANCHORS)})')
@@ -171,8 +175,11 @@ def _stress(args, argv, source, folder, trials, anchors, progress):
     keys = tuple(args.variants) if args.variants else VARIANTS
     start = time.perf_counter()
     load = _load()
+    params = _params(args.param)
+    if params is not None:
+        source = dict(source, params=params.as_dict(), overrides=list(args.param))
     out = run_stress(trials, keys, modes, anchors, jobs=args.jobs, workers=args.workers,
-                     progress=progress)
+                     progress=progress, params=params)
     names = [t.name for t in trials]
     meta = dict(source,
                 command=('python -m ext_observer broad ' + ' '.join(argv)).strip(),
@@ -196,12 +203,31 @@ def _stress(args, argv, source, folder, trials, anchors, progress):
     return 0
 
 
+def _params(settings):
+    """``AhrsParams`` from ``NAME=VALUE`` settings, or None for the shipped defaults."""
+    if not settings:
+        return None
+    from ext_observer.core.ahrs.estimator import AhrsParams
+    values = {}
+    for setting in settings:
+        name, sep, value = setting.partition('=')
+        if not sep or not name:
+            raise ValueError(f'--param wants NAME=VALUE, got {setting!r}')
+        words = {'true': True, 'false': False}
+        values[name.strip()] = words.get(value.strip().lower(), value.strip())
+    return AhrsParams(**values)
+
+
 def _check(args, anchors):
     """Return what is wrong with the options before anything runs, or None."""
     if args.stress and args.covariance:
         return '--stress and --covariance are two benchmarks: one at a time'
-    if args.variants and not args.stress:
-        return '--variants goes with --stress'
+    if (args.variants or args.param) and not args.stress:
+        return '--variants and --param go with --stress'
+    try:
+        _params(args.param)
+    except ValueError as error:
+        return f'--param: {error}'
     if args.jobs < 1 or args.workers < 1:
         return '--jobs and --workers must be at least 1'
     if args.head is not None and not args.head > 0.0:

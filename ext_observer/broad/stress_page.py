@@ -60,7 +60,7 @@ def stress_markdown(out, meta, figure=None, docs_dir='.'):
         '',
         "BROAD's trials start with seconds of rest, from a calibrated sensor at 286 Hz whose "
         "gyro never leaves its range. A robot's IMU is often none of that. This page runs "
-        'the raw-IMU estimator (ours, shipped defaults) and the anchors on variants of '
+        'the raw-IMU estimator (ours) and the anchors on variants of '
         'each trial that break one of those habits at a time (issue 27), and scores them '
         'as [broad.md](broad.md) does. It is generated; do not edit it by hand.',
         '',
@@ -137,8 +137,11 @@ _ANCHOR_NOTES = {
 def _scoring(meta):
     anchors = [_ANCHOR_NOTES[a] for a in meta.get('anchors', ())]
     params = meta.get('params')
-    ours = 'ours with its shipped defaults (`AhrsParams()`' + (
-        ': ' + ', '.join(f'{k} = {v:g}' for k, v in params.items()) if params else '') + ')'
+    overrides = meta.get('overrides')
+    ours = ('ours with ' + (f'`--param {" --param ".join(overrides)}`, otherwise its shipped '
+                            'defaults' if overrides else 'its shipped defaults')
+            + ' (`AhrsParams`' + (': ' + ', '.join(f'{k} = {v:g}' for k, v in params.items())
+                                  if params else '') + ')')
     return [
         "**Scoring**, as in [broad.md](broad.md): BROAD's RMSE over the `movement` samples "
         'of each trial, in degrees: in 6D (no magnetometer) the inclination error, in 9D '

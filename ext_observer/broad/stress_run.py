@@ -31,7 +31,7 @@ HALVES = ('all', 'tuning', 'report')
 
 
 def run_stress(trials, keys=VARIANTS, modes=MODES, anchors=STRESS_ANCHORS, jobs=1,
-               workers=1, progress=log):
+               workers=1, progress=log, params=None):
     """
     Score ours and the anchors on the variants of the trials.
 
@@ -47,6 +47,8 @@ def run_stress(trials, keys=VARIANTS, modes=MODES, anchors=STRESS_ANCHORS, jobs=
     jobs, workers : int
         Processes of the anchors and of our batched call, as in ``run``.
     progress : callable
+    params : AhrsParams, optional
+        Our estimator's parameters (default: the shipped defaults).
 
     Returns
     -------
@@ -61,7 +63,8 @@ def run_stress(trials, keys=VARIANTS, modes=MODES, anchors=STRESS_ANCHORS, jobs=
         start = time.perf_counter()
         varied = [variant(t, key) for t in trials]
         progress(f'variant {key}: {DESCRIPTIONS[key]} ...')
-        result = run(varied, modes, anchors, jobs=jobs, workers=workers, progress=progress)
+        result = run(varied, modes, anchors, jobs=jobs, workers=workers, progress=progress,
+                     params=params)
         out['scores'][key] = result['scores']
         out['seconds'][key] = dict(result['seconds'], wall=time.perf_counter() - start)
         out['samples'][key] = int(sum(len(t) for t in varied))
