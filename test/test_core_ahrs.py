@@ -158,8 +158,8 @@ def test_the_float_path_stays_on_floats_whatever_dt_is():
     for dt in (np.float64(0.005), 0.0051, np.float64(0.0049)):
         q = est.update((0.1, 0.0, -0.02), (0.3, 0.1, 9.8), (20.0, 1.0, -40.0), dt)
         est.update_mag((20.0, 1.0, -40.0), np.float64(0.01))
-        assert all(type(v) is float for v in q + est.bias + est._lp), q
-        assert type(est._k_acc) is float and type(est._k_mag) is float
+        assert all(type(v) is float for v in q + est.bias + est.field('lp')), q
+        assert type(est.field('k_acc')) is float and type(est.field('k_mag')) is float
 
 
 def test_workers_give_the_vectorized_estimates():
@@ -245,7 +245,7 @@ def test_a_field_at_its_own_rate_corrects_on_its_own_time_constant(motion):
         est = AhrsObserver(AhrsParams(mag_cal=False))  # the heading gain alone
         est.update(tuple(gyr[0]), tuple(acc[0]), tuple(mag[0]), 1.0 / RATE)
         est.q = tuple(quat.multiply(quat.exp(np.r_[0.0, 0.0, 0.0, 0.3]), np.asarray(est.q)))
-        est._mag_used = 1e9  # past the initial averaging: the steady gain
+        est.set_field('mag_used', 1e9)  # past the initial averaging: the steady gain
         for k in range(1, int(20 * RATE)):
             est.update(tuple(gyr[k]), tuple(acc[k]), None, 1.0 / RATE)
             if k % every == 0:

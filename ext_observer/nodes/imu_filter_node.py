@@ -35,8 +35,8 @@ from ext_observer.recordings.calibrate import write_params
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
 from ext_observer.core.ahrs.compiled import BackgroundCompile, start_plan
 from ext_observer.nodes.estimator_node import EstimatorNode
-from ext_observer.nodes.imu_filter_parameters import (IMU_FILTER_PARAMETERS, imu_filter_settings,
-                                                MADGWICK_UNUSED)
+from ext_observer.nodes.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
+                                                      imu_filter_settings, MADGWICK_UNUSED)
 from ext_observer.nodes.node_common import run_node
 from ext_observer.pipeline.pairing import BACKWARD_JUMP
 from ext_observer.pipeline.raw_imu import RawImuPipeline
@@ -108,6 +108,7 @@ class ImuFilterNode(EstimatorNode):
                else ' (use_mag false: heading free)')
             + f', world frame {settings["world_frame"]}, '
             f'{self.pipeline.estimator.core.params}')
+        logger.info(covariance_text(settings))
         self.compiler = None
         if plan == 'background':
             self.compiler = BackgroundCompile()

@@ -24,11 +24,12 @@ from ext_observer.nodes.parameters import ParameterSpec
 from ext_observer.pipeline.raw_imu import AHRS_PREFIX, ahrs_params, COVARIANCE_PREFIX, uncertainty_params
 
 __all__ = ['COVARIANCE_MODES', 'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'MADGWICK_UNUSED',
-           'covariance_estimated', 'imu_filter_settings']
+           'covariance_estimated', 'covariance_text', 'imu_filter_settings']
 
 # orientation_covariance of imu/data: the estimate's own, or orientation_stddev²;
-# 'auto' is 'fixed' when orientation_stddev is set (an imu_filter_madgwick
-# params file asks for its number), else 'estimate'.
+# 'auto' is 'fixed' when orientation_stddev is set to a positive value other
+# than ours (a user asks for that number), else 'estimate': imu_tools' own
+# params files say 0.0, their default, which means "not given" here.
 COVARIANCE_MODES = ('auto', 'estimate', 'fixed')
 ORIENTATION_STDDEV = 0.05
 
@@ -188,18 +189,20 @@ IMU_FILTER_OWN = (
                   'covariance, row-major, rad², about the world frame\'s x, y, z axes: '
                   "docs/covariance.md), 'fixed' (orientation_stddev squared on the "
                   "diagonal, as imu_filter_madgwick) or 'auto': 'fixed' when "
-                  'orientation_stddev is set to other than its default (an '
-                  "imu_filter_madgwick params file), else 'estimate'.",
+                  'orientation_stddev is set to a positive value other than its default, '
+                  "else 'estimate' (0, imu_tools' own default, means not given).",
                   constraints=f'One of {", ".join(COVARIANCE_MODES)}.'),
     ParameterSpec('orientation_stddev', ORIENTATION_STDDEV,
-                  "With orientation_covariance_mode 'fixed' (or 'auto' and a value other "
-                  'than this default): standard deviation of the orientation, rad; '
+                  "With orientation_covariance_mode 'fixed' (or 'auto' and a positive value "
+                  'other than this default): standard deviation of the orientation, rad; '
                   'orientation_covariance of imu/data is its square on the diagonal (as '
-                  'imu_filter_madgwick; 0 publishes zeros, "unknown" in sensor_msgs/Imu).',
+                  "imu_filter_madgwick). 0 (imu_tools' default) with 'auto': not given, the "
+                  "estimate's own covariance; with 'fixed': zeros.",
                   (0.0, 10.0)),
     ParameterSpec('constant_dt', 0.0,
-                  'Δt of every sample, s, instead of the interval between the stamps; 0 = '
-                  'from the stamps (as imu_filter_madgwick).', (0.0, 10.0)),
+                  'Δt of every sample, s, instead of the interval between the stamps: '
+                  'every sample is used, in the order it arrives, repeated or older stamps '
+                  'included (as imu_filter_madgwick); 0 = from the stamps.', (0.0, 10.0)),
     ParameterSpec('max_dt', 0.1,
                   'Largest interval between two IMU samples, s; after a longer one the '
                   'estimator goes on from the new sample (dropped: dt_too_large).',
@@ -264,10 +267,28 @@ def covariance_estimated(values):
     Whether ``imu/data`` carries the estimate's own covariance (else orientation_stddev's).
 
     ``orientation_covariance_mode`` ``'auto'`` is ``'fixed'`` when
-    ``orientation_stddev`` differs from its default: a user (or an
-    imu_filter_madgwick params file) who sets it gets it.
+    ``orientation_stddev`` is positive and differs from its default: a user
+    who sets a number gets it. 0, the default of imu_filter_madgwick and of
+    imu_complementary_filter (their own params files say ``0.0``), is "not
+    given": a zero covariance would tell robot_localization that the
+    orientation is exact.
     """
     mode = values['orientation_covariance_mode']
     if mode == 'auto':
-        return values['orientation_stddev'] == ORIENTATION_STDDEV
+        stddev = values['orientation_stddev']
+        return not (stddev > 0.0 and stddev != ORIENTATION_STDDEV)
     return mode == 'estimate'
+
+
+def covariance_text(values):
+    """Say which ``orientation_covariance`` ``imu/data`` carries and why (the start-up log)."""
+    mode, stddev = values['orientation_covariance_mode'], values['orientation_stddev']
+    if not covariance_estimated(values):
+        return (f'orientation_covariance of imu/data: orientation_stddev² on the diagonal '
+                f'(orientation_stddev {stddev:g} rad, orientation_covariance_mode {mode})')
+    if mode == 'auto' and stddev == 0.0:
+        why = ('orientation_stddev 0.0 means not given (imu_tools\' default); a positive '
+               'value selects a fixed one')
+    else:
+        why = f'orientation_covariance_mode {mode}'
+    return f"orientation_covariance of imu/data: the estimate's own ({why})"

@@ -61,6 +61,17 @@ Angular velocities (an IMU)
     (``non_finite_acceleration``, ``zero_acceleration``) before its stamp is
     looked at.
 
+    With ``arrival_order`` (and ``constant_dt > 0``; for a caller whose
+    steps wait for nothing, ``timeout`` 0) the samples are taken in the order
+    they arrive and every one closes the interval of the one before with
+    ``Δt = constant_dt``, as imu_filter_madgwick's ``constant_dt`` does:
+    repeated, older and zero stamps are integrated, not dropped (drivers
+    that stamp in bursts, imu_tools #3), and ``max_dt`` is not applied.
+    Only non-finite values (and a zero acceleration) are dropped, and a
+    stamp older than the waiting one by more than ``backward_jump`` still
+    restarts the time line. A step's ``end`` is then the closing sample's
+    stamp, whatever its order.
+
 Magnetic fields (a magnetometer at its own rate)
     :meth:`StepPairer.add_field` checks a field (finite, nonzero:
     ``non_finite_measurement``, ``zero_field``) and its stamp against the
@@ -120,6 +131,13 @@ class StepPairer:
         the time line instead of being dropped as stale.
     forward_gap : int
         A step more than this (ns) after the previous one is flagged ``gap``.
+    max_dt : int
+        Largest interval between two IMU samples, ns.
+    constant_dt : float
+        ``Δt`` of every IMU interval, s; 0: from the stamps.
+    arrival_order : bool
+        IMU samples in arrival order, each closing an interval of
+        ``constant_dt`` (see the module docstring); only with ``constant_dt``.
 
     Attributes
     ----------
@@ -135,10 +153,12 @@ class StepPairer:
 
     def __init__(self, depth=10, timeout=100_000_000, max_increment=20.0,
                  norm_tolerance=0.1, backward_jump=1_000_000_000,
-                 forward_gap=1_000_000_000, max_dt=100_000_000, constant_dt=0.0):
+                 forward_gap=1_000_000_000, max_dt=100_000_000, constant_dt=0.0,
+                 arrival_order=False):
         self.configure(depth=depth, timeout=timeout, max_increment=max_increment,
                        norm_tolerance=norm_tolerance, backward_jump=backward_jump,
-                       forward_gap=forward_gap, max_dt=max_dt, constant_dt=constant_dt)
+                       forward_gap=forward_gap, max_dt=max_dt, constant_dt=constant_dt,
+                       arrival_order=arrival_order)
         self.received = dict.fromkeys(KINDS, 0)
         self.processed = dict.fromkeys(KINDS, 0)
         self.drops = dict.fromkeys(DROP_REASONS, 0)
@@ -164,9 +184,12 @@ class StepPairer:
         """
         for name, value in settings.items():
             if name not in ('depth', 'timeout', 'max_increment', 'norm_tolerance',
-                            'backward_jump', 'forward_gap', 'max_dt', 'constant_dt'):
+                            'backward_jump', 'forward_gap', 'max_dt', 'constant_dt',
+                            'arrival_order'):
                 raise TypeError(f'unknown setting {name!r}')
-            if not value >= (1 if name == 'depth' else 0):
+            if name == 'arrival_order':
+                value = bool(value)
+            elif not value >= (1 if name == 'depth' else 0):
                 raise ValueError(f'{name} must not be negative (depth: >= 1), got {value}')
             setattr(self, name, value)
 
@@ -239,14 +262,22 @@ class StepPairer:
                 return self._drop('non_finite_acceleration' if reason == 'non_finite'
                                   else 'zero_acceleration')
         pending = self._pending
+        arrival = self.arrival_order and self.constant_dt > 0.0
         if pending is None:
-            outcome = self._check_stamp(stamp, self._increments, 'increment')
+            outcome = None if arrival else self._check_stamp(stamp, self._increments,
+                                                             'increment')
             if outcome is not None and outcome != BACKWARD_JUMP:
                 return self._drop(outcome)
             self._pending = (stamp, omega)
             return outcome
         start, (v0, v1, v2) = pending
-        if stamp <= start:
+        if arrival:
+            if start - stamp > self.backward_jump:
+                self.restart()
+                self.events['backward_jumps'] += 1
+                self._pending = (stamp, omega)
+                return BACKWARD_JUMP
+        elif stamp <= start:
             if stamp <= 0:
                 return self._drop('zero_stamp_increment')
             if stamp == start:
@@ -259,7 +290,7 @@ class StepPairer:
             return self._drop('stale_increment')
         self._pending = (stamp, omega)
         span = stamp - start
-        if span > self.max_dt:
+        if span > self.max_dt and not arrival:
             return self._drop('dt_too_large')
         dt = self.constant_dt if self.constant_dt > 0.0 else span * 1e-9
         half = 0.5 * dt
@@ -302,7 +333,8 @@ class StepPairer:
             previous = self._last_stamp
             # Well clear of the zero-acceleration threshold (hypot there);
             # a non-finite value fails the comparisons.
-            if (0 < span <= self.max_dt and _FAST_ACC2 < a2n < math.inf
+            if ((0 < span <= self.max_dt if not (self.arrival_order and self.constant_dt > 0.0)
+                 else -span <= self.backward_jump) and _FAST_ACC2 < a2n < math.inf
                     and math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)
                     and (previous is None or start - previous <= self.forward_gap)):
                 dt = self.constant_dt if self.constant_dt > 0.0 else span * 1e-9

@@ -18,9 +18,12 @@ Inputs
 Steps
     Sample ``k`` runs :meth:`AhrsObserver.update
     <ext_observer.core.ahrs.estimator.AhrsObserver.update>` with its own angular
-    velocity and acceleration and ``dt = t_k − t_{k−1}`` (``constant_dt``
-    when set); the first sample of a time line only sets ``t_0``, the second
-    initializes the estimate from gravity (and the latest field). A field
+    velocity and acceleration and ``dt = t_k − t_{k−1}``; the first sample of
+    a time line only sets ``t_0``, the second initializes the estimate from
+    gravity (and the latest field). With ``constant_dt > 0`` every sample
+    answers, in the order it arrives, whatever its stamp (imu_filter_madgwick's
+    ``constant_dt``): the first of a time line initializes the estimate, each
+    further one runs a step of ``dt = constant_dt``. A field
     corrects the heading when it arrives
     (:meth:`~ext_observer.core.ahrs.estimator.AhrsObserver.update_mag`, the latest field
     only, with the hard-iron offset ``mag_bias_*`` removed and the interval
@@ -67,7 +70,7 @@ from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, covariance_o
 from ext_observer.core.ahrs.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_OK, SAMPLE_RESIDUAL
 from ext_observer.core.validation import check_state
 from ext_observer.pipeline.guard import GUARD_REASONS
-from ext_observer.pipeline.pairing import BACKWARD_JUMP, StepPairer
+from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
 
 __all__ = ['AHRS_PREFIX', 'COVARIANCE_PREFIX', 'Estimate', 'RESET_CAUSES', 'RawImuEstimator',
@@ -176,7 +179,8 @@ def pairing_settings(settings):
                 backward_jump=round(settings['backward_jump_threshold'] * SECOND),
                 forward_gap=round(settings['forward_gap_threshold'] * SECOND),
                 max_dt=round(settings['max_dt'] * SECOND),
-                constant_dt=settings['constant_dt'])
+                constant_dt=settings['constant_dt'],
+                arrival_order=settings['constant_dt'] > 0.0)
 
 
 # sample_step's outcomes as check_state's reasons (a step that raised: step_failed).
@@ -561,10 +565,20 @@ class RawImuPipeline:
 
         """
         self.units.imu(gyr, acc)
-        outcome, steps = self.pairer.add_sample(stamp, gyr, acc)
+        pairer = self.pairer
+        outcome, steps = pairer.add_sample(stamp, gyr, acc)
         if outcome == BACKWARD_JUMP:
             self.reset('backward_jump')
         estimate = None
+        if (not steps and self._constant_dt > 0.0 and outcome in (None, BACKWARD_JUMP)
+                and pairer.last_stamp is None and pairer.pending_stamp == stamp):
+            # constant_dt: the first sample of a time line answers too, the
+            # estimate initialized from it (the next one steps from there).
+            step = Step(stamp, (0.0, 0.0, 0.0), None, None, False, False, stamp)
+            state, reason = self.estimator.step(gyr, acc, self._constant_dt, covariance)
+            return outcome, Estimate(stamp, state, reason, step,
+                                     self.estimator.uncertainty.covariance
+                                     if covariance is None else covariance)
         for step in steps:
             if step.end != stamp:
                 # Cannot happen: a step is released by the sample that closes it.

@@ -25,68 +25,69 @@ sensor → ENU.
 
 import math
 
+from .layout import Layout
 from .magcal_kernel import (MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn,
                             mc_restart)
 
 # --- the layout ----------------------------------------------------------------
 
-# Parameters (set once by the wrapper).
-P_ALPHA = 0
-P_TAU_ACC = 1
-P_TAU_ACC_GAIN = 2
-P_TAU_MAG = 3
-P_TAU_BIAS = 4
-P_BIAS_MAX = 5
-P_REST_GYR = 6
-P_REST_ACC = 7
-P_REST_TIME = 8
-P_TAU_REST = 9
-P_MAG_NORM_TH = 10
-P_MAG_DIP_TH = 11
-P_MAG_NEW_TIME = 12
-P_MAG_NEW_GYR = 13
-P_TAU_MAG_REF = 14
-P_USE_MAG = 15
-P_EXTENDED = 16  # variant 'extended' (1) or 'plain' (0)
-P_HAS_CAL = 17  # a magnetometer calibration runs (mag_cal and 9D)
-P_CAL_PERIOD = 18  # s: learn from a field at most this often
-P_MOTION_BIAS = 19  # tau_bias > 0
+AHRS = Layout()
+# Parameters: AhrsParams's of the same name (set once by the wrapper).
+P_ALPHA = AHRS.parameter('alpha')
+P_TAU_ACC = AHRS.parameter('tau_acc')
+P_TAU_ACC_GAIN = AHRS.parameter('tau_acc_gain')
+P_TAU_MAG = AHRS.parameter('tau_mag')
+P_TAU_BIAS = AHRS.parameter('tau_bias')
+P_BIAS_MAX = AHRS.parameter('bias_max')
+P_REST_GYR = AHRS.parameter('rest_gyr')
+P_REST_ACC = AHRS.parameter('rest_acc')
+P_REST_TIME = AHRS.parameter('rest_time')
+P_TAU_REST = AHRS.parameter('tau_rest')
+P_MAG_NORM_TH = AHRS.parameter('mag_norm_th')
+P_MAG_DIP_TH = AHRS.parameter('mag_dip_th')
+P_MAG_NEW_TIME = AHRS.parameter('mag_new_time')
+P_MAG_NEW_GYR = AHRS.parameter('mag_new_gyr')
+P_TAU_MAG_REF = AHRS.parameter('tau_mag_ref')
+# Parameters the wrapper derives.
+P_USE_MAG = AHRS.field('use_mag')
+P_EXTENDED = AHRS.field('extended')  # variant 'extended' (1) or 'plain' (0)
+P_HAS_CAL = AHRS.field('has_cal')  # a magnetometer calibration runs (mag_cal and 9D)
+P_CAL_PERIOD = AHRS.field('cal_period')  # s: learn from a field at most this often
+P_MOTION_BIAS = AHRS.field('motion_bias')  # tau_bias > 0
 # Coefficients of the current intervals (NaN: not computed yet).
-C_DT = 20
-C_BW = 21  # 5: b0, b1, b2, a1, a2
-C_K_ACC = 26
-C_K_REST = 27
-C_MAG_DT = 28
-C_K_MAG = 29
-C_K_REF = 30
+C_DT = AHRS.field('dt')
+C_BW = AHRS.field('bw', 5)  # b0, b1, b2, a1, a2
+C_K_ACC = AHRS.field('k_acc')
+C_K_REST = AHRS.field('k_rest')
+C_MAG_DT = AHRS.field('mag_dt')
+C_K_MAG = AHRS.field('k_mag')
+C_K_REF = AHRS.field('k_ref')
 # The estimate and what it remembers.
-S_INIT = 31
-S_Q = 32  # 4
-S_BIAS = 36  # 3
-S_REST = 39
-S_REST_TIME = 40
-S_REST_GYR = 41  # 3
-S_REST_ACC = 44  # 3
-S_LP = 47  # 6: the Butterworth states s1 (3), s2 (3)
-S_ACC_STILL = 53
-S_MAG_DIST = 54
-S_HAS_REF = 55
-S_REF = 56  # 2: norm, dip
-S_CAND = 58  # 2: norm, dip of a new field
-S_CAND_TIME = 60
-S_MAG_USED = 61
-S_CAL_TURN = 62  # 4: body rotation since the field last learned from
-S_CAL_RATE = 66  # 3: the latest angular rate, bias removed
-S_CAL_WAIT = 69
-S_CAL_MOVED = 70
-S_CAL_SINCE = 71
-S_CAL_LOADED = 72
-A_SIZE = 73
+S_INIT = AHRS.field('init')
+S_Q = AHRS.field('q', 4)
+S_BIAS = AHRS.field('bias', 3)
+S_REST = AHRS.field('rest')
+S_REST_TIME = AHRS.field('time_at_rest')
+S_REST_GYR = AHRS.field('rest_gyr_lp', 3)
+S_REST_ACC = AHRS.field('rest_acc_lp', 3)
+S_LP = AHRS.field('lp', 6)  # the Butterworth states s1 (3), s2 (3)
+S_ACC_STILL = AHRS.field('acc_still')
+S_MAG_DIST = AHRS.field('mag_dist')
+S_HAS_REF = AHRS.field('has_ref')
+S_REF = AHRS.field('ref', 2)  # norm, dip
+S_CAND = AHRS.field('cand', 2)  # norm, dip of a new field
+S_CAND_TIME = AHRS.field('cand_time')
+S_MAG_USED = AHRS.field('mag_used')
+S_CAL_TURN = AHRS.field('cal_turn', 4)  # body rotation since the field last learned from
+S_CAL_RATE = AHRS.field('cal_rate', 3)  # the latest angular rate, bias removed
+S_CAL_WAIT = AHRS.field('cal_wait')
+S_CAL_MOVED = AHRS.field('cal_moved')
+S_CAL_SINCE = AHRS.field('cal_since')
+S_CAL_LOADED = AHRS.field('cal_loaded')
+A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 
-PARAMETERS = ('alpha', 'tau_acc', 'tau_acc_gain', 'tau_mag', 'tau_bias', 'bias_max',
-              'rest_gyr', 'rest_acc', 'rest_time', 'tau_rest', 'mag_norm_th', 'mag_dip_th',
-              'mag_new_time', 'mag_new_gyr', 'tau_mag_ref')
+PARAMETERS = tuple(AHRS.parameters)
 
 _TINY = 1e-300
 # After a calibration is applied, the heading's time constant is this share

@@ -50,8 +50,8 @@ __all__ = ['BackgroundCompile', 'CompiledUnavailable', 'Kernels', 'cache_ready',
            'compiled_available', 'kernels', 'start_plan']
 
 # In this order: each file's names are defined before the next one's functions use them.
-_SOURCES = ('magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py', 'ahrs_kernel.py',
-            'uncertainty_kernel.py')
+_SOURCES = ('layout.py', 'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
+            'ahrs_kernel.py', 'uncertainty_kernel.py')
 _ENV = 'EXT_OBSERVER_COMPILED'
 
 
@@ -185,8 +185,11 @@ def joined_source():
             for target in targets:
                 if target.startswith('__'):
                     continue
-                # The same constant in both files is harmless; anything else is not.
-                if target in defined and defined[target][1] != definition:
+                # The same constant in both files is harmless; anything else
+                # is not (a call, such as a Layout(), made twice is two objects).
+                if target in defined and (defined[target][1] != definition
+                                          or any(isinstance(n, ast.Call)
+                                                 for n in ast.walk(node))):
                     raise RuntimeError(f'{target} is defined in both {defined[target][0]} and '
                                        f'{name}: the kernels are joined into one module')
                 defined[target] = (name, definition)

@@ -179,8 +179,8 @@ class AhrsObserver:
         self._states = []
         for i in range(n):
             s = self._kernels.container(size)
-            for slot, name in enumerate(k.PARAMETERS):
-                s[slot] = each(name, i)
+            for name in k.PARAMETERS:
+                s[k.AHRS.offset(name)] = each(name, i)
             s[k.P_USE_MAG] = 1.0 if uses[i] else 0.0
             s[k.P_EXTENDED] = 1.0 if variant == 'extended' else 0.0
             s[k.P_HAS_CAL] = 1.0 if calibrate[i] else 0.0
@@ -314,10 +314,31 @@ class AhrsObserver:
                 s[k.S_Q + j] = float(value[j] if self.batch is None else value[j][i])
             s[k.S_INIT] = 1.0
 
+    def field(self, name):
+        """
+        A field of the flat state by its name in ahrs_kernel's layout (``AHRS``).
+
+        A float (a vector: a tuple of floats); with ``batch``, arrays
+        ``(B,)``. E.g. ``'bias'``, ``'lp'`` (the Butterworth states),
+        ``'k_acc'``, ``'mag_used'``, ``'ref'``.
+        """
+        offset, size = self._kernels.ahrs.AHRS.fields[name]
+        values = self._slots(offset, size)
+        return values[0] if size == 1 else values
+
+    def set_field(self, name, value):
+        """Set a one-slot field of every estimate (a float, or an array ``(B,)``)."""
+        offset, size = self._kernels.ahrs.AHRS.fields[name]
+        if size != 1:
+            raise ValueError(f'{name} has {size} slots; set_field sets one-slot fields')
+        values = np.broadcast_to(np.asarray(value, dtype=float), (self._n,))
+        for i, s in enumerate(self._states):
+            s[offset] = float(values[i])
+
     @property
     def bias(self):
         """The gyro bias estimate (rad/s), body frame."""
-        return self._slots(self._kernels.ahrs.S_BIAS, 3)
+        return self.field('bias')
 
     @property
     def rest(self):
@@ -325,42 +346,9 @@ class AhrsObserver:
         return self._flag(self._kernels.ahrs.S_REST)
 
     @property
-    def rest_time(self):
-        """Time (s) below the rest thresholds."""
-        return self._slots(self._kernels.ahrs.S_REST_TIME, 1)[0]
-
-    @property
     def mag_disturbed(self):
         """Whether the last magnetometer sample was rejected."""
         return self._flag(self._kernels.ahrs.S_MAG_DIST)
-
-    @property
-    def _lp(self):
-        return self._slots(self._kernels.ahrs.S_LP, 6)
-
-    @property
-    def _mag_used(self):
-        return self._slots(self._kernels.ahrs.S_MAG_USED, 1)[0]
-
-    @_mag_used.setter
-    def _mag_used(self, value):
-        for i, s in enumerate(self._states):
-            s[self._kernels.ahrs.S_MAG_USED] = float(np.broadcast_to(value, (self._n,))[i])
-
-    @property
-    def _mag_ref(self):
-        k = self._kernels.ahrs
-        if not any(s[k.S_HAS_REF] != 0.0 for s in self._states):
-            return None
-        return self._slots(k.S_REF, 2)
-
-    @property
-    def _k_acc(self):
-        return self._slots(self._kernels.ahrs.C_K_ACC, 1)[0]
-
-    @property
-    def _k_mag(self):
-        return self._slots(self._kernels.ahrs.C_K_MAG, 1)[0]
 
     @property
     def calibration_state(self):

@@ -21,49 +21,51 @@ the compiled kernels, one crossing from Python per sample.
 import math
 
 from .ahrs_kernel import S_INIT, S_REST, ahrs_update
+from .layout import Layout
 
 # Standard gravity, m/s²: turns the accelerometer's noise into a direction.
 GRAVITY = 9.80665
 
 # --- the layout ----------------------------------------------------------------
 
+UNCERTAINTY = Layout()
 # Constants (set once by the wrapper): the estimator's time constants (s),
 # the noises of UncertaintyParams, and what is added on output (rad²; the
 # stamp's per (rad/s)²).
-U_TAU_ACC = 0
-U_TAU_REST = 1
-U_GYRO_NOISE = 2
-U_GYRO_RATE_NOISE = 3
-U_BIAS_STD = 4
-U_BIAS_TIME = 5
-U_ACC_NOISE = 6
-U_TILT_FLOOR = 7
-U_HEADING_FLOOR = 8
-U_STAMP2 = 9
+U_TAU_ACC = UNCERTAINTY.field('tau_acc')
+U_TAU_REST = UNCERTAINTY.field('tau_rest')
+U_GYRO_NOISE = UNCERTAINTY.field('gyro_noise')
+U_GYRO_RATE_NOISE = UNCERTAINTY.field('gyro_rate_noise')
+U_BIAS_STD = UNCERTAINTY.field('bias_std')
+U_BIAS_TIME = UNCERTAINTY.field('bias_time')
+U_ACC_NOISE = UNCERTAINTY.field('acc_noise')
+U_TILT_FLOOR = UNCERTAINTY.field('tilt_floor')
+U_HEADING_FLOOR = UNCERTAINTY.field('heading_floor')
+U_STAMP2 = UNCERTAINTY.field('stamp2')
 # Coefficients of the interval U_DT (NaN: none yet).
-U_DT = 10
-U_K_ACC = 11
-U_K_REST = 12
-U_R_ACC = 13
-U_R_GYRO = 14
-U_Q_GYRO = 15
-U_Q_RATE = 16
-U_PHI = 17
-U_Q_BIAS = 18
+U_DT = UNCERTAINTY.field('dt')
+U_K_ACC = UNCERTAINTY.field('k_acc')
+U_K_REST = UNCERTAINTY.field('k_rest')
+U_R_ACC = UNCERTAINTY.field('r_acc')
+U_R_GYRO = UNCERTAINTY.field('r_gyro')
+U_Q_GYRO = UNCERTAINTY.field('q_gyro')
+U_Q_RATE = UNCERTAINTY.field('q_rate')
+U_PHI = UNCERTAINTY.field('phi')
+U_Q_BIAS = UNCERTAINTY.field('q_bias')
 # The state: per axis [[P, C], [C, B]] (tilt t, heading h, one B), the
 # reference's variance, the calibration's, whether a field set the heading,
 # the rate's squared world components (vertical, horizontal).
-U_PT = 19
-U_CT = 20
-U_PH = 21
-U_CH = 22
-U_B = 23
-U_UNKNOWN = 24
-U_CALIBRATION = 25
-U_HEADING_SET = 26
-U_WZ2 = 27
-U_WH2 = 28
-U_SIZE = 29
+U_PT = UNCERTAINTY.field('pt')
+U_CT = UNCERTAINTY.field('ct')
+U_PH = UNCERTAINTY.field('ph')
+U_CH = UNCERTAINTY.field('ch')
+U_B = UNCERTAINTY.field('b')
+U_UNKNOWN = UNCERTAINTY.field('unknown')
+U_CALIBRATION = UNCERTAINTY.field('calibration')
+U_HEADING_SET = UNCERTAINTY.field('heading_set')
+U_WZ2 = UNCERTAINTY.field('wz2')
+U_WH2 = UNCERTAINTY.field('wh2')
+U_SIZE = UNCERTAINTY.size
 
 # sample_step's outcomes: 0 the step ran; else the estimator stepped but the
 # estimate failed the guard (the caller reinitializes), or nothing ran: the

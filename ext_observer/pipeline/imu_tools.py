@@ -1,0 +1,139 @@
+"""
+What imu_filter_madgwick publishes beside the orientation, without ROS.
+
+A node that replaces imu_filter_madgwick keeps its extra outputs: the roll,
+pitch and yaw of the debug topics (``imu/rpy/filtered``, ``imu/rpy/raw``),
+the specific force without gravity (``remove_gravity_vector``) and the
+orientation as a TF transform (``publish_tf``, ``reverse_tf``,
+``fixed_frame``). Each is a small function of the estimate here; the node
+only puts the numbers into messages. Quaternions scalar first
+``(w, x, y, z)``, sensor → world; angles in rad, accelerations in m/s².
+"""
+
+import math
+
+from ext_observer.core.ahrs.ahrs_math import initial_attitude
+from ext_observer.core.quaternion import multiply_floats
+
+__all__ = ['STANDARD_GRAVITY', 'gravity_in_sensor', 'raw_attitude', 'rpy_from_quaternion',
+           'transform_from_estimate', 'without_gravity']
+
+# imu_filter_madgwick's gravity (its getGravity's default), m/s².
+STANDARD_GRAVITY = 9.80665
+
+
+def rpy_from_quaternion(q):
+    """
+    Return roll, pitch and yaw (rad) of an attitude, as tf2's ``getRPY`` gives them.
+
+    Fixed axes x, y, z (``q = R_z(yaw) R_y(pitch) R_x(roll)``), pitch in
+    [−π/2, π/2]; at gimbal lock (pitch ±π/2) yaw is 0 and roll takes the
+    whole turn, as tf2's ``Matrix3x3::getEulerYPR`` (its first solution).
+    ``q`` need not be normalized.
+
+    Returns
+    -------
+    roll, pitch, yaw : float
+
+    """
+    w, x, y, z = q
+    s = 2.0 / (w * w + x * x + y * y + z * z)
+    m20 = s * (x * z - w * y)
+    m21 = s * (y * z + w * x)
+    m22 = 1.0 - s * (x * x + y * y)
+    if abs(m20) >= 1.0:
+        delta = math.atan2(m21, m22)
+        return delta, (0.5 * math.pi if m20 < 0.0 else -0.5 * math.pi), 0.0
+    m10 = s * (x * y + w * z)
+    m00 = 1.0 - s * (y * y + z * z)
+    return math.atan2(m21, m22), -math.asin(m20), math.atan2(m10, m00)
+
+
+def gravity_in_sensor(q_enu, gravity=STANDARD_GRAVITY):
+    """
+    Return what the accelerometer reads of gravity at rest, in the sensor frame.
+
+    ``R(q)ᵀ (0, 0, g)``: the world's up axis (ENU) seen from the sensor,
+    scaled by ``gravity`` (the specific force points up at rest).
+
+    Parameters
+    ----------
+    q_enu : sequence of 4 float
+        Sensor → ENU, any norm.
+
+    Returns
+    -------
+    tuple of 3 float
+
+    """
+    w, x, y, z = q_enu
+    s = gravity * 2.0 / (w * w + x * x + y * y + z * z)
+    # The third row of the rotation matrix: the sensor's axes' up components.
+    return (s * (x * z - w * y), s * (y * z + w * x),
+            gravity - s * (x * x + y * y))
+
+
+def without_gravity(acc, q_enu, gravity=STANDARD_GRAVITY):
+    """Return the specific force ``acc`` minus gravity's part, sensor frame (m/s²)."""
+    gx, gy, gz = gravity_in_sensor(q_enu, gravity)
+    return acc[0] - gx, acc[1] - gy, acc[2] - gz
+
+
+def raw_attitude(acc, field=None, frame=None):
+    """
+    Return the attitude of one sample alone (gravity, and the field's heading).
+
+    imu_filter_madgwick's ``imu/rpy/raw``: no filter, the accelerometer and
+    the magnetometer of the moment. Without a field the heading is that of
+    the smallest rotation taking the accelerometer's axis to the vertical.
+
+    Parameters
+    ----------
+    acc : sequence of 3 float
+        Specific force, m/s², sensor frame.
+    field : sequence of 3 float, optional
+        Magnetic field (any unit), sensor frame.
+    frame : sequence of 4 float, optional
+        Left factor from ENU to the published world frame
+        (:func:`~ext_observer.pipeline.raw_imu.heading_factor`); None: ENU.
+
+    Returns
+    -------
+    tuple of 4 float
+        Unit quaternion, sensor → world.
+
+    """
+    q = initial_attitude(acc, field, use_mag=field is not None)
+    return q if frame is None else multiply_floats(frame, q)
+
+
+def transform_from_estimate(q, fixed_frame, imu_frame, reverse=False):
+    """
+    Return the TF transform of an attitude, as imu_filter_madgwick broadcasts it.
+
+    Parameters
+    ----------
+    q : sequence of 4 float
+        Sensor → world, any norm (normalized here).
+    fixed_frame, imu_frame : str
+        The world's frame name (``fixed_frame``) and the sample's
+        ``frame_id``.
+    reverse : bool
+        ``reverse_tf``: the transform from the sensor to the fixed frame
+        (the inverse rotation) instead.
+
+    Returns
+    -------
+    parent, child : str
+        ``header.frame_id`` and ``child_frame_id``.
+    rotation : tuple of 4 float
+        Unit quaternion ``(w, x, y, z)``: the child's axes in the parent's;
+        the translation is zero.
+
+    """
+    w, x, y, z = q
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    if reverse:
+        return imu_frame, fixed_frame, (w, -x, -y, -z)
+    return fixed_frame, imu_frame, (w, x, y, z)
