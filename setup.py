@@ -14,6 +14,8 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+        # For colcon users, as imu_tools ships its own (ros2 launch ext_observer ...).
+        ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     # The ROS client libraries come from a ROS installation or from the wheels
     # in requirements.txt; listing them here would make colcon's entry-point

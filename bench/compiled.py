@@ -19,6 +19,12 @@ printed and, with ``--docs DIR``, written to ``DIR/compiled.md``:
    warm cache), and ``imu_filter_node`` to its first status on the compiled
    kernels (cold: after its background compile); ``python -m ext_observer
    broad --no-anchors`` on the 22 trials, cold and warm.
+4. **The BROAD command whole** (issue 29): ``python -m ext_observer broad
+   --no-anchors`` on the 22 trials (9D and 6D; a warm cache), the whole
+   process, against VQF doing the same work in one process
+   (``python -m bench.broad_vqf``: read, estimate both modes, score), runs
+   interleaved, medians; and the command's time to its first estimate (its
+   line announcing the batched call).
 
 Every ROS process runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``.
 The node's CPU per sample against a bare relay is ``python -m bench.raw_imu``
@@ -265,9 +271,65 @@ def start_figures(data, domain_id=77, progress=print):
     return out
 
 
+# --- 4. the BROAD command whole --------------------------------------------------------------
+
+# Printed by the broad command on stderr just before its estimator starts.
+FIRST_ESTIMATE_LINE = 'in one batched call'
+
+
+def _timed(argv):
+    """Wall time of a process and when it printed FIRST_ESTIMATE_LINE on stderr (s)."""
+    start = time.perf_counter()
+    proc = subprocess.Popen(argv, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    first = None
+    for line in proc.stderr:
+        if first is None and FIRST_ESTIMATE_LINE in line:
+            first = time.perf_counter() - start
+    if proc.wait(1800) != 0:
+        raise RuntimeError(f'{" ".join(argv)} exited with {proc.returncode}')
+    return time.perf_counter() - start, first
+
+
+def whole_figures(data, runs=5, progress=print):
+    """
+    The BROAD command's whole process against VQF's for the same work, s.
+
+    Returns
+    -------
+    dict
+        ``ours``, ``ours, 1 process`` (``--workers 1``), ``VQF``: the wall
+        times of every run; ``first estimate``: ours to its first estimate;
+        ``load``: the 1-minute load average before and after.
+
+    """
+    ours = [sys.executable, '-m', 'ext_observer', 'broad', '--no-anchors', '--data', data]
+    argvs = {'ours': ours, 'ours, 1 process': ours + ['--workers', '1'],
+             'VQF': [sys.executable, '-m', 'bench.broad_vqf', '--data', data]}
+    out = {label: [] for label in argvs}
+    out['first estimate'] = []
+    before = os.getloadavg()[0]
+    _timed(ours)  # the cache warm, the files in the page cache
+    for _ in range(runs):
+        for label, argv in argvs.items():
+            wall, first = _timed(argv)
+            out[label].append(wall)
+            if label == 'ours':
+                out['first estimate'].append(first)
+    out['load'] = [before, os.getloadavg()[0]]
+    progress('BROAD command, whole process: ' + ', '.join(
+        f'{k} {v:.2f} s' for k, v in whole_medians(out).items()))
+    return out
+
+
+def whole_medians(whole):
+    """``{label: median}`` of :func:`whole_figures`' runs."""
+    return {k: float(np.median(v)) for k, v in whole.items() if k != 'load'}
+
+
 # --- the report -------------------------------------------------------------------------------
 
-def markdown(broad, steps, starts, meta, node=None):
+def markdown(broad, steps, starts, meta, node=None, whole=None):
     lines = [BEGIN, '', f'Measured with `{meta["command"]}` at commit `{meta["commit"]}` '
              f'({meta["machine"]}). numba {meta["numba"]}.', '']
     if broad:
@@ -309,6 +371,24 @@ def markdown(broad, steps, starts, meta, node=None):
         for name, (cold, warm) in starts.items():
             lines.append(f'| {name} | {cold:.2f} | {warm:.2f} |')
         lines.append('')
+    if whole:
+        m = whole_medians(whole)
+        runs = len(whole['VQF'])
+        lines += ['### The BROAD command, whole process (issue 29)', '',
+                  '`python -m ext_observer broad --no-anchors --data DIR` on the 22 trials, 9D '
+                  'and 6D, a warm cache, from the start of the process to its end (imports, '
+                  'reading, the kernels, the estimates, the scores, the report), against VQF '
+                  'doing the same work in one process (`python -m bench.broad_vqf`); '
+                  f'{runs} runs of each, interleaved, medians. 1-minute load average '
+                  f'{whole["load"][0]:.1f} before, {whole["load"][1]:.1f} after (other work '
+                  'on the cores lengthens every row). Goal: ≤ 1.0× VQF\'s (aim ≤ 0.5×).', '',
+                  '| process | wall time (s) | ÷ VQF |', '|---|---:|---:|']
+        for label in ('VQF', 'ours', 'ours, 1 process'):
+            name = {'VQF': 'VQF (C++), 1 process', 'ours': 'ours, the command as shipped '
+                    '(`--workers` the CPUs)', 'ours, 1 process': 'ours, `--workers 1`'}[label]
+            lines.append(f'| {name} | {m[label]:.2f} | {m[label] / m["VQF"]:.2f} |')
+        lines += ['', f'From the start of the command to its first estimate: '
+                  f'{m["first estimate"]:.2f} s (the trials read while the kernels load).', '']
     if node:
         lines += ['### The node against a bare relay', '', node, '']
     lines += [END]
@@ -326,8 +406,8 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog='python -m bench.compiled',
                                      description=__doc__.split('\n\n')[0])
     parser.add_argument('--data', default=None, help='BROAD folder (as ext_observer broad)')
-    parser.add_argument('--sections', default='broad,steps,starts',
-                        help='comma-separated: broad, steps, starts')
+    parser.add_argument('--sections', default='broad,steps,starts,whole',
+                        help='comma-separated: broad, steps, starts, whole')
     parser.add_argument('--node', action='store_true',
                         help='also python -m bench.raw_imu (the node against a relay)')
     parser.add_argument('--docs', default=None, metavar='DIR', help='write DIR/compiled.md')
@@ -340,7 +420,7 @@ def main(argv=None):
     def progress(text):
         print(text, file=sys.stderr, flush=True)
 
-    broad = steps = starts = node = None
+    broad = steps = starts = node = whole = None
     if 'broad' in sections:
         trials = [load_trial(path, name) for name, path in find_trials(folder, None)]
         broad = broad_figures(trials, progress)
@@ -348,6 +428,8 @@ def main(argv=None):
         steps = step_figures()
     if 'starts' in sections:
         starts = start_figures(folder, progress=progress)
+    if 'whole' in sections:
+        whole = whole_figures(folder, progress=progress)
     if args.node:
         from bench import raw_imu
         result = raw_imu.compare(rounds=5, progress=progress, floor=True)
@@ -364,19 +446,19 @@ def main(argv=None):
             'commit': facts['commit'], 'numba': numba.__version__,
             'machine': f'{facts["cpu"]}, {facts["cores"]} cores, Python {facts["python"]}, '
                        f'{facts["date"]}'}
-    section = markdown(broad, steps, starts, meta, node)
+    section = markdown(broad, steps, starts, meta, node, whole)
     print(section)
     if args.docs:
         progress(f'wrote {write_docs(args.docs, section)}')
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as out:
-            json.dump(as_json(broad, steps, starts, section), out, indent=1)
+            json.dump(as_json(broad, steps, starts, section, whole), out, indent=1)
     return 0
 
 
-def as_json(broad, steps, starts, section):
+def as_json(broad, steps, starts, section, whole=None):
     """The figures as JSON: a step's key as ``'9D update compiled'``, a start ``[cold, warm]``."""
-    return {'broad': broad,
+    return {'broad': broad, 'whole': whole,
             'steps': None if steps is None else {
                 key if isinstance(key, str) else
                 f'{key[0]} {key[1]} {"compiled" if key[2] else "plain"}': value

@@ -21,6 +21,10 @@ SCORE_TOLERANCE = 1e-9
 STEP_GOAL_US = 2.0
 COLD_GOAL_S = 10.0
 WARM_GOAL_S = 2.0
+# Issue 29: the BROAD command's whole process within this factor of VQF's
+# doing the same work (aim: the second).
+WHOLE_GOAL = 1.0
+WHOLE_AIM = 0.5
 NODES = ('imu_filter_node', 'observer_node')
 
 
@@ -103,11 +107,26 @@ def targets_section(compiled, raw):
         rows.append(_node_row(node))
     if _ok(compiled) and compiled.get('starts'):
         rows += _start_rows(compiled['starts'])
+    if _ok(compiled) and compiled.get('whole'):
+        rows.append(_whole_row(compiled['whole']))
     if not rows:
         return ''
     return ('## Targets of issue 19 (compiled kernels)\n\n'
             f'Figures: [section 7](#7-compiled-kernels-issue-19) and, for the node, '
             '[section 6](#6-raw-imu-estimator-imu_filter_node).\n\n' + _table(rows))
+
+
+def _whole_row(whole):
+    from bench.compiled import whole_medians
+    m = whole_medians(whole)
+    ratio = m['ours'] / m['VQF']
+    aim = '' if ratio <= WHOLE_AIM else f' (the aim, ≤ {WHOLE_AIM:g}×, not reached)'
+    return (f'issue 29: the BROAD command, 22 trials × 9D and 6D, whole process, warm cache: '
+            f'≤ {WHOLE_GOAL:g}× VQF\'s time for the same work (aim ≤ {WHOLE_AIM:g}×)',
+            f'{m["ours"]:.2f} s, VQF {m["VQF"]:.2f} s: {ratio:.2f}× (medians of '
+            f'{len(whole["VQF"])}, load {whole["load"][0]:.1f}–{whole["load"][1]:.1f}); '
+            f'to its first estimate {m["first estimate"]:.2f} s',
+            verdict(ratio <= WHOLE_GOAL) + aim)
 
 
 def section(compiled):

@@ -266,7 +266,10 @@ def test_report_renders_issue_19s_goals_from_the_figures():
               'imu_filter_node to the compiled kernels': (25.0, 1.9),
               'observer_node to its first /diagnostics': (11.0, 0.5)}
     meta = {'command': 'python -m bench.compiled', 'commit': 'abc', 'numba': '0', 'machine': 'x'}
-    compiled = as_json(broad, steps, starts, markdown(broad, steps, starts, meta))
+    whole = {'ours': [1.6, 1.2, 1.3], 'ours, 1 process': [1.5, 1.6, 1.7], 'VQF': [2.0, 2.2, 2.1],
+             'first estimate': [0.7, 0.8, 0.9], 'load': [1.0, 1.5]}
+    compiled = as_json(broad, steps, starts, markdown(broad, steps, starts, meta, whole=whole),
+                       whole)
     node = _node_result([230, 232, 236], [200, 201, 199])  # 1.15x: not met
     text = report.render({'machine': machine, 'command': 'python -m bench',
                           'raw_imu': {'node_events': node}, 'compiled': compiled})
@@ -287,6 +290,11 @@ def test_report_renders_issue_19s_goals_from_the_figures():
     assert row('raw-IMU node').endswith('| not met |') and '1.16×' in row('raw-IMU node')
     assert row('imu_filter_node: first start').endswith('| met |')
     assert row('observer_node: first start').endswith('| not met |')
+    # Issue 29: the medians 1.3 and 2.1 s, 0.62x: the goal met, not the aim.
+    assert row('issue 29: the BROAD command').endswith(
+        '1.30 s, VQF 2.10 s: 0.62× (medians of 3, load 1.0–1.5); to its first estimate '
+        '0.80 s | met (the aim, ≤ 0.5×, not reached) |')
+    assert '| ours, `--workers 1` | 1.60 | 0.76 |' in text
     assert report_compiled.BEGIN not in text
     # Without its figures, no table.
     assert report_compiled.targets_section(None, {}) == ''

@@ -2,7 +2,7 @@
 The generated parts of ``docs/``: ``python -m ext_observer docs``.
 
 ``docs/parameters.md`` holds one table per node, made by
-:func:`~ext_observer.nodes.node_common.markdown_table` from the node's
+:func:`~ext_observer.pipeline.parameter_specs.markdown_table` from the node's
 ``ParameterSpec`` rows (``GYRO_PARAMETERS``, ``OBSERVER_PARAMETERS``,
 ``MONITOR_PARAMETERS``). Each table sits between two marker comments; the
 prose around them is written by hand and left as it is. After a change to a
@@ -12,7 +12,7 @@ node's parameters, run ``python -m ext_observer docs`` (or ``make docs``);
 The same command rewrites the node sections of the params files,
 ``config/ext_observer.yaml`` (gyro, observer, monitor) and
 ``config/imu_filter.yaml`` (every parameter with its default and a comment,
-:func:`~ext_observer.nodes.node_common.yaml_section`; the header comment is left
+:func:`~ext_observer.pipeline.parameter_specs.yaml_section`; the header comment is left
 as it is); ``test/test_nodes.py`` loads that file and checks it.
 
 The other generated pages have their own commands: ``docs/reproduction.md``
@@ -44,7 +44,7 @@ NODES = (
      'OBSERVER_PARAMETERS'),
     ('monitor', 'ext_observer.nodes.monitor_node', 'MONITOR_PARAMETERS', CONFIG,
      'MONITOR_PARAMETERS'),
-    ('imu_filter', 'ext_observer.nodes.imu_filter_parameters', 'IMU_FILTER_PARAMETERS',
+    ('imu_filter', 'ext_observer.pipeline.imu_filter_parameters', 'IMU_FILTER_PARAMETERS',
      IMU_FILTER_CONFIG, 'IMU_FILTER_OWN'),
 )
 
@@ -67,7 +67,7 @@ def parameter_tables():
         (node name, begin marker, Markdown table) per node of :data:`NODES`.
 
     """
-    from ext_observer.nodes.node_common import markdown_table
+    from ext_observer.pipeline.parameter_specs import markdown_table
 
     tables = []
     for name, module, specs, _, _ in NODES:
@@ -126,7 +126,7 @@ def render_config(text, config=CONFIG):
         If the section of a node is missing.
 
     """
-    from ext_observer.nodes.node_common import yaml_section
+    from ext_observer.pipeline.parameter_specs import yaml_section
 
     for name, module, _, path, specs in NODES:
         if path != config:

@@ -3,17 +3,15 @@ Tests of the BROAD benchmark (``python -m ext_observer broad``).
 
 The scoring, the grouping and the page run on synthetic arrays (no h5py, no
 data). The anchors' frame conversions run on a synthetic static sensor
-(their packages are in requirements-test.txt). Where the data is looked for,
-and ``make broad-data``'s fetch from a local stand-in for BROAD's
-repository, run on temporary folders. The command end to end runs on two
-short trials of BROAD (see broad_data.py: without the data it fails, or
+(their packages are in requirements-test.txt). Where the data is looked for
+runs on temporary folders (the fetch: test_broad_fetch.py). The command end
+to end runs on two short trials of BROAD (see broad_data.py: without the data it fails, or
 skips with EXT_OBSERVER_ALLOW_NO_BROAD=1).
 """
 
 import json
 import math
 import os
-import shutil
 import subprocess
 import sys
 
@@ -23,7 +21,7 @@ import pytest
 from broad_data import broad_data_dir
 from conftest import REPO
 from ext_observer import broad
-from ext_observer.broad import data, fetch
+from ext_observer.broad import data
 from ext_observer.core.quaternion import conjugate, multiply
 
 
@@ -300,46 +298,6 @@ def test_groups_come_from_data_mat_as_in_a_clone_of_broad(tmp_path):
     assert groups['members']['special'] == [NAMES[0]]
 
 
-def _git(*args, cwd):
-    subprocess.run(['git', '-c', 'user.name=t', '-c', 'user.email=t@t', *args], cwd=cwd,
-                   check=True, capture_output=True)
-
-
-@pytest.mark.skipif(shutil.which('git') is None, reason='needs git')
-def test_fetch_takes_the_hdf5_files_and_credits_broad(tmp_path, capsys):
-    # A stand-in for BROAD's repository, laid out like it.
-    upstream = tmp_path / 'upstream'
-    for folder in ('data_hdf5', 'data_mat', 'animations'):
-        (upstream / folder).mkdir(parents=True)
-    (upstream / 'data_hdf5' / f'{NAMES[0]}.hdf5').write_bytes(b'hdf5')
-    (upstream / 'data_mat' / f'{NAMES[0]}.mat').write_bytes(b'mat')
-    (upstream / 'data_mat' / 'trials.json').write_text('{"groups": [], "trials": {}}')
-    (upstream / 'animations' / 'trial.mp4').write_bytes(b'video')
-    (upstream / 'README.md').write_text('# BROAD\n')
-    _git('init', '-q', cwd=upstream)
-    _git('add', '.', cwd=upstream)
-    _git('commit', '-qm', 'data', cwd=upstream)
-    dest = tmp_path / 'data' / 'broad'
-
-    assert fetch.main([str(dest), '--url', upstream.as_uri()]) == 0
-    files = sorted(str(p.relative_to(dest)) for p in dest.rglob('*') if p.is_file())
-    assert files == ['CREDIT.md', 'README.md', f'data_hdf5/{NAMES[0]}.hdf5', 'trials.json']
-    credit = (dest / 'CREDIT.md').read_text()
-    for needed in ('Laidig', 'doi:10.3390/data6070072', 'CC BY 4.0', upstream.as_uri()):
-        assert needed in credit
-    assert broad.has_trials(str(dest)) and not (tmp_path / 'data' / 'broad.partial').exists()
-    # A second run leaves the folder as it is.
-    assert fetch.main([str(dest), '--url', str(tmp_path / 'nowhere')]) == 0
-    assert 'nothing to do' in capsys.readouterr().out
-
-
-def test_fetch_failure_is_one_error_and_no_folder(tmp_path, capsys):
-    dest = tmp_path / 'broad'
-    assert fetch.main([str(dest), '--url', str(tmp_path / 'nowhere')]) == 1
-    assert capsys.readouterr().err.startswith('error: ')
-    assert not dest.exists()
-
-
 # Every public name of the module ext_observer/broad.py had, before it became
 # a package.
 FORMER_NAMES = (
@@ -402,12 +360,12 @@ def test_anchor_frames_on_a_static_sensor(anchor, mode):
 
 @pytest.mark.timeout(240)
 def test_command_end_to_end_on_two_short_trials(tmp_path):
-    folder = broad_data_dir()
+    trials = ['01_undisturbed_slow_rotation_A', '28_disturbed_stationary_magnet_A']
+    folder = broad_data_dir(trials)
     # 60 s: the first 30 to 48 s of each trial are rest, not scored.
     out = tmp_path / 'broad.json'
     docs = tmp_path / 'docs'
     docs.mkdir()
-    trials = ['01_undisturbed_slow_rotation_A', '28_disturbed_stationary_magnet_A']
     done = subprocess.run(
         [sys.executable, '-m', 'ext_observer', 'broad', '--data', folder, '--trials', *trials,
          '--head', '60', '--no-anchors', '--json', str(out), '--docs', str(docs), '--quiet'],

@@ -204,10 +204,10 @@ def test_runner_scores_ours_and_vqf_on_every_variant(tmp_path):
 
 @pytest.mark.timeout(240)
 def test_stress_command_end_to_end_on_two_short_trials(tmp_path):
-    folder = broad_data_dir()
+    trials = ['01_undisturbed_slow_rotation_A', '28_disturbed_stationary_magnet_A']
+    folder = broad_data_dir(trials)
     out = tmp_path / 'robustness.json'
     docs = tmp_path / 'docs'
-    trials = ['01_undisturbed_slow_rotation_A', '28_disturbed_stationary_magnet_A']
     done = subprocess.run(
         [sys.executable, '-m', 'ext_observer', 'broad', '--stress', '--data', folder,
          '--trials', *trials, '--head', '50', '--anchors', 'VQF', '--variants', 'b', 'd',

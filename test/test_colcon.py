@@ -56,6 +56,7 @@ def test_colcon_installs_the_ros_layout(workspace):
     assert (share / 'ext_observer' / 'package.xml').exists()
     assert (share / 'ext_observer' / 'config' / 'ext_observer.yaml').exists()
     assert (share / 'ext_observer' / 'config' / 'imu_filter.yaml').exists()
+    assert (share / 'ext_observer' / 'launch' / 'imu_filter.launch.py').exists()
 
 
 def test_ros2_run_path_with_the_installed_params_file(workspace, ros_processes):

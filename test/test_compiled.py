@@ -11,6 +11,7 @@ every kernel function; and without numba the package must run plain.
 import os
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -256,3 +257,43 @@ def test_a_covariance_array_the_kernels_cannot_write_is_refused(compiled):
         with pytest.raises(ValueError, match='C-contiguous float64 array of 9'):
             pipeline.estimator.step((0.1, 0.0, 0.0), (0.0, 0.0, 9.8), 0.001, bad)
     assert pipeline.estimator.state == state and not wide.any()
+
+
+@pytest.mark.parametrize('command', ['csv', 'bag', 'broad'])
+def test_without_numba_each_command_warns_once_with_the_cost(command, monkeypatch, capsys,
+                                                            tmp_path):
+    from ext_observer.__main__ import main
+    argv = {'csv': ['csv', str(tmp_path / 'in.csv'), '--out', str(tmp_path / 'out.csv')],
+            'bag': ['bag', str(tmp_path / 'no_bag'), '--out', str(tmp_path / 'out')],
+            'broad': ['broad', '--data', str(tmp_path), '--no-anchors']}[command]
+    monkeypatch.setitem(sys.modules, 'numba', None)
+    monkeypatch.delenv('EXT_OBSERVER_COMPILED', raising=False)
+    assert main(argv) == 2  # no input: the error comes after the warning
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0] == f'warning: {compiled_module.plain_warning()}' and len(lines) == 2
+    for needed in ('numba cannot be imported', 'per sample', 'BROAD command', 'pip install'):
+        assert needed in lines[0]
+    # Plain on purpose, or numba there: nothing said.
+    monkeypatch.setenv('EXT_OBSERVER_COMPILED', '0')
+    assert main(argv) == 2 and 'warning' not in capsys.readouterr().err
+    monkeypatch.delitem(sys.modules, 'numba')
+    monkeypatch.delenv('EXT_OBSERVER_COMPILED')
+    if compiled_module.compiled_available():
+        assert main(argv) == 2 and 'warning' not in capsys.readouterr().err
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(120)
+def test_without_numba_the_node_warns_once_with_the_cost(ros_processes):
+    code = ('import sys; sys.modules["numba"] = None; '
+            'from ext_observer.nodes.imu_filter_node import main; sys.exit(main())')
+    env = {k: v for k, v in os.environ.items() if k != 'EXT_OBSERVER_COMPILED'}
+    node = ros_processes([sys.executable, '-c', code], env=env)
+    deadline = time.monotonic() + 60.0
+    while 'raw IMU on' not in node.output and time.monotonic() < deadline:
+        assert node.process.poll() is None, node.output
+        time.sleep(0.1)
+    assert node.interrupt() == 0, node.output
+    assert node.output.count('numba cannot be imported') == 1, node.output
+    line = next(li for li in node.output.splitlines() if 'numba cannot be imported' in li)
+    assert line.startswith('[WARN]') and line.endswith(compiled_module.PLAIN_COST), line

@@ -221,7 +221,7 @@ def test_world_frames_name_east_as_rep_103_does(frame, east):
 @pytest.mark.parametrize('name, value, match', [
     ('tau_acc', 0.0, 'tau_acc must be positive'),
     ('tau_bias', -1.0, 'tau_bias must be >= 0'),
-    ('alpha', 0.08, 'certified'),
+    ('alpha', 0.08, 'alpha must be below 0.0762'),
     ('rest_gyr', float('nan'), 'rest_gyr must be finite'),
     ('tau_magg', 1.0, 'unknown parameters'),
 ])

@@ -56,7 +56,7 @@ def test_page_figures_are_read_from_the_per_trial_table():
 
 @pytest.mark.timeout(120)
 def test_estimator_on_two_whole_trials_matches_the_page():
-    folder = broad_data_dir()
+    folder = broad_data_dir(TRIALS)
     with open(PAGE, encoding='utf-8') as f:
         reported = page_figures(f.read())
     missing = [t for t in TRIALS if t not in reported]
@@ -99,7 +99,7 @@ def test_the_bag_command_on_a_whole_trial_reproduces_the_page(tmp_path):
     name = TRIALS[0]
     with open(PAGE, encoding='utf-8') as f:
         expected = float(page_figures(f.read())[name][COLUMNS[('9D', 'total_rmse_deg')]])
-    [(_, path)] = broad.find_trials(broad_data_dir(), (name,))
+    [(_, path)] = broad.find_trials(broad_data_dir((name,)), (name,))
     trial = broad.load_trial(path, name)
     data = {'gyr': trial.gyr, 'acc': trial.acc, 'mag': trial.mag, 'rate': trial.rate,
             'opt_quat': trial.quat, 'movement': trial.movement}

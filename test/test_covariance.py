@@ -24,7 +24,7 @@ import pytest
 from ext_observer.core.ahrs.estimator import AhrsParams
 from ext_observer.core.ahrs.uncertainty import (AttitudeUncertainty, HEADING_UNKNOWN,
                                            UncertaintyParams)
-from ext_observer.nodes.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 
 SECOND = 1_000_000_000

@@ -79,3 +79,63 @@ def test_the_estimators_fields_are_read_by_name():
     batch = AhrsObserver(batch=3, compiled=False)
     batch.set_field('mag_used', [1.0, 2.0, 3.0])
     assert list(batch.field('mag_used')) == [1.0, 2.0, 3.0]
+
+
+def _raw_imu_rows():
+    from ext_observer.core.ahrs.ahrs_params import AHRS_TABLE
+    from ext_observer.core.ahrs.uncertainty import UNCERTAINTY_TABLE
+    from ext_observer.pipeline.raw_imu import AHRS_PREFIX, COVARIANCE_PREFIX
+    return ([(AHRS_PREFIX, row) for row in AHRS_TABLE]
+            + [(COVARIANCE_PREFIX, row) for row in UNCERTAINTY_TABLE])
+
+
+def test_every_raw_imu_parameter_comes_from_the_one_table():
+    from ext_observer.core.ahrs.ahrs_params import AhrsParams
+    from ext_observer.core.ahrs.uncertainty import UncertaintyParams
+    from ext_observer.nodes.parameters import descriptor
+    from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS,
+                                                             imu_filter_settings)
+    from ext_observer.pipeline.parameter_specs import markdown_table
+
+    specs = {spec.name: spec for spec in IMU_FILTER_PARAMETERS}
+    rows = _raw_imu_rows()
+    # Every prefixed parameter of the node is a row, and every row a parameter.
+    assert {prefix + row.name for prefix, row in rows} == {
+        name for name in specs if name.startswith(('ahrs.', 'covariance.'))}
+    docs = (PACKAGE.parent / 'docs' / 'parameters.md').read_text(encoding='utf-8')
+    yaml = (PACKAGE.parent / 'config' / 'imu_filter.yaml').read_text(encoding='utf-8')
+    defaults = {**{f'ahrs.{k}': v for k, v in AhrsParams.DEFAULTS.items()},
+                **{f'covariance.{k}': v for k, v in UncertaintyParams.DEFAULTS.items()}}
+    values = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
+    for prefix, row in rows:
+        spec = specs[prefix + row.name]
+        # The core's default, the node's default, the docs' and the YAML's.
+        assert defaults[spec.name] == row.default == spec.default
+        assert row.description in spec.description and spec.constraints == row.rule
+        assert markdown_table([spec]).splitlines()[-1] in docs.splitlines(), spec.name
+        assert f'    {spec.name}: {spec.default_text}' in yaml.splitlines(), spec.name
+        # The node's declared range is the row's.
+        declared = descriptor(spec)
+        if row.flag:
+            assert spec.range is None and not declared.floating_point_range
+            continue
+        (declared_range,) = declared.floating_point_range
+        assert (declared_range.from_value, declared_range.to_value) == (row.low, row.high)
+        # And the node's validation enforces the row's ends, open or closed.
+        for value, accepted in ((row.low, row.low_closed), (row.high, not row.high_open)):
+            candidate = dict(values, **{spec.name: value})
+            if accepted:
+                imu_filter_settings(candidate)
+            else:
+                with pytest.raises(ValueError, match=row.name):
+                    imu_filter_settings(candidate)
+
+
+def test_the_node_refuses_what_the_core_refuses():
+    from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS,
+                                                             imu_filter_settings)
+    values = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
+    # alpha's rclpy range is [0, 0.0762]; the certified range is open at 0.0762.
+    with pytest.raises(ValueError, match='alpha must be below 0.0762'):
+        imu_filter_settings(dict(values, **{'ahrs.alpha': 0.0762}))
+    imu_filter_settings(dict(values, **{'ahrs.alpha': 0.0761}))

@@ -17,8 +17,8 @@ import pytest
 from sensor_msgs.msg import Imu
 
 from ext_observer.nodes.conversions import nanoseconds_from_stamp
-from ext_observer.nodes.imu_filter_parameters import (covariance_estimated,
-                                                      IMU_FILTER_PARAMETERS)
+from ext_observer.pipeline.imu_filter_parameters import (covariance_estimated,
+                                                         IMU_FILTER_PARAMETERS)
 from ros_helpers import installed, SECOND
 from test_raw_imu import Driver
 
@@ -96,6 +96,12 @@ def test_imu_filter_madgwick_own_file_starts_with_a_covariance_and_names_publish
     assert "orientation_covariance of imu/data: the estimate's own" in out, out
     assert 'orientation_stddev 0.0 means not given' in out, out
     assert 'publish_tf' in out, out
+    try:
+        import tf2_ros  # noqa: F401
+    except ImportError:
+        # The pip wheels: one WARN, saying what to do.
+        assert out.count('publish_tf is true but tf2_ros does not import here') == 1, out
+        assert 'ROS 2 installation' in out
 
 
 # constant_dt: every sample, in the order it comes ---------------------------------
@@ -271,3 +277,309 @@ def test_transform_is_imu_filter_madgwicks_and_its_reverse():
         'odom', 'imu_link', q)
     parent, child, r = transform_from_estimate(q, 'odom', 'imu_link', reverse=True)
     assert (parent, child, r) == ('imu_link', 'odom', (0.5, -0.5, 0.5, -0.5))
+
+
+def test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest(ros_context, spinner):
+    from geometry_msgs.msg import Vector3Stamped
+    from std_msgs.msg import Bool
+
+    from ext_observer.core.quaternion import multiply_floats
+    from ext_observer.nodes.imu_filter_node import ImuFilterNode
+    from ext_observer.pipeline.imu_tools import gravity_in_sensor, rpy_from_quaternion
+    from ros_helpers import overrides
+    from test_raw_imu import connect
+
+    node = spinner.add(ImuFilterNode(
+        node_name='debugged', context=ros_context, parameter_overrides=overrides(
+            publish_debug_topics=True, remove_gravity_vector=True, yaw_offset=0.3)))
+    driver = spinner.add(Driver(ros_context))
+    out = {'imu': {}, 'filtered': {}, 'raw': {}, 'steady': []}
+
+    def keep(store):
+        return lambda msg: store.__setitem__(nanoseconds_from_stamp(msg.header.stamp), msg)
+    driver.create_subscription(Imu, 'imu/data', keep(out['imu']), 1000)
+    driver.create_subscription(Vector3Stamped, 'imu/rpy/filtered', keep(out['filtered']), 1000)
+    driver.create_subscription(Vector3Stamped, 'imu/rpy/raw', keep(out['raw']), 1000)
+    driver.create_subscription(Bool, 'imu/steady_state',
+                               lambda msg: out['steady'].append(msg.data), 1000)
+    connect(spinner, driver, node)
+    spinner.spin_until(lambda: all(driver.count_publishers(t) == 1 for t in (
+        'imu/rpy/filtered', 'imu/rpy/raw', 'imu/steady_state')), 10.0, 'the debug topics')
+    # At rest, tilted (about x by 0.4 rad, then z by 1 rad), with noise.
+    rng = np.random.default_rng(32)
+    tilt = multiply_floats((math.cos(0.5), 0.0, 0.0, math.sin(0.5)),
+                           (math.cos(0.2), math.sin(0.2), 0.0, 0.0))
+    g = np.array(gravity_in_sensor(tilt, 9.81))
+    field = (2e-5, 1e-5, -4e-5)
+    count = 300
+    for k in range(count):
+        stamp = START + k * SECOND // 100
+        acc = tuple(float(v) for v in g + rng.normal(0.0, 0.02, 3))
+        gyr = tuple(float(v) for v in rng.normal(0.0, 0.002, 3))
+        driver.send_field(stamp, field)
+        driver.send_imu(stamp, gyr, acc)
+        if k:
+            spinner.spin_until(lambda: stamp in out['imu'] and stamp in out['filtered']
+                               and stamp in out['raw'], 10.0, f'outputs {k}')
+    assert len(out['imu']) == count - 1
+    worst_rpy = worst_acc = 0.0
+    for stamp, msg in out['imu'].items():
+        filtered = out['filtered'][stamp]
+        assert filtered.header.frame_id == msg.header.frame_id == 'imu_link'
+        o = msg.orientation
+        expected = rpy_from_quaternion((o.w, o.x, o.y, o.z))
+        v = filtered.vector
+        worst_rpy = max(worst_rpy, np.abs(np.subtract((v.x, v.y, v.z), expected)).max())
+        a = msg.linear_acceleration
+        worst_acc = max(worst_acc, math.sqrt(a.x * a.x + a.y * a.y + a.z * a.z))
+        # The sample alone agrees with the filter at rest, to the noise.
+        r = out['raw'][stamp].vector
+        assert np.abs(np.subtract((r.x, r.y, r.z), expected)).max() < 0.05
+    # imu/rpy/filtered is the roll, pitch and yaw of imu/data.
+    assert worst_rpy < 1e-12, worst_rpy
+    # At rest with remove_gravity_vector: what is left is noise.
+    assert worst_acc < 0.2, worst_acc
+    print(f'rpy difference {worst_rpy:.2e} rad, largest |a| without gravity {worst_acc:.3f} m/s²')
+    spinner.spin_until(lambda: len(out['steady']) >= count - 1, 10.0, 'steady states')
+    assert out['steady'][-1] is True
+    # At runtime: false gives the specific force as measured again.
+    from rclpy.parameter import Parameter
+    assert node.set_parameters([Parameter('remove_gravity_vector', value=False)])[0].successful
+    stamp = START + count * SECOND // 100
+    driver.send_field(stamp, field)
+    driver.send_imu(stamp, (0.0, 0.0, 0.0), tuple(g))
+    spinner.spin_until(lambda: stamp in out['imu'], 10.0, 'the last estimate')
+    a = out['imu'][stamp].linear_acceleration
+    assert (a.x, a.y, a.z) == tuple(g)
+
+
+# imu_complementary_filter's users -------------------------------------------------
+
+def test_complementary_filter_own_file_starts_the_node_and_names_its_parameters(
+        ros_processes, ros_context, spinner):
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    # Its own file, unchanged, under its own node name; it asks for a
+    # reliable imu/data_raw (qos_overrides), so the driver here is reliable.
+    process = ros_processes([installed('imu_filter_node'), '--ros-args',
+                             '-r', '__node:=complementary_filter_gain_node',
+                             '--params-file', COMPLEMENTARY_FILE])
+    driver = spinner.add(Driver(ros_context))
+    reliable = driver.create_publisher(Imu, 'imu/data_raw', QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    received = []
+    driver.create_subscription(Imu, 'imu/data', received.append, 1000)
+    spinner.spin_until(lambda: reliable.get_subscription_count() == 1
+                       and driver.count_publishers('imu/data') == 1, 20.0, 'the node')
+    deadline = time.monotonic() + 20.0
+    k = 0
+    while len(received) < 20:
+        assert time.monotonic() < deadline and process.process.poll() is None, process.output
+        msg = Imu()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 1_700_000_000 + k // 100, (
+            k % 100) * 10_000_000
+        msg.header.frame_id = 'imu_link'
+        msg.angular_velocity.z = 0.1
+        msg.linear_acceleration.z = 9.81
+        reliable.publish(msg)
+        k += 1
+        spinner.spin_for(0.01)
+    out = process.output
+    warnings = [line for line in out.splitlines() if 'not used here' in line]
+    assert len(warnings) == 1, out
+    for name, replacement in (('gain_acc', 'ahrs.tau_acc_gain'), ('gain_mag', 'ahrs.tau_mag'),
+                              ('bias_alpha', 'ahrs.tau_rest'),
+                              ('do_bias_estimation', 'ahrs.tau_bias'),
+                              ('do_adaptive_gain', 'ahrs.tau_acc')):
+        assert f'{name}=' in warnings[0] and replacement in warnings[0], (name, warnings[0])
+    # Its use_mag: false is honoured (6D), its orientation_stddev (not in
+    # the file) leaves the estimate's own covariance.
+    assert 'use_mag false' in out, out
+    assert all(msg.orientation_covariance[0] > 0.0 for msg in received)
+
+
+# The gyro bias: given, saved, loaded, switched ---------------------------------------
+
+def test_a_saved_gyro_bias_reloads_and_applies_from_the_first_sample(
+        ros_context, spinner, tmp_path):
+    import yaml
+    from std_srvs.srv import Trigger
+
+    from ext_observer.nodes.imu_filter_node import ImuFilterNode
+    from ext_observer.pipeline.imu_filter_parameters import imu_filter_settings
+    from ext_observer.pipeline.raw_imu import RawImuPipeline
+    from ros_helpers import overrides
+    from test_raw_imu import connect
+
+    bias = (0.01, -0.015, 0.02)  # rad/s
+    path = tmp_path / 'calibration.yaml'
+    learner = spinner.add(ImuFilterNode(node_name='learner', context=ros_context,
+                                        parameter_overrides=overrides(
+                                            calibration_file=str(path), use_mag=False)))
+    # 6 s at rest on a biased gyro: the bias is learned.
+    rng = np.random.default_rng(33)
+    for k in range(600):
+        gyr = tuple(float(v) for v in np.add(bias, rng.normal(0.0, 0.001, 3)))
+        learner.pipeline.imu(START + k * SECOND // 100, gyr, (0.0, 0.0, 9.81))
+    learned = learner.observer.bias
+    assert np.abs(np.subtract(learned, bias)).max() < 1e-3, learned
+    driver = spinner.add(Driver(ros_context))
+    client = driver.create_client(Trigger, '/learner/save_calibration')
+    spinner.spin_until(client.service_is_ready, 10.0, 'the save service')
+    future = client.call_async(Trigger.Request())
+    spinner.spin_until(future.done, 10.0, 'the save answer')
+    result = future.result()
+    # The gyro bias is saved; the magnetometer's (off in 6D) is said not to be.
+    assert result.success and 'magnetometer calibration not saved' in result.message
+    saved = yaml.safe_load(path.read_text())['learner']['ros__parameters']
+    assert 'mag_bias_x' not in saved
+    assert tuple(saved[f'gyro_bias_{a}'] for a in 'xyz') == learned
+    # A new node loads it (as --params-file does) and starts from it.
+    fresh = spinner.add(ImuFilterNode(node_name='fresh', context=ros_context,
+                                      parameter_overrides=overrides(use_mag=False, **saved)))
+    assert fresh.observer.bias == learned
+    spinner.executor.remove_node(learner)
+    spinner.nodes.remove(learner)
+    learner.destroy_node()
+    received = []
+    driver.create_subscription(Imu, 'imu/data', received.append, 1000)
+    connect(spinner, driver, fresh)
+    spinner.spin_until(lambda: fresh.imu_publisher.get_subscription_count() == 2, 10.0,
+                       'both subscriptions to imu/data')
+    # 1 s at rest, the gyro reading exactly its bias: from the first sample
+    # the estimate does not turn (rest is detected only after 1.5 s, so
+    # nothing is learned meanwhile).
+    samples = [(START + k * SECOND // 100, learned, (0.0, 0.0, 9.81)) for k in range(101)]
+    for k, (stamp, gyr, acc) in enumerate(samples):
+        driver.send_imu(stamp, gyr, acc)
+        if k:
+            spinner.spin_until(lambda: len(received) == k, 10.0, f'estimate {k}')
+    first, last = received[0].orientation, received[-1].orientation
+    turned = 2.0 * math.acos(min(1.0, abs(first.w * last.w + first.x * last.x
+                                          + first.y * last.y + first.z * last.z)))
+    # Without it, the same samples turn the estimate by the bias over 1 s.
+    pipeline = RawImuPipeline(imu_filter_settings(defaults(use_mag=False)))
+    states = [pipeline.imu(t, g, a)[1] for t, g, a in samples]
+    q0, q1 = states[1].state, states[-1].state
+    unsaved = 2.0 * math.acos(min(1.0, abs(np.dot(q0, q1))
+                                  / np.linalg.norm(q0) / np.linalg.norm(q1)))
+    print(f'turn over 1 s at rest: {turned:.2e} rad with the saved bias, '
+          f'{unsaved:.4f} rad without')
+    assert turned < 1e-4, turned
+    assert unsaved > 0.02, unsaved
+
+
+def test_gyro_bias_learning_switches_at_runtime(ros_context):
+    from rclpy.parameter import Parameter
+
+    from ext_observer.nodes.imu_filter_node import ImuFilterNode
+    from ros_helpers import values_of
+    from ros_helpers import overrides
+
+    node = ImuFilterNode(node_name='switched', context=ros_context,
+                         parameter_overrides=overrides(use_mag=False, gyro_bias_z=0.005))
+    try:
+        assert node.observer.bias == (0.0, 0.0, 0.005)
+        assert node.set_parameters([Parameter('gyro_bias_learning', value=False)])[0].successful
+        rest = [(START + k * SECOND // 100, (0.0, 0.0, 0.02), (0.0, 0.0, 9.81))
+                for k in range(400)]
+        for stamp, gyr, acc in rest[:200]:
+            node.pipeline.imu(stamp, gyr, acc)
+        # Held: at rest for 2 s and nothing learned.
+        assert node.observer.bias == (0.0, 0.0, 0.005)
+        assert values_of(node.status())['bias_learning'] == 'false'
+        assert node.set_parameters([Parameter('gyro_bias_learning', value=True)])[0].successful
+        for stamp, gyr, acc in rest[200:]:
+            node.pipeline.imu(stamp, gyr, acc)
+        assert node.observer.bias[2] == pytest.approx(0.02, abs=2e-3)
+        # A reset starts again from the bias given.
+        node.pipeline.reset('service')
+        assert node.observer.bias == (0.0, 0.0, 0.005)
+        # Beyond ahrs.bias_max: refused with the reason.
+        result = node.set_parameters([Parameter('gyro_bias_x', value=0.5)])[0]
+        assert not result.successful and 'bias_max' in result.reason
+    finally:
+        node.destroy_node()
+
+
+# TF -------------------------------------------------------------------------------
+
+def test_publish_tf_broadcasts_the_orientation_where_tf2_ros_imports(ros_context, spinner):
+    tf2_ros = pytest.importorskip(
+        'tf2_ros', reason='tf2_ros is not on PyPI: the TF broadcast needs a ROS installation')
+    from ext_observer.nodes.imu_filter_node import ImuFilterNode
+    from ext_observer.pipeline.imu_tools import transform_from_estimate
+    from ros_helpers import overrides
+    from test_raw_imu import connect
+
+    node = spinner.add(ImuFilterNode(node_name='tf', context=ros_context,
+                                     parameter_overrides=overrides(
+                                         publish_tf=True, fixed_frame='odom', use_mag=False)))
+    assert node.tf_broadcaster is not None
+    buffer = tf2_ros.Buffer()
+    listener = tf2_ros.TransformListener(buffer, node, spin_thread=False)
+    driver = spinner.add(Driver(ros_context))
+    connect(spinner, driver, node)
+    for k in range(50):
+        driver.send_imu(START + k * SECOND // 100, (0.0, 0.0, 0.5), (0.3, 0.0, 9.8))
+        spinner.spin_for(0.02)
+    spinner.spin_until(lambda: buffer.can_transform('odom', 'imu_link', rclpy_time_zero()),
+                       10.0, 'the transform')
+    t = buffer.lookup_transform('odom', 'imu_link', rclpy_time_zero())
+    r = t.transform.rotation
+    _, _, expected = transform_from_estimate(node.state, 'odom', 'imu_link')
+    assert np.abs(np.subtract((r.w, r.x, r.y, r.z), expected)).max() < 1e-9
+    del listener
+
+
+def rclpy_time_zero():
+    from rclpy.time import Time
+    return Time()
+
+
+# The launch file -------------------------------------------------------------------
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+LAUNCH_FILE = os.path.join(REPO, 'launch', 'imu_filter.launch.py')
+
+
+def test_the_launch_file_is_imu_tools_shape_and_installed_by_setup():
+    import ast
+
+    tree = ast.parse(open(LAUNCH_FILE).read())
+    calls = {node.func.attr: node for node in ast.walk(tree)
+             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)}
+    keywords = {k.arg: k.value for k in calls['Node'].keywords}
+    assert {k: ast.literal_eval(keywords[k]) for k in ('package', 'executable', 'name')} == {
+        'package': 'ext_observer', 'executable': 'imu_filter_node', 'name': 'imu_filter'}
+    # imu_tools' shape: the installed config/imu_filter.yaml, overridable.
+    assert ast.literal_eval(calls['DeclareLaunchArgument'].args[0]) == 'params_file'
+    assert "'config'" in ast.unparse(tree) and "'imu_filter.yaml'" in ast.unparse(tree)
+    setup = open(os.path.join(REPO, 'setup.py')).read()
+    assert "'imu_filter_node = ext_observer.nodes.imu_filter_node:main'" in setup
+    assert "glob('launch/*.launch.py')" in setup
+
+
+def test_ros2_launch_starts_the_node_where_launch_ros_imports(ros_processes):
+    import shutil
+
+    pytest.importorskip('launch_ros', reason='launch_ros is not on PyPI: the launch file '
+                        'needs a ROS 2 installation (colcon)')
+    from ament_index_python.packages import (get_package_share_directory,
+                                             PackageNotFoundError)
+    try:
+        share = get_package_share_directory('ext_observer')
+    except PackageNotFoundError:
+        pytest.skip('ext_observer is not installed with colcon in this environment')
+    ros2 = shutil.which('ros2')
+    if ros2 is None:
+        pytest.skip('the ros2 command is not on PATH')
+    assert os.path.exists(os.path.join(share, 'launch', 'imu_filter.launch.py'))
+    process = ros_processes([ros2, 'launch', 'ext_observer', 'imu_filter.launch.py',
+                             f'params_file:={MADGWICK_FILE}'])
+    deadline = time.monotonic() + 30.0
+    while 'raw IMU on /imu/data_raw' not in process.output:
+        assert process.process.poll() is None, process.output
+        assert time.monotonic() < deadline, process.output
+        time.sleep(0.1)
+    assert "the estimate's own" in process.output

@@ -21,6 +21,7 @@ MS = 1_000_000
 S = 1_000_000_000
 Y = (1.0, 0.0, 0.0, 0.0)
 THETA = (0.1, 0.2, 0.3)
+THETA_SMALL = (0.01, -0.02, 0.005)  # a good increment (rad)
 nan, inf = float('nan'), float('inf')
 # Drops counted when a later input or a restart pushes an input out, not
 # returned by the call that took it.
@@ -455,13 +456,36 @@ imu_operations = st.lists(st.one_of(
     st.tuples(st.just('restart'), st.none(), st.none())), max_size=60)
 
 
+# A stream that releases steps, after any operations: good samples a usual
+# interval apart from beyond every stamp drawn so far, each with or without
+# a measurement inside its interval (issue 31: drawn at random alone, the
+# operations released no step in 400 examples, so the step checks never ran).
+stream_intervals = st.lists(st.tuples(st.integers(1 * MS, 20 * MS), st.booleans()),
+                            min_size=3, max_size=12)
+
+
+def stream_start(ops):
+    """A stamp after every positive stamp of ``ops``."""
+    return max([stamp for _, stamp, _ in ops if stamp is not None and stamp > 0] + [0]) + S
+
+
 @settings(max_examples=400, deadline=None)
-@given(imu_operations, st.integers(1, 5), st.sampled_from([0.0, 0.01]))
-def test_every_imu_sample_is_accounted_for_and_steps_are_valid(ops, depth, constant_dt):
+@given(imu_operations, st.integers(1, 5), st.sampled_from([0.0, 0.01]), stream_intervals)
+def test_every_imu_sample_is_accounted_for_and_steps_are_valid(ops, depth, constant_dt,
+                                                               stream):
     pairer = make(depth=depth, max_increment=2.0, norm_tolerance=0.1,
                   max_dt=200 * MS, constant_dt=constant_dt)
     now = 0
     last = last_end = None
+    released = 0
+    stamp = stream_start(ops)
+    ops = ops + [('imu', stamp, THETA_SMALL)]
+    for interval, measured in stream:
+        if measured:
+            ops.append(('measurement', stamp + interval // 2, Y))
+        stamp += interval
+        ops += [('imu', stamp, THETA_SMALL), ('tick', interval, None)]
+    ops.append(('tick', S, None))  # then nothing waits for a measurement
     for op, stamp, value in ops:
         if op == 'imu':
             outcome = pairer.add_angular_velocity(stamp, value, now)
@@ -485,9 +509,12 @@ def test_every_imu_sample_is_accounted_for_and_steps_are_valid(ops, depth, const
             if step.measurement is not None:
                 assert math.hypot(*step.measurement) == pytest.approx(1.0)
             last, last_end = step.stamp, step.end
+            released += 1
         assert pairer.waiting('increment') <= depth + 1
         assert pairer.waiting('measurement') <= depth
         assert_accounted(pairer)
+    # Every interval of the stream was released (the checks above ran).
+    assert released >= len(stream)
 
 
 raw_imu_operations = st.lists(st.one_of(
@@ -497,11 +524,21 @@ raw_imu_operations = st.lists(st.one_of(
 
 
 @settings(max_examples=400, deadline=None)
-@given(raw_imu_operations, st.integers(1, 5))
-def test_raw_imu_samples_and_fields_are_accounted_for(ops, depth):
+@given(raw_imu_operations, st.integers(1, 5), stream_intervals)
+def test_raw_imu_samples_and_fields_are_accounted_for(ops, depth, stream):
     # The raw IMU: samples with their acceleration, fields used at once,
-    # nothing waits for a measurement (timeout 0).
+    # nothing waits for a measurement (timeout 0); then a stream of good
+    # samples with fields between them.
     pairer = make(depth=depth, timeout=0, max_increment=2.0, max_dt=200 * MS)
+    released = 0
+    stamp = stream_start(ops)
+    sample = (THETA_SMALL, (0.1, -0.2, 9.8))
+    ops = ops + [('imu', stamp, sample)]
+    for interval, field in stream:
+        if field:
+            ops.append(('field', stamp + interval // 2, (2e-5, 0.0, -4e-5)))
+        stamp += interval
+        ops.append(('imu', stamp, sample))
     for op, stamp, value in ops:
         if op == 'imu':
             omega, acceleration = value
@@ -526,10 +563,12 @@ def test_raw_imu_samples_and_fields_are_accounted_for(ops, depth):
         for step in pairer.pop_ready(0):
             assert step.measurement is None
             assert 0 < step.stamp < step.end <= step.stamp + 200 * MS
+            released += 1
         # Steps wait for nothing; fields never wait.
         assert pairer.waiting('increment') <= 1
         assert pairer.waiting('measurement') == 0
         assert_accounted(pairer)
+    assert released >= len(stream)
 
 
 # The raw IMU's samples: a 5 ms stream, its steps drawn as differences

@@ -26,6 +26,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 
 from broad_replay import fields_tesla, load, offline, stamps as broad_stamps, TRIALS
+from ext_observer.core.ahrs.estimator import AhrsParams
 from ext_observer.recordings import bag_io
 from ext_observer.recordings import cdr
 from ext_observer.recordings.bag import _Progress, compare, main as bag_main, run_bag
@@ -84,22 +85,32 @@ def recording(data):
     return excerpt(data, mag_every=MAG_EVERY)
 
 
-def _python_call(data):
+def _python_call(data, parameters=None):
     mag = fields_tesla(data).copy()
     mag[np.arange(len(mag)) % MAG_EVERY != 0] = np.nan
-    return attitude_from_imu(data['gyr'], data['acc'], mag, rate=float(data['rate']))
+    return attitude_from_imu(data['gyr'], data['acc'], mag, rate=float(data['rate']),
+                             parameters=parameters)
 
 
-@pytest.mark.parametrize('storage, parallel', [('mcap', True), ('sqlite3', False)])
-def test_bag_equals_python_call_and_offline(tmp_path, data, recording, storage, parallel):
+# The shipped defaults, and the other side of each choice the comparison
+# below branches on: the calibration off, the covariance orientation_stddev's.
+NOT_DEFAULT = {'ahrs.mag_cal': False, 'orientation_covariance_mode': 'fixed'}
+
+
+@pytest.mark.parametrize('storage, parallel, parameters', [('mcap', True, None),
+                                                            ('sqlite3', False, None),
+                                                            ('mcap', False, NOT_DEFAULT)])
+def test_bag_equals_python_call_and_offline(tmp_path, data, recording, storage, parallel,
+                                            parameters):
     bag = write_bag(str(tmp_path / 'in'), recording, storage)
     digest = _files_digest(bag)
-    run = run_bag(bag, str(tmp_path / 'out'), parallel=parallel)
+    run = run_bag(bag, str(tmp_path / 'out'), parameters=parameters, parallel=parallel)
     assert _files_digest(bag) == digest  # the input is only read
     out = _read_bag(str(tmp_path / 'out'))
     count = len(data['gyr'])
-    expected = offline(data, mag_every=MAG_EVERY)[1:]
-    ours = _python_call(data)
+    mag_cal = (parameters or {}).get('ahrs.mag_cal', True)
+    expected = offline(data, mag_every=MAG_EVERY, params=AhrsParams(mag_cal=mag_cal))[1:]
+    ours = _python_call(data, parameters)
     np.testing.assert_allclose(ours.ambient[1:], expected, rtol=0, atol=TOLERANCE)
     assert not ours.estimated[0] and ours.estimated[1:].all()
 
@@ -126,10 +137,15 @@ def test_bag_equals_python_call_and_offline(tmp_path, data, recording, storage, 
                                       raw_in.angular_velocity_covariance)
         assert (msg.linear_acceleration.z, msg.angular_velocity.x) == (
             raw_in.linear_acceleration.z, raw_in.angular_velocity.x)
-    if not node_settings()['covariance_estimated']:
+    if not node_settings(parameters)['covariance_estimated']:
         # orientation_stddev's (the estimate's own: test_imu_data_carries_...).
-        np.testing.assert_array_equal(data_msgs[0][1].orientation_covariance,
-                                      np.diag([0.05 ** 2] * 3).ravel())
+        for _, msg, _ in data_msgs:
+            np.testing.assert_array_equal(msg.orientation_covariance,
+                                          np.diag([0.05 ** 2] * 3).ravel())
+    else:
+        covariance = np.array([m.orientation_covariance for _, m, _ in data_msgs])
+        assert np.isfinite(covariance).all() and (covariance[:, [0, 4, 8]] > 0).all()
+        assert len({tuple(c) for c in covariance}) > 1  # the estimate's own, it changes
     # The input topics are copied as they were, at their receive times.
     with Reader(bag) as reader:
         original = {c.topic: [(t, bytes(raw)) for _, t, raw in reader.messages([c])]
@@ -142,12 +158,13 @@ def test_bag_equals_python_call_and_offline(tmp_path, data, recording, storage, 
     np.testing.assert_array_equal(run.recording.quaternions, ours.quaternions)
     np.testing.assert_array_equal(run.recording.rest, ours.rest)
     np.testing.assert_array_equal(run.recording.mag_disturbed, ours.mag_disturbed)
-    # The magnetometer calibration's state, where the core has one.
-    if ours.calibration is None:
-        assert run.recording.calibration is None
+    # The magnetometer calibration's state after each sample: 'off'
+    # throughout with mag_cal off, learning from the start with it on.
+    np.testing.assert_array_equal(run.recording.calibration, ours.calibration)
+    if mag_cal:
+        assert 'learning' in set(ours.calibration) <= {'learning', 'converged'}
     else:
-        np.testing.assert_array_equal(run.recording.calibration, ours.calibration)
-        assert set(ours.calibration) <= {'off', 'learning', 'converged', 'loaded'}
+        assert set(ours.calibration) == {'off'}
     assert run.storage == storage
     suffix = 'mcap' if storage == 'mcap' else 'db3'
     assert os.path.exists(os.path.join(tmp_path, 'out', f'out.{suffix}'))

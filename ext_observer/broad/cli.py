@@ -20,7 +20,7 @@ import numpy as np
 
 from ext_observer.broad.anchors import missing_anchor_packages
 from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_groups,
-                                     find_trials, has_trials, HOW_TO_GET, load_trial,
+                                     find_trials, has_trials, HOW_TO_GET, load_trials,
                                      shown_path, TREE)
 from ext_observer.broad.names import ANCHORS, MODES
 from ext_observer.broad.page import markdown
@@ -29,6 +29,7 @@ from ext_observer.broad.report import text_report, write_json
 from ext_observer.broad.run import log, run
 from ext_observer.broad.stress import VARIANTS
 from ext_observer.broad.stress_run import STRESS_ANCHORS
+from ext_observer.core.ahrs.compiled import kernels, warn_if_plain
 
 # Trial shown over time in the report: magnetically disturbed.
 PLOT_TRIAL = '28_disturbed_stationary_magnet_A'
@@ -97,6 +98,7 @@ def main(argv=None):
     """Run ``broad``; return the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    warn_if_plain()
     progress = (lambda text: None) if args.quiet else log
     default_anchors = STRESS_ANCHORS if args.stress else ANCHORS
     anchors = () if args.no_anchors or args.covariance else tuple(
@@ -257,10 +259,13 @@ def _read(folder, args, progress):
                          f'{os.path.join(folder, "data_hdf5")}: {HOW_TO_GET}')
     found = find_trials(folder, args.trials)
     start = time.perf_counter()
-    trials = [load_trial(path, name) for name, path in found]
+    # The estimator's compiled kernels load (numba's import and cache) on
+    # one core while the trials are read on the other.
+    trials = load_trials(found, meanwhile=kernels)
     if args.head:
         trials = [t.head(args.head) for t in trials]
-    progress(f'{len(trials)} trials read in {time.perf_counter() - start:.1f} s')
+    progress(f'{len(trials)} trials read in {time.perf_counter() - start:.1f} s (and the '
+             'kernels loaded meanwhile)')
     groups = find_groups(folder, [t.name for t in trials], os.path.dirname(found[0][1]))
     return trials, groups
 

@@ -54,7 +54,7 @@ def split_of(name):
 
 def node_settings(mode, values=None):
     """``imu_filter_node``'s settings with its defaults, 9D or 6D (and ``values``)."""
-    from ext_observer.nodes.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+    from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
     settings = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
     settings.update(values or {})
     settings['use_mag'] = mode == '9D'

@@ -17,6 +17,7 @@ import fnmatch
 import glob
 import json
 import math
+import mmap
 import os
 
 import numpy as np
@@ -192,20 +193,89 @@ def find_trials(data_dir, patterns=None):
     return trials
 
 
+_KEYS = ('imu_gyr', 'imu_acc', 'imu_mag', 'opt_quat', 'movement')
+
+
+def _checked(f, path):
+    """The sampling rate of an open trial file; ValueError naming what it lacks."""
+    missing = [k for k in _KEYS if k not in f]
+    if missing:
+        raise ValueError(f'{path}: missing {missing}')
+    if 'sampling_rate' not in f.attrs:
+        raise ValueError(f'{path}: missing the attribute sampling_rate')
+    return float(np.squeeze(f.attrs['sampling_rate']))
+
+
 def load_trial(path, name=None):
     """Read one BROAD HDF5 file into a :class:`Trial`."""
     h5py = _h5py()
     name = name or os.path.splitext(os.path.basename(path))[0]
     with h5py.File(path, 'r') as f:
-        missing = [k for k in ('imu_gyr', 'imu_acc', 'imu_mag', 'opt_quat', 'movement')
-                   if k not in f]
-        if missing:
-            raise ValueError(f'{path}: missing {missing}')
-        if 'sampling_rate' not in f.attrs:
-            raise ValueError(f'{path}: missing the attribute sampling_rate')
-        return Trial(name, f['imu_gyr'][()], f['imu_acc'][()], f['imu_mag'][()],
-                     f['opt_quat'][()], f['movement'][()],
-                     float(np.squeeze(f.attrs['sampling_rate'])))
+        rate = _checked(f, path)
+        return Trial(name, *(f[k][()] for k in _KEYS), rate)
+
+
+def load_trials(found, meanwhile=None):
+    """
+    Read trials into :class:`Trial` objects while this process does something else.
+
+    A forked child reads the arrays into memory shared with this process
+    (their shapes are read here first), while this process runs
+    ``meanwhile()``: the command loads its compiled kernels (numba's import
+    and cache, about as long as reading BROAD) on the other core. Where
+    forking is not possible, or the child fails, the trials are read here
+    after ``meanwhile()``, as :func:`load_trial` reads them.
+
+    Parameters
+    ----------
+    found : list of (str, str)
+        (trial name, path), as :func:`find_trials` returns them.
+    meanwhile : callable, optional
+
+    Returns
+    -------
+    list of Trial
+
+    """
+    h5py = _h5py()
+    layout, offset = [], 0
+    for name, path in found:
+        with h5py.File(path, 'r') as f:
+            rate = _checked(f, path)
+            arrays = []
+            for key in _KEYS:
+                dtype, shape = np.dtype(f[key].dtype), f[key].shape
+                arrays.append((key, dtype, shape, offset))
+                offset += -(-int(np.prod(shape)) * dtype.itemsize // 64) * 64
+        layout.append((name, path, rate, arrays))
+    pid = None
+    if len(found) > 1 and hasattr(os, 'fork'):
+        shared = mmap.mmap(-1, max(offset, 1))  # anonymous, shared with a child
+        pid = os.fork()
+        if pid == 0:  # the child: fill the shared buffer, then leave at once
+            status = 1
+            try:
+                for name, path, rate, arrays in layout:
+                    with h5py.File(path, 'r') as f:
+                        for key, dtype, shape, start in arrays:
+                            f[key].read_direct(_view(shared, dtype, shape, start))
+                status = 0
+            finally:
+                os._exit(status)
+    try:
+        if meanwhile is not None:
+            meanwhile()
+    finally:
+        failed = pid is None or os.waitpid(pid, 0)[1] != 0
+    if failed:
+        return [load_trial(path, name) for name, path in found]
+    return [Trial(name, *(_view(shared, *spec[1:]) for spec in arrays), rate)
+            for name, path, rate, arrays in layout]
+
+
+def _view(buffer, dtype, shape, start):
+    count = int(np.prod(shape))
+    return np.frombuffer(buffer, dtype=dtype, count=count, offset=start).reshape(shape)
 
 
 # --- the groups ------------------------------------------------------------

@@ -8,6 +8,7 @@ defaults); the anchors run one recording per task, in processes when
 the per-sample errors of one trial (for the figure) are kept.
 """
 
+import multiprocessing
 import sys
 import time
 
@@ -100,19 +101,23 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
     result = {'scores': {}, 'norms': {}, 'seconds': {}, 'series': {}}
     by_name = {t.name: t for t in trials}
 
-    def keep(algorithm, mode, name, q):
+    def scored(name, q):
         t = by_name[name]
-        result['scores'].setdefault(algorithm, {}).setdefault(mode, {})[name] = score(
-            q, t.quat, t.movement)
-        if name == plot_trial:
-            result['series'].setdefault(algorithm, {})[mode] = error_angles(q, t.quat)
+        return score(q, t.quat, t.movement), (error_angles(q, t.quat) if name == plot_trial
+                                              else None)
 
-    _run_ours(trials, modes, plain, workers, result, keep, progress, params)
+    def keep(algorithm, mode, name, q, scores=None):
+        scores, series = scores if scores is not None else scored(name, q)
+        result['scores'].setdefault(algorithm, {}).setdefault(mode, {})[name] = scores
+        if series is not None:
+            result['series'].setdefault(algorithm, {})[mode] = series
+
+    _run_ours(trials, modes, plain, workers, result, keep, scored, progress, params)
     _run_anchors(trials, modes, anchors, jobs, result, keep, progress)
     return result
 
 
-def _run_ours(trials, modes, plain, workers, result, keep, progress, params=None):
+def _run_ours(trials, modes, plain, workers, result, keep, scored, progress, params=None):
     samples = sum(len(t) for t in trials)
     variants = [('extended', OURS)] + ([('plain', OURS_PLAIN)] if plain else [])
     for variant, algorithm in variants:
@@ -124,9 +129,31 @@ def _run_ours(trials, modes, plain, workers, result, keep, progress, params=None
         norms = {m: norm_deviation(list(estimates[m].values())) for m in modes}
         norms['all'] = norm_deviation([q for m in modes for q in estimates[m].values()])
         result['norms'][variant] = norms
-        for mode in modes:
-            for name, q in estimates[mode].items():
-                keep(algorithm, mode, name, q)
+        streams = [(mode, name, q) for mode in modes for name, q in estimates[mode].items()]
+        for (mode, name, q), scores in zip(streams, _score_all(streams, scored, workers)):
+            keep(algorithm, mode, name, q, scores)
+
+
+# What the forked scorers read (set for the time of _score_all): no copies.
+_SCORING = None
+
+
+def _score_one(i):
+    mode, name, q = _SCORING[0][i]
+    return _SCORING[1](name, q)
+
+
+def _score_all(streams, scored, workers):
+    """``scored(name, q)`` of every stream, in order; in ``workers`` forked processes."""
+    global _SCORING
+    if workers <= 1 or len(streams) < 2:
+        return [scored(name, q) for _, name, q in streams]
+    _SCORING = (streams, scored)
+    try:
+        with multiprocessing.get_context('fork').Pool(min(workers, len(streams))) as pool:
+            return pool.map(_score_one, range(len(streams)), chunksize=4)
+    finally:
+        _SCORING = None
 
 
 def _anchor_task(task):

@@ -44,12 +44,10 @@ from ext_observer.nodes.node_common import (CounterDeltas, diagnostic_array, key
                                       QosWatch)
 from ext_observer.pipeline.pairing import KINDS
 
-__all__ = ['COMMON_PARAMETERS', 'EstimatorNode', 'FORWARD_GAP_ACTIONS', 'LOG_THROTTLE',
-           'RESET_CAUSES', 'SECOND', 'STATUS_SUFFIX', 'common_settings']
+__all__ = ['EstimatorNode', 'LOG_THROTTLE', 'RESET_CAUSES', 'SECOND', 'STATUS_SUFFIX']
 
 # Why the estimator restarted from its initial state.
 RESET_CAUSES = ('backward_jump', 'clock_jump', 'forward_gap', 'service')
-FORWARD_GAP_ACTIONS = ('propagate', 'reset')
 
 # The status is named '<node name>: inputs'.
 STATUS_SUFFIX = ': inputs'
@@ -57,44 +55,6 @@ STATUS_SUFFIX = ': inputs'
 SECOND = 1_000_000_000
 # Faults are logged at most this often per kind, s.
 LOG_THROTTLE = 5.0
-
-# The parameters both estimator nodes have, with the same meaning.
-COMMON_PARAMETERS = (
-    ParameterSpec('backward_jump_threshold', 1.0,
-                  'An input stamp older than the last step by more than this, or a '
-                  'backward jump of the node clock by more than this, restarts the '
-                  'time line and resets the estimator, s; smaller: stale, dropped.',
-                  (0.001, 3600.0)),
-    ParameterSpec('forward_gap_threshold', 1.0,
-                  'A step more than this after the previous one is a forward gap, s.',
-                  (0.001, 3600.0)),
-    ParameterSpec('forward_gap_action', 'propagate',
-                  "At a forward gap: 'propagate' (go on from the current estimate) or "
-                  "'reset' (start over).",
-                  constraints=f'One of {", ".join(FORWARD_GAP_ACTIONS)}.'),
-    ParameterSpec('queue_depth', 100,
-                  'History depth of every subscription and publisher (keep last), and '
-                  'the most inputs of each kind waiting for their pair.', (1, 10000),
-                  read_only=True),
-    ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.', (0.01, 3600.0),
-                  read_only=True),
-)
-
-
-def common_settings(values):
-    """
-    Check the values of :data:`COMMON_PARAMETERS` that rclpy's ranges do not.
-
-    Raises
-    ------
-    ValueError
-        With the reason.
-
-    """
-    if values['forward_gap_action'] not in FORWARD_GAP_ACTIONS:
-        raise ValueError(f'forward_gap_action must be one of {FORWARD_GAP_ACTIONS}, got '
-                         f'{values["forward_gap_action"]!r}')
-
 
 def floor_text(seconds):
     """Return ``seconds`` rounded down to 0.01 s, as text (never more than measured)."""
@@ -109,7 +69,8 @@ class EstimatorNode(Node):
     ----------
     node_name : str
     specs : sequence of ParameterSpec
-        The node's parameters (:data:`COMMON_PARAMETERS` among them).
+        The node's parameters
+        (:data:`~ext_observer.pipeline.parameter_specs.COMMON_PARAMETERS` among them).
     validate : callable
         ``validate(values) -> settings``, raising ``ValueError``.
     **kwargs

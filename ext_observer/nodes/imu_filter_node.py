@@ -14,30 +14,38 @@ says so (``fixed``; ``auto``, the default, when it is set); only while
 subscribed) and ``attitude_estimate``
 (``QuaternionStamped``, the ambient estimate, not normalized: its distance
 to S³ is what the extension term holds small); ``/diagnostics`` every
-``diagnostic_period``; the service ``~/reset`` (``std_srvs/Trigger``).
+``diagnostic_period``; as imu_filter_madgwick, with ``publish_debug_topics``
+``imu/rpy/filtered``, ``imu/rpy/raw`` (and ``imu/steady_state``), with
+``publish_tf`` the orientation on ``/tf`` where tf2_ros imports; the services
+``~/reset`` and ``~/save_calibration`` (``std_srvs/Trigger``: the gyro bias and
+the magnetometer calibration as a params file).
 
 The estimator is :class:`~ext_observer.pipeline.raw_imu.RawImuPipeline` (validation,
 stamps, the core's :class:`~ext_observer.core.ahrs.estimator.AhrsObserver`); this node
 turns messages into its inputs and its estimates into messages, and says
 what went wrong: drops, resets, a silent IMU, a missing magnetometer, and
 values that only a wrong unit explains (:mod:`ext_observer.pipeline.units`). The
-parameters are :data:`~ext_observer.nodes.imu_filter_parameters.IMU_FILTER_PARAMETERS`,
-imu_filter_madgwick's among them (``docs/raw_imu.md``).
+parameters are :data:`~ext_observer.pipeline.imu_filter_parameters.IMU_FILTER_PARAMETERS`,
+imu_tools' two filters' among them (``docs/raw_imu.md``).
 """
 
 import os
 
-from geometry_msgs.msg import QuaternionStamped
+from geometry_msgs.msg import QuaternionStamped, TransformStamped, Vector3Stamped
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Imu, MagneticField
+from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
 from ext_observer.recordings.calibrate import write_params
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
-from ext_observer.core.ahrs.compiled import BackgroundCompile, start_plan
+from ext_observer.core.ahrs.compiled import BackgroundCompile, plain_warning, start_plan
 from ext_observer.nodes.estimator_node import EstimatorNode
-from ext_observer.nodes.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
-                                                      imu_filter_settings, MADGWICK_UNUSED)
+from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
+                                                         imu_filter_settings, unused_text)
 from ext_observer.nodes.node_common import run_node
+from ext_observer.pipeline.imu_tools import (raw_attitude, rpy_from_quaternion,
+                                             transform_from_estimate, without_gravity)
 from ext_observer.pipeline.pairing import BACKWARD_JUMP
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 
@@ -45,6 +53,21 @@ __all__ = ['IMU_FILTER_PARAMETERS', 'ImuFilterNode', 'IMU_TOPIC', 'MAG_TOPIC', '
 
 IMU_TOPIC = 'imu/data_raw'
 MAG_TOPIC = 'imu/mag'
+
+# What publish_tf needs and the pip wheels do not have (tf2 is not on PyPI).
+NO_TF2 = ('publish_tf is true but tf2_ros does not import here ({error}): no TF is '
+          'broadcast, the orientation is on imu/data. For the transform run the node in a '
+          'ROS 2 installation (source /opt/ros/jazzy/setup.bash, colcon), or set publish_tf '
+          'false to silence this')
+
+
+def transform_broadcaster(node):
+    """Return a tf2_ros TransformBroadcaster of ``node``, or the ImportError's text."""
+    try:
+        from tf2_ros import TransformBroadcaster
+    except ImportError as error:
+        return None, str(error)
+    return TransformBroadcaster(node), None
 
 
 class ImuFilterNode(EstimatorNode):
@@ -100,8 +123,24 @@ class ImuFilterNode(EstimatorNode):
         self._calibration_state = None  # as last reported
         self.save_calibration_service = self.create_service(
             Trigger, '~/save_calibration', self.save_calibration_callback)
+        self.rpy_filtered_publisher = self.rpy_raw_publisher = None
+        self.steady_state_publisher = None
+        if settings['publish_debug_topics']:
+            # imu_filter_madgwick's debug topics (and the complementary filter's).
+            qos = QoSProfile(depth=settings['queue_depth'])
+            self.rpy_filtered_publisher = self.create_publisher(
+                Vector3Stamped, 'imu/rpy/filtered', qos)
+            self.rpy_raw_publisher = self.create_publisher(Vector3Stamped, 'imu/rpy/raw', qos)
+            self.steady_state_publisher = self.create_publisher(Bool, 'imu/steady_state', qos)
         self._cache_settings(settings)
         logger = self.get_logger()
+        self.tf_broadcaster = None
+        if settings['publish_tf']:
+            self.tf_broadcaster, error = transform_broadcaster(self)
+            if self.tf_broadcaster is None:
+                logger.warning(NO_TF2.format(error=error))
+            else:
+                self._transform = TransformStamped()
         logger.info(
             f'raw IMU on {self.increment_subscription.topic_name}'
             + (f' and {self.measurement_subscription.topic_name}' if settings['use_mag']
@@ -110,6 +149,8 @@ class ImuFilterNode(EstimatorNode):
             f'{self.pipeline.estimator.core.params}')
         logger.info(covariance_text(settings))
         self.compiler = None
+        if plan == 'plain' and plain_warning():
+            logger.warning(plain_warning())
         if plan == 'background':
             self.compiler = BackgroundCompile()
             self._compile_timer = self.create_timer(0.1, self.compile_timer_callback)
@@ -117,12 +158,9 @@ class ImuFilterNode(EstimatorNode):
                 logger.info(f'compiling the estimator\'s kernels in the background (pid '
                             f'{self.compiler.pid}, once per install or upgrade): the '
                             'plain kernels run meanwhile, with the same estimates')
-        unused = [spec.name for spec in MADGWICK_UNUSED if spec.name in self.parameters.given]
+        unused = unused_text(self.parameters.values, self.parameters.given)
         if unused:
-            logger.warning(
-                'parameters of imu_filter_madgwick accepted but not used here: '
-                + ', '.join(f'{name}={self.parameters.values[name]!r}' for name in unused)
-                + ' (docs/raw_imu.md says why; the gains are the ahrs.* parameters)')
+            logger.warning(unused)
 
     @property
     def state(self):
@@ -176,6 +214,10 @@ class ImuFilterNode(EstimatorNode):
         q = out.quaternion
         q.w, q.x, q.y, q.z = w, x, y, z
         self.estimate_publisher.publish(out)
+        if self.rpy_filtered_publisher is not None:
+            self._publish_debug(msg.header, estimate.state, (a.x, a.y, a.z))
+        if self.tf_broadcaster is not None:
+            self._broadcast(msg.header, estimate.state)
         if self._publish_imu:
             # The sample itself goes out, its header, rates and covariances
             # passed through (as imu_filter_madgwick does): the message is
@@ -186,7 +228,39 @@ class ImuFilterNode(EstimatorNode):
             if covariance is None:
                 # In place: the message's own float64 array (cheaper than a new one).
                 msg.orientation_covariance[:] = self._orientation_covariance
+            if self._remove_gravity:
+                a.x, a.y, a.z = without_gravity((a.x, a.y, a.z), self.observer.q)
             self.imu_publisher.publish(msg)
+
+    def _broadcast(self, header, state):
+        """The orientation on /tf, as imu_filter_madgwick's publishTransform."""
+        settings = self.parameters.settings
+        parent, child, (w, x, y, z) = transform_from_estimate(
+            state, settings['fixed_frame'], header.frame_id, settings['reverse_tf'])
+        t = self._transform
+        t.header.stamp = header.stamp
+        t.header.frame_id = parent
+        t.child_frame_id = child
+        r = t.transform.rotation
+        r.w, r.x, r.y, r.z = w, x, y, z
+        self.tf_broadcaster.sendTransform(t)
+
+    def _publish_debug(self, header, state, acc):
+        """imu/rpy/filtered (the estimate), imu/rpy/raw (the sample alone), imu/steady_state."""
+        w, x, y, z = state
+        n = (w * w + x * x + y * y + z * z) ** 0.5
+        rpy = Vector3Stamped(header=header)
+        v = rpy.vector
+        # Of the normalized orientation, the one imu/data carries.
+        v.x, v.y, v.z = rpy_from_quaternion((w / n, x / n, y / n, z / n))
+        self.rpy_filtered_publisher.publish(rpy)
+        estimator = self.pipeline.estimator
+        field = estimator.latest_field if estimator.core.use_mag else None
+        rpy = Vector3Stamped(header=header)
+        v = rpy.vector
+        v.x, v.y, v.z = rpy_from_quaternion(raw_attitude(acc, field, estimator.frame))
+        self.rpy_raw_publisher.publish(rpy)
+        self.steady_state_publisher.publish(Bool(data=bool(estimator.core.rest)))
 
     def imu_mag_callback(self, msg):
         """Take a magnetic field (T) and correct the heading with it at once."""
@@ -236,6 +310,7 @@ class ImuFilterNode(EstimatorNode):
         self._orientation_covariance = [variance, 0.0, 0.0, 0.0, variance, 0.0,
                                         0.0, 0.0, variance]
         self._covariance_estimated = settings['covariance_estimated']
+        self._remove_gravity = settings['remove_gravity_vector']
         self._estimate_msg.header.frame_id = settings['frame_id']
 
     def _apply_parameters(self, settings, changed):
@@ -319,12 +394,20 @@ class ImuFilterNode(EstimatorNode):
         return []
 
     def save_calibration_callback(self, request, response):
-        """Service ``~/save_calibration``: write the calibration as a params file."""
+        """Service ``~/save_calibration``: write the calibrations as a params file."""
         path = self.parameters.settings['calibration_file']
+        estimator = self.pipeline.estimator
+        # The gyro bias always; the magnetometer's once it has one.
+        gyro_bias = estimator.core.bias
         try:
-            bias, soft_iron = self.pipeline.estimator.calibration()
-            write_params(path, bias, soft_iron, node=self.get_name(),
-                         comment=f'The magnetometer calibration {self.get_fully_qualified_name()} '
+            bias, soft_iron = estimator.calibration()
+            missing = ''
+        except ValueError as error:
+            bias = soft_iron = None
+            missing = f'; magnetometer calibration not saved: {error}'
+        try:
+            write_params(path, bias, soft_iron, node=self.get_name(), gyro_bias=gyro_bias,
+                         comment=f'The calibration {self.get_fully_qualified_name()} '
                          'learned; load it with --params-file.')
         except (ValueError, OSError) as error:
             response.success = False
@@ -332,8 +415,11 @@ class ImuFilterNode(EstimatorNode):
             self.get_logger().warning(f'~/save_calibration: {error}')
             return response
         response.success = True
-        response.message = f'saved to {os.path.abspath(path)}'
-        self.get_logger().info(f'magnetometer calibration {response.message}')
+        response.message = (f'saved to {os.path.abspath(path)}: gyro bias '
+                            + ', '.join(f'{v:.6g}' for v in gyro_bias) + ' rad/s'
+                            + (', magnetometer calibration' if bias is not None else missing))
+        (self.get_logger().info if bias is not None else self.get_logger().warning)(
+            f'~/save_calibration: {response.message}')
         return response
 
 

@@ -16,8 +16,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import (DurabilityPolicy, qos_check_compatible, qos_policy_name_from_kind,
                        QoSCompatibility, ReliabilityPolicy)
 
-from ext_observer.nodes.parameters import (markdown_table, NodeParameters, ParameterError,
-                                     ParameterSpec, yaml_section)
+from ext_observer.nodes.parameters import NodeParameters, ParameterError
+from ext_observer.pipeline.parameter_specs import ParameterSpec
 
 __all__ = [
     'EXECUTORS',
@@ -30,9 +30,7 @@ __all__ = [
     'diagnostic_array',
     'executor_from_args',
     'key_values',
-    'markdown_table',
     'run_node',
-    'yaml_section',
 ]
 
 

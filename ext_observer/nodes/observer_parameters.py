@@ -13,8 +13,9 @@ from rclpy.qos import ReliabilityPolicy
 
 from ext_observer.core import (certified_alpha_max, GAIN_MODES, PAPER_ALPHA, PAPER_GAIN,
                                SingleObserver, VARIANTS)
-from ext_observer.nodes.estimator_node import COMMON_PARAMETERS, common_settings, SECOND
-from ext_observer.nodes.parameters import ParameterSpec
+from ext_observer.nodes.estimator_node import SECOND
+from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_settings,
+                                                   ParameterSpec)
 
 __all__ = ['ALIGN_SIGN_AUTO', 'CERTIFIED_EPSILON', 'INCREMENT_SOURCES', 'INCREMENT_TOPICS',
            'MEASUREMENT_SOURCES', 'MEASUREMENT_TOPICS', 'OBSERVER_PARAMETERS',

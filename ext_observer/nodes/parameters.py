@@ -1,15 +1,9 @@
 """
-Declared parameters of the nodes: specs, validation, the generated docs.
+Declaring the nodes' parameters with rclpy, validating them, applying changes.
 
-Each node lists its parameters once, as :class:`ParameterSpec` rows; from
-them come the ``ParameterDescriptor`` (description, range, read-only), the
-tables of ``docs/parameters.md`` (:func:`markdown_table`, written by
-``python -m ext_observer docs``) and the YAML in ``config/``.
-
-Every parameter has a value: rclpy's ``get_parameters`` (what ``ros2 param
-dump`` calls) answers nothing for a whole request that names a parameter
-declared with a type and no value, so "not set" is spelled as a value
-(``'auto'``, all zeros) that the node's validation reads.
+The rows are plain data (:class:`~ext_observer.pipeline.parameter_specs.ParameterSpec`);
+here each becomes a ``ParameterDescriptor`` (:func:`descriptor`: description,
+range, read-only) and :class:`NodeParameters` declares them on a node.
 
 Validation has one entry point per node, a function from the dict of all
 parameter values to the node's settings that raises ``ValueError`` with the
@@ -22,9 +16,7 @@ the nodes build the core objects from the candidate values and report the
 core's ``ValueError``.
 """
 
-import dataclasses
-import textwrap
-from typing import Any, Callable, Optional, Sequence, Tuple
+from typing import Any, Callable, Optional, Sequence
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
                                 ParameterDescriptor, SetParametersResult)
@@ -32,90 +24,29 @@ from rclpy.exceptions import (InvalidParameterTypeException,
                               InvalidParameterValueException)
 from rclpy.parameter import Parameter
 
-__all__ = ['ParameterError', 'ParameterSpec', 'NodeParameters', 'markdown_table',
-           'yaml_section']
+from ext_observer.pipeline.parameter_specs import ParameterSpec
+
+__all__ = ['NodeParameters', 'ParameterError', 'descriptor']
 
 
 class ParameterError(ValueError):
     """A parameter value refused at start-up; the message is the reason."""
 
 
-@dataclasses.dataclass(frozen=True)
-class ParameterSpec:
-    """
-    One declared parameter.
-
-    Attributes
-    ----------
-    name : str
-    default : bool, int, float, str or list
-        The default value; its Python type is the parameter's type (every
-        parameter has one: see the module docstring).
-    description : str
-        Shown by ``ros2 param describe`` and in ``docs/parameters.md``; states the unit.
-    range : tuple of 2 numbers, optional
-        Inclusive ``(from, to)`` for an int or float parameter.
-    read_only : bool
-        Structural: set at start-up only.
-    constraints : str
-        Further rules, in words (``ParameterDescriptor.additional_constraints``).
-    dynamic : bool
-        Declared with ``dynamic_typing``: the default is a string (``'auto'``)
-        and a value of another type (a bool) is accepted too; the node's
-        validation checks it.
-
-    """
-
-    name: str
-    default: Any
-    description: str
-    range: Optional[Tuple[float, float]] = None
-    read_only: bool = False
-    constraints: str = ''
-    dynamic: bool = False
-
-    def __post_init__(self):
-        if self.default is None or isinstance(self.default, Parameter.Type):
-            raise TypeError(f'{self.name}: every parameter needs a default value')
-
-    def descriptor(self):
-        """Return the ``ParameterDescriptor`` of this parameter."""
-        descriptor = ParameterDescriptor(
-            description=self.description, read_only=self.read_only,
-            additional_constraints=self.constraints, dynamic_typing=self.dynamic)
-        if self.range is not None:
-            low, high = self.range
-            if isinstance(self.default, bool) or not isinstance(
-                    self.default, (int, float)):
-                raise TypeError(f'{self.name}: a range needs an int or float default')
-            if isinstance(self.default, int):
-                descriptor.integer_range = [
-                    IntegerRange(from_value=int(low), to_value=int(high), step=1)]
-            else:
-                descriptor.floating_point_range = [FloatingPointRange(
-                    from_value=float(low), to_value=float(high), step=0.0)]
-        return descriptor
-
-    @property
-    def type_name(self):
-        """Return the ROS type name of the parameter (for the docs)."""
-        name = Parameter.Type.from_parameter_value(self.default).name.lower()
-        return f'{name} or bool' if self.dynamic else name
-
-    @property
-    def default_text(self):
-        """Return the default as written in docs/parameters.md and the YAML."""
-        return _yaml_value(self.default)
-
-
-def _yaml_value(value):
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, str):
-        return f"'{value}'"
-    if isinstance(value, (list, tuple)):
-        return '[' + ', '.join(_yaml_value(v) for v in value) + ']'
-    return repr(value)
+def descriptor(spec):
+    """Return the ``ParameterDescriptor`` of a :class:`ParameterSpec`."""
+    result = ParameterDescriptor(
+        description=spec.description, read_only=spec.read_only,
+        additional_constraints=spec.constraints, dynamic_typing=spec.dynamic)
+    if spec.range is not None:
+        low, high = spec.range
+        if isinstance(spec.default, int):
+            result.integer_range = [
+                IntegerRange(from_value=int(low), to_value=int(high), step=1)]
+        else:
+            result.floating_point_range = [FloatingPointRange(
+                from_value=float(low), to_value=float(high), step=0.0)]
+    return result
 
 
 def _python_value(parameter):
@@ -173,7 +104,7 @@ class NodeParameters:
         node.add_post_set_parameters_callback(self._post_set)
         try:
             for spec in self._specs:
-                node.declare_parameter(spec.name, spec.default, spec.descriptor())
+                node.declare_parameter(spec.name, spec.default, descriptor(spec))
         except (InvalidParameterValueException, InvalidParameterTypeException) as error:
             raise ParameterError(f'{node.get_name()}: {error}') from None
         self.values = {spec.name: _python_value(node.get_parameter_or(spec.name))
@@ -222,66 +153,3 @@ class NodeParameters:
         self.values = values
         if self._apply is not None:
             self._apply(self.settings, {p.name for p in parameters})
-
-
-def markdown_table(specs):
-    """
-    Return the table of a node's parameters in ``docs/parameters.md``.
-
-    Parameters
-    ----------
-    specs : sequence of ParameterSpec
-
-    Returns
-    -------
-    table : str
-        Markdown, one row per parameter, ending with a newline.
-
-    """
-    rows = ['| parameter | type | default | range | runtime | description |',
-            '| --- | --- | --- | --- | --- | --- |']
-    for spec in specs:
-        bounds = '' if spec.range is None else f'[{spec.range[0]}, {spec.range[1]}]'
-        runtime = 'no' if spec.read_only else 'yes'
-        description = spec.description
-        if spec.constraints:
-            description += f' {spec.constraints}'
-        description = description.replace('|', '\\|')
-        rows.append(f'| `{spec.name}` | {spec.type_name} | `{spec.default_text}` | '
-                    f'{bounds} | {runtime} | {description} |')
-    return '\n'.join(rows) + '\n'
-
-
-def yaml_section(node_name, specs):
-    """
-    Return a node's section of ``config/ext_observer.yaml``.
-
-    Every parameter with its default, under a comment made of its description,
-    constraints, range and whether it is start-up only, wrapped at 78
-    columns.
-
-    Parameters
-    ----------
-    node_name : str
-        The section is ``/**/<node_name>``.
-    specs : sequence of ParameterSpec
-
-    Returns
-    -------
-    section : str
-        YAML, ending with a newline.
-
-    """
-    lines = [f'/**/{node_name}:', '  ros__parameters:']
-    for spec in specs:
-        text = spec.description
-        if spec.constraints:
-            text += f' {spec.constraints}'
-        if spec.range is not None:
-            text += f' Range [{spec.range[0]}, {spec.range[1]}].'
-        if spec.read_only:
-            text += ' Start-up only.'
-        lines += textwrap.wrap(text, width=78, initial_indent='    # ',
-                               subsequent_indent='    # ', break_on_hyphens=False)
-        lines.append(f'    {spec.name}: {spec.default_text}')
-    return '\n'.join(lines) + '\n'

@@ -223,6 +223,8 @@ class RawImuEstimator:
         self.latest_field = None
         self._fields_used = 0
         self._calibrated = True
+        self._gyro_bias = None
+        self._held_bias = None
         self.configure(settings)
 
     def configure(self, settings):
@@ -259,6 +261,19 @@ class RawImuEstimator:
                             else tuple(np.linalg.inv(soft_iron).ravel().tolist()))
         self._frame = heading_factor(self.world_frame, settings['declination'],
                                      settings['yaw_offset'])
+        # The gyro bias given (gyro_bias_*, rad/s): the estimate starts from
+        # it, now and after each reset; gyro_bias_learning false holds the
+        # bias where it is.
+        gyro_bias = tuple(float(settings.get(f'gyro_bias_{axis}', 0.0)) for axis in 'xyz')
+        if gyro_bias != self._gyro_bias:
+            self._gyro_bias = gyro_bias
+            self.core.bias = gyro_bias
+            if self._held_bias is not None:
+                self._held_bias = gyro_bias
+        if settings.get('gyro_bias_learning', True):
+            self._held_bias = None
+        elif self._held_bias is None:
+            self._held_bias = self.core.bias
 
     def field(self, field, dt=None):
         """
@@ -366,12 +381,16 @@ class RawImuEstimator:
         except (ValueError, OverflowError, ZeroDivisionError):
             outcome = None
         if outcome == SAMPLE_OK:
+            if self._held_bias is not None:
+                core.bias = self._held_bias
             return ((w, x, y, z) if self._frame is None
                     else multiply_floats(self._frame, (w, x, y, z))), None
         state, reason = self._general_step(  # failed the guard, or did not run
             gyr, acc, dt, 'step_failed' if outcome is None else _SAMPLE_REASONS.get(outcome))
         if covariance is not None:
             covariance[:] = self.uncertainty.covariance
+        if self._held_bias is not None:
+            core.bias = self._held_bias
         return state, reason
 
     def _general_step(self, gyr, acc, dt, reason=None):
@@ -387,6 +406,7 @@ class RawImuEstimator:
                 reason = check_state(q, None, self.max_residual)
         if reason is not None:
             core.reset()
+            core.bias = self._start_bias
             q = core.update(gyr, acc, self.latest_field, dt)
             starting = True
         if starting:
@@ -405,6 +425,11 @@ class RawImuEstimator:
             self._track_field(None, self.latest_field)
 
     @property
+    def frame(self):
+        """The left factor from the core's ENU estimate to the published one (None: identity)."""
+        return self._frame
+
+    @property
     def state(self):
         """The estimate in ``world_frame`` (ambient), or None before the first step."""
         q = self.core.q
@@ -413,9 +438,19 @@ class RawImuEstimator:
         return multiply_floats(self._frame, q)
 
     def reset(self):
-        """Forget the estimate: the next step initializes it again."""
+        """Forget the estimate: the next step initializes it again (from the bias given)."""
         self.core.reset()
+        self.core.bias = self._start_bias
         self.uncertainty.reset()
+
+    @property
+    def _start_bias(self):
+        return self._gyro_bias if self._held_bias is None else self._held_bias
+
+    @property
+    def bias_learning(self):
+        """Whether the gyro bias is learned (``gyro_bias_learning``), else held."""
+        return self._held_bias is None
 
     @property
     def covariance(self):
@@ -442,6 +477,7 @@ class RawImuEstimator:
         return [('world_frame', self.world_frame), ('use_mag', bool(core.use_mag)),
                 ('initialized', q is not None), ('bias_x', float(bx)),
                 ('bias_y', float(by)), ('bias_z', float(bz)), ('rest', bool(core.rest)),
+                ('bias_learning', self._held_bias is None),
                 ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
                 ('inclination_std_deg',
                  math.degrees(tracker.inclination_std) if started else math.nan),
@@ -493,7 +529,7 @@ class RawImuPipeline:
     Parameters
     ----------
     settings : dict
-        The settings of ``imu_filter_node`` (:func:`~ext_observer.nodes.imu_filter_parameters.
+        The settings of ``imu_filter_node`` (:func:`~ext_observer.pipeline.imu_filter_parameters.
         imu_filter_settings`).
     depth : int
         Most inputs waiting (the node's ``queue_depth``).

@@ -46,6 +46,7 @@ import time
 
 import numpy as np
 
+from ext_observer.core.ahrs.compiled import warn_if_plain
 from ext_observer.recordings.bag_io import BagReader, STORAGES
 from ext_observer.recordings.bag_worker import _BagSide, _Estimator, _fork, _forked, _in_process
 from ext_observer.recordings.cdr import FIELD_TYPE, IMU_TYPE, QUATERNION_TYPE, REFERENCE_TYPES
@@ -354,6 +355,7 @@ def report(run, out):
 def main(argv=None):
     """Run ``python -m ext_observer bag``; return the exit code."""
     args = build_parser().parse_args(argv)
+    warn_if_plain()
     try:
         parameters = parameters_from_options(args)
         run = run_bag(args.bag, args.out, imu_topic=args.imu_topic, mag_topic=args.mag_topic,

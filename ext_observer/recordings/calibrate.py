@@ -256,34 +256,39 @@ def read_recording(path):
 
 # --- the params file --------------------------------------------------------
 
-def params_text(bias_tesla, soft_iron, node=NODE, comment=''):
+def params_text(bias_tesla, soft_iron, node=NODE, comment='', gyro_bias=None):
     """
     The ROS 2 params file of a calibration.
 
     Parameters
     ----------
-    bias_tesla : sequence of 3 floats
-        ``b`` in T.
+    bias_tesla : sequence of 3 floats or None
+        ``b`` in T; None: no magnetometer calibration in the file.
     soft_iron : array_like, shape (3, 3) or (9,)
-        ``S``.
+        ``S`` (with ``bias_tesla``).
     node : str
         The node's name in the file.
     comment : str
         Lines put first, as YAML comments.
+    gyro_bias : sequence of 3 floats, optional
+        The gyro bias, rad/s (``gyro_bias_*`` of ``imu_filter_node``).
 
     """
-    b, s = check_calibration(bias_tesla, soft_iron)
     lines = [f'# {line}' for line in comment.splitlines()]
-    lines += [f'{node}:', '  ros__parameters:',
-              f'    mag_bias_x: {float(b[0])!r}', f'    mag_bias_y: {float(b[1])!r}',
-              f'    mag_bias_z: {float(b[2])!r}',
-              '    mag_soft_iron: [' + ', '.join(repr(float(v)) for v in s.ravel()) + ']']
+    lines += [f'{node}:', '  ros__parameters:']
+    if bias_tesla is not None:
+        b, s = check_calibration(bias_tesla, soft_iron)
+        lines += [f'    mag_bias_x: {float(b[0])!r}', f'    mag_bias_y: {float(b[1])!r}',
+                  f'    mag_bias_z: {float(b[2])!r}',
+                  '    mag_soft_iron: [' + ', '.join(repr(float(v)) for v in s.ravel()) + ']']
+    if gyro_bias is not None:
+        lines += [f'    gyro_bias_{axis}: {float(v)!r}' for axis, v in zip('xyz', gyro_bias)]
     return '\n'.join(lines) + '\n'
 
 
-def write_params(path, bias_tesla, soft_iron, node=NODE, comment=''):
+def write_params(path, bias_tesla, soft_iron, node=NODE, comment='', gyro_bias=None):
     """Write :func:`params_text` to ``path``."""
-    text = params_text(bias_tesla, soft_iron, node, comment)
+    text = params_text(bias_tesla, soft_iron, node, comment, gyro_bias)
     with open(path, 'w', encoding='utf-8') as f:
         f.write(text)
 

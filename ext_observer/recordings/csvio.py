@@ -29,6 +29,7 @@ import sys
 
 import numpy as np
 
+from ext_observer.core.ahrs.compiled import warn_if_plain
 from ext_observer.recordings.recording import (add_parameter_options, attitude_from_imu,
                                     parameters_from_options)
 
@@ -157,6 +158,7 @@ def build_parser():
 def main(argv=None):
     """Run ``python -m ext_observer csv``; return the exit code."""
     args = build_parser().parse_args(argv)
+    warn_if_plain()
     try:
         parameters = parameters_from_options(args)
         times, gyr, acc, mag = read_recording(args.csv)

@@ -41,7 +41,7 @@ import math
 import numpy as np
 
 from ext_observer.core.ahrs.ahrs_batch import _hold_finite
-from ext_observer.nodes.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
 

@@ -2,91 +2,103 @@
 The raw-IMU estimator's parameters (:class:`AhrsParams`), in physical units.
 
 What a user tunes: time constants in seconds, thresholds in rad/s and m/s²
-(VQF's way; see :mod:`ext_observer.core.ahrs.estimator`). Checked when made: a bad
-value raises ``ValueError`` naming the parameter.
+(VQF's way; see :mod:`ext_observer.core.ahrs.estimator`). :data:`AHRS_TABLE`
+declares each once (name, default, unit, range, one line); the node's
+``ahrs.*`` parameters, docs/parameters.md and config/imu_filter.yaml come
+from it. A bad value raises ``ValueError`` naming the parameter.
 """
 
 import math
 
-__all__ = ['AhrsParams']
+from .tunables import Tunable, Tunables
+
+__all__ = ['AHRS_TABLE', 'AhrsParams']
+
+# Time constants above this are "forever" (s).
+_LONG = 1e4
+_T = Tunable
+
+AHRS_TABLE = (
+    # Theorem 1 on S³ (ε = 0.5, best δ) certifies (0, 0.0762): python -m ext_observer gains.
+    _T('alpha', 0.05, '', 0.0, 0.0762,
+       'gain α of the extension term that holds the estimate near S³ (below 0.0762: the '
+       'range certified by Theorem 1)', high_open=True),
+    _T('tau_acc', 2.0, 's', 0.0, _LONG,
+       'time constant of the world-frame low-pass of the accelerometer'),
+    _T('tau_acc_gain', 0.05, 's', 0.0, _LONG,
+       'time constant of the inclination correction (the gain κ_a)'),
+    _T('tau_mag', 15.0, 's', 0.0, _LONG,
+       'time constant of the heading correction from the magnetometer (κ_m; the gain of '
+       'each field follows from the interval since the previous field)'),
+    # Off by default: under rotation the filtered corrections average the bias
+    # over many body orientations, and on the tuning trials it did not help
+    # (docs/broad_tuning.md). The bias is then learned at rest.
+    _T('tau_bias', 0.0, 's', 0.0, 1e6,
+       'time constant of the gyro bias estimate in motion',
+       low_closed=True, zero_off=True),
+    _T('bias_max', math.radians(2.0), 'rad/s', 0.0, 10.0,
+       'largest gyro bias estimate per axis'),
+    _T('rest_gyr', math.radians(2.0), 'rad/s', 0.0, 10.0,
+       'rest detection: threshold on the angular rate'),
+    _T('rest_acc', 0.5, 'm/s²', 0.0, 100.0,
+       'rest detection: threshold on the deviation of the specific force'),
+    _T('rest_time', 1.5, 's', 0.0, _LONG,
+       'rest detection: time below both thresholds before rest'),
+    _T('tau_rest', 0.5, 's', 0.0, _LONG,
+       'time constant of the rest-detection filters and of the bias estimate at rest'),
+    _T('mag_norm_th', 0.05, '', 0.0, 100.0,
+       'magnetic disturbance: relative deviation of the field norm from its reference'),
+    _T('mag_dip_th', math.radians(10.0), 'rad', 0.0, math.pi,
+       'magnetic disturbance: deviation of the dip angle from its reference'),
+    _T('mag_new_time', 20.0, 's', 0.0, _LONG,
+       'time a new, consistent field must last (while the body turns) before it is '
+       'accepted'),
+    _T('mag_new_gyr', math.radians(20.0), 'rad/s', 0.0, 100.0,
+       'angular rate the body must turn at for that time to count'),
+    _T('tau_mag_ref', 20.0, 's', 0.0, 1e6,
+       'time constant of the learned field norm and dip references'),
+    _T('mag_cal', True, '', None, None,
+       'calibrate the magnetometer online in 9D (hard-iron offset and soft-iron matrix, '
+       'learned while the body turns; docs/calibration.md); false: the fields are used '
+       'as given'),
+    _T('mag_cal_noise', 0.025, '', 0.0, 1.0,
+       "the field's noise per sample and axis, relative to its norm"),
+    # The calibration learns from the gyro's prediction of the field over
+    # about the time it takes this walk to reach the field's noise (well
+    # under a second with the defaults).
+    _T('mag_cal_field_rw', 0.03, '1/√s', 0.0, 10.0,
+       'how fast the world field may change where the body goes, relative to its norm'),
+    _T('mag_cal_soft_iron', 0.05, '', 0.0, 10.0,
+       'prior standard deviation of each element of the soft-iron matrix S − I'),
+    _T('mag_cal_delay', 0.02, 's', 0.0, 10.0,
+       "prior standard deviation of the field's lag behind the gyro (learned)",
+       low_closed=True, zero_off=True),
+    _T('mag_cal_heading', math.radians(6.0), 'rad', 0.0, math.pi,
+       'the calibration is converged, and the heading follows the field, when the heading '
+       'error its uncertainty would cause is below this (1σ)'),
+    # And by more than three times its own uncertainty: below, the sensor
+    # is taken as calibrated (on BROAD, whose fields are calibrated, what
+    # is learned from a trial turns the heading by 2–11°).
+    _T('mag_cal_deadband', math.radians(15.0), 'rad', 0.0, math.pi,
+       'a learned calibration replaces the field as given only when it turns the heading '
+       'by more than this (RMS over the recent attitudes)'),
+    # A payload moves, the temperature changes.
+    _T('mag_cal_drift', 0.002, '1/√s', 0.0, 10.0,
+       "random walk of the hard-iron offset, relative to the field's norm",
+       low_closed=True, zero_off=True),
+    _T('mag_cal_rate', 100.0, 'Hz', 0.0, 1e5,
+       'most fields per second the calibration learns from (one value for a batch; every '
+       'field is calibrated)'),
+)
 
 
-class AhrsParams:
+class AhrsParams(Tunables):
     """
-    What a user tunes, in physical units (seconds, rad/s, m/s²).
+    What a user tunes, in physical units: the rows of :data:`AHRS_TABLE`.
 
-    Parameters
-    ----------
-    alpha : float
-        Gain of the extension term, in (0, 0.0762): the certified range of
-        Theorem 1 on S³ (ε = 0.5, best δ; ``python -m ext_observer gains``).
-    tau_acc : float
-        Time constant (s) of the world-frame low-pass of the accelerometer.
-    tau_acc_gain : float
-        Time constant (s) of the Luenberger gain ``κ_a`` on the inclination
-        measurement.
-    tau_mag : float
-        Time constant (s) of the heading correction (``κ_m``).
-    tau_bias : float
-        Time constant (s) of the bias estimate in motion; 0 (the default)
-        turns it off: under rotation the filtered corrections average the
-        bias over many body orientations, and on the tuning trials it did
-        not help (docs/broad_tuning.md). The bias is then learned at rest.
-    bias_max : float
-        Largest bias estimate (rad/s), per axis.
-    rest_gyr : float
-        Rest threshold on the angular rate (rad/s).
-    rest_acc : float
-        Rest threshold on the deviation of the specific force (m/s²).
-    rest_time : float
-        Time (s) below both thresholds before rest is declared.
-    tau_rest : float
-        Time constant (s) of the low-pass filters of rest detection and of
-        the bias estimate at rest.
-    mag_norm_th : float
-        Relative deviation of the field norm from its reference that counts
-        as a disturbance.
-    mag_dip_th : float
-        Deviation (rad) of the dip angle from its reference that counts as a
-        disturbance.
-    mag_new_time : float
-        Time (s) a new, consistent field must last before it is accepted.
-    mag_new_gyr : float
-        Angular rate (rad/s) the body must turn at for that time to count.
-    tau_mag_ref : float
-        Time constant (s) of the learned field norm and dip references.
-    mag_cal : bool
-        Calibrate the magnetometer online in 9D (hard and soft iron); false:
-        the fields are used as given, exactly as without the calibrator.
-    mag_cal_noise : float
-        The field's noise per sample and axis, relative to its norm.
-    mag_cal_field_rw : float
-        How fast the world field may change where the body goes, relative to
-        its norm, per √s: the calibration learns from the gyro's prediction
-        of the field over about the time it takes this walk to reach the
-        field's noise (well under a second with the defaults).
-    mag_cal_soft_iron : float
-        Prior standard deviation of each element of the soft-iron matrix
-        ``S − I``.
-    mag_cal_delay : float
-        Prior standard deviation (s) of the field's lag behind the gyro,
-        which is learned; 0: no lag.
-    mag_cal_heading : float
-        The calibration is converged (and the heading follows the field)
-        when the heading error its uncertainty would cause is below this
-        (rad, 1σ).
-    mag_cal_deadband : float
-        A learned calibration replaces the field as given only when it turns
-        the heading by more than this (rad, RMS over the recent attitudes),
-        and by more than three times its own uncertainty: below, the sensor
-        is taken as calibrated (on BROAD, whose fields are calibrated, what
-        is learned from a trial turns the heading by 2–11°).
-    mag_cal_drift : float
-        Random walk of the hard-iron offset, relative to the field's norm,
-        per √s (a payload moves, the temperature changes); 0: constant.
-    mag_cal_rate : float
-        Most fields per second the calibration learns from (Hz; one value
-        for a batch); every field is calibrated.
+    ``AhrsParams(tau_mag=10.0)``: the defaults, ``tau_mag`` in its place.
+    Each field is an attribute; ``AhrsParams.DEFAULTS`` is ``{name: default}``
+    and ``AhrsParams.ROWS[name]`` the row (unit, range, description).
 
     Raises
     ------
@@ -95,62 +107,4 @@ class AhrsParams:
 
     """
 
-    DEFAULTS = dict(
-        alpha=0.05,
-        tau_acc=2.0,
-        tau_acc_gain=0.05,
-        tau_mag=15.0,
-        tau_bias=0.0,
-        bias_max=math.radians(2.0),
-        rest_gyr=math.radians(2.0),
-        rest_acc=0.5,
-        rest_time=1.5,
-        tau_rest=0.5,
-        mag_norm_th=0.05,
-        mag_dip_th=math.radians(10.0),
-        mag_new_time=20.0,
-        mag_new_gyr=math.radians(20.0),
-        tau_mag_ref=20.0,
-        mag_cal=True,
-        mag_cal_noise=0.025,
-        mag_cal_field_rw=0.03,
-        mag_cal_soft_iron=0.05,
-        mag_cal_delay=0.02,
-        mag_cal_heading=math.radians(6.0),
-        mag_cal_deadband=math.radians(15.0),
-        mag_cal_drift=0.002,
-        mag_cal_rate=100.0,
-    )
-
-    def __init__(self, **values):
-        unknown = set(values) - set(self.DEFAULTS)
-        if unknown:
-            raise ValueError(f'unknown parameters: {sorted(unknown)}')
-        merged = dict(self.DEFAULTS, **values)
-        for name, value in merged.items():
-            if isinstance(self.DEFAULTS[name], bool):
-                if value not in (True, False):
-                    raise ValueError(f'{name} must be true or false, got {value!r}')
-                setattr(self, name, bool(value))
-                continue
-            value = float(value)
-            if not math.isfinite(value):
-                raise ValueError(f'{name} must be finite, got {value}')
-            if name in ('tau_bias', 'mag_cal_delay', 'mag_cal_drift'):
-                if value < 0.0:
-                    raise ValueError(f'{name} must be >= 0 (0: off), got {value}')
-            elif not value > 0.0:
-                raise ValueError(f'{name} must be positive, got {value}')
-            setattr(self, name, value)
-        if not self.alpha < 0.0762:
-            raise ValueError(
-                f'alpha must be below the certified 0.0762, got {self.alpha}')
-
-    def as_dict(self):
-        """Return the parameters as a dict."""
-        return {name: getattr(self, name) for name in self.DEFAULTS}
-
-    def __repr__(self):
-        items = ', '.join(f'{k}={v}' if isinstance(v, bool) else f'{k}={v:g}'
-                          for k, v in self.as_dict().items())
-        return f'AhrsParams({items})'
+    TABLE = AHRS_TABLE

@@ -47,12 +47,19 @@ import time
 import numpy as np
 
 __all__ = ['BackgroundCompile', 'CompiledUnavailable', 'Kernels', 'cache_ready',
-           'compiled_available', 'kernels', 'start_plan']
+           'compiled_available', 'kernels', 'plain_warning', 'start_plan',
+           'warn_if_plain']
 
 # In this order: each file's names are defined before the next one's functions use them.
 _SOURCES = ('layout.py', 'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
             'ahrs_kernel.py', 'uncertainty_kernel.py')
 _ENV = 'EXT_OBSERVER_COMPILED'
+# What running plain costs, measured (docs/compiled.md#without-numba): said
+# once at start by imu_filter_node and the broad, csv and bag commands.
+PLAIN_COST = ('numba cannot be imported: the estimator runs its plain kernels, about 30x '
+              'slower per sample than compiled in 9D (58 µs against 2.0 µs; 6D 8x) and the '
+              'BROAD command about 20x slower (48 s of CPU against 2.5 s on its 22 trials); '
+              'pip install numba (requirements.txt has it; docs/compiled.md#without-numba)')
 
 
 class CompiledUnavailable(RuntimeError):
@@ -114,6 +121,30 @@ def compiled_available():
     except Exception:  # ImportError, or a broken install
         return False
     return True
+
+
+def plain_warning():
+    """
+    The one line to say at start where the plain kernels will run for want of numba; else None.
+
+    None also where ``EXT_OBSERVER_COMPILED`` chooses (``0``: plain on
+    purpose). numba is looked for, not imported.
+    """
+    if os.environ.get(_ENV, 'auto').strip().lower() not in ('', 'auto'):
+        return None
+    try:
+        if importlib.util.find_spec('numba') is not None:
+            return None
+    except (ImportError, ValueError):
+        pass
+    return PLAIN_COST
+
+
+def warn_if_plain(stream=None):
+    """A command's start: write :func:`plain_warning` to ``stream`` (stderr) if there is one."""
+    warning = plain_warning()
+    if warning:
+        print(f'warning: {warning}', file=stream or sys.stderr, flush=True)
 
 
 def _wanted(compiled):

@@ -337,8 +337,17 @@ class AhrsObserver:
 
     @property
     def bias(self):
-        """The gyro bias estimate (rad/s), body frame."""
+        """The gyro bias estimate (rad/s), body frame; settable (a saved or known bias)."""
         return self.field('bias')
+
+    @bias.setter
+    def bias(self, value):
+        # VQF's setBiasEstimate: the estimate goes on from this bias (each
+        # value a float, or with batch an array (B,)).
+        offset, size = self._kernels.ahrs.AHRS.fields['bias']
+        for i, s in enumerate(self._states):
+            for j in range(size):
+                s[offset + j] = float(value[j] if self.batch is None else value[j][i])
 
     @property
     def rest(self):

@@ -91,6 +91,7 @@ import math
 import numpy as np
 
 from . import uncertainty_kernel as _plain
+from .tunables import Tunable, Tunables
 from .uncertainty_kernel import (
     GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,
     U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_K_ACC, U_K_REST, U_PH,
@@ -101,6 +102,7 @@ __all__ = [
     'AttitudeUncertainty',
     'GRAVITY',
     'HEADING_UNKNOWN',
+    'UNCERTAINTY_TABLE',
     'UncertaintyParams',
     'covariance_out',
 ]
@@ -125,37 +127,51 @@ def covariance_out(array):
     return array
 
 
-class UncertaintyParams:
+_T = Tunable
+
+# The defaults were chosen on the even-numbered BROAD trials (docs/covariance.md
+# says how, and what they give on the odd ones). Those > 0 keep every
+# variance positive; the others may be 0 (off).
+UNCERTAINTY_TABLE = (
+    # Angle random walk, measured at rest (0.006 °/s/√Hz).
+    _T('gyro_noise', 1.0e-4, 'rad/s/√Hz', 0.0, 1.0, 'white noise density of the gyro'),
+    _T('gyro_rate_noise', 1.3e-3, '(rad/s per rad/s)/√Hz', 0.0, 1.0,
+       'noise density of the gyro error proportional to the rate (scale factor, '
+       'misalignment, vibration)', low_closed=True, zero_off=True),
+    # Steady-state σ of a first-order Gauss-Markov process (0.08 °/s).
+    _T('bias_std', 1.4e-3, 'rad/s', 0.0, 1.0,
+       'how far the gyro bias wanders from the learned one (σ)', low_closed=True,
+       zero_off=True),
+    _T('bias_time', 250.0, 's', 0.0, 1e6, 'correlation time of that wander'),
+    # 0.24 °/s: the biases learned at the first rest.
+    _T('bias_init', 4.1e-3, 'rad/s', 0.0, 1.0,
+       'gyro bias uncertainty per axis before the first rest', low_closed=True,
+       zero_off=True),
+    _T('acc_noise', 3.2e-3, 'm/s²/√Hz', 0.0, 10.0,
+       'accelerometer noise density (measured at rest)'),
+    # 1.25° per sample at 286 Hz.
+    _T('mag_noise', 1.3e-3, 'rad·√s', 0.0, 10.0,
+       "noise density of the field's horizontal direction (measured at rest)"),
+    # 0.46°.
+    _T('inclination_floor', 8.0e-3, 'rad', 0.0, 1.0,
+       'smallest inclination σ (translational acceleration, accelerometer calibration, '
+       'mounting)', low_closed=True, zero_off=True),
+    # 1.20°.
+    _T('heading_floor', 2.1e-2, 'rad', 0.0, 1.0,
+       'smallest heading σ once a field has set the heading (a bent but accepted field)',
+       low_closed=True, zero_off=True),
+    _T('stamp_error', 7.0e-4, 's', 0.0, 1.0,
+       "timing error of a sample's stamp: the orientation is off by |ω| times it",
+       low_closed=True, zero_off=True),
+)
+
+
+class UncertaintyParams(Tunables):
     """
-    The noise of the sensors and of what the estimator does not model, in physical units.
+    The noise of the sensors and of what the estimator does not model: :data:`UNCERTAINTY_TABLE`.
 
-    The defaults were chosen on the even-numbered BROAD trials
-    (``docs/covariance.md`` says how, and what they give on the odd ones).
-
-    Parameters
-    ----------
-    gyro_noise : float
-        White noise density of the gyro, rad/s/√Hz (angle random walk).
-    gyro_rate_noise : float
-        Noise density of the gyro's error proportional to the rate (scale
-        factor, misalignment, vibration), (rad/s per rad/s)/√Hz.
-    bias_std : float
-        How far the gyro bias wanders from what the estimator learned,
-        rad/s (steady-state σ of a first-order Gauss-Markov process).
-    bias_time : float
-        Correlation time of that wander, s.
-    bias_init : float
-        Gyro bias uncertainty before the first rest, rad/s, per axis.
-    acc_noise : float
-        Accelerometer noise density, m/s²/√Hz.
-    mag_noise : float
-        Noise density of the field's horizontal direction, rad·√s.
-    inclination_floor : float
-        The smallest inclination σ, rad.
-    heading_floor : float
-        The smallest heading σ once a field has set the heading, rad.
-    stamp_error : float
-        Timing error of a sample's stamp, s.
+    ``UncertaintyParams(acc_noise=1e-2)``: the defaults, ``acc_noise`` in
+    its place; each field an attribute, ``DEFAULTS`` ``{name: default}``.
 
     Raises
     ------
@@ -164,43 +180,7 @@ class UncertaintyParams:
 
     """
 
-    DEFAULTS = dict(
-        gyro_noise=1.0e-4,  # rad/s/√Hz (0.006 °/s/√Hz), measured at rest
-        gyro_rate_noise=1.3e-3,  # 1/√Hz
-        bias_std=1.4e-3,  # rad/s (0.08 °/s)
-        bias_time=250.0,  # s
-        bias_init=4.1e-3,  # rad/s (0.24 °/s), the biases learned at the first rest
-        acc_noise=3.2e-3,  # m/s²/√Hz, measured at rest
-        mag_noise=1.3e-3,  # rad·√s (1.25° per sample at 286 Hz), measured at rest
-        inclination_floor=8.0e-3,  # rad (0.46°)
-        heading_floor=2.1e-2,  # rad (1.20°)
-        stamp_error=7.0e-4,  # s
-    )
-    # These keep every variance positive; the others may be 0 (off).
-    POSITIVE = ('gyro_noise', 'bias_time', 'acc_noise', 'mag_noise')
-
-    def __init__(self, **values):
-        unknown = set(values) - set(self.DEFAULTS)
-        if unknown:
-            raise ValueError(f'unknown parameters: {sorted(unknown)}')
-        for name, value in dict(self.DEFAULTS, **values).items():
-            value = float(value)
-            if not math.isfinite(value):
-                raise ValueError(f'{name} must be finite, got {value}')
-            if name in self.POSITIVE:
-                if not value > 0.0:
-                    raise ValueError(f'{name} must be positive, got {value}')
-            elif value < 0.0:
-                raise ValueError(f'{name} must be >= 0 (0: off), got {value}')
-            setattr(self, name, value)
-
-    def as_dict(self):
-        """Return the parameters as a dict."""
-        return {name: getattr(self, name) for name in self.DEFAULTS}
-
-    def __repr__(self):
-        items = ', '.join(f'{k}={v:g}' for k, v in self.as_dict().items())
-        return f'UncertaintyParams({items})'
+    TABLE = UNCERTAINTY_TABLE
 
 
 class _Slot:
