@@ -50,7 +50,8 @@ demo: $(RUNTIME_STAMP)
 # covariance on edge inputs, the plain batch in workers, one node process
 # on plain kernels end to end (docs/tests.md says what is left out and why).
 TEST_WORKERS ?= auto
-PLAIN_TESTS := test/test_core_ahrs.py test/test_core_ahrs_params.py test/test_core_magcal.py \
+PLAIN_TESTS := test/test_core_ahrs.py test/test_core_ahrs_params.py test/test_core_ahrs_robust.py \
+	test/test_core_magcal.py \
 	test/test_covariance.py \
 	test/test_compiled.py::test_the_whole_recording_loop_gives_the_per_sample_estimates \
 	test/test_raw_imu.py::test_drop_in_for_imu_filter_madgwick_as_a_process

@@ -1,7 +1,7 @@
 """
 The orientation covariance of imu_filter_node (issue 18).
 
-The uncertainty model alone (``core/uncertainty.py``): its steady state is
+The uncertainty model alone (``core/ahrs/uncertainty.py``): its steady state is
 the closed form of a first-order correction, rest teaches the bias. Through
 ``RawImuPipeline`` (the node's steps without ROS): the covariance of every
 estimate is symmetric, positive definite and finite for any input the node

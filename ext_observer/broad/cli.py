@@ -29,7 +29,8 @@ from ext_observer.broad.report import text_report, write_json
 from ext_observer.broad.run import log, run
 from ext_observer.broad.stress import VARIANTS
 from ext_observer.broad.stress_run import STRESS_ANCHORS
-from ext_observer.core.ahrs.compiled import kernels, warn_if_plain
+from ext_observer.core.ahrs.compiled import warn_if_plain
+from ext_observer.pipeline.kernel_cache import preload
 
 # Trial shown over time in the report: magnetically disturbed.
 PLOT_TRIAL = '28_disturbed_stationary_magnet_A'
@@ -261,7 +262,7 @@ def _read(folder, args, progress):
     start = time.perf_counter()
     # The estimator's compiled kernels load (numba's import and cache) on
     # one core while the trials are read on the other.
-    trials = load_trials(found, meanwhile=kernels)
+    trials = load_trials(found, meanwhile=preload)
     if args.head:
         trials = [t.head(args.head) for t in trials]
     progress(f'{len(trials)} trials read in {time.perf_counter() - start:.1f} s (and the '

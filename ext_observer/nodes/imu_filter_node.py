@@ -39,7 +39,8 @@ from std_srvs.srv import Trigger
 
 from ext_observer.recordings.calibrate import write_params
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
-from ext_observer.core.ahrs.compiled import BackgroundCompile, plain_warning, start_plan
+from ext_observer.core.ahrs.compiled import plain_warning
+from ext_observer.pipeline.kernel_cache import BackgroundCompile, start_plan
 from ext_observer.nodes.estimator_node import EstimatorNode
 from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
                                                          imu_filter_settings, unused_text)
