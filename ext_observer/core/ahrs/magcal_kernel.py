@@ -3,82 +3,13 @@ The maths of the online magnetometer calibration, as plain functions on a flat s
 
 :class:`~ext_observer.core.ahrs.magcal.MagCalibrator` is a thin wrapper over
 these functions. One calibrator's state is a block of :data:`MC_SIZE`
-floats starting at an offset ``o`` of a container ``s`` (a Python list, or
-a 1-D float64 array that may hold other state too); the ``MC_*`` constants
-are the slots, relative to ``o``. Booleans are stored as 0.0/1.0, counts as
-floats. The functions use only what numba's nopython mode compiles (float
-arithmetic, :mod:`math`, ``for`` loops, ``s[o + k]``, calls between them,
-tuples of floats returned), so the same source runs in plain Python on a
-list, or compiled by ``numba.njit`` on an array (:mod:`~ext_observer.core.ahrs.compiled`
-joins this file with :mod:`~ext_observer.core.ahrs.magcal_layout`, the slots, and
-:mod:`~ext_observer.core.ahrs.magcal_filter`, the Kalman filter's steps).
-Nothing is allocated in the hot path: the products' intermediates have
-scratch slots.
-
-**The model**, body frame: a raw field sample is ``y = S m + b``, with
-``m`` the true field, ``b`` the hard-iron offset and ``S`` a symmetric
-soft-iron matrix. With ``A = S⁻¹ = I + D(d)`` (``D`` symmetric, trace 0:
-five numbers ``d``) and ``z = A b``, the calibrated field is ``m = A y − z``.
-``S`` is known only up to a scale (a uniform gain moves no direction), fixed
-here by ``trace(A) = 3``, or by the trace of a loaded matrix.
-
-What makes it observable is the gyro. The field is fixed in the world, so
-in the body frame it turns against the body: between two fields ``m ← Rᵀ m``
-with ``R`` the gyro's rotation, and a body that turns about two axes leaves
-one offset and one matrix that fit (gyro-aided calibration: Troni and
-Whitcomb 2013, "Adaptive estimation of measurement bias in
-three-dimensional field sensors with angular rate sensors", Robotics:
-Science and Systems; Kok and Schön 2016, "Magnetometer calibration using
-inertial sensors", IEEE Sensors Journal 16(14), for the view of the field as
-a constant world vector seen through the gyro's orientation). A Kalman
-filter estimates ``(s, z, d, τ)`` with ``s = m + z = A y``: then the field's
-turn, ``s ← Rᵀ s + (I − Rᵀ) z``, is linear, nothing ties ``s`` to ``z`` at
-rest (the covariance stays well conditioned while nothing can be learned),
-and the measurement ``y = A⁻¹ (s + τ ω × (s − z))`` is linear in ``s`` and
-``z`` and linearized about the estimate in ``d`` and ``τ`` only. (Written as
-``A y = s``, with the measured ``y`` in the regressor, its noise would pull
-``A`` towards 0 while the body rests: the errors-in-variables bias.) Two
-things measured on BROAD (Laidig et al. 2021) shape the filter beyond that:
-
-- The field lags the gyro on real hardware (about 12 ms there);
-  uncorrected, the lag correlates with the turn rate and biases the offset
-  by about 1 % of the field. The lag ``τ`` is a state:
-  ``m(t − τ) ≈ m + τ ω × m``.
-- The world field is not quite constant where a body moves (a lab's field
-  changes by a few percent over a metre). ``m`` is a random walk, relative
-  ``field_rw`` per √s, so a slowly changing field is not learned as an
-  offset; the offset itself may drift (``drift``).
-
-A sample whose innovation is improbable (``GATE``) is not used (a field that
-jumps: a magnet passing). The caller may also refuse a sample (``allow``).
-When most samples are refused while the body turns (the offset changed for
-good, or a field that moved while nothing was known misled the filter), or
-the soft iron leaves its prior far behind, the calibration starts over.
-
-**Convergence.** The quality is the heading error the calibration's
-uncertainty would cause now: the covariance of ``(z, d)`` mapped onto the
-calibrated field, along the horizontal direction across the field (body
-frame, from the caller's up vector), over the horizontal field. The
-calibration is converged once the quality has stayed below ``heading``
-(rad) for ``CAL_HOLD`` seconds of learning without the calibration turning the
-heading by more than that meanwhile. Measured where it matters, so a robot
-that only turns about its vertical converges (the offset along that axis is
-never learned, and does not move the heading while it stays level).
-
-**The field as given, or the learned calibration.** :func:`mc_apply`
-returns the field as given until a converged calibration turns the heading
-by more than ``deadband`` (RMS over the recent learning steps) from it: a
-sensor calibrated already (BROAD's are) keeps its own calibration, which
-what can be learned online, about 1 % of the field, does not beat. A loaded
-calibration is applied at once.
-
-**Arithmetic.** The formulas and their order are those of the numpy
-implementation this replaced (sums left to right, ``x * x`` for squares);
-the 3 × 3 inverses are written out with cofactors. Its matrix products went
-through BLAS, whose kernels fuse multiply and add, so the two agree to
-rounding, not to the bit (about 1e-14 in the estimator's attitude on the
-test excerpts). Plain and compiled agree to the bit: without ``fastmath``
-numba fuses nothing.
+floats at an offset ``o`` of a container ``s`` (the ``MC_*`` slots of
+:mod:`~ext_observer.core.ahrs.magcal_layout`, relative to ``o``); flags are
+0.0/1.0. Written in the part of Python numba compiles, so the same source
+runs plain on a list or compiled on an array
+(:mod:`~ext_observer.core.ahrs.compiled`), with no allocation in the hot
+path. The model, the gate, convergence and when a calibration is applied:
+docs/calibration.md ("The filter, in equations").
 """
 
 import math
