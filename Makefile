@@ -97,6 +97,9 @@ bench: $(BENCH_STAMP)
 # with BROAD's HDF5 files, directly or under data_hdf5/, as in a clone of
 # BROAD), else $EXT_OBSERVER_BROAD_DATA, else data/broad (make broad-data),
 # else ../shared/broad; with none, the command says so in one line.
+# make broad BROAD_ARGS="--stress --json out/robustness.json": the robustness
+# benchmark instead (issue 27: each trial cut, biased, at 50 Hz, clipped),
+# into docs/robustness.md, docs/figures/robustness.png and out/robustness.json.
 BROAD_DATA ?=
 BROAD_ARGS ?=
 

@@ -412,7 +412,7 @@ class RawImuEstimator:
         if starting:
             self._start(dt)
         else:
-            self.uncertainty.step(dt, gyr, q, core.rest, core.bias_variance)
+            self.uncertainty.step(dt, gyr, q, core.rest, core.bias_variance, core.clip_variance)
         # The state property's value, from the q the step returned.
         return (q if self._frame is None else multiply_floats(self._frame, q)), reason
 
@@ -463,7 +463,8 @@ class RawImuEstimator:
 
         ``world_frame``, ``use_mag``, ``initialized``, ``bias_x``, ``bias_y``,
         ``bias_z`` (rad/s), ``bias_std_x``, ``bias_std_y``, ``bias_std_z``
-        (its σ, rad/s), ``rest``, ``mag_disturbed``, ``residual``
+        (its σ, rad/s), ``gyro_clipped`` (samples at the gyro's range so
+        far), ``rest``, ``mag_disturbed``, ``residual``
         (``|q̂̄q̂ − 1|``), ``inclination_std_deg`` and ``heading_std_deg``
         (the σ of the published covariance, degrees); NaN before the first
         step.
@@ -474,13 +475,14 @@ class RawImuEstimator:
             q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] - 1.0)
         bx, by, bz = core.bias
         sx, sy, sz = core.bias_std
+        clipped = core.clipped
         tracker = self.uncertainty
         started = q is not None and tracker.started
         return [('world_frame', self.world_frame), ('use_mag', bool(core.use_mag)),
                 ('initialized', q is not None), ('bias_x', float(bx)),
                 ('bias_y', float(by)), ('bias_z', float(bz)), ('bias_std_x', float(sx)),
                 ('bias_std_y', float(sy)), ('bias_std_z', float(sz)), ('rest', bool(core.rest)),
-                ('bias_learning', self._held_bias is None),
+                ('bias_learning', self._held_bias is None), ('gyro_clipped', clipped),
                 ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
                 ('inclination_std_deg',
                  math.degrees(tracker.inclination_std) if started else math.nan),
