@@ -1,7 +1,7 @@
 """
 The compiled kernels against the plain ones and VQF: ``python -m bench.compiled``.
 
-Figures for the raw-IMU estimator's compiled step (core/compiled.py, numba),
+Figures for the raw-IMU estimator's compiled step (core/ahrs/compiled.py, numba),
 printed and, with ``--docs DIR``, written to ``DIR/compiled.md``:
 
 1. **BROAD, 22 trials × 9D and 6D**, in one run: VQF (C++, the ``vqf``
@@ -63,8 +63,8 @@ def broad_figures(trials, progress=print):
     from ext_observer.broad import score
     from ext_observer.broad.anchors import anchor_estimates
     from ext_observer.core.ahrs.ahrs_batch import estimate_batch
-    from ext_observer.core.ahrs.compiled import kernels
-    kernels(True)  # warm
+    from ext_observer.pipeline.kernel_cache import load
+    load()  # warm
     rate = trials[0].rate
     out = {'samples': int(sum(len(t.gyr) for t in trials)), 'trials': len(trials)}
     runs = {}
@@ -144,7 +144,7 @@ def step_figures():
 def _kernel_process(cache):
     start = time.perf_counter()
     subprocess.run([sys.executable, '-c',
-                    'from ext_observer.core.ahrs.compiled import kernels; kernels(True)'],
+                    'from ext_observer.pipeline.kernel_cache import load; load()'],
                    check=True, env=_env(EXT_OBSERVER_CACHE=cache), timeout=600)
     return time.perf_counter() - start
 
@@ -397,7 +397,7 @@ def markdown(broad, steps, starts, meta, node=None, whole=None):
 
 def write_docs(folder, section):
     """Put ``section`` between the markers of ``folder/compiled.md``."""
-    from bench.report import replace_section
+    from bench.pages import replace_section
     return replace_section(os.path.join(folder, 'compiled.md'), section, BEGIN, END)
 
 

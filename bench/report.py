@@ -8,19 +8,6 @@ REPRODUCE_TARGET = 5.0  # s
 LATENCY_MARGIN_MS = 0.2
 
 
-def replace_section(path, section, begin, end):
-    """Put ``section`` (markers included) in place of ``path``'s, from ``begin`` to ``end``."""
-    with open(path, encoding='utf-8') as f:
-        page = f.read()
-    if begin not in page or end not in page:
-        raise ValueError(f'{path} has no generated section ({begin} ... {end})')
-    head, rest = page.split(begin, 1)
-    _, tail = rest.split(end, 1)
-    with open(path, 'w', encoding='utf-8') as f:
-        f.write(head + section + tail)
-    return path
-
-
 def _si(value):
     for scale, suffix in ((1e9, ' G'), (1e6, ' M'), (1e3, ' k')):
         if value >= scale:

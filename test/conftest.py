@@ -186,5 +186,5 @@ def pytest_sessionstart(session):
     of each compiling in the background.
     ``EXT_OBSERVER_COMPILED=0`` skips it (the plain kernels).
     """
-    from ext_observer.core.ahrs.compiled import kernels
-    kernels()
+    from ext_observer.pipeline.kernel_cache import preload
+    preload()

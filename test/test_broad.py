@@ -314,7 +314,7 @@ def test_every_public_name_is_importable_from_the_package():
     import inspect
     missing = [n for n in FORMER_NAMES if not hasattr(broad, n)]
     for module in ('names', 'data', 'scoring', 'anchors', 'run', 'report', 'page', 'plots',
-                   'cli'):
+                   'cli', 'stress', 'stress_run', 'stress_page'):
         found = importlib.import_module(f'ext_observer.broad.{module}')
         missing += [f'{module}.{name}' for name, value in vars(found).items()
                     if not name.startswith('_') and (inspect.isfunction(value)

@@ -1,9 +1,9 @@
 """
 The compiled kernels (numba) and the plain ones: one source, the same estimates.
 
-The raw-IMU estimator's steps (core/ahrs_kernel.py, core/magcal_kernel.py)
+The raw-IMU estimator's steps (core/ahrs/ahrs_kernel.py, core/ahrs/magcal_kernel.py)
 run as plain Python, or compiled by numba where it is installed
-(core/compiled.py). Here both run the shipped BROAD excerpts, sample by
+(core/ahrs/compiled.py). Here both run the shipped BROAD excerpts, sample by
 sample and whole, and must agree to 1e-12; the joined source must hold
 every kernel function; and without numba the package must run plain.
 """
@@ -233,8 +233,11 @@ def test_the_covariance_goes_along_when_the_kernels_change_mid_run():
     assert all(type(v) is float for v in tracker.covariance + tracker.last_field[:2])
     assert np.max(np.abs(switched[0] - reference[0])) <= 1e-12
     assert np.max(np.abs(switched[1] - reference[1])) <= 1e-12 * np.max(reference[1])
-    # The compiled sample_step is called past numba's dispatch (one signature).
-    k = compiled_module.kernels(True)
+    # The node's compiled sample_step (kernel_cache.load: compiled ahead of
+    # the samples) is called past numba's dispatch (one signature).
+    from ext_observer.pipeline.kernel_cache import load
+    k = load()
+    assert k is compiled_module.kernels(True)
     assert k.sample_step is not k.uncertainty.sample_step
 
 

@@ -1,4 +1,4 @@
-"""The raw-IMU estimator (core/ahrs.py) on synthetic motion with known truth."""
+"""The raw-IMU estimator (core/ahrs/estimator.py) on synthetic motion with known truth."""
 
 import math
 
@@ -7,7 +7,8 @@ from numpy.testing import assert_allclose
 import pytest
 
 from ext_observer.core import quaternion as quat
-from ext_observer.core.ahrs.estimator import (AhrsObserver, AhrsParams, estimate_batch,
+from ext_observer.core.ahrs.ahrs_batch import estimate_batch
+from ext_observer.core.ahrs.estimator import (AhrsObserver, AhrsParams,
                                     initial_attitude, world_from_enu)
 
 G = 9.81

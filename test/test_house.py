@@ -15,7 +15,7 @@ SLOT_PREFIXES = ('P_', 'C_', 'S_', 'U_', 'MC_', 'A_')
 
 
 def _hand_numbered(folder):
-    """Module-level slot constants whose value is typed as a number: ``S_Q = 32``, ``X = Y + 4``."""
+    """Module-level slot constants typed as numbers: ``S_Q = 32``, ``X = Y + 4``."""
     found = []
     for path in sorted(folder.rglob('*.py')):
         for node in ast.parse(path.read_text(encoding='utf-8')).body:
@@ -139,3 +139,183 @@ def test_the_node_refuses_what_the_core_refuses():
     with pytest.raises(ValueError, match='alpha must be below 0.0762'):
         imu_filter_settings(dict(values, **{'ahrs.alpha': 0.0762}))
     imu_filter_settings(dict(values, **{'ahrs.alpha': 0.0761}))
+
+
+# --- imports: downward only, public names only ----------------------------------------------
+
+ROOT = PACKAGE.parent
+
+
+def _modules():
+    """``{dotted name: path}`` of every module of ext_observer and bench."""
+    found = {}
+    for base in ('ext_observer', 'bench'):
+        for path in (ROOT / base).rglob('*.py'):
+            parts = list(path.relative_to(ROOT).with_suffix('').parts)
+            if parts[-1] == '__init__':
+                parts = parts[:-1]
+            found['.'.join(parts)] = path
+    return found
+
+
+def _imports(modules):
+    """Every import between the modules (function-level ones too): ``(edges, private names)``."""
+    edges = {name: set() for name in modules}
+    private = []
+    for name, path in modules.items():
+        package = name.split('.') if path.name == '__init__.py' else name.split('.')[:-1]
+        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+            if isinstance(node, ast.Import):
+                edges[name].update(a.name for a in node.names if a.name in modules)
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    target = '.'.join(package[:len(package) - node.level + 1]
+                                      + ([node.module] if node.module else []))
+                else:
+                    target = node.module
+                for alias in node.names:
+                    if f'{target}.{alias.name}' in modules:
+                        edges[name].add(f'{target}.{alias.name}')
+                    elif target in modules:
+                        edges[name].add(target)
+                        if alias.name.startswith('_') and not alias.name.startswith('__'):
+                            private.append(f'{name} imports {target}.{alias.name}')
+    return edges, private
+
+
+def _cycles(edges):
+    """The strongly connected components of more than one module (Tarjan, iterative)."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+    for root in edges:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(edges[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(edges[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return found
+
+
+def test_no_import_cycle_and_no_private_name_across_modules():
+    edges, private = _imports(_modules())
+    assert 'ext_observer.core.ahrs.compiled' in edges['ext_observer.core.ahrs.estimator']
+    assert _cycles(edges) == []
+    assert private == []
+    # The check finds a cycle where there is one.
+    assert _cycles({'a': {'b'}, 'b': {'c'}, 'c': {'a'}, 'd': {'a'}}) == [['a', 'b', 'c']]
+
+
+def test_the_core_manages_no_processes_and_imports_no_ros():
+    for path in sorted((PACKAGE / 'core').rglob('*.py')):
+        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ''] if isinstance(node, ast.ImportFrom) else [])
+            for name in names:
+                top = name.split('.')[0]
+                assert top not in ('subprocess', 'fcntl', 'signal', 'threading', 'rclpy'), (
+                    f'{path.relative_to(PACKAGE)} imports {name}')
+                assert not top.endswith(('_msgs', '_srvs')), path
+                assert not name.startswith(('ext_observer.pipeline', 'ext_observer.nodes',
+                                            'ext_observer.recordings')), path
+
+
+# --- the offline path without ROS ----------------------------------------------------------
+
+_NO_ROS = '''
+import sys
+
+
+class NoRos:
+    """Refuse rclpy and every message package, as on a machine without ROS."""
+
+    def find_spec(self, name, path=None, target=None):
+        top = name.split('.')[0]
+        if (top in ('rclpy', 'builtin_interfaces', 'rcl_interfaces')
+                or top.endswith(('_msgs', '_srvs'))):
+            raise ImportError(f'no ROS here: {name}')
+        return None
+
+
+sys.meta_path.insert(0, NoRos())
+'''
+
+_OFFLINE = '''
+import os
+import numpy as np
+
+try:
+    import rclpy  # noqa: F401
+except ImportError:
+    pass
+else:
+    raise SystemExit('the blocker let rclpy in')
+
+import ext_observer.core as core
+from ext_observer import attitude_from_imu
+from ext_observer.__main__ import main
+
+assert abs(core.certified_alpha_max() - 0.0762) < 1e-3
+data = np.load(os.path.join({data!r}, 'broad_01_undisturbed_slow_rotation_A.npz'))
+names = list(data)
+rate = float(data['rate']) if 'rate' in names else None
+run = attitude_from_imu(data['gyr'][:600], data['acc'][:600], data['mag'][:600] * 1e-6,
+                        rate=rate)
+assert run.quaternions.shape == (600, 4) and np.all(np.isfinite(run.quaternions))
+out = {out!r}
+assert main(['example-data', '--out', out, '--seconds', '3', '--storage', 'mcap']) in (0, None)
+folder = sorted(os.listdir(out))
+csv = [f for f in folder if f.endswith('.csv')][0]
+bag = [f for f in folder if f.endswith('_mcap')][0]
+assert main(['csv', os.path.join(out, csv), '--out', os.path.join(out, 'ours.csv')]) in (0, None)
+assert main(['bag', os.path.join(out, bag), '--out', os.path.join(out, 'ours')]) in (0, None)
+leaked = sorted(m for m in sys.modules if m.split('.')[0] == 'rclpy' or m.endswith('_msgs'))
+assert not leaked, leaked
+print('offline path ran without ROS')
+'''
+
+
+def test_the_offline_path_runs_without_ros(tmp_path):
+    import subprocess
+    import sys
+    code = _NO_ROS + _OFFLINE.format(data=str(ROOT / 'test' / 'data'), out=str(tmp_path / 'ex'))
+    env = dict(__import__('os').environ, EXT_OBSERVER_COMPILED='0')
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          env=env, timeout=300, cwd=str(tmp_path))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert 'offline path ran without ROS' in done.stdout
+
+
+def test_the_tree_shows_the_architecture():
+    # At most 8 modules at the top; each subpackage says what lives there.
+    assert len(list(PACKAGE.glob('*.py'))) <= 8
+    for init in PACKAGE.rglob('__init__.py'):
+        text = ast.get_docstring(ast.parse(init.read_text(encoding='utf-8')))
+        assert text and len(text.splitlines()) <= 40, init.relative_to(ROOT)
+    layout = (ROOT / 'docs' / 'layout.md').read_text(encoding='utf-8')
+    for folder in ('core/', 'ahrs/', 'paper/', 'pipeline/', 'nodes/', 'recordings/', 'broad/'):
+        assert folder in layout, folder

@@ -92,6 +92,9 @@ def test_imu_filter_madgwick_own_file_starts_with_a_covariance_and_names_publish
     for msg in filtered.values():
         c = np.reshape(msg.orientation_covariance, (3, 3))
         assert np.all(np.diag(c) > 0.0) and np.all(np.isfinite(c)), c
+    smallest = min(min(np.diag(np.reshape(m.orientation_covariance, (3, 3))))
+                   for m in filtered.values())
+    print(f'{len(filtered)} imu/data messages, smallest variance {smallest:.3g} rad²')
     out = process.output
     assert "orientation_covariance of imu/data: the estimate's own" in out, out
     assert 'orientation_stddev 0.0 means not given' in out, out
@@ -179,6 +182,7 @@ def test_constant_dt_integrates_every_sample_of_same_stamp_pairs_over_dds(
     last = received[-1].orientation
     turn = yaw_of((last.w, last.x, last.y, last.z)) - yaw_of((first.w, first.x, first.y,
                                                               first.z))
+    print(f'{len(received)} estimates of {len(samples)} samples, turn {turn:.4f} rad')
     assert turn == pytest.approx(1.99, abs=0.005), turn
 
 
@@ -583,3 +587,38 @@ def test_ros2_launch_starts_the_node_where_launch_ros_imports(ros_processes):
         assert time.monotonic() < deadline, process.output
         time.sleep(0.1)
     assert "the estimate's own" in process.output
+
+
+# The docs' switching table -----------------------------------------------------------
+
+# Every parameter the two imu_tools nodes declare (ROS 2 branch:
+# imu_filter_madgwick/src/imu_filter_ros.cpp and
+# imu_complementary_filter/src/complementary_filter_ros.cpp).
+MADGWICK_DECLARES = ('stateless', 'use_mag', 'publish_tf', 'reverse_tf', 'fixed_frame',
+                     'constant_dt', 'remove_gravity_vector', 'publish_debug_topics',
+                     'yaw_offset', 'declination', 'world_frame', 'gain', 'zeta',
+                     'mag_bias_x', 'mag_bias_y', 'mag_bias_z', 'orientation_stddev')
+COMPLEMENTARY_DECLARES = ('fixed_frame', 'use_mag', 'publish_tf', 'reverse_tf',
+                          'constant_dt', 'publish_debug_topics', 'gain_acc', 'gain_mag',
+                          'do_bias_estimation', 'bias_alpha', 'do_adaptive_gain',
+                          'orientation_stddev')
+
+
+def test_every_parameter_of_both_filters_is_declared_here_and_in_the_switching_table():
+    import re
+
+    text = open(os.path.join(REPO, 'docs', 'raw_imu.md')).read()
+    start = text.index('| parameter | imu_filter_madgwick | imu_complementary_filter | here |')
+    rows = text[start:text.index('\n\n', start)].splitlines()[2:]
+    listed = {name for row in rows for name in re.findall(r'`([a-z_]+)`', row.split('|')[1])}
+    declared = {spec.name for spec in IMU_FILTER_PARAMETERS}
+    for name in set(MADGWICK_DECLARES) | set(COMPLEMENTARY_DECLARES):
+        assert name in listed, f'{name} missing from the switching table'
+        assert name in declared, f'{name} not declared by imu_filter_node'
+    # The params files in test/data name nothing else (qos_overrides is rclpy's).
+    import yaml
+    for path, node in ((MADGWICK_FILE, 'imu_filter'),
+                       (COMPLEMENTARY_FILE, 'complementary_filter_gain_node')):
+        with open(path) as f:
+            names = set(yaml.safe_load(f)[node]['ros__parameters']) - {'qos_overrides'}
+        assert names <= set(MADGWICK_DECLARES) | set(COMPLEMENTARY_DECLARES), names

@@ -19,7 +19,11 @@ from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from test_core_ahrs_params import (angle_deg, DT, FIELD, first_index, qexp, qmul, RATE, run,
                                    simulate, turning)
 
-CHANGE = 3.0  # s: from here on the field is 30 % stronger (a new place)
+# s: from here on the field is 30 % stronger (a new place); later than
+# MAG_NEW_TIME, so that the references have been confirmed for longer than
+# that and the new field waits the whole MAG_NEW_TIME (a new field is never
+# made to wait longer than fields confirmed the references, issue 27).
+CHANGE = 5.0
 MAG_NEW_TIME = 4.0
 ATTITUDES = {'pitched': qexp((0.0, math.radians(15.0), 0.0)),
              'rolled': qexp((math.radians(15.0), 0.0, 0.0)),

@@ -50,7 +50,7 @@ BEST_EFFORT = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
 TOLERANCE = 1e-12
 # Total attitude error against the optical reference over the movement
 # samples, deg. The core offline on these excerpts (the defaults of
-# core/ahrs.py chosen on the even-numbered BROAD trials; the field every
+# core/ahrs/estimator.py chosen on the even-numbered BROAD trials; the field every
 # third sample, as here): RMSE 1.19 and 1.60, max 2.27 and 3.94 (undisturbed,
 # disturbed); 6D would give RMSE 2.53 and 3.50. The bounds leave about 2×.
 RMSE_BOUND = 3.0

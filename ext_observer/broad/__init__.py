@@ -18,6 +18,9 @@ One module per step, each importing only the ones above it in this list:
 - :mod:`~ext_observer.broad.run`: ours and the anchors on the trials, scored;
 - :mod:`~ext_observer.broad.report`, :mod:`~ext_observer.broad.page`,
   :mod:`~ext_observer.broad.plots`: stdout and JSON, the page, the figures;
+- :mod:`~ext_observer.broad.stress`, :mod:`~ext_observer.broad.stress_run`,
+  :mod:`~ext_observer.broad.stress_page`: the robustness benchmark
+  (``--stress``): the trials made harder, their run and tables, their page;
 - :mod:`~ext_observer.broad.cli`: the command;
 - :mod:`~ext_observer.broad.fetch` (standard library only, apart): BROAD from
   its repository into ``data/broad`` (``make broad-data``).
@@ -49,6 +52,15 @@ from ext_observer.broad.run import estimate_ours, log, run
 from ext_observer.broad.scoring import (criteria, error_angles, group_means,
                                         norm_deviation, rmse_deg, score, summary,
                                         VQF_RATIO_GOAL)
+from ext_observer.broad.stress import (BIAS, bias_of, blocks, clip_gyro, cut_at_movement,
+                                       DESCRIPTIONS, downsample, first_movement,
+                                       GYRO_RANGE, half_of, LOW_RATE, trial_number, variant,
+                                       VARIANTS, variants, with_bias)
+from ext_observer.broad.stress_page import plot_stress, stress_markdown
+from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, MODE_KEYS,
+                                           modes_of, ratio_to_vqf, run_stress,
+                                           STRESS_ANCHORS, stress_summary, table_rows,
+                                           text_table, write_stress_json)
 
 __all__ = [
     'ALGORITHMS', 'ANCHOR_PACKAGES', 'ANCHORS', 'DEFAULT_DIRS', 'ENV_VAR', 'HOW_TO_GET',
@@ -59,4 +71,11 @@ __all__ = [
     'fmt', 'group_means', 'groups_from_name', 'has_trials', 'load_trial', 'load_trials', 'log', 'main',
     'markdown', 'missing_anchor_packages', 'norm_deviation', 'plot', 'rmse_deg', 'run',
     'score', 'shown_path', 'summary', 'text_report', 'write_json',
+    # The robustness benchmark (--stress).
+    'BIAS', 'DESCRIPTIONS', 'GYRO_RANGE', 'HALVES', 'LOW_RATE', 'MODE_KEYS',
+    'STRESS_ANCHORS', 'VARIANTS', 'algorithms_of', 'bias_of', 'blocks', 'clip_gyro',
+    'cut_at_movement', 'downsample', 'first_movement', 'half_counts', 'half_of', 'modes_of',
+    'plot_stress', 'ratio_to_vqf', 'run_stress', 'stress_markdown', 'stress_summary',
+    'table_rows', 'text_table', 'trial_number', 'variant', 'variants', 'with_bias',
+    'write_stress_json',
 ]

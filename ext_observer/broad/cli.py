@@ -27,7 +27,10 @@ from ext_observer.broad.page import markdown
 from ext_observer.broad.plots import plot
 from ext_observer.broad.report import text_report, write_json
 from ext_observer.broad.run import log, run
-from ext_observer.core.ahrs.compiled import kernels, warn_if_plain
+from ext_observer.broad.stress import VARIANTS
+from ext_observer.broad.stress_run import STRESS_ANCHORS
+from ext_observer.core.ahrs.compiled import warn_if_plain
+from ext_observer.pipeline.kernel_cache import preload
 
 # Trial shown over time in the report: magnetically disturbed.
 PLOT_TRIAL = '28_disturbed_stationary_magnet_A'
@@ -74,6 +77,21 @@ def build_parser():
                         help='instead: is the published orientation covariance honest? (our '
                              'estimator through the node\'s pipeline; with --docs, '
                              'DOCS_DIR/covariance.md and its figures)')
+    parser.add_argument('--stress', action='store_true',
+                        help='instead: the robustness benchmark, each trial (a) as recorded, '
+                             '(b) cut at its first movement sample, (c) (b) plus a 1 °/s gyro '
+                             'bias, (d) (c) at 50 Hz, (e) gyro clipped at ±250 °/s (--plain '
+                             'is ignored); with --docs, DOCS_DIR/robustness.md and '
+                             'DOCS_DIR/figures/robustness.png')
+    parser.add_argument('--variants', nargs='+', choices=VARIANTS, metavar='KEY',
+                        help='with --stress: only these variants (a to e; default all)')
+    parser.add_argument('--param', action='append', default=[], metavar='NAME=VALUE',
+                        help="with --stress: one of our estimator's parameters (AhrsParams) "
+                             'set for this run, e.g. --param tau_bias=100; repeatable; the '
+                             'page lists the parameters used')
+    parser.add_argument('--anchors', nargs='+', choices=ANCHORS, metavar='NAME',
+                        help=f'the anchors to run (of {", ".join(ANCHORS)}; default all, '
+                             f'with --stress {", ".join(STRESS_ANCHORS)})')
     return parser
 
 
@@ -83,7 +101,9 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     warn_if_plain()
     progress = (lambda text: None) if args.quiet else log
-    anchors = () if args.no_anchors or args.covariance else ANCHORS
+    default_anchors = STRESS_ANCHORS if args.stress else ANCHORS
+    anchors = () if args.no_anchors or args.covariance else tuple(
+        args.anchors or default_anchors)
     problem = _check(args, anchors)
     if problem:
         print(f'error: {problem}', file=sys.stderr)
@@ -96,6 +116,8 @@ def main(argv=None):
         trials, groups = _read(folder, args, progress)
         if args.covariance:
             return _covariance(args, argv, source, folder, trials, groups, progress)
+        if args.stress:
+            return _stress(args, argv, source, folder, trials, anchors, progress)
         names = [t.name for t in trials]
         plot_trial = PLOT_TRIAL if PLOT_TRIAL in names else next(
             (n for n in names if 'magnet' in n), names[0])
@@ -147,8 +169,68 @@ def _covariance(args, argv, source, folder, trials, groups, progress):
     return 0
 
 
+def _stress(args, argv, source, folder, trials, anchors, progress):
+    """The robustness benchmark (``--stress``) on the trials read."""
+    from ext_observer.broad.stress_page import plot_stress, stress_markdown
+    from ext_observer.broad.stress_run import (half_counts, run_stress, stress_summary,
+                                               text_table, write_stress_json)
+    modes = MODES if args.mode == 'both' else (args.mode,)
+    keys = tuple(args.variants) if args.variants else VARIANTS
+    start = time.perf_counter()
+    load = _load()
+    params = _params(args.param)
+    if params is not None:
+        source = dict(source, params=params.as_dict(), overrides=list(args.param))
+    out = run_stress(trials, keys, modes, anchors, jobs=args.jobs, workers=args.workers,
+                     progress=progress, params=params)
+    names = [t.name for t in trials]
+    meta = dict(source,
+                command=('python -m ext_observer broad ' + ' '.join(argv)).strip(),
+                data=shown_path(folder), machine=_machine(), versions=_versions(),
+                trials=names, anchors=list(anchors), variants=list(keys), head=args.head,
+                workers=args.workers, jobs=args.jobs, wall=time.perf_counter() - start,
+                load=(load, _load()))
+    print(f'BROAD robustness: {len(names)} trials, commit {meta["commit"]}'
+          + (' (estimator modified)' if meta['dirty'] else ''))
+    print(text_table(stress_summary(out['scores']), half_counts(names)))
+    print(f'  time: {meta["wall"]:.1f} s (' + ', '.join(
+        f'({k}) {s["wall"]:.1f} s' for k, s in out['seconds'].items()) + ')')
+    if args.json:
+        write_stress_json(args.json, out, meta)
+    if args.docs:
+        figure = plot_stress(out, os.path.join(args.docs, 'figures', 'robustness.png'))
+        page = os.path.join(args.docs, 'robustness.md')
+        with open(page, 'w', encoding='utf-8') as f:
+            f.write(stress_markdown(out, meta, figure, args.docs))
+        progress(f'wrote {page} and {figure}')
+    return 0
+
+
+def _params(settings):
+    """``AhrsParams`` from ``NAME=VALUE`` settings, or None for the shipped defaults."""
+    if not settings:
+        return None
+    from ext_observer.core.ahrs.estimator import AhrsParams
+    values = {}
+    for setting in settings:
+        name, sep, value = setting.partition('=')
+        if not sep or not name:
+            raise ValueError(f'--param wants NAME=VALUE, got {setting!r}')
+        words = {'true': True, 'false': False}
+        values[name.strip()] = words.get(value.strip().lower(), value.strip())
+    return AhrsParams(**values)
+
+
 def _check(args, anchors):
     """Return what is wrong with the options before anything runs, or None."""
+    if args.stress and args.covariance:
+        return '--stress and --covariance are two benchmarks: one at a time'
+    if (args.variants or args.param) and not args.stress:
+        return '--variants and --param go with --stress'
+    try:
+        _params(args.param)
+    except ValueError as error:
+        return f'--param: {error}'
     if args.jobs < 1 or args.workers < 1:
         return '--jobs and --workers must be at least 1'
     if args.head is not None and not args.head > 0.0:
@@ -180,7 +262,7 @@ def _read(folder, args, progress):
     start = time.perf_counter()
     # The estimator's compiled kernels load (numba's import and cache) on
     # one core while the trials are read on the other.
-    trials = load_trials(found, meanwhile=kernels)
+    trials = load_trials(found, meanwhile=preload)
     if args.head:
         trials = [t.head(args.head) for t in trials]
     progress(f'{len(trials)} trials read in {time.perf_counter() - start:.1f} s (and the '

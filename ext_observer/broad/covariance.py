@@ -54,7 +54,8 @@ def split_of(name):
 
 def node_settings(mode, values=None):
     """``imu_filter_node``'s settings with its defaults, 9D or 6D (and ``values``)."""
-    from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+    from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS,
+                                                             imu_filter_settings)
     settings = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
     settings.update(values or {})
     settings['use_mag'] = mode == '9D'
@@ -82,7 +83,10 @@ def run_trial(trial, mode, values=None):
         ``reference`` (what the sample's field told the uncertainty model:
         NaN without one; ``gain0``, ``calibration0`` and ``reference0`` for
         the field the start used),
-        ``rejected`` (a field came and did not correct the heading), ``dt``.
+        ``rejected`` (a field came and did not correct the heading),
+        ``bias_var`` (the estimator's bias variance, NaN when it learns no
+        bias in motion), ``clip_var`` (what a sample at the gyro's range
+        added to the variances), ``dt``.
 
     """
     from ext_observer.pipeline.raw_imu import RawImuPipeline
@@ -92,7 +96,7 @@ def run_trial(trial, mode, values=None):
     period = 1e9 / trial.rate
     out = {key: np.full(n, np.nan) for key in ('tilt', 'heading', 'gain', 'calibration',
                                                'reference', 'gain0', 'calibration0',
-                                               'reference0')}
+                                               'reference0', 'bias_var', 'clip_var')}
     out['state'] = np.full((n, 4), np.nan)
     for key in ('rest', 'rejected', 'started'):
         out[key] = np.zeros(n, dtype=bool)
@@ -108,6 +112,9 @@ def run_trial(trial, mode, values=None):
             out['tilt'][k], out['heading'][k] = estimate.covariance[0], estimate.covariance[8]
             out['started'][k] = not was_started or estimate.reason is not None
             out['rest'][k] = core.rest
+            bias_var = core.bias_variance
+            out['bias_var'][k] = math.nan if bias_var is None else bias_var
+            out['clip_var'][k] = core.clip_variance
             if tracker.last_field is not None:
                 out['gain0'][k], out['calibration0'][k], out['reference0'][k] = (
                     tracker.last_field[1:])
@@ -160,6 +167,10 @@ def replay(runs, params=None, ahrs_params=None):
         states[:len(r['state']), :, i] = r['state']
     gyr = np.stack([stack(f'gyr{j}', 0.0) for j in range(3)], axis=1)
     rest, started = stack('rest', 0.0), stack('started', 0.0)
+    bias_var = stack('bias_var', np.nan) if all('bias_var' in r for r in runs) else None
+    if bias_var is not None and not np.isfinite(bias_var).any():
+        bias_var = None
+    clip_var = stack('clip_var', 0.0) if all('clip_var' in r for r in runs) else None
     first = int(np.argmax(started.any(axis=1)))
     if not np.all(started[first]) or started[first + 1:].any():
         raise ValueError('replay needs runs that all start at the same sample and never restart')
@@ -179,7 +190,9 @@ def replay(runs, params=None, ahrs_params=None):
     apply(0, first)
     for k in range(first, n):
         if k > first:
-            tracker.step(dt, gyr[k], states[k], rest[k] > 0.5)
+            tracker.step(dt, gyr[k], states[k], rest[k] > 0.5,
+                         None if bias_var is None else np.nan_to_num(bias_var[k]),
+                         None if clip_var is None else np.nan_to_num(clip_var[k]))
         cov = tracker.covariance
         tilt[k], heading[k] = cov[0], cov[8]
         apply(1, k)

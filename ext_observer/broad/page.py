@@ -378,4 +378,7 @@ def _reproduce():
             '`--no-anchors`, `--plain` (also without the extension term), '
             '`--trials NAME...`, `--jobs N` (processes for the anchors) and `--workers N` '
             '(for our batched call; 1: one process), both by default the '
-            'CPUs; `make broad BROAD_ARGS="--jobs 1"` passes them on.', '']
+            'CPUs; `make broad BROAD_ARGS="--jobs 1"` passes them on.', '',
+            'How the estimator does on harder variants of these trials (a start in motion, '
+            'a gyro bias, 50 Hz, a clipped gyro): [robustness.md](robustness.md), by '
+            '`make broad BROAD_ARGS="--stress --json out/robustness.json"`.', '']

@@ -26,7 +26,7 @@ def _plural(count, word):
     return f'{count} {word}{"es" if count > 1 else ""}'
 
 
-def estimate_ours(trials, modes, variant, workers=1):
+def estimate_ours(trials, modes, variant, workers=1, params=None):
     """
     Run our estimator on every trial in every mode, in one batched call.
 
@@ -38,6 +38,8 @@ def estimate_ours(trials, modes, variant, workers=1):
         With the extension term, or without it.
     workers : int
         ``estimate_batch``'s processes (1: all in this process).
+    params : AhrsParams, optional
+        Default: the shipped defaults.
 
     Returns
     -------
@@ -48,12 +50,12 @@ def estimate_ours(trials, modes, variant, workers=1):
         Wall clock of the call.
 
     """
-    from ext_observer.core.ahrs.estimator import estimate_batch
+    from ext_observer.core.ahrs.ahrs_batch import estimate_batch
     streams = [(t, m) for m in modes for t in trials]
     start = time.perf_counter()
     out = estimate_batch([t.gyr for t, _ in streams], [t.acc for t, _ in streams],
                          [t.mag for t, _ in streams], [t.rate for t, _ in streams],
-                         [m == '9D' for _, m in streams], params=None, variant=variant,
+                         [m == '9D' for _, m in streams], params=params, variant=variant,
                          workers=workers)
     seconds = time.perf_counter() - start
     estimates = {m: {} for m in modes}
@@ -63,7 +65,7 @@ def estimate_ours(trials, modes, variant, workers=1):
 
 
 def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
-        plot_trial=None, progress=log):
+        plot_trial=None, progress=log, params=None):
     """
     Score the estimator (and the anchors) on the trials.
 
@@ -83,6 +85,8 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
     plot_trial : str, optional
         Keep the per-sample errors of this trial (for ``plot``).
     progress : callable
+    params : AhrsParams, optional
+        Our estimator's parameters (default: the shipped defaults).
 
     Returns
     -------
@@ -108,18 +112,18 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
         if series is not None:
             result['series'].setdefault(algorithm, {})[mode] = series
 
-    _run_ours(trials, modes, plain, workers, result, keep, scored, progress)
+    _run_ours(trials, modes, plain, workers, result, keep, scored, progress, params)
     _run_anchors(trials, modes, anchors, jobs, result, keep, progress)
     return result
 
 
-def _run_ours(trials, modes, plain, workers, result, keep, scored, progress):
+def _run_ours(trials, modes, plain, workers, result, keep, scored, progress, params=None):
     samples = sum(len(t) for t in trials)
     variants = [('extended', OURS)] + ([('plain', OURS_PLAIN)] if plain else [])
     for variant, algorithm in variants:
         progress(f'{algorithm}: {len(trials)} trials × {len(modes)} modes in one batched call, '
                  f'{_plural(workers, "process")} ({samples} samples each mode) ...')
-        estimates, seconds = estimate_ours(trials, modes, variant, workers)
+        estimates, seconds = estimate_ours(trials, modes, variant, workers, params)
         result['seconds'][algorithm] = seconds
         progress(f'{algorithm}: {seconds:.1f} s')
         norms = {m: norm_deviation(list(estimates[m].values())) for m in modes}

@@ -1,30 +1,10 @@
 """
-The numerical core of ext_observer: numpy only, no ROS.
+The numerical core of ext_observer: numpy only, no ROS, no processes.
 
-Modules
--------
-quaternion
-    Batched quaternion algebra, scalar first ``(w, x, y, z)``.
-extension
-    The transversal extension of Theorems 1 and 2 (S³ and SO(3) built in).
-certificate
-    The gain certificate: admissible α and the certified contraction.
-observer
-    The extended, plain and projected Luenberger-like observers.
-gyro_model
-    The simulated gyro and attitude sensor.
-magcal, magcal_model
-    Online magnetometer calibration (hard and soft iron) from the gyro; the
-    check of a saved calibration.
-ahrs, ahrs_params, ahrs_math, ahrs_batch
-    The raw-IMU estimator, its parameters, its world frames and first
-    attitude, and many recordings at once.
-ahrs_kernel, magcal_kernel, magcal_filter, magcal_layout, compiled
-    The estimator's steps and the calibration's filter as functions on a
-    flat state (one source; the filter's steps and the state's slots in
-    their own modules), and their compiled form (numba, optional).
-uncertainty
-    The variance of the raw-IMU estimate's inclination and heading.
+``quaternion`` (scalar first ``(w, x, y, z)``), ``extension`` (the
+transversal extension of Theorems 1 and 2), ``certificate`` (admissible α),
+``validation`` (state checks); ``paper/`` the paper's observer and gyro;
+``ahrs/`` the raw-IMU estimator. The names below are the public API.
 """
 
 from .certificate import (GainCertificate, certified_alpha_max,

@@ -1,8 +1,10 @@
 """
 What the nodes share beyond their parameters: diagnostics, QoS, ``main``.
 
-The parameter machinery (:class:`ParameterSpec`, :class:`NodeParameters`)
-lives in :mod:`ext_observer.nodes.parameters` and is re-exported here; the input
+The parameter rows (:class:`ParameterSpec`, plain data in
+:mod:`ext_observer.pipeline.parameter_specs`) and their declaration
+(:class:`NodeParameters`, :mod:`ext_observer.nodes.parameters`) are
+re-exported here; the input
 machinery of the two estimator nodes (stamps, checks, silence, resets,
 status) in :mod:`ext_observer.nodes.estimator_node`.
 """

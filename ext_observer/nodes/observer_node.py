@@ -1,60 +1,15 @@
 """
 The ``observer`` node: the core's Luenberger-like observer on ROS topics.
 
-Inputs, step k: ``gyro/increment`` (``Vector3Stamped``, ``θ_k`` in rad) and
-``attitude/measurement`` (``QuaternionStamped``, ``y_k``), both stamped
-``t_k``. Outputs: ``attitude_estimate`` (``QuaternionStamped``, the ambient
-``q̂_{k+1}``, not normalized), ``attitude_estimate/unit`` (the same,
-normalized; only while subscribed) and ``imu/data`` (``sensor_msgs/Imu``:
-the normalized estimate, ``orientation_covariance``; only while
-subscribed), stamped ``t_{k+1}``; ``/diagnostics`` every
-``diagnostic_period``; the service ``~/reset`` (``std_srvs/Trigger``).
-
-Real sensors (``increment_source``, ``measurement_source``): the increments
-from the angular velocity of ``sensor_msgs/Imu`` on ``imu/data_raw``
-(integrated between consecutive samples, :meth:`StepPairer.add_angular_velocity`;
-``imu/data`` then passes the sample's angular velocity and acceleration
-through), the measurements from the orientation of ``sensor_msgs/Imu`` on
-``attitude/imu`` or of ``geometry_msgs/PoseStamped`` on ``attitude/pose``,
-at their own rate: a measurement corrects the step whose interval contains
-its stamp. Every input but ``gyro/increment`` (``input_reliability``) is
-subscribed best effort (the sensor-data QoS at ``queue_depth``), so that
-reliable and best-effort publishers both connect, overridable with
-``qos_overrides``.
-
-The raw-IMU estimator (gyro + accelerometer + magnetometer, the drop-in for
-``imu_filter_madgwick_node``) is ``imu_filter_node``.
-
-Inputs
-    Every input goes through :class:`~ext_observer.pipeline.pairing.StepPairer`:
-    validated (``max_increment``, ``measurement_norm_tolerance``), checked
-    for zero, duplicate, stale and jumping stamps, paired by equal stamps
-    with a bounded wait (``measurement_timeout``) in bounded buffers
-    (``queue_depth``), and counted: received = processed + dropped (by
-    reason) + waiting, in ``/diagnostics``.
-
-Faults
-    A stamp older than the last step by more than ``backward_jump_threshold``
-    (a bag that restarts) restarts the time line and resets the observer; so
-    does a backward jump of the node's clock (rclpy's clock jump callback:
-    with ``use_sim_time``, ``/clock`` going back) or a switch of its time
-    source. A step more than ``forward_gap_threshold`` after the previous one
-    resets the observer or just propagates (``forward_gap_action``). After
-    every step :class:`~ext_observer.pipeline.guard.GuardedObserver` checks the
-    estimate (``divergence_max_residual``, ``divergence_max_innovation``)
-    and reinitializes it from the latest valid measurement when it diverged.
-    Nothing non-finite is ever published. Every reset is counted by cause
-    and logged (throttled). A silent input (none for ``input_timeout``: a
-    stopped driver, a wrong topic, a network partition) is a WARN status
-    that names the topic, and is logged when it starts and ends.
-
-``t_{k+1}``
-    The increment covers ``[t_k, t_{k+1})`` but carries only ``t_k``. The
-    estimate is published at once, stamped ``t_k + Δ`` with ``Δ`` =
-    ``step_period`` when set, else the interval between the two last
-    processed steps (not across a forward gap); before two steps have been
-    seen (and with ``step_period`` = 0), the first estimate is stamped
-    ``t_k``.
+Step k pairs a gyro increment (``gyro/increment``, or integrated from
+``imu/data_raw``) with an attitude measurement (``attitude/measurement``,
+``attitude/imu`` or ``attitude/pose``) through
+:class:`~ext_observer.pipeline.pairing.StepPairer`, runs the guarded
+observer (:class:`~ext_observer.pipeline.guard.GuardedObserver`) and
+publishes ``attitude_estimate`` (ambient), ``attitude_estimate/unit`` and
+``imu/data``, stamped ``t_{k+1}``. Topics and stamps: docs/nodes.md; faults
+and what each does: docs/faults.md; the raw-IMU estimator is
+``imu_filter_node``.
 """
 
 import math

@@ -1,5 +1,6 @@
 """
 What the nodes run, without ROS: the input rules (``pairing``, ``steps``),
-the divergence guard (``guard``), the unit checks (``units``) and the
-raw-IMU pipeline of imu_filter_node (``raw_imu``). Imports no rclpy.
+the divergence guard (``guard``), the unit checks (``units``), the raw-IMU
+pipeline (``raw_imu``), the parameters as plain data (``parameter_specs``,
+``imu_filter_parameters``) and the compiled kernels' cache (``kernel_cache``).
 """

@@ -92,12 +92,14 @@ COMPLEMENTARY_UNUSED = tuple(
 # (the start-up warning says it beside the name).
 REPLACED_BY = {
     'gain': 'ahrs.tau_acc_gain and ahrs.tau_mag, time constants in s',
-    'zeta': 'the gyro bias learned at rest, ahrs.tau_rest, and in motion, ahrs.tau_bias',
+    'zeta': 'the gyro bias learned at rest, ahrs.tau_rest, and in motion, ahrs.tau_bias; '
+            'gyro_bias_learning switches it',
     'stateless': 'none: always filtered; imu/rpy/raw is the attitude of each sample alone',
     'gain_acc': 'ahrs.tau_acc_gain, s',
     'gain_mag': 'ahrs.tau_mag, s',
     'bias_alpha': 'ahrs.tau_rest, s',
-    'do_bias_estimation': 'the gyro bias learned at rest and in motion, ahrs.tau_bias',
+    'do_bias_estimation': 'the gyro bias learned at rest and in motion, ahrs.tau_bias; '
+                          'gyro_bias_learning switches it',
     'do_adaptive_gain': 'the accelerometer low-passed in a frame the gyro moves, '
                         'ahrs.tau_acc: no gain to adapt',
 }

@@ -100,7 +100,7 @@ import math
 from ext_observer.core.validation import check_increment, check_measurement, check_vector
 from ext_observer.pipeline.guard import carried
 # The vocabulary lives in steps.py; its names are importable from here too.
-from ext_observer.pipeline.steps import (_VALUE_REASONS, BACKWARD_JUMP, DROP_REASONS,  # noqa: F401
+from ext_observer.pipeline.steps import (VALUE_REASONS, BACKWARD_JUMP, DROP_REASONS,  # noqa: F401
                                 EVENTS, INCREMENT_DROP_REASONS, KINDS,
                                 MEASUREMENT_DROP_REASONS, MIN_ACCELERATION, MIN_FIELD, Step)
 
@@ -219,7 +219,7 @@ class StepPairer:
         self.received['increment'] += 1
         reason = check_increment(increment, self.max_increment)
         if reason is not None:
-            return self._drop(_VALUE_REASONS['increment'][reason])
+            return self._drop(VALUE_REASONS['increment'][reason])
         outcome = self._check_stamp(stamp, self._increments, 'increment')
         if outcome is not None and outcome != BACKWARD_JUMP:
             return self._drop(outcome)
@@ -297,7 +297,7 @@ class StepPairer:
         theta = ((v0 + w0) * half, (v1 + w1) * half, (v2 + w2) * half)
         reason = check_increment(theta, self.max_increment)
         if reason is not None:
-            return self._drop(_VALUE_REASONS['increment'][reason])
+            return self._drop(VALUE_REASONS['increment'][reason])
         self._increments[start] = (theta, now + self.timeout, stamp)
         return None
 
@@ -417,7 +417,7 @@ class StepPairer:
         self.received['measurement'] += 1
         unit, reason = check_measurement(measurement, self.norm_tolerance)
         if reason is not None:
-            return self._drop(_VALUE_REASONS['measurement'][reason])
+            return self._drop(VALUE_REASONS['measurement'][reason])
         outcome = self._check_stamp(stamp, self._measurements, 'measurement')
         if outcome is not None and outcome != BACKWARD_JUMP:
             return self._drop(outcome)

@@ -1,5 +1,5 @@
 """
-The nodes' parameters as plain data: :class:`ParameterSpec` rows, the docs and YAML made from them.
+The nodes' parameters as plain data: :class:`ParameterSpec` rows, and the docs made of them.
 
 A node lists its parameters once, as rows; :mod:`ext_observer.nodes.parameters`
 declares them with rclpy (a ``ParameterDescriptor`` per row), and
@@ -17,8 +17,8 @@ import dataclasses
 import textwrap
 from typing import Any, Optional, Tuple
 
-__all__ = ['COMMON_PARAMETERS', 'FORWARD_GAP_ACTIONS', 'ParameterSpec', 'common_settings', 'markdown_table', 'ros_type_name', 'spec_from_tunable',
-           'yaml_section']
+__all__ = ['COMMON_PARAMETERS', 'FORWARD_GAP_ACTIONS', 'ParameterSpec', 'common_settings',
+           'markdown_table', 'ros_type_name', 'spec_from_tunable', 'yaml_section']
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,7 +75,7 @@ class ParameterSpec:
 
 
 def ros_type_name(value):
-    """The ROS parameter type of a Python value, as rclpy's ``Parameter.Type`` names it, lower case."""
+    """The ROS parameter type of a Python value, as rclpy's ``Parameter.Type`` (lower case)."""
     scalar = ((bool, 'bool'), (int, 'integer'), (float, 'double'), (str, 'string'))
     for kind, name in scalar:
         if isinstance(value, kind):

@@ -9,7 +9,7 @@ releases. Every name is also importable from :mod:`ext_observer.pipeline.pairing
 from collections import namedtuple
 
 __all__ = ['BACKWARD_JUMP', 'DROP_REASONS', 'EVENTS', 'INCREMENT_DROP_REASONS', 'KINDS',
-           'MEASUREMENT_DROP_REASONS', 'MIN_ACCELERATION', 'MIN_FIELD', 'Step']
+           'MEASUREMENT_DROP_REASONS', 'MIN_ACCELERATION', 'MIN_FIELD', 'Step', 'VALUE_REASONS']
 
 KINDS = ('increment', 'measurement')
 
@@ -50,7 +50,7 @@ EVENTS = ('backward_jumps', 'forward_gaps', 'early_releases')
 # Returned by add_increment/add_measurement: accepted after a backward jump.
 BACKWARD_JUMP = 'backward_jump'
 
-_VALUE_REASONS = {
+VALUE_REASONS = {
     'increment': {'non_finite': 'non_finite_increment',
                   'increment_too_large': 'increment_too_large'},
     'measurement': {'non_finite': 'non_finite_measurement',

@@ -48,7 +48,8 @@ import numpy as np
 
 from ext_observer.core.ahrs.compiled import warn_if_plain
 from ext_observer.recordings.bag_io import BagReader, STORAGES
-from ext_observer.recordings.bag_worker import _BagSide, _Estimator, _fork, _forked, _in_process
+from ext_observer.recordings.bag_worker import (BagEstimator, BagSide, fork_context, forked,
+                                               in_process)
 from ext_observer.recordings.cdr import FIELD_TYPE, IMU_TYPE, QUATERNION_TYPE, REFERENCE_TYPES
 from ext_observer.recordings.recording import (add_parameter_options, node_settings,
                                     parameters_from_options, SECOND)
@@ -211,12 +212,12 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     topics = {role: (cs[0].topic, cs[0].msgtype, cs[0].ext.offered_qos_profiles)
               for role, cs in roles.items()}
     topics.update(outputs)
-    side = _BagSide(reader, roles, out, storage, topics, settings)
-    estimator = _Estimator(settings, _Progress(side.total, progress))
-    context = _fork() if parallel else None
+    side = BagSide(reader, roles, out, storage, topics, settings)
+    estimator = BagEstimator(settings, _Progress(side.total, progress))
+    context = fork_context() if parallel else None
     try:
-        counts = (_in_process(side, estimator) if context is None
-                  else _forked(context, side, estimator))
+        counts = (in_process(side, estimator) if context is None
+                  else forked(context, side, estimator))
         recording = estimator.recording
         comparison = None
         if 'reference' in roles:

@@ -1,12 +1,12 @@
 """
 The two processes of the bag command (:mod:`ext_observer.recordings.bag`).
 
-This process runs the estimator (:class:`_Estimator`, the node's
+This process runs the estimator (:class:`BagEstimator`, the node's
 :class:`~ext_observer.recordings.recording.PipelineRun`); a forked one
-(:func:`_forked`; this one where ``fork`` is not available, or with
-``parallel=False``: :func:`_in_process`) reads the bag and decodes its
+(:func:`forked`; this one where ``fork`` is not available, or with
+``parallel=False``: :func:`in_process`) reads the bag and decodes its
 messages, then encodes the estimates and writes the new bag
-(:class:`_BagSide`, with :mod:`ext_observer.recordings.cdr` and
+(:class:`BagSide`, with :mod:`ext_observer.recordings.cdr` and
 :mod:`ext_observer.recordings.bag_io`), a batch ahead. Between them go only numbers:
 the samples' kinds, stamps and values one way, the estimates the other.
 The first message of every input topic is checked against ``rosbags``' own
@@ -63,7 +63,7 @@ _SIZES = {IMU: 6, FIELD: 3, REFERENCE: 4, IMU_AND_REFERENCE: 10}
 _NAN4 = (math.nan,) * 4
 
 
-class _BagSide:
+class BagSide:
     """
     The bag's side of the command: read and decode a batch; write it with its estimates.
 
@@ -214,7 +214,7 @@ def _width(settings):
     return 13 if settings['covariance_estimated'] else 4
 
 
-class _Estimator:
+class BagEstimator:
     """This process's side: the node's steps on a batch's samples; the estimates back."""
 
     def __init__(self, settings, progress):
@@ -274,14 +274,14 @@ class _Estimator:
         self.recording = self.run.recording()
 
 
-def _fork():
+def fork_context():
     try:
         return multiprocessing.get_context('fork')
     except ValueError:
         return None
 
 
-def _in_process(side, estimator):
+def in_process(side, estimator):
     """Read, estimate and write a batch at a time, here."""
     try:
         side.open()
@@ -294,7 +294,7 @@ def _in_process(side, estimator):
         raise
 
 
-def _forked(context, side, estimator):
+def forked(context, side, estimator):
     """
     The bag's side in a forked process, a batch ahead of the estimator.
 
@@ -350,7 +350,7 @@ def _send_columns(pipe, columns):
 
 
 def _bag_process(side, pipe):
-    """The forked process: :class:`_BagSide`, talking to :func:`_forked`."""
+    """The forked process: :class:`BagSide`, talking to :func:`forked`."""
     # What it inherited lives as long as it does: kept out of the garbage
     # collector's full passes, which otherwise cost about 0.5 s of its 3 s.
     gc.freeze()

@@ -13,8 +13,9 @@ import numpy as np
 
 from .ahrs_params import AhrsParams
 from .compiled import kernels
+from .estimator import AhrsObserver
 
-__all__ = ['estimate_batch']
+__all__ = ['estimate_batch', 'hold_finite']
 
 
 def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extended',
@@ -64,7 +65,6 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
     out = [None] * count
     if workers > 1 and kernels().compiled:
         # The loop compiled (or loaded from numba's cache) once, before the workers fork.
-        from .estimator import AhrsObserver  # estimator imports this module
         AhrsObserver(use_mag=False).run(np.zeros((1, 3)), np.array([[0.0, 0.0, 9.8]]), None, dt)
     try:
         if workers == 1:
@@ -90,15 +90,14 @@ def _run_one(i):
     if params is not None and any(np.ndim(v) for v in params.as_dict().values()):
         params = AhrsParams(**{name: value[i] if np.ndim(value) else value
                                for name, value in params.as_dict().items()})
-    from .estimator import AhrsObserver  # estimator imports this module
     est = AhrsObserver(params, use_mag=bool(use_mag[i]), variant=variant)
-    g = _hold_finite(np.asarray(gyr[i], dtype=float))
-    a = _hold_finite(np.asarray(acc[i], dtype=float))
-    m = _hold_finite(np.asarray(mag[i], dtype=float)) if use_mag[i] else None
+    g = hold_finite(np.asarray(gyr[i], dtype=float))
+    a = hold_finite(np.asarray(acc[i], dtype=float))
+    m = hold_finite(np.asarray(mag[i], dtype=float)) if use_mag[i] else None
     return i, est.run(g, a, m, dt)
 
 
-def _hold_finite(a):
+def hold_finite(a):
     """A recording with every non-finite sample replaced by the last finite one."""
     bad = ~np.isfinite(a).all(axis=1)
     if not bad.any():

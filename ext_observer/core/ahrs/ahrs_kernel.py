@@ -84,6 +84,23 @@ S_CAL_WAIT = AHRS.field('cal_wait')
 S_CAL_MOVED = AHRS.field('cal_moved')
 S_CAL_SINCE = AHRS.field('cal_since')
 S_CAL_LOADED = AHRS.field('cal_loaded')
+# --- issue 27: the bias in motion, the start, a clipped gyro -----------------------
+P_BIAS_SIGMA_INIT = AHRS.parameter('bias_sigma_init')  # rad/s: σ of the bias at first
+P_BIAS_SIGMA_MOTION = AHRS.parameter('bias_sigma_motion')  # rad/s: in steady motion
+P_GYRO_RANGE = AHRS.parameter('gyro_range')  # rad/s: the gyro's range (0: unknown)
+C_BIAS_Q = AHRS.field('bias_q')  # rad²/s²: the bias's random walk per sample
+C_BIAS_R = AHRS.field('bias_r')  # (rad/s)²·s: noise density of a correction rate
+S_BIAS_P = AHRS.field('bias_p', 6)  # the bias's covariance, xx xy xz yy yz zz
+S_RLP = AHRS.field('r_lp', 18)  # Butterworth states of R(q̂) (s1 9, s2 9), rows x, y, z
+S_RZLP = AHRS.field('rz_lp', 3)  # R(q̂)'s z row low-passed by the heading correction
+S_START = AHRS.field('start')  # s since the start (or a clipped stretch)
+S_START_N = AHRS.field('start_n')  # samples in the running mean
+S_CLIPS = AHRS.field('clips')  # clipped samples counted
+S_CLIPPED = AHRS.field('clipped')  # the last sample's clipped variance (0: not clipped)
+S_GYR_LAST = AHRS.field('gyr_last', 3)  # the previous sample's rate, as measured
+S_GYR_PEAK = AHRS.field('gyr_peak')  # largest |rate| on any axis seen
+S_STUCK = AHRS.field('stuck', 3)  # samples each axis has repeated its rate at the peak
+S_REF_AGE = AHRS.field('ref_age')  # s of fields that confirmed the field references
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 
@@ -95,6 +112,20 @@ _TINY = 1e-300
 _REFINE_SHARE = 0.5
 _REFINE_SHORTEST = 1.0
 _SQRT2 = math.sqrt(2.0)
+# σ of the bias learned at rest (rad/s), VQF's value: the low-passed rate of
+# a body at rest is a far better measurement than any correction in motion.
+_REST_BIAS_SIGMA = math.radians(0.03)
+# A correction rate further than 3 σ from what the bias predicts teaches nothing.
+_GATE = 9.0
+# Rad/s: no gyro's range is below this (the smallest common one, ±125 °/s, is
+# 2.18 rad/s): a rate stuck at its largest magnitude below it is not clipped.
+_CLIP_FLOOR = 2.0
+# A rate this close to a known range (relative) is at it.
+_AT_RANGE = 1e-4
+# Unknown range: a rate repeated this many times more at the largest
+# magnitude seen is stuck (a smooth peak of a quantized rate repeats once;
+# none of BROAD's 22 trials repeats twice).
+_STUCK = 2.0
 
 
 # --- arithmetic ------------------------------------------------------------------
@@ -162,6 +193,10 @@ def ahrs_reset(s):
     s[S_HAS_REF] = 0.0
     s[S_CAND_TIME] = 0.0
     s[S_MAG_USED] = 0.0
+    _bias_forget(s)
+    s[S_START] = 0.0
+    s[S_START_N] = 0.0
+    s[S_CLIPPED] = 0.0
     if s[P_HAS_CAL] != 0.0:
         # The learned calibration stays; the field is followed afresh.
         mc_restart(s, MC0)
@@ -191,6 +226,13 @@ def ahrs_coefficients(s, dt):
     s[C_BW + 4] = (1.0 - k + wc * wc) / a0
     s[C_K_ACC] = _gain(s[P_TAU_ACC_GAIN], dt)
     s[C_K_REST] = _gain(s[P_TAU_REST], dt)
+    # The bias in motion: its σ would grow to bias_sigma_motion in tau_bias
+    # alone, and a correction rate's noise density makes that σ the steady
+    # one (and tau_bias the steady time constant of the estimate).
+    sm2 = s[P_BIAS_SIGMA_MOTION] * s[P_BIAS_SIGMA_MOTION]
+    tb = s[P_TAU_BIAS] if s[P_TAU_BIAS] > 0.0 else 1.0
+    s[C_BIAS_Q] = sm2 * dt / tb
+    s[C_BIAS_R] = sm2 * tb
 
 
 def ahrs_mag_coefficients(s, dt):
@@ -226,16 +268,65 @@ def ahrs_update(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
     return s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
 
 
-def _init_filters(s, gx, gy, gz, ax, ay, az):
-    vx, vy, vz = rotate(s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3], ax, ay, az)
+def _steady(s, i, vx, vy, vz):
+    """The Butterworth states at ``s[i:i+3]``, ``s[i+3:i+6]`` steady for a constant ``v``."""
     b1, b2, a1, a2 = s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
     # Steady state of the transposed direct form II for a constant input.
-    s[S_LP + 3] = (b2 - a2) * vx
-    s[S_LP + 4] = (b2 - a2) * vy
-    s[S_LP + 5] = (b2 - a2) * vz
-    s[S_LP] = (b1 - a1) * vx + s[S_LP + 3]
-    s[S_LP + 1] = (b1 - a1) * vy + s[S_LP + 4]
-    s[S_LP + 2] = (b1 - a1) * vz + s[S_LP + 5]
+    s[i + 3] = (b2 - a2) * vx
+    s[i + 4] = (b2 - a2) * vy
+    s[i + 5] = (b2 - a2) * vz
+    s[i] = (b1 - a1) * vx + s[i + 3]
+    s[i + 1] = (b1 - a1) * vy + s[i + 4]
+    s[i + 2] = (b1 - a1) * vz + s[i + 5]
+
+
+def _lowpass(s, i, vx, vy, vz):
+    """One step of the Butterworth whose states are at ``s[i:i+6]``; its output."""
+    b0, b1, b2, a1, a2 = s[C_BW], s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
+    fx, fy, fz = b0 * vx + s[i], b0 * vy + s[i + 1], b0 * vz + s[i + 2]
+    s[i] = b1 * vx - a1 * fx + s[i + 3]
+    s[i + 1] = b1 * vy - a1 * fy + s[i + 4]
+    s[i + 2] = b1 * vz - a1 * fz + s[i + 5]
+    s[i + 3] = b2 * vx - a2 * fx
+    s[i + 4] = b2 * vy - a2 * fy
+    s[i + 5] = b2 * vz - a2 * fz
+    return fx, fy, fz
+
+
+def _matrix(s):
+    """The rows of ``R(q̂)`` (sensor → world), ``q̂`` of any nonzero norm."""
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    n2 = w * w + x * x + y * y + z * z
+    return ((w * w + x * x - y * y - z * z) / n2, 2.0 * (x * y - w * z) / n2,
+            2.0 * (x * z + w * y) / n2,
+            2.0 * (x * y + w * z) / n2, (w * w - x * x + y * y - z * z) / n2,
+            2.0 * (y * z - w * x) / n2,
+            2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
+            (w * w - x * x - y * y + z * z) / n2)
+
+
+def _restart_mean(s):
+    """Start (again) from a running mean of the vertical: a start, or a clipped gyro."""
+    s[S_START] = 0.0
+    s[S_START_N] = 0.0
+    s[S_LP + 3] = 0.0
+    s[S_LP + 4] = 0.0
+    s[S_LP + 5] = 0.0
+
+
+def _init_filters(s, gx, gy, gz, ax, ay, az):
+    vx, vy, vz = rotate(s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3], ax, ay, az)
+    s[S_LP] = vx
+    s[S_LP + 1] = vy
+    s[S_LP + 2] = vz
+    _restart_mean(s)
+    r = _matrix(s)
+    for j in range(3):
+        s[S_RZLP + j] = r[6 + j]
+    s[S_GYR_LAST] = gx
+    s[S_GYR_LAST + 1] = gy
+    s[S_GYR_LAST + 2] = gz
+    s[S_GYR_PEAK] = max(abs(gx), max(abs(gy), abs(gz)))
     s[S_REST_GYR] = gx
     s[S_REST_GYR + 1] = gy
     s[S_REST_GYR + 2] = gz
@@ -244,9 +335,60 @@ def _init_filters(s, gx, gy, gz, ax, ay, az):
     s[S_REST_ACC + 2] = az
 
 
+def _at_range(s, i, g):
+    """Whether rate ``g`` on axis ``i`` is at the gyro's range (and the axis's memory)."""
+    a = abs(g)
+    rng = s[P_GYRO_RANGE]
+    if rng > 0.0:
+        at = a >= rng * (1.0 - _AT_RANGE)
+    else:
+        # Unknown range: stuck at the largest magnitude seen.
+        same = a >= _CLIP_FLOOR and a == abs(s[S_GYR_LAST + i]) and a >= s[S_GYR_PEAK]
+        s[S_STUCK + i] = s[S_STUCK + i] + 1.0 if same else 0.0
+        at = s[S_STUCK + i] >= _STUCK
+    s[S_GYR_LAST + i] = g
+    return at
+
+
+def _watch_clipping(s, gx, gy, gz):
+    """
+    A sample at the gyro's range: count it, distrust the gyro, lean on the others.
+
+    The rate beyond the range is unknown: the sample adds ``(range dt)²``
+    per clipped axis to the attitude's variance (``S_CLIPPED``, for the
+    covariance); the inclination starts again from the running mean of the
+    specific force (as at the start: the gyro's integral is not trusted
+    across the stretch), the heading from the running mean of the next
+    fields, the bias learns nothing until the low-pass has settled again,
+    and the magnetometer calibration does not learn across the stretch.
+    """
+    dt = s[C_DT]
+    cx = _at_range(s, 0, gx)
+    cy = _at_range(s, 1, gy)
+    cz = _at_range(s, 2, gz)
+    peak = max(abs(gx), max(abs(gy), abs(gz)))
+    if peak > s[S_GYR_PEAK]:
+        s[S_GYR_PEAK] = peak
+    top = max(s[P_GYRO_RANGE], s[S_GYR_PEAK]) * dt
+    var = ((1.0 if cx else 0.0) + (1.0 if cy else 0.0) + (1.0 if cz else 0.0)) * top * top
+    s[S_CLIPPED] = var
+    if var == 0.0:
+        return
+    s[S_CLIPS] += 1.0
+    _restart_mean(s)
+    s[S_MAG_USED] = 0.0
+    if s[P_HAS_CAL] != 0.0:
+        mc_restart(s, MC0)
+        s[S_CAL_TURN] = 1.0
+        for i in range(1, 4):
+            s[S_CAL_TURN + i] = 0.0
+        s[S_CAL_WAIT] = math.inf
+
+
 def ahrs_update_gyr(s, gx, gy, gz):
     """Propagate with ``exp((ω − b̂) dt / 2)`` and apply the extension term."""
     dt = s[C_DT]
+    _watch_clipping(s, gx, gy, gz)
     bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
     ux = (gx - bx) * dt
     uy = (gy - by) * dt
@@ -309,6 +451,13 @@ def _detect_rest(s, gx, gy, gz):
     s[S_BIAS] = _clip(bx + kr * mx, -m, m)
     s[S_BIAS + 1] = _clip(by + kr * my, -m, m)
     s[S_BIAS + 2] = _clip(bz + kr * mz, -m, m)
+    if rest:
+        # Its variance as that of a measurement whose steady σ is
+        # _REST_BIAS_SIGMA's: (1 − k)² P + k² r, r = 2 σ² / k.
+        a = (1.0 - k) * (1.0 - k)
+        add = 2.0 * k * _REST_BIAS_SIGMA * _REST_BIAS_SIGMA
+        for i in range(6):
+            s[S_BIAS_P + i] = a * s[S_BIAS_P + i] + (add if i == 0 or i == 3 or i == 5 else 0.0)
 
 
 def ahrs_update_acc(s, ax, ay, az):
@@ -325,13 +474,29 @@ def ahrs_update_acc(s, ax, ay, az):
 
     w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
     vx, vy, vz = rotate(w, x, y, z, ax, ay, az)
-    b0, b1, b2, a1, a2 = s[C_BW], s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
-    s1x, s1y, s1z = s[S_LP], s[S_LP + 1], s[S_LP + 2]
-    s2x, s2y, s2z = s[S_LP + 3], s[S_LP + 4], s[S_LP + 5]
-    fx, fy, fz = b0 * vx + s1x, b0 * vy + s1y, b0 * vz + s1z
-    s1x, s1y, s1z = (b1 * vx - a1 * fx + s2x, b1 * vy - a1 * fy + s2y,
-                     b1 * vz - a1 * fz + s2z)
-    s2x, s2y, s2z = b2 * vx - a2 * fx, b2 * vy - a2 * fy, b2 * vz - a2 * fz
+    dt = s[C_DT]
+    starting = s[S_START] < s[P_TAU_ACC]
+    if starting:
+        # The first tau_acc seconds (from the start, or after a clipped
+        # gyro): the running mean of the world-frame specific force, which
+        # a low-pass started on one sample of a moving body would only
+        # approach at its own pace (VQF starts its low-pass so too).
+        n = s[S_START_N] + 1.0
+        s[S_START_N] = n
+        fx = s[S_LP] + (vx - s[S_LP]) / n
+        fy = s[S_LP + 1] + (vy - s[S_LP + 1]) / n
+        fz = s[S_LP + 2] + (vz - s[S_LP + 2]) / n
+        s1x, s1y, s1z = fx, fy, fz
+        s2x, s2y, s2z = 0.0, 0.0, 0.0
+        s[S_START] += dt
+    else:
+        b0, b1, b2, a1, a2 = s[C_BW], s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
+        s1x, s1y, s1z = s[S_LP], s[S_LP + 1], s[S_LP + 2]
+        s2x, s2y, s2z = s[S_LP + 3], s[S_LP + 4], s[S_LP + 5]
+        fx, fy, fz = b0 * vx + s1x, b0 * vy + s1y, b0 * vz + s1z
+        s1x, s1y, s1z = (b1 * vx - a1 * fx + s2x, b1 * vy - a1 * fy + s2y,
+                         b1 * vz - a1 * fz + s2z)
+        s2x, s2y, s2z = b2 * vx - a2 * fx, b2 * vy - a2 * fy, b2 * vz - a2 * fz
 
     # δ: the rotation taking f/|f| to the vertical, [1 + u_z, u_y, −u_x, 0].
     # (A filtered vector pointing straight down, |δ| = 0, only shrinks the
@@ -350,22 +515,112 @@ def ahrs_update_acc(s, ax, ay, az):
     # The filter's states follow the applied rotation (r need not be unit).
     s[S_LP], s[S_LP + 1], s[S_LP + 2] = rotate(rw, rx, ry, 0.0, s1x, s1y, s1z)
     s[S_LP + 3], s[S_LP + 4], s[S_LP + 5] = rotate(rw, rx, ry, 0.0, s2x, s2y, s2z)
+    if starting:
+        if s[S_START] >= s[P_TAU_ACC]:
+            # The mean hands over to the low-pass, steady at it.
+            _steady(s, S_LP, s[S_LP], s[S_LP + 1], s[S_LP + 2])
+            _rlp_steady(s)
+        else:
+            _rlp_steady(s)
+        return
+    # The corrections measure a bias once the low-pass has settled from
+    # the start, one tau_acc after the running mean handed over.
+    settled = s[S_START] >= 2.0 * s[P_TAU_ACC]
+    if not settled:
+        s[S_START] += dt
     if s[P_MOTION_BIAS] != 0.0:
-        _learn_bias(s, rw, rx, ry, 0.0)
+        _learn_bias(s, rw, rx, ry, dt, settled)
 
 
-def _learn_bias(s, rw, rx, ry, rz):
-    """In motion: the correction ``r`` (world) averages ``−(b − b̂) dt`` (body)."""
-    tb = s[P_TAU_BIAS]
-    # Small-angle rotation vector of r, in the body frame.
-    cx, cy, cz = 2.0 * rx / rw, 2.0 * ry / rw, 2.0 * rz / rw
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    cx, cy, cz = rotate(w, -x, -y, -z, cx, cy, cz)
-    k = 0.0 if (s[S_REST] != 0.0 or tb <= 0.0) else 1.0 / (tb if tb > 0.0 else 1.0)
+# --- the bias in motion: a Kalman filter on the corrections ------------------------
+
+def _bias_forget(s):
+    """Nothing known of the bias beyond its estimate: σ = bias_sigma_init per axis."""
+    p0 = s[P_BIAS_SIGMA_INIT] * s[P_BIAS_SIGMA_INIT]
+    s[S_BIAS_P] = p0
+    s[S_BIAS_P + 1] = 0.0
+    s[S_BIAS_P + 2] = 0.0
+    s[S_BIAS_P + 3] = p0
+    s[S_BIAS_P + 4] = 0.0
+    s[S_BIAS_P + 5] = p0
+
+
+def _rlp_steady(s):
+    """The low-passed ``R(q̂)`` steady at the current one."""
+    r = _matrix(s)
+    for j in range(3):
+        _steady(s, S_RLP + 6 * j, r[3 * j], r[3 * j + 1], r[3 * j + 2])
+
+
+def bias_variance(s, i, j):
+    """Element ``(i, j)`` of the bias estimate's covariance, (rad/s)²."""
+    a, b = (i, j) if i <= j else (j, i)
+    return s[S_BIAS_P + (a * (5 - a)) // 2 + b]
+
+
+def _bias_grow(s):
+    """The bias may have wandered: its variance grows, up to bias_sigma_init² per axis."""
+    p0 = s[P_BIAS_SIGMA_INIT] * s[P_BIAS_SIGMA_INIT]
+    q = s[C_BIAS_Q]
+    for d in (0, 3, 5):
+        v = s[S_BIAS_P + d] + q
+        s[S_BIAS_P + d] = v if v < p0 else max(s[S_BIAS_P + d], p0)
+
+
+def _bias_measure(s, hx, hy, hz, y, r):
+    """
+    One scalar measurement ``y = h · (b − b̂) + e``, ``var(e) = r``: the Kalman update.
+
+    ``h`` in the body frame; the estimate is clipped to bias_max per axis;
+    an innovation beyond 3 σ is not used.
+    """
+    p00, p01, p02 = s[S_BIAS_P], s[S_BIAS_P + 1], s[S_BIAS_P + 2]
+    p11, p12, p22 = s[S_BIAS_P + 3], s[S_BIAS_P + 4], s[S_BIAS_P + 5]
+    ux = p00 * hx + p01 * hy + p02 * hz
+    uy = p01 * hx + p11 * hy + p12 * hz
+    uz = p02 * hx + p12 * hy + p22 * hz
+    den = hx * ux + hy * uy + hz * uz + r
+    if y * y > _GATE * den:
+        # Not a bias: a correction of an error the model has no room for
+        # (a start, a gyro that clipped, an estimate turned by hand).
+        return
+    kx, ky, kz = ux / den, uy / den, uz / den
     m = s[P_BIAS_MAX]
-    s[S_BIAS] = _clip(s[S_BIAS] - k * cx, -m, m)
-    s[S_BIAS + 1] = _clip(s[S_BIAS + 1] - k * cy, -m, m)
-    s[S_BIAS + 2] = _clip(s[S_BIAS + 2] - k * cz, -m, m)
+    s[S_BIAS] = _clip(s[S_BIAS] + kx * y, -m, m)
+    s[S_BIAS + 1] = _clip(s[S_BIAS + 1] + ky * y, -m, m)
+    s[S_BIAS + 2] = _clip(s[S_BIAS + 2] + kz * y, -m, m)
+    s[S_BIAS_P] = p00 - kx * ux
+    s[S_BIAS_P + 1] = p01 - kx * uy
+    s[S_BIAS_P + 2] = p02 - kx * uz
+    s[S_BIAS_P + 3] = p11 - ky * uy
+    s[S_BIAS_P + 4] = p12 - ky * uz
+    s[S_BIAS_P + 5] = p22 - kz * uz
+
+
+def _learn_bias(s, rw, rx, ry, dt, settled):
+    """
+    In motion: the inclination correction ``r`` measures the bias error.
+
+    A bias error ``β = b − b̂`` (body) turns the estimate by ``R β dt``
+    (world) per sample; the corrections, which follow the low-passed
+    specific force, take it back: their rate averages ``−LP(R) β``, with
+    ``LP`` the accelerometer's low-pass. So ``−c/dt`` measures ``β``
+    through the low-passed ``R`` (its horizontal rows), with the noise of
+    a correction rate. A Kalman filter per sample on the bias, as VQF's
+    (Laidig & Seel 2023); rest keeps its own, better measurement. Not
+    before the low-pass has ``settled`` from a start.
+    """
+    r = _matrix(s)
+    hx, hy, hz = _lowpass(s, S_RLP, r[0], r[1], r[2])
+    gx, gy, gz = _lowpass(s, S_RLP + 6, r[3], r[4], r[5])
+    _lowpass(s, S_RLP + 12, r[6], r[7], r[8])
+    _bias_grow(s)
+    if s[S_REST] != 0.0 or not settled:
+        return
+    # Small-angle world rotation vector of r: (2 rx / rw, 2 ry / rw, 0).
+    var = s[C_BIAS_R] / dt
+    _bias_measure(s, hx, hy, hz, -2.0 * rx / (rw * dt), var)
+    _bias_measure(s, gx, gy, gz, -2.0 * ry / (rw * dt), var)
 
 
 def ahrs_update_mag(s, mx, my, mz, dt):
@@ -389,6 +644,7 @@ def ahrs_update_mag(s, mx, my, mz, dt):
         s[S_CAND] = norm
         s[S_CAND + 1] = dip
         s[S_HAS_REF] = 1.0
+        s[S_REF_AGE] = 0.0
     ref_n, ref_d = s[S_REF], s[S_REF + 1]
     th_n, th_d = s[P_MAG_NORM_TH], s[P_MAG_DIP_TH]
     disturbed = (abs(norm - ref_n) > th_n * ref_n) or (abs(dip - ref_d) > th_d)
@@ -405,12 +661,22 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     else:
         s[S_CAND] = norm
         s[S_CAND + 1] = dip
-    accept_new = disturbed and (s[S_CAND_TIME] >= s[P_MAG_NEW_TIME])
+    # A new field is accepted once it has lasted mag_new_time, or longer
+    # than fields have confirmed the references: those taken from the
+    # first field of a body that starts beside a magnet are not trusted
+    # longer than the true field has been seen.
+    accept_new = disturbed and (s[S_CAND_TIME] >= min(s[P_MAG_NEW_TIME], s[S_REF_AGE]))
     if accept_new:
         ref_n, ref_d = s[S_CAND], s[S_CAND + 1]
+        if s[S_REF_AGE] < s[P_MAG_NEW_TIME]:
+            # The fields the heading followed so far were the disturbed
+            # ones: its running mean starts again from the new field.
+            s[S_MAG_USED] = 0.0
+        s[S_REF_AGE] = s[S_CAND_TIME]
     disturbed = disturbed and not accept_new
     use = valid and not disturbed and s[P_USE_MAG] != 0.0
     if use:
+        s[S_REF_AGE] += dt
         s[S_REF] = ref_n + kr * (norm - ref_n)
         s[S_REF + 1] = ref_d + kr * (dip - ref_d)
     else:
@@ -440,8 +706,21 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     rw, rz = 1.0 - kap + kap * math.cos(half), kap * math.sin(half)
     _turn_heading(s, rw, rz)
     if s[P_MOTION_BIAS] != 0.0:
-        # Only corrections of the steady phase teach the bias.
-        _learn_bias(s, rw, 0.0, 0.0, rz if used * k_mag > 1.0 else 0.0)
+        # The heading correction follows the drift (R β)_z through a
+        # first-order low-pass of tau_mag: R's z row low-passed alike is
+        # what it measures β through. Only the steady gain's corrections
+        # teach (not the first fields' running mean, nor a calibration's
+        # refinement), and not at rest or in a start. A field's heading is
+        # disturbed far more often and for longer than gravity's direction:
+        # its correction rate is trusted as much less as its loop is slower
+        # (noise density times tau_mag / tau_acc).
+        r = _matrix(s)
+        for j in range(3):
+            s[S_RZLP + j] += k_mag * (r[6 + j] - s[S_RZLP + j])
+        if (kap == k_mag and used * k_mag > 1.0 and s[S_REST] == 0.0
+                and s[S_START] >= 2.0 * s[P_TAU_ACC]):
+            _bias_measure(s, s[S_RZLP], s[S_RZLP + 1], s[S_RZLP + 2], -2.0 * rz / (rw * dt),
+                          s[C_BIAS_R] * s[P_TAU_MAG] / (s[P_TAU_ACC] * dt))
 
 
 def _turn_heading(s, rw, rz):

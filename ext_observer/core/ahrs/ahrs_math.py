@@ -13,7 +13,7 @@ import numpy as np
 
 from .ahrs_kernel import first_attitude
 
-__all__ = ['WORLD_FRAMES', 'initial_attitude', 'world_from_enu']
+__all__ = ['WORLD_FRAMES', 'check_dt', 'initial_attitude', 'world_from_enu']
 
 _H = math.sqrt(0.5)
 # Left factor C with q_frame = C ⊗ q_enu (C maps ENU coordinates to the frame's).
@@ -24,7 +24,7 @@ WORLD_FRAMES = {
 }
 
 
-def _check_dt(dt):
+def check_dt(dt):
     if not (math.isfinite(dt) and dt > 0.0):
         raise ValueError(f'dt must be positive and finite, got {dt}')
 

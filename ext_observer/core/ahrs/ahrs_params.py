@@ -30,12 +30,11 @@ AHRS_TABLE = (
     _T('tau_mag', 15.0, 's', 0.0, _LONG,
        'time constant of the heading correction from the magnetometer (κ_m; the gain of '
        'each field follows from the interval since the previous field)'),
-    # Off by default: under rotation the filtered corrections average the bias
-    # over many body orientations, and on the tuning trials it did not help
-    # (docs/broad_tuning.md). The bias is then learned at rest.
-    _T('tau_bias', 0.0, 's', 0.0, 1e6,
-       'time constant of the gyro bias estimate in motion',
-       low_closed=True, zero_off=True),
+    # A Kalman filter on the inclination (and in 9D heading) corrections, VQF's
+    # idea (docs/raw_imu.md#wherever-the-robot-starts); 0: learned at rest only.
+    _T('tau_bias', 100.0, 's', 0.0, 1e6,
+       'time constant of the gyro bias estimate in steady motion (a Kalman filter on the '
+       'inclination and heading corrections)', low_closed=True, zero_off=True),
     _T('bias_max', math.radians(2.0), 'rad/s', 0.0, 10.0,
        'largest gyro bias estimate per axis'),
     _T('rest_gyr', math.radians(2.0), 'rad/s', 0.0, 10.0,
@@ -89,6 +88,17 @@ AHRS_TABLE = (
     _T('mag_cal_rate', 100.0, 'Hz', 0.0, 1e5,
        'most fields per second the calibration learns from (one value for a batch; every '
        'field is calibrated)'),
+    # Issue 27: the bias in motion and a clipped gyro.
+    _T('bias_sigma_init', math.radians(0.5), 'rad/s', 0.0, 10.0,
+       'σ of the gyro bias per axis before anything is learned (the most its uncertainty '
+       'grows to)'),
+    _T('bias_sigma_motion', math.radians(0.07), 'rad/s', 0.0, 10.0,
+       'σ of the gyro bias estimate in steady motion (with tau_bias, how noisy a '
+       'correction is taken to be)'),
+    _T('gyro_range', 0.0, 'rad/s', 0.0, 1e3,
+       "the gyro's measuring range per axis where the driver knows it (a sample at it is "
+       'clipped); 0: unknown, a rate stuck at the largest magnitude seen is taken as clipped',
+       low_closed=True, zero_off=True),
 )
 
 

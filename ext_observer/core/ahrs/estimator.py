@@ -29,28 +29,20 @@ renormalizes it. Each sample runs three steps, each a short function:
     accepted after ``mag_new_time``.
 
 The gyro bias is learned at rest (rest detected from the gyro and the
-accelerometer) and, with ``tau_bias > 0`` (off by default), in motion from
-the corrections: a constant bias makes the estimate drift, so the body-frame
-correction averages ``−(b − b̂) dt``.
+accelerometer) and, with ``tau_bias > 0`` (the default), in motion by a
+Kalman filter on the bias (VQF's idea; its own 3×3 covariance, σ
+``bias_std``): a bias error ``β`` turns the estimate by ``R β dt`` per
+sample, the inclination corrections take it back through the
+accelerometer's low-pass, so the correction rate measures ``β`` through
+the low-passed ``R`` (in 9D the heading's corrections through its vertical
+row); see docs/raw_imu.md for what 6D cannot tell apart.
 
 In 9D the magnetometer is calibrated online (``mag_cal``, on by default):
-:class:`~ext_observer.core.ahrs.magcal.MagCalibrator` learns the hard-iron
-offset and the soft-iron matrix from the fields and the gyro's rotation
-between them. Until its quality (the heading error its uncertainty would
-cause) is below ``mag_cal_heading`` the heading does not follow the field:
-it starts from the field as given (averaged until the body first moves, as
-without calibration) and then follows the gyro alone (6D), while the
-disturbance test watches the raw field. Once converged, a learned
-calibration that turns the heading by more than ``mag_cal_deadband`` (RMS)
-from the field as given, and by more than its uncertainty could, is
-applied: the heading is set once from the calibrated field (as the
-calibration tracks it, its noise averaged), the field references become the
-calibrated field's, and 9D runs on calibrated fields, the heading following
-them with a time constant of half the time since (at least 1 s) until that
-reaches ``tau_mag``, as the calibration still improves. One that turns it
-less (the sensor was calibrated already) is watched, and the field is used
-as given. A field the norm/dip test rejects does not teach the
-calibration. ``calibration_state`` says which phase runs;
+:class:`~ext_observer.core.ahrs.magcal.MagCalibrator` learns hard and soft
+iron from the fields and the gyro; the heading waits for it (gyro-held)
+and follows the calibrated field once it has converged. The phases are
+docs/calibration.md's ("Start-up: the heading waits for the calibration");
+``calibration_state`` says which one runs, and
 :meth:`AhrsObserver.load_calibration` starts from a saved calibration.
 
 Credit: several ideas here are VQF's (D. Laidig and T. Seel, "VQF: Highly
@@ -70,22 +62,17 @@ accelerometer reads about ``+9.81`` along the world vertical. Angular rate in
 rad/s, acceleration in m/s², the magnetic field in any unit (only its
 direction and its norm relative to the reference are used), time in s.
 
-The steps are written once, as functions on a flat state in
-:mod:`~ext_observer.core.ahrs.ahrs_kernel` (the calibration's in
-:mod:`~ext_observer.core.ahrs.magcal_kernel`): compiled by numba where it is
-installed, plain Python otherwise (:mod:`~ext_observer.core.ahrs.compiled`), the
-same estimates. :class:`AhrsObserver` wraps them for one estimate on floats
-or a batch of ``(B,)`` arrays (each estimate stepping on floats in turn).
-The ROS node runs it on floats; :func:`estimate_batch`
-(:mod:`~ext_observer.core.ahrs.ahrs_batch`) runs many recordings. The
-parameters: :class:`AhrsParams` (:mod:`~ext_observer.core.ahrs.ahrs_params`).
+The steps are written once, on a flat state, in
+:mod:`~ext_observer.core.ahrs.ahrs_kernel` (plain or compiled: the same
+estimates); :class:`AhrsObserver` wraps them for one estimate or a batch
+of ``(B,)`` arrays. Its parameters: :class:`AhrsParams`.
 """
 
 import math
 
 import numpy as np
 
-from .ahrs_math import _check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
+from .ahrs_math import check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
 from .ahrs_params import AhrsParams
 from .compiled import kernels
 from .magcal import MagCalibrator
@@ -95,7 +82,6 @@ __all__ = [
     'AhrsParams',
     'MODES',
     'WORLD_FRAMES',
-    'estimate_batch',
     'initial_attitude',
     'world_from_enu',
 ]
@@ -350,6 +336,43 @@ class AhrsObserver:
                 s[offset + j] = float(value[j] if self.batch is None else value[j][i])
 
     @property
+    def bias_std(self):
+        """σ of the gyro bias estimate per body axis (rad/s): its Kalman filter's."""
+        k = self._kernels.ahrs
+        if self.batch is None:
+            s = self._states[0]
+            return tuple(math.sqrt(max(float(k.bias_variance(s, i, i)), 0.0)) for i in range(3))
+        return tuple(np.array([math.sqrt(max(float(k.bias_variance(s, i, i)), 0.0))
+                               for s in self._states]) for i in range(3))
+
+    @property
+    def bias_variance(self):
+        """
+        The mean variance of the bias estimate over the body axes, (rad/s)²; None when off.
+
+        None where the bias is not learned in motion (``tau_bias`` 0): the
+        covariance then keeps its own model of it.
+        """
+        if not self.params.tau_bias > 0.0 if self.batch is None else not np.all(
+                np.asarray(self.params.tau_bias) > 0.0):
+            return None
+        x, y, z = self.bias_std
+        return (x * x + y * y + z * z) / 3.0
+
+    @property
+    def clipped(self):
+        """Samples found at the gyro's range so far (``gyro_range``, or stuck at its peak)."""
+        k = self._kernels.ahrs
+        if self.batch is None:
+            return int(self._states[0][k.S_CLIPS])
+        return np.array([int(s[k.S_CLIPS]) for s in self._states])
+
+    @property
+    def clip_variance(self):
+        """What the last sample, at the gyro's range, adds to the variances (rad²; 0: none)."""
+        return self._slots(self._kernels.ahrs.S_CLIPPED, 1)[0]
+
+    @property
     def rest(self):
         """Whether rest is detected."""
         return self._flag(self._kernels.ahrs.S_REST)
@@ -399,7 +422,7 @@ class AhrsObserver:
 
     def _interval(self, dt):
         if dt != self._dt:
-            _check_dt(dt)
+            check_dt(dt)
             self._dt = float(dt)  # a numpy scalar would make every later quantity one
         return self._dt
 
@@ -514,12 +537,9 @@ class AhrsObserver:
             # The last sample's interval, as the kernels hold it (a caller
             # may step them directly: RawImuEstimator's sample_step).
             dt = float(self._states[0][self._kernels.ahrs.C_DT])
-            _check_dt(dt)
+            check_dt(dt)
         elif dt != self._mag_dt:
-            _check_dt(dt)
+            check_dt(dt)
             self._mag_dt = dt
         self._each(self._kernels.ahrs.ahrs_update_mag, mag, float(dt))
 
-
-# The batch runs AhrsObserver, so it is imported once that is defined.
-from .ahrs_batch import estimate_batch  # noqa: E402

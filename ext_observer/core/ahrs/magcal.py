@@ -6,9 +6,9 @@ filter on ``(s, z, d, τ)`` with the gyro turning the field between samples,
 a gate for improbable fields, a start-over when the calibration no longer
 fits, a convergence test on the heading error the calibration's uncertainty
 would cause, and the learned calibration applied only once it turns the
-heading by more than a deadband (a loaded one at once). The maths, and its
-description, is in :mod:`~ext_observer.core.ahrs.magcal_kernel`: plain functions
-on a flat state, which run in plain Python or compiled by numba.
+heading by more than a deadband (a loaded one at once). The maths is
+:mod:`~ext_observer.core.ahrs.magcal_kernel`'s (plain functions on a flat
+state, plain or compiled), described in docs/calibration.md.
 :class:`MagCalibrator` wraps them; :func:`check_calibration`
 (:mod:`~ext_observer.core.ahrs.magcal_model`) checks a saved calibration.
 

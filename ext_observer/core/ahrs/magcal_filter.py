@@ -16,8 +16,8 @@ from .magcal_layout import (GATE, MC_AH, MC_AI, MC_DELAY, MC_DRIFT, MC_FIELD_RW,
                             MC_FIELD_SCALE, MC_FRESH, MC_H, MC_HAS_PRIOR, MC_K, MC_LEARNED,
                             MC_NIS, MC_NOISE, MC_P, MC_PH, MC_PRIOR_COV, MC_PRIOR_P,
                             MC_PRIOR_SCALE, MC_PRIOR_X, MC_REFUSED_SHARE, MC_S, MC_SCALE,
-                            MC_SI, MC_SOFT_IRON, MC_X, MC_YY, _DIFFUSE, _LOADED_BIAS_STD,
-                            _MC_N)
+                            MC_SI, MC_SOFT_IRON, MC_X, MC_YY, CAL_DIFFUSE, CAL_LOADED_BIAS_STD,
+                            CAL_N)
 
 
 def mc_predict(s, o, rw, rx, ry, rz, dt):
@@ -55,20 +55,20 @@ def mc_predict(s, o, rw, rx, ry, rz, dt):
     s[x + 2] = r02 * v0 + r12 * v1 + r22 * v2 + z2
     p = o + MC_P
     # P[s, :] ← Rᵀ P[s, :] + (I − Rᵀ) P[z, :]
-    for c in range(_MC_N):
+    for c in range(CAL_N):
         a0 = s[p + c]
-        a1 = s[p + _MC_N + c]
-        a2 = s[p + 2 * _MC_N + c]
-        b0 = s[p + 3 * _MC_N + c]
-        b1 = s[p + 4 * _MC_N + c]
-        b2 = s[p + 5 * _MC_N + c]
+        a1 = s[p + CAL_N + c]
+        a2 = s[p + 2 * CAL_N + c]
+        b0 = s[p + 3 * CAL_N + c]
+        b1 = s[p + 4 * CAL_N + c]
+        b2 = s[p + 5 * CAL_N + c]
         s[p + c] = (r00 * a0 + r10 * a1 + r20 * a2) + (e00 * b0 - r10 * b1 - r20 * b2)
-        s[p + _MC_N + c] = (r01 * a0 + r11 * a1 + r21 * a2) + (-r01 * b0 + e11 * b1 - r21 * b2)
-        s[p + 2 * _MC_N + c] = (r02 * a0 + r12 * a1 + r22 * a2) + (-r02 * b0 - r12 * b1
+        s[p + CAL_N + c] = (r01 * a0 + r11 * a1 + r21 * a2) + (-r01 * b0 + e11 * b1 - r21 * b2)
+        s[p + 2 * CAL_N + c] = (r02 * a0 + r12 * a1 + r22 * a2) + (-r02 * b0 - r12 * b1
                                                                 + e22 * b2)
     # P[:, s] ← P[:, s] R + P[:, z] (I − R)
-    for i in range(_MC_N):
-        row = p + _MC_N * i
+    for i in range(CAL_N):
+        row = p + CAL_N * i
         a0 = s[row]
         a1 = s[row + 1]
         a2 = s[row + 2]
@@ -81,7 +81,7 @@ def mc_predict(s, o, rw, rx, ry, rz, dt):
     a = s[o + MC_FIELD_RW] * s[o + MC_FIELD_SCALE]
     q = a * a * dt
     for i in range(3):
-        s[p + (_MC_N + 1) * i] += q
+        s[p + (CAL_N + 1) * i] += q
     drift = s[o + MC_DRIFT]
     if drift != 0.0:
         # The offset drifts (temperature, a payload moved): never quite
@@ -89,13 +89,13 @@ def mc_predict(s, o, rw, rx, ry, rz, dt):
         a = drift * s[o + MC_FIELD_SCALE]
         q = a * a * dt
         for i in range(3):
-            s[p + (_MC_N + 1) * i] += q
+            s[p + (CAL_N + 1) * i] += q
         for i in range(3):
-            s[p + _MC_N * i + 3 + i] += q
+            s[p + CAL_N * i + 3 + i] += q
         for i in range(3):
-            s[p + _MC_N * (3 + i) + i] += q
+            s[p + CAL_N * (3 + i) + i] += q
         for i in range(3):
-            s[p + (_MC_N + 1) * (3 + i)] += q
+            s[p + (CAL_N + 1) * (3 + i)] += q
 
 
 def mc_update(s, o, y0, y1, y2, w0, w1, w2, live, norm):
@@ -182,24 +182,24 @@ def mc_update(s, o, y0, y1, y2, w0, w1, w2, live, norm):
             a0 = s[ai + 3 * r]
             a1 = s[ai + 3 * r + 1]
             a2 = s[ai + 3 * r + 2]
-            for c in range(_MC_N):
-                s[ah + _MC_N * r + c] = (a0 * s[h + c] + a1 * s[h + _MC_N + c]
-                                         + a2 * s[h + 2 * _MC_N + c])
+            for c in range(CAL_N):
+                s[ah + CAL_N * r + c] = (a0 * s[h + c] + a1 * s[h + CAL_N + c]
+                                         + a2 * s[h + 2 * CAL_N + c])
         # P Hᵀ, and S = H P Hᵀ + R summed along (the rows of P Hᵀ in order).
         # Written out, with the rows of A⁻¹ H held: the hot loop.
         a0, a1, a2, a3, a4, a5 = s[ah], s[ah + 1], s[ah + 2], s[ah + 3], s[ah + 4], s[ah + 5]
         a6, a7, a8, a9, a10, a11 = (s[ah + 6], s[ah + 7], s[ah + 8], s[ah + 9], s[ah + 10],
                                     s[ah + 11])
-        b = ah + _MC_N
+        b = ah + CAL_N
         b0, b1, b2, b3, b4, b5 = s[b], s[b + 1], s[b + 2], s[b + 3], s[b + 4], s[b + 5]
         b6, b7, b8, b9, b10, b11 = s[b + 6], s[b + 7], s[b + 8], s[b + 9], s[b + 10], s[b + 11]
-        e = ah + 2 * _MC_N
+        e = ah + 2 * CAL_N
         e0, e1, e2, e3, e4, e5 = s[e], s[e + 1], s[e + 2], s[e + 3], s[e + 4], s[e + 5]
         e6, e7, e8, e9, e10, e11 = s[e + 6], s[e + 7], s[e + 8], s[e + 9], s[e + 10], s[e + 11]
         ph = o + MC_PH
         s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
-        for i in range(_MC_N):
-            row = p + _MC_N * i
+        for i in range(CAL_N):
+            row = p + CAL_N * i
             q0, q1, q2, q3, q4, q5 = (s[row], s[row + 1], s[row + 2], s[row + 3], s[row + 4],
                                       s[row + 5])
             q6, q7, q8, q9, q10, q11 = (s[row + 6], s[row + 7], s[row + 8], s[row + 9],
@@ -267,7 +267,7 @@ def mc_update(s, o, y0, y1, y2, w0, w1, w2, live, norm):
             g10a, g10b, g10c = s[ph + 30], s[ph + 31], s[ph + 32]
             g11a, g11b, g11c = s[ph + 33], s[ph + 34], s[ph + 35]
             kk = o + MC_K
-            for i in range(_MC_N):
+            for i in range(CAL_N):
                 f0 = s[ph + 3 * i]
                 f1 = s[ph + 3 * i + 1]
                 f2 = s[ph + 3 * i + 2]
@@ -278,7 +278,7 @@ def mc_update(s, o, y0, y1, y2, w0, w1, w2, live, norm):
                 s[kk + 3 * i + 1] = k1
                 s[kk + 3 * i + 2] = k2
                 s[x + i] += k0 * nu0 + k1 * nu1 + k2 * nu2
-                row = p + _MC_N * i
+                row = p + CAL_N * i
                 s[row] -= k0 * g0a + k1 * g0b + k2 * g0c
                 s[row + 1] -= k0 * g1a + k1 * g1b + k2 * g1c
                 s[row + 2] -= k0 * g2a + k1 * g2b + k2 * g2c
@@ -310,19 +310,19 @@ def mc_start(s, o, y0, y1, y2, norm):
     """Initialize the filter from the field ``y`` (of norm ``norm``)."""
     x = o + MC_X
     p = o + MC_P
-    for k in range(_MC_N + _MC_N * _MC_N):
+    for k in range(CAL_N + CAL_N * CAL_N):
         s[x + k] = 0.0
     soft = s[o + MC_SOFT_IRON]
     delay = s[o + MC_DELAY]
     if s[o + MC_HAS_PRIOR] == 0.0:
         s[o + MC_SCALE] = 1.0
-        big = _DIFFUSE * norm
+        big = CAL_DIFFUSE * norm
         big = big * big
         for i in range(3, 6):
-            s[p + (_MC_N + 1) * i] = big
+            s[p + (CAL_N + 1) * i] = big
         for i in range(6, 11):
-            s[p + (_MC_N + 1) * i] = soft * soft
-        s[p + (_MC_N + 1) * 11] = delay * delay
+            s[p + (CAL_N + 1) * i] = soft * soft
+        s[p + (CAL_N + 1) * 11] = delay * delay
     else:
         for k in range(9):
             s[x + 3 + k] = s[o + MC_PRIOR_X + k]
@@ -330,15 +330,15 @@ def mc_start(s, o, y0, y1, y2, norm):
         if s[o + MC_PRIOR_COV] != 0.0:
             for i in range(9):
                 for j in range(9):
-                    s[p + _MC_N * (3 + i) + 3 + j] = s[o + MC_PRIOR_P + 9 * i + j]
+                    s[p + CAL_N * (3 + i) + 3 + j] = s[o + MC_PRIOR_P + 9 * i + j]
         else:  # loaded: a tighter prior about it
-            std = _LOADED_BIAS_STD * norm / s[o + MC_SCALE]
+            std = CAL_LOADED_BIAS_STD * norm / s[o + MC_SCALE]
             for i in range(3, 6):
-                s[p + (_MC_N + 1) * i] = std * std
+                s[p + (CAL_N + 1) * i] = std * std
             a = 0.2 * soft
             for i in range(6, 11):
-                s[p + (_MC_N + 1) * i] = a * a
-            s[p + (_MC_N + 1) * 11] = delay * delay
+                s[p + (CAL_N + 1) * i] = a * a
+            s[p + (CAL_N + 1) * 11] = delay * delay
     # s = A y = y + Y(y) d: as uncertain as d (and correlated with it),
     # plus the noise; independent of the offset.
     yy = o + MC_YY
@@ -361,21 +361,21 @@ def mc_start(s, o, y0, y1, y2, norm):
         s[x + r] = (y0 if r == 0 else y1 if r == 1 else y2) + acc
     # P[s, 3:] = Y P[d, 3:], and its transpose
     for r in range(3):
-        for c in range(3, _MC_N):
+        for c in range(3, CAL_N):
             acc = 0.0
             for k in range(5):
-                acc += s[yy + 5 * r + k] * s[p + _MC_N * (6 + k) + c]
-            s[p + _MC_N * r + c] = acc
+                acc += s[yy + 5 * r + k] * s[p + CAL_N * (6 + k) + c]
+            s[p + CAL_N * r + c] = acc
     for r in range(3):
-        for c in range(3, _MC_N):
-            s[p + _MC_N * c + r] = s[p + _MC_N * r + c]
+        for c in range(3, CAL_N):
+            s[p + CAL_N * c + r] = s[p + CAL_N * r + c]
     # P[s, s] = Y P[d, d] Yᵀ + noise² I; Y P[d, d] into the scratch of K
     t = o + MC_K
     for r in range(3):
         for c in range(5):
             acc = 0.0
             for k in range(5):
-                acc += s[yy + 5 * r + k] * s[p + _MC_N * (6 + k) + 6 + c]
+                acc += s[yy + 5 * r + k] * s[p + CAL_N * (6 + k) + 6 + c]
             s[t + 5 * r + c] = acc
     noise = s[o + MC_NOISE] * norm
     for r in range(3):
@@ -385,7 +385,7 @@ def mc_start(s, o, y0, y1, y2, norm):
                 acc += s[t + 5 * r + k] * s[yy + 5 * c + k]
             if r == c:
                 acc += noise * noise
-            s[p + _MC_N * r + c] = acc
+            s[p + CAL_N * r + c] = acc
     m0 = s[x] - s[x + 3]
     m1 = s[x + 1] - s[x + 4]
     m2 = s[x + 2] - s[x + 5]
@@ -416,8 +416,8 @@ def mc_inv3(s, out, a, b, c, d, e, f, g, h, i):
 
 def mc_symmetrize(s, p):
     """``P ← (P + Pᵀ) / 2`` for the 12 × 12 matrix at ``s[p:]``."""
-    for i in range(_MC_N):
-        for j in range(i + 1, _MC_N):
-            v = 0.5 * (s[p + _MC_N * i + j] + s[p + _MC_N * j + i])
-            s[p + _MC_N * i + j] = v
-            s[p + _MC_N * j + i] = v
+    for i in range(CAL_N):
+        for j in range(i + 1, CAL_N):
+            v = 0.5 * (s[p + CAL_N * i + j] + s[p + CAL_N * j + i])
+            s[p + CAL_N * i + j] = v
+            s[p + CAL_N * j + i] = v

@@ -3,99 +3,30 @@ The maths of the online magnetometer calibration, as plain functions on a flat s
 
 :class:`~ext_observer.core.ahrs.magcal.MagCalibrator` is a thin wrapper over
 these functions. One calibrator's state is a block of :data:`MC_SIZE`
-floats starting at an offset ``o`` of a container ``s`` (a Python list, or
-a 1-D float64 array that may hold other state too); the ``MC_*`` constants
-are the slots, relative to ``o``. Booleans are stored as 0.0/1.0, counts as
-floats. The functions use only what numba's nopython mode compiles (float
-arithmetic, :mod:`math`, ``for`` loops, ``s[o + k]``, calls between them,
-tuples of floats returned), so the same source runs in plain Python on a
-list, or compiled by ``numba.njit`` on an array (:mod:`~ext_observer.core.ahrs.compiled`
-joins this file with :mod:`~ext_observer.core.ahrs.magcal_layout`, the slots, and
-:mod:`~ext_observer.core.ahrs.magcal_filter`, the Kalman filter's steps).
-Nothing is allocated in the hot path: the products' intermediates have
-scratch slots.
-
-**The model**, body frame: a raw field sample is ``y = S m + b``, with
-``m`` the true field, ``b`` the hard-iron offset and ``S`` a symmetric
-soft-iron matrix. With ``A = S⁻¹ = I + D(d)`` (``D`` symmetric, trace 0:
-five numbers ``d``) and ``z = A b``, the calibrated field is ``m = A y − z``.
-``S`` is known only up to a scale (a uniform gain moves no direction), fixed
-here by ``trace(A) = 3``, or by the trace of a loaded matrix.
-
-What makes it observable is the gyro. The field is fixed in the world, so
-in the body frame it turns against the body: between two fields ``m ← Rᵀ m``
-with ``R`` the gyro's rotation, and a body that turns about two axes leaves
-one offset and one matrix that fit (gyro-aided calibration: Troni and
-Whitcomb 2013, "Adaptive estimation of measurement bias in
-three-dimensional field sensors with angular rate sensors", Robotics:
-Science and Systems; Kok and Schön 2016, "Magnetometer calibration using
-inertial sensors", IEEE Sensors Journal 16(14), for the view of the field as
-a constant world vector seen through the gyro's orientation). A Kalman
-filter estimates ``(s, z, d, τ)`` with ``s = m + z = A y``: then the field's
-turn, ``s ← Rᵀ s + (I − Rᵀ) z``, is linear, nothing ties ``s`` to ``z`` at
-rest (the covariance stays well conditioned while nothing can be learned),
-and the measurement ``y = A⁻¹ (s + τ ω × (s − z))`` is linear in ``s`` and
-``z`` and linearized about the estimate in ``d`` and ``τ`` only. (Written as
-``A y = s``, with the measured ``y`` in the regressor, its noise would pull
-``A`` towards 0 while the body rests: the errors-in-variables bias.) Two
-things measured on BROAD (Laidig et al. 2021) shape the filter beyond that:
-
-- The field lags the gyro on real hardware (about 12 ms there);
-  uncorrected, the lag correlates with the turn rate and biases the offset
-  by about 1 % of the field. The lag ``τ`` is a state:
-  ``m(t − τ) ≈ m + τ ω × m``.
-- The world field is not quite constant where a body moves (a lab's field
-  changes by a few percent over a metre). ``m`` is a random walk, relative
-  ``field_rw`` per √s, so a slowly changing field is not learned as an
-  offset; the offset itself may drift (``drift``).
-
-A sample whose innovation is improbable (``GATE``) is not used (a field that
-jumps: a magnet passing). The caller may also refuse a sample (``allow``).
-When most samples are refused while the body turns (the offset changed for
-good, or a field that moved while nothing was known misled the filter), or
-the soft iron leaves its prior far behind, the calibration starts over.
-
-**Convergence.** The quality is the heading error the calibration's
-uncertainty would cause now: the covariance of ``(z, d)`` mapped onto the
-calibrated field, along the horizontal direction across the field (body
-frame, from the caller's up vector), over the horizontal field. The
-calibration is converged once the quality has stayed below ``heading``
-(rad) for ``_HOLD`` seconds of learning without the calibration turning the
-heading by more than that meanwhile. Measured where it matters, so a robot
-that only turns about its vertical converges (the offset along that axis is
-never learned, and does not move the heading while it stays level).
-
-**The field as given, or the learned calibration.** :func:`mc_apply`
-returns the field as given until a converged calibration turns the heading
-by more than ``deadband`` (RMS over the recent learning steps) from it: a
-sensor calibrated already (BROAD's are) keeps its own calibration, which
-what can be learned online, about 1 % of the field, does not beat. A loaded
-calibration is applied at once.
-
-**Arithmetic.** The formulas and their order are those of the numpy
-implementation this replaced (sums left to right, ``x * x`` for squares);
-the 3 × 3 inverses are written out with cofactors. Its matrix products went
-through BLAS, whose kernels fuse multiply and add, so the two agree to
-rounding, not to the bit (about 1e-14 in the estimator's attitude on the
-test excerpts). Plain and compiled agree to the bit: without ``fastmath``
-numba fuses nothing.
+floats at an offset ``o`` of a container ``s`` (the ``MC_*`` slots of
+:mod:`~ext_observer.core.ahrs.magcal_layout`, relative to ``o``); flags are
+0.0/1.0. Written in the part of Python numba compiles, so the same source
+runs plain on a list or compiled on an array
+(:mod:`~ext_observer.core.ahrs.compiled`), with no allocation in the hot
+path. The model, the gate, convergence and when a calibration is applied:
+docs/calibration.md ("The filter, in equations").
 """
 
 import math
 
 from .magcal_filter import mc_inv3, mc_predict, mc_start, mc_symmetrize, mc_update
-from .magcal_layout import (GATE, MC_AI, MC_APPLIED, MC_ASSESSED, MC_C, MC_CANDIDATE, MC_COEF,
-                            MC_CONVERGED, MC_COUNTS, MC_DEADBAND, MC_DELAY, MC_DRIFT,
-                            MC_ENABLED, MC_FIELDS, MC_FIELD_RW, MC_FIELD_SCALE, MC_FRESH,
-                            MC_GATED, MC_HAS_PRIOR, MC_HEADING, MC_HELD, MC_IDENTITY,
-                            MC_INVALID, MC_JP, MC_LEARNED, MC_LOADED, MC_NIS, MC_NOISE, MC_P,
-                            MC_PRIOR_COV, MC_PRIOR_P, MC_PRIOR_SCALE, MC_PRIOR_X, MC_QUALITY,
-                            MC_READY, MC_REFUSED, MC_REFUSED_SHARE, MC_RESETS, MC_SCALE,
-                            MC_SEEN_HAS_UP, MC_SEEN_LIVE, MC_SEEN_UP, MC_SEEN_Y, MC_SHIFT,
-                            MC_SIZE, MC_SOFT_IRON, MC_STALE, MC_USED, MC_WATCHED, MC_WATCHING,
-                            MC_X, _HOLD, _HOLD_TURN, _MC_INF, _MC_N, _MC_TINY, _REFUSED_SHARE,
-                            _REFUSED_TAU, _SHIFT_SAMPLES, _SIGNIFICANT, _TURNING2, _WATCH,
-                            _WILD)
+from .magcal_layout import (CAL_HOLD, CAL_HOLD_TURN, CAL_INF, CAL_N, CAL_REFUSED_SHARE,
+                            CAL_REFUSED_TAU, CAL_SHIFT_SAMPLES, CAL_SIGNIFICANT, CAL_TINY,
+                            CAL_TURNING2, CAL_WATCH, CAL_WILD, GATE, MC_AI, MC_APPLIED,
+                            MC_ASSESSED, MC_C, MC_CANDIDATE, MC_COEF, MC_CONVERGED, MC_COUNTS,
+                            MC_DEADBAND, MC_DELAY, MC_DRIFT, MC_ENABLED, MC_FIELDS, MC_FIELD_RW,
+                            MC_FIELD_SCALE, MC_FRESH, MC_GATED, MC_HAS_PRIOR, MC_HEADING,
+                            MC_HELD, MC_IDENTITY, MC_INVALID, MC_JP, MC_LEARNED, MC_LOADED,
+                            MC_NIS, MC_NOISE, MC_P, MC_PRIOR_COV, MC_PRIOR_P, MC_PRIOR_SCALE,
+                            MC_PRIOR_X, MC_QUALITY, MC_READY, MC_REFUSED, MC_REFUSED_SHARE,
+                            MC_RESETS, MC_SCALE, MC_SEEN_HAS_UP, MC_SEEN_LIVE, MC_SEEN_UP,
+                            MC_SEEN_Y, MC_SHIFT, MC_SIZE, MC_SOFT_IRON, MC_STALE, MC_USED,
+                            MC_WATCHED, MC_WATCHING, MC_X)
 
 # The functions, for a caller that compiles them (each one, before any call).
 FUNCTIONS = ('mc_init', 'mc_reset', 'mc_restart', 'mc_load_state', 'mc_learn', 'mc_predict',
@@ -126,7 +57,7 @@ def mc_init(s, o, enabled, noise, field_rw, soft_iron, delay, heading, deadband,
 
 def mc_reset(s, o):
     """Forget the calibration: learn from the next field on."""
-    for k in range(_MC_N + _MC_N * _MC_N):
+    for k in range(CAL_N + CAL_N * CAL_N):
         s[o + MC_X + k] = 0.0
     for k in range(9 + 1 + 81):
         s[o + MC_PRIOR_X + k] = 0.0
@@ -136,7 +67,7 @@ def mc_reset(s, o):
     s[o + MC_FRESH] = 1.0
     s[o + MC_LOADED] = 0.0
     s[o + MC_CONVERGED] = 0.0
-    s[o + MC_QUALITY] = _MC_INF
+    s[o + MC_QUALITY] = CAL_INF
     s[o + MC_STALE] = 0.0
     s[o + MC_LEARNED] = 0.0
     s[o + MC_REFUSED_SHARE] = 0.0
@@ -167,7 +98,7 @@ def mc_restart(s, o):
         s[o + MC_PRIOR_SCALE] = s[o + MC_SCALE]
         for i in range(9):
             for j in range(9):
-                s[o + MC_PRIOR_P + 9 * i + j] = s[o + MC_P + _MC_N * (3 + i) + 3 + j]
+                s[o + MC_PRIOR_P + 9 * i + j] = s[o + MC_P + CAL_N * (3 + i) + 3 + j]
         s[o + MC_HAS_PRIOR] = 1.0
         s[o + MC_PRIOR_COV] = 1.0
     s[o + MC_FRESH] = 1.0
@@ -252,18 +183,18 @@ def mc_learn(s, o, y0, y1, y2, rw, rx, ry, rz, dt, w0, w1, w2, has_up, u0, u1, u
     # calibration is applied, so that the caller tests calibrated fields)
     # by the caller: the calibration no longer fits (the offset changed, or
     # it was learned wrong); start over.
-    watched = (valid and w0 * w0 + w1 * w1 + w2 * w2 > _TURNING2
+    watched = (valid and w0 * w0 + w1 * w1 + w2 * w2 > CAL_TURNING2
                and (take or s[o + MC_APPLIED] != 0.0))
-    k_share = 1.0 - math.exp(-dt / _REFUSED_TAU)
+    k_share = 1.0 - math.exp(-dt / CAL_REFUSED_TAU)
     share = s[o + MC_REFUSED_SHARE]
     if watched:
         share = share + k_share * ((0.0 if use else 1.0) - share)
         s[o + MC_REFUSED_SHARE] = share
-    lost = watched and share > _REFUSED_SHARE
+    lost = watched and share > CAL_REFUSED_SHARE
     # A soft iron far outside its prior: the filter has gone astray (a
     # field that changed while it could not yet tell); start over.
     if live:
-        wild = _WILD * s[o + MC_SOFT_IRON]
+        wild = CAL_WILD * s[o + MC_SOFT_IRON]
         for k in range(5):
             if abs(s[o + MC_X + 6 + k]) > wild:
                 lost = True
@@ -302,7 +233,7 @@ def mc_learn(s, o, y0, y1, y2, rw, rx, ry, rz, dt, w0, w1, w2, has_up, u0, u1, u
     s[o + MC_WATCHING] = 0.0
     # Watched once the calibration is nearly good enough to be used.
     if (has_up and seen and s[o + MC_IDENTITY] != 0.0
-            and s[o + MC_QUALITY] < _WATCH * s[o + MC_HEADING]):
+            and s[o + MC_QUALITY] < CAL_WATCH * s[o + MC_HEADING]):
         mc_watch(s, o, y0, y1, y2, u0, u1, u2)
         s[o + MC_WATCHING] = 1.0
     mc_cache(s, o)
@@ -313,14 +244,14 @@ def mc_watch(s, o, y0, y1, y2, u0, u1, u2):
     """How far the learned calibration turns the heading from the field as given."""
     f0, f1, f2 = mc_calibrated(s, o + MC_X + 3, y0, y1, y2)
     angle = mc_heading_between(u0, u1, u2, y0, y1, y2, f0, f1, f2)
-    # A mean over the samples watched, then over the last _SHIFT_SAMPLES.
+    # A mean over the samples watched, then over the last CAL_SHIFT_SAMPLES.
     watched = s[o + MC_WATCHED] + 1.0
     s[o + MC_WATCHED] = watched
     n = watched
     if n < 1.0:
         n = 1.0
-    if n > _SHIFT_SAMPLES:
-        n = _SHIFT_SAMPLES
+    if n > CAL_SHIFT_SAMPLES:
+        n = CAL_SHIFT_SAMPLES
     k = 1.0 / n
     shift = s[o + MC_SHIFT]
     s[o + MC_SHIFT] = shift + k * (angle * angle - shift)
@@ -336,7 +267,7 @@ def mc_reconsider(s, o):
     """
     shift = s[o + MC_SHIFT]
     deadband = s[o + MC_DEADBAND]
-    a = _SIGNIFICANT * s[o + MC_QUALITY]
+    a = CAL_SIGNIFICANT * s[o + MC_QUALITY]
     if (s[o + MC_CONVERGED] != 0.0 and shift > deadband * deadband and shift > a * a):
         s[o + MC_IDENTITY] = 0.0
 
@@ -351,16 +282,16 @@ def mc_assess(s, o, dt):
     y2 = s[o + MC_SEEN_Y + 2]
     # The covariance of the calibrated field, J P[3:11, 3:11] Jᵀ with
     # J = [−I, Y(y)].
-    p = o + MC_P + _MC_N * 3 + 3
+    p = o + MC_P + CAL_N * 3 + 3
     jp = o + MC_JP
     for c in range(8):
-        s[jp + c] = (-s[p + c] + y0 * s[p + _MC_N * 3 + c] + y1 * s[p + _MC_N * 5 + c]
-                     + y2 * s[p + _MC_N * 6 + c])
-        s[jp + 8 + c] = (-s[p + _MC_N + c] + y1 * s[p + _MC_N * 4 + c] + y0 * s[p + _MC_N * 5 + c]
-                         + y2 * s[p + _MC_N * 7 + c])
-        s[jp + 16 + c] = (-s[p + 2 * _MC_N + c] - y2 * s[p + _MC_N * 3 + c]
-                          - y2 * s[p + _MC_N * 4 + c] + y0 * s[p + _MC_N * 6 + c]
-                          + y1 * s[p + _MC_N * 7 + c])
+        s[jp + c] = (-s[p + c] + y0 * s[p + CAL_N * 3 + c] + y1 * s[p + CAL_N * 5 + c]
+                     + y2 * s[p + CAL_N * 6 + c])
+        s[jp + 8 + c] = (-s[p + CAL_N + c] + y1 * s[p + CAL_N * 4 + c] + y0 * s[p + CAL_N * 5 + c]
+                         + y2 * s[p + CAL_N * 7 + c])
+        s[jp + 16 + c] = (-s[p + 2 * CAL_N + c] - y2 * s[p + CAL_N * 3 + c]
+                          - y2 * s[p + CAL_N * 4 + c] + y0 * s[p + CAL_N * 6 + c]
+                          + y1 * s[p + CAL_N * 7 + c])
     cc = o + MC_C
     for r in range(3):
         a = jp + 8 * r
@@ -382,8 +313,8 @@ def mc_assess(s, o, dt):
         e2 = u0 * f1 - u1 * f0
         horizontal = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         h = horizontal
-        if h < _MC_TINY:
-            h = _MC_TINY
+        if h < CAL_TINY:
+            h = CAL_TINY
         e0 = e0 / h
         e1 = e1 / h
         e2 = e2 / h
@@ -394,11 +325,11 @@ def mc_assess(s, o, dt):
             v = 0.0
         across = math.sqrt(v)
     h = horizontal
-    if h < _MC_TINY:
-        h = _MC_TINY
+    if h < CAL_TINY:
+        h = CAL_TINY
     quality = across / h
     s[o + MC_QUALITY] = quality
-    # Converged once the quality has stayed below the threshold for _HOLD s
+    # Converged once the quality has stayed below the threshold for CAL_HOLD s
     # of learning and the calibration has not turned the heading by more
     # than the threshold meanwhile (a filter misled by a field that changes
     # keeps moving; a settled one does not).
@@ -415,7 +346,7 @@ def mc_assess(s, o, dt):
             turned = abs(mc_heading_between(u0, u1, u2, f0, f1, f2, g0, g1, g2))
         else:
             turned = abs(mc_heading_between(y0, y1, y2, f0, f1, f2, g0, g1, g2))
-        if turned > _HOLD_TURN * heading:
+        if turned > CAL_HOLD_TURN * heading:
             for k in range(8):
                 s[cand + k] = s[x + 3 + k]
             s[o + MC_HELD] = 0.0
@@ -424,11 +355,11 @@ def mc_assess(s, o, dt):
             if held < 0.0:
                 held = 0.0
             s[o + MC_HELD] = held + dt
-        if s[o + MC_HELD] >= _HOLD:
+        if s[o + MC_HELD] >= CAL_HOLD:
             s[o + MC_CONVERGED] = 1.0
     # The hold pauses while the quality is a little above the threshold (it
     # changes with the attitude), and ends well above it.
-    if learning and quality > _HOLD_TURN * heading:
+    if learning and quality > CAL_HOLD_TURN * heading:
         s[o + MC_HELD] = -1.0
 
 

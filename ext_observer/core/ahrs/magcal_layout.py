@@ -13,37 +13,37 @@ from .layout import Layout
 
 # Innovations beyond this (χ², 3 degrees of freedom; 16.3 is 99.9 %) are refused.
 GATE = 16.0
-# The share of fields refused while the body turns faster than _TURNING
-# (rad/s), with this time constant (s): above _REFUSED_SHARE, start over.
-_REFUSED_TAU = 10.0
-_REFUSED_SHARE = 0.7
-_TURNING = 0.2
-_TURNING2 = _TURNING ** 2
+# The share of fields refused while the body turns faster than CAL_TURNING
+# (rad/s), with this time constant (s): above CAL_REFUSED_SHARE, start over.
+CAL_REFUSED_TAU = 10.0
+CAL_REFUSED_SHARE = 0.7
+CAL_TURNING = 0.2
+CAL_TURNING2 = CAL_TURNING ** 2
 # A soft-iron element beyond this many prior standard deviations: start over.
-_WILD = 4.0
+CAL_WILD = 4.0
 # Seconds of learning the quality must stay below the threshold, the
 # calibration settled, before it counts as converged.
-_HOLD = 2.0
-_HOLD_TURN = 2.0
+CAL_HOLD = 2.0
+CAL_HOLD_TURN = 2.0
 # The heading turn of the learned calibration: its mean square over the last
-# this many learning steps, from a quality of _WATCH times the threshold on
+# this many learning steps, from a quality of CAL_WATCH times the threshold on
 # (earlier, a calibration still far off would count).
-_SHIFT_SAMPLES = 1000.0
-_WATCH = 1.0
-_SIGNIFICANT = 3.0
+CAL_SHIFT_SAMPLES = 1000.0
+CAL_WATCH = 1.0
+CAL_SIGNIFICANT = 3.0
 # Prior standard deviation of an unknown offset and field, times the first field's norm.
-_DIFFUSE = 4.0
+CAL_DIFFUSE = 4.0
 # Prior standard deviation of a loaded offset, times the field's norm.
-_LOADED_BIAS_STD = 0.05
-_MC_INF = float('inf')
-_MC_TINY = 1e-300
+CAL_LOADED_BIAS_STD = 0.05
+CAL_INF = float('inf')
+CAL_TINY = 1e-300
 
 # --- the state block (offsets from o) ------------------------------------------
 
 MAGCAL = Layout()
-_MC_N = 12  # the filter's state: s = m + z (3), z (3), d (5), τ
-MC_X = MAGCAL.field('x', _MC_N)  # (s, z, d, τ): s at 0-2, z at 3-5, d at 6-10, τ at 11
-MC_P = MAGCAL.field('p', _MC_N * _MC_N)  # its covariance, 12 × 12 row-major
+CAL_N = 12  # the filter's state: s = m + z (3), z (3), d (5), τ
+MC_X = MAGCAL.field('x', CAL_N)  # (s, z, d, τ): s at 0-2, z at 3-5, d at 6-10, τ at 11
+MC_P = MAGCAL.field('p', CAL_N * CAL_N)  # its covariance, 12 × 12 row-major
 # What a fresh start starts from: x[3:] (9), the scale, the covariance of
 # x[3:] (9 × 9, row-major) and whether there is a prior and whether it has
 # a covariance (restart: yes; load: no, a tighter prior about it).
@@ -113,4 +113,5 @@ MC_JP = MAGCAL.field('jp', 24)
 MC_C = MAGCAL.field('c', 9)
 MC_SIZE = MAGCAL.size
 
-__all__ = [name for name in dir() if name.startswith('MC_')] + ['GATE']
+__all__ = ([name for name in dir() if name.startswith(('MC_', 'CAL_'))]
+           + ['GATE', 'MAGCAL'])

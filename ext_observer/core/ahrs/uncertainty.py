@@ -2,88 +2,15 @@
 How good the raw-IMU estimate is now: a variance for its inclination and one for its heading.
 
 :class:`AttitudeUncertainty` runs beside
-:class:`~ext_observer.core.ahrs.estimator.AhrsObserver` and is told, after each step,
-what the estimator did: the interval, the gyro's rate, whether rest was
-detected, the gain of a heading correction from the field (0 when the field
-was rejected or there is none). From that alone it propagates the variance
-of the attitude error, as the covariance step of an error-state Kalman
-filter for attitude does (Markley 2003, "Attitude error representations for
-Kalman filtering", JGCD 26(2); Solà 2017, "Quaternion kinematics for the
-error-state Kalman filter", arXiv:1711.02508), except that the gains are
-not computed from the covariance: they are the estimator's, fixed time
-constants, and the covariance only follows what they do to the error.
-
-The error
-    ``δ``, a small rotation of the world frame: the true attitude is
-    ``exp(δ) ⊗ q̂`` (BROAD's error ``q̂ ⊗ q_ref⁻¹`` is ``exp(−δ)``).
-    Its x and y components are the inclination error, z the heading error.
-    The estimator treats every horizontal direction alike, so the model keeps
-    one variance ``P_t`` per horizontal axis, one ``P_h`` for the vertical,
-    and no correlation between them (the body's turning mixes the body-frame
-    causes; only their size is kept).
-
-Per axis, two states
-    the angle error ``θ`` and the gyro bias error ``β`` (rad/s), with a 2×2
-    covariance ``[[P, C], [C, B]]``. Between samples (interval ``dt``)::
-
-        θ ← θ + β dt + w,      var(w) = (gyro_noise² + (gyro_rate_noise |ω|)²) dt
-        β ← φ β + v,           φ = exp(−dt / bias_time),  var(v) = bias_std² (1 − φ²)
-
-    the bias error a first-order Gauss-Markov process (it wanders by
-    ``bias_std`` with correlation time ``bias_time``; ``B`` starts at
-    ``bias_init²``). At rest the estimator learns the bias (gain ``k_r`` of
-    ``tau_rest``): ``β ← (1 − k_r) β + k_r n``, ``n`` one gyro sample's
-    noise. A complementary correction with gain ``k`` pulls the angle to a
-    measurement with error ``e``: ``θ ← (1 − k) θ + k e``, so
-    ``P ← (1 − k)² P + k² R`` and ``C ← (1 − k) C``. Each update is a
-    congruence plus a positive term, so the 2×2 stays positive definite.
-
-The corrections
-    Inclination: every sample, ``k = 1 − exp(−dt / (tau_acc + tau_acc_gain))``
-    (the world-frame low-pass in series with the Luenberger gain),
-    ``R = (acc_noise / g)² / dt``, one sample's direction noise. For small
-    ``k`` the steady state is ``P ≈ q τ / 2 + R dt / (2 τ)`` for a process
-    noise density ``q`` and a correction of time constant ``τ``: the
-    complementary filter's trade-off in closed form. Heading: only with a
-    field that corrected it, with the gain the estimator applied
-    (``R = mag_noise² / dt_field``). Without one (6D, fields rejected, a
-    magnetometer still being calibrated) nothing shrinks ``P_h``: it grows
-    without bound.
-
-The reference of the heading
-    In 9D the heading's error is the drift ``P_h`` plus the error of the
-    field the heading was taken from, ``U``: unknown at the start
-    (``HEADING_UNKNOWN``, a uniform angle), 0 once a field known to be good
-    corrects it (``U`` joins ``P_h`` and the correction shrinks both).
-    While the magnetometer calibration learns, the estimator holds the
-    heading it took from the field as given, and the caller may say what
-    the calibration learned so far makes of that field: ``U = min(U₀,
-    turn² + quality² + heading_floor²)``, with ``turn`` the angle by which
-    the calibration learned so far turns the field's heading (0 for a
-    sensor that is calibrated already) and ``quality`` that calibration's
-    own heading σ (infinite before it has learned anything).
-
-What is published
-    The variances plus what the propagation does not model, each in
-    physical units: ``inclination_floor`` (the smallest inclination σ:
-    translational acceleration, accelerometer calibration, mounting),
-    ``heading_floor`` (a field bent where it is accepted, once a field has
-    set the heading), the magnetometer calibration's own heading
-    uncertainty when given (``raw_imu`` gives it where the calibration is
-    applied), and the error of a stamp off by ``stamp_error``
-    seconds, ``|ω| stamp_error``, split over the world axes by the world
-    rate. The 3×3 covariance about the world frame's x, y, z axes is
-    ``diag(V_t, V_t, V_h)``; the inclination σ is ``√(2 V_t)`` (the RMS of
-    the tilt angle), the heading σ is ``√V_h``. A diagonal with equal x and
-    y entries is the same in ENU, NWU and NED and after any turn about the
-    vertical (declination, yaw offset).
-
-The per-sample arithmetic is :mod:`~ext_observer.core.ahrs.uncertainty_kernel`'s,
-on a flat state (plain, or compiled with the estimator's kernels).
-
-Units: rad, s, rad/s, m/s². Every quantity is a Python float, or a numpy
-array of shape ``(B,)`` for many recordings at once (the arithmetic is the
-same; flags multiply rather than branch).
+:class:`~ext_observer.core.ahrs.estimator.AhrsObserver` and is told, after
+each step, what the estimator did (interval, rate, rest, the heading gain
+of a field); from that alone it propagates the variance of the attitude
+error, as an error-state Kalman filter's covariance step does, with the
+estimator's fixed gains. The model and its equations: docs/covariance.md
+("The model"). :data:`UNCERTAINTY_TABLE` its parameters; the per-sample
+arithmetic is :mod:`~ext_observer.core.ahrs.uncertainty_kernel`'s. Units
+rad, s, rad/s, m/s²; every quantity a float, or an array ``(B,)`` for many
+recordings at once.
 """
 
 import math
@@ -356,7 +283,7 @@ class AttitudeUncertainty:
 
     # --- the steps ---------------------------------------------------------
 
-    def step(self, dt, gyr, q, rest):
+    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None):
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
@@ -373,6 +300,15 @@ class AttitudeUncertainty:
             any nonzero norm (for the rate's world components).
         rest : bool or ndarray
             Whether the estimator detected rest (and learned the bias).
+        bias_var : float or ndarray, optional
+            The estimator's own bias variance, (rad/s)² per axis (its
+            Kalman filter's, :attr:`AhrsObserver.bias_std
+            <ext_observer.core.ahrs.estimator.AhrsObserver.bias_std>`): the
+            model's is at least that. None: the model's alone.
+        clip_var : float or ndarray, optional
+            What a sample at the gyro's range adds to the angle's variances,
+            rad² (:attr:`AhrsObserver.clip_variance
+            <ext_observer.core.ahrs.estimator.AhrsObserver.clip_variance>`).
 
         """
         if dt != self._u[U_DT]:
@@ -385,6 +321,12 @@ class AttitudeUncertainty:
                                           1.0 if rest else 0.0)
         else:
             self._kernel.uncertainty_step(self._u, dt, gx, gy, gz, w, x, y, z, rest)
+        if bias_var is not None:
+            self._kernel.uncertainty_bias(
+                self._u, float(bias_var) if self._compiled else bias_var)
+        if clip_var is not None and np.any(clip_var):
+            self._kernel.uncertainty_clipped(
+                self._u, float(clip_var) if self._compiled else clip_var)
 
     def field(self, dt, gain, calibration=0.0, reference=math.nan):
         """

@@ -8,7 +8,7 @@ whose items may also be numpy arrays ``(B,)`` for many recordings at once:
 the arithmetic has no branch on them) or compiled by numba on a float64
 array (:mod:`~ext_observer.core.ahrs.compiled` joins this file to the
 estimator's kernels), as :mod:`~ext_observer.core.ahrs.ahrs_kernel` is. The
-model is :mod:`~ext_observer.core.ahrs.uncertainty`'s docstring.
+model is docs/covariance.md's ("The model").
 
 :func:`sample_step` is what the node runs for the usual sample of an
 estimate that exists: the estimator's step
@@ -20,7 +20,7 @@ the compiled kernels, one crossing from Python per sample.
 
 import math
 
-from .ahrs_kernel import S_INIT, S_REST, ahrs_update
+from .ahrs_kernel import ahrs_update, bias_variance, P_MOTION_BIAS, S_CLIPPED, S_INIT, S_REST
 from .layout import Layout
 
 # Standard gravity, m/s²: turns the accelerometer's noise into a direction.
@@ -140,6 +140,29 @@ def uncertainty_step(u, dt, gx, gy, gz, w, x, y, z, rest):
     u[U_WH2] = w2 - wz2
 
 
+def uncertainty_bias(u, var):
+    """
+    The estimator's own bias variance (rad²/s², its Kalman filter's, per axis): at least that.
+
+    The model's ``B`` never claims a bias better known than the estimator's
+    learning in motion does (a start, a gyro that clipped).
+    """
+    b = u[U_B]
+    # The larger, exactly, also on arrays (no branch).
+    u[U_B] = var * (var > b) + b * (var <= b)
+
+
+def uncertainty_clipped(u, var):
+    """
+    A sample at the gyro's range: the angle's variances grow by ``var`` (rad²).
+
+    The estimator's ``(range dt)²`` per clipped axis: the rate beyond the
+    range is unknown (0 for a sample that did not clip: nothing changes).
+    """
+    u[U_PT] = u[U_PT] + var
+    u[U_PH] = u[U_PH] + var
+
+
 def uncertainty_variances(u):
     """The published variances: ``(V_t, V_h)``, rad² (tilt per horizontal axis, heading)."""
     t = u[U_PT] + u[U_TILT_FLOOR] + 0.5 * u[U_STAMP2] * u[U_WH2]
@@ -180,6 +203,11 @@ def sample_step(s, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
     if abs(n2 - 1.0) > max_residual:
         return SAMPLE_RESIDUAL, w, x, y, z
     uncertainty_step(u, dt, gx, gy, gz, w, x, y, z, 1.0 if s[S_REST] != 0.0 else 0.0)
+    if s[P_MOTION_BIAS] != 0.0:
+        uncertainty_bias(u, (bias_variance(s, 0, 0) + bias_variance(s, 1, 1)
+                             + bias_variance(s, 2, 2)) / 3.0)
+    if s[S_CLIPPED] != 0.0:
+        uncertainty_clipped(u, s[S_CLIPPED])
     t, h = uncertainty_variances(u)
     zero = 0.0 * t
     cov[0] = t
