@@ -200,6 +200,20 @@ def test_heading_sigma_grows_without_bound_in_6d():
     assert inclination[-1] < 2.0 * inclination[len(inclination) // 2]
 
 
+def test_a_clipped_gyro_widens_the_covariance_and_is_counted():
+    # Turning at the gyro's range (ahrs.gyro_range): each sample adds
+    # (range dt)² per clipped axis to both variances; gyro_clipped counts.
+    pipeline = RawImuPipeline(node_settings(use_mag=False, **{'ahrs.gyro_range': 0.3}))
+    sigmas, stamp = turning_run(pipeline, 5.0, field=None, gyr=(0.02, -0.01, 0.2))
+    assert dict(pipeline.estimator.key_values())['gyro_clipped'] == 0
+    clipped, _ = turning_run(pipeline, 0.5, field=None, start=stamp, gyr=(0.02, -0.01, 0.3))
+    assert dict(pipeline.estimator.key_values())['gyro_clipped'] == 50
+    grown = (0.3 * 0.01) ** 2 * 50
+    heading = math.radians(clipped[-1, 0]) ** 2 - math.radians(sigmas[-1, 0]) ** 2
+    assert heading > grown
+    assert clipped[-1, 1] > 1.3 * sigmas[-1, 1]
+
+
 def test_heading_sigma_grows_while_the_field_is_rejected_and_shrinks_after():
     pipeline = RawImuPipeline(plain_fields())
     settled, stamp = turning_run(pipeline, 30.0)

@@ -166,35 +166,44 @@ def test_bash_block_runs_as_written(page, line, text, ros_domain_id, tmp_path):
     with open(os.path.join(REPO, page), encoding='utf-8') as file:
         active = ACTIVATED in ' '.join(file.read().split())
     runs = []
-    for index, command in enumerate(commands(text)):
-        if command == 'source .venv/bin/activate':
-            active = True
-            continue
-        assert reason_not_run(command) is None, (
-            f'{page}:{line}: {command!r} is in NOT_RUN: tag its block shell')
-        env = _environment(ros_domain_id, active)
-        process, log = _run(command, env, tmp_path, index)
-        runs.append((command, process, log, _starts_a_node(command)))
-        if not runs[-1][3]:
-            code = _end(process, TIMEOUT)
-            assert code == 0, (f'{page}:{line}: {command!r} ended with {code}:\n'
-                               f'{log.read_text(errors="replace")}')
-    # The nodes of the block run side by side: each must stay up, then end
-    # cleanly on Ctrl-C.
-    nodes = [run for run in runs if run[3]]
-    deadline = time.monotonic() + UP_SECONDS
-    while time.monotonic() < deadline and all(p.poll() is None for _, p, _, _ in nodes):
-        time.sleep(0.1)
-    for command, process, log, _ in nodes:
-        assert process.poll() is None, (f'{page}:{line}: {command!r} ended early:\n'
-                                        f'{log.read_text(errors="replace")}')
-    for _, process, _, _ in nodes:
-        os.killpg(process.pid, signal.SIGINT)
-    for command, process, log, _ in nodes:
-        code = _end(process, 15.0)
-        output = log.read_text(errors='replace')
-        assert code == 0, f'{page}:{line}: {command!r} ended with {code} on Ctrl-C:\n{output}'
-        assert 'Traceback' not in output, f'{page}:{line}: {command!r}:\n{output}'
+    try:
+        for index, command in enumerate(commands(text)):
+            if command == 'source .venv/bin/activate':
+                active = True
+                continue
+            assert reason_not_run(command) is None, (
+                f'{page}:{line}: {command!r} is in NOT_RUN: tag its block shell')
+            env = _environment(ros_domain_id, active)
+            process, log = _run(command, env, tmp_path, index)
+            runs.append((command, process, log, _starts_a_node(command)))
+            if not runs[-1][3]:
+                code = _end(process, TIMEOUT)
+                assert code == 0, (f'{page}:{line}: {command!r} ended with {code}:\n'
+                                   f'{log.read_text(errors="replace")}')
+        # The nodes of the block run side by side: each must stay up, then end
+        # cleanly on Ctrl-C.
+        nodes = [run for run in runs if run[3]]
+        deadline = time.monotonic() + UP_SECONDS
+        while time.monotonic() < deadline and all(p.poll() is None for _, p, _, _ in nodes):
+            time.sleep(0.1)
+        for command, process, log, _ in nodes:
+            assert process.poll() is None, (f'{page}:{line}: {command!r} ended early:\n'
+                                            f'{log.read_text(errors="replace")}')
+        for _, process, _, _ in nodes:
+            os.killpg(process.pid, signal.SIGINT)
+        for command, process, log, _ in nodes:
+            code = _end(process, 15.0)
+            output = log.read_text(errors='replace')
+            assert code == 0, f'{page}:{line}: {command!r} ended with {code} on Ctrl-C:\n{output}'
+            assert 'Traceback' not in output, f'{page}:{line}: {command!r}:\n{output}'
+    finally:
+        # Whatever failed above, no process of the block outlives the test.
+        for _, process, _, _ in runs:
+            try:
+                os.killpg(process.pid, signal.SIGKILL)
+            except ProcessLookupError:  # the group has ended
+                pass
+            process.wait(10)
 
 
 PYTHON = [(page, line, text) for page, line, tag, text in all_blocks()

@@ -85,7 +85,8 @@ def run_trial(trial, mode, values=None):
         the field the start used),
         ``rejected`` (a field came and did not correct the heading),
         ``bias_var`` (the estimator's bias variance, NaN when it learns no
-        bias in motion), ``dt``.
+        bias in motion), ``clip_var`` (what a sample at the gyro's range
+        added to the variances), ``dt``.
 
     """
     from ext_observer.pipeline.raw_imu import RawImuPipeline
@@ -95,7 +96,7 @@ def run_trial(trial, mode, values=None):
     period = 1e9 / trial.rate
     out = {key: np.full(n, np.nan) for key in ('tilt', 'heading', 'gain', 'calibration',
                                                'reference', 'gain0', 'calibration0',
-                                               'reference0', 'bias_var')}
+                                               'reference0', 'bias_var', 'clip_var')}
     out['state'] = np.full((n, 4), np.nan)
     for key in ('rest', 'rejected', 'started'):
         out[key] = np.zeros(n, dtype=bool)
@@ -113,6 +114,7 @@ def run_trial(trial, mode, values=None):
             out['rest'][k] = core.rest
             bias_var = core.bias_variance
             out['bias_var'][k] = math.nan if bias_var is None else bias_var
+            out['clip_var'][k] = core.clip_variance
             if tracker.last_field is not None:
                 out['gain0'][k], out['calibration0'][k], out['reference0'][k] = (
                     tracker.last_field[1:])
@@ -168,6 +170,7 @@ def replay(runs, params=None, ahrs_params=None):
     bias_var = stack('bias_var', np.nan) if all('bias_var' in r for r in runs) else None
     if bias_var is not None and not np.isfinite(bias_var).any():
         bias_var = None
+    clip_var = stack('clip_var', 0.0) if all('clip_var' in r for r in runs) else None
     first = int(np.argmax(started.any(axis=1)))
     if not np.all(started[first]) or started[first + 1:].any():
         raise ValueError('replay needs runs that all start at the same sample and never restart')
@@ -188,7 +191,8 @@ def replay(runs, params=None, ahrs_params=None):
     for k in range(first, n):
         if k > first:
             tracker.step(dt, gyr[k], states[k], rest[k] > 0.5,
-                         None if bias_var is None else np.nan_to_num(bias_var[k]))
+                         None if bias_var is None else np.nan_to_num(bias_var[k]),
+                         None if clip_var is None else np.nan_to_num(clip_var[k]))
         cov = tracker.covariance
         tilt[k], heading[k] = cov[0], cov[8]
         apply(1, k)

@@ -121,6 +121,7 @@ class ImuFilterNode(EstimatorNode):
         self._status_steps = self._status_fields = 0
         self._said = set()
         self._unit_counts = dict(self.pipeline.units.counts)
+        self._status_clipped = 0
         self._calibration_state = None  # as last reported
         self.save_calibration_service = self.create_service(
             Trigger, '~/save_calibration', self.save_calibration_callback)
@@ -357,8 +358,24 @@ class ImuFilterNode(EstimatorNode):
                     text + ' (the samples are used as they are; counted in '
                     f'/diagnostics as implausible_{kind})')
         self._unit_counts = dict(units.counts)
+        parts.extend(self._clipping_problems())
         parts.extend(self._calibration_problems())
         return parts
+
+    def _clipping_problems(self):
+        # A gyro at its range (ahrs.gyro_range, or a rate stuck at its peak):
+        # WARN while it clips, a line in the log the first time.
+        clipped = self.pipeline.estimator.core.clipped
+        new = clipped - self._status_clipped
+        self._status_clipped = clipped
+        if new <= 0:
+            return []
+        text = (f'gyro clipped: {new} samples at its range since the last status (the '
+                'attitude is taken again from the accelerometer and the field)')
+        if 'gyro_clipped' not in self._said:
+            self._said.add('gyro_clipped')
+            self.get_logger().warning(text + '; a wider range in the driver avoids it')
+        return [text]
 
     def _calibration_problems(self):
         # The online magnetometer calibration: WARN while it learns from the

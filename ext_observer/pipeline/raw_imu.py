@@ -1,61 +1,19 @@
 """
 The raw-IMU estimator as ``imu_filter_node`` runs it, without ROS.
 
-:class:`RawImuPipeline` takes the samples of a raw IMU as the node receives
-them, stamped (integer nanoseconds), in any order and of any quality, and
-returns the estimates the node publishes. The node is a thin shell around
-it (messages in, messages out, logs and diagnostics), so that anything else
-that wants the node's exact output (a recording, a bag, a test) calls the
-same code.
-
-Inputs
-    IMU samples: the angular velocity (rad/s) and the linear acceleration
-    (m/s², the specific force: about +9.81 up at rest) of one sample. Fields
-    (T), at their own rate, when ``use_mag``. Both go through
-    :class:`~ext_observer.pipeline.pairing.StepPairer` first (values and stamps
-    checked, every input counted by what came of it).
-
-Steps
-    Sample ``k`` runs :meth:`AhrsObserver.update
-    <ext_observer.core.ahrs.estimator.AhrsObserver.update>` with its own angular
-    velocity and acceleration and ``dt = t_k − t_{k−1}``; the first sample of
-    a time line only sets ``t_0``, the second initializes the estimate from
-    gravity (and the latest field). With ``constant_dt > 0`` every sample
-    answers, in the order it arrives, whatever its stamp (imu_filter_madgwick's
-    ``constant_dt``): the first of a time line initializes the estimate, each
-    further one runs a step of ``dt = constant_dt``. A field
-    corrects the heading when it arrives
-    (:meth:`~ext_observer.core.ahrs.estimator.AhrsObserver.update_mag`, the latest field
-    only, with the hard-iron offset ``mag_bias_*`` removed and the interval
-    since the previous field, from their stamps, as its ``dt``); before the
-    first step it is kept for the initialization. Nothing normalizes the
-    estimate on this path: the extension term of the core holds it near S³.
-
-Outputs
-    The core's estimate is sensor → ENU (magnetic north). It goes out turned
-    to true north by ``declination`` (rad, east positive), then into
-    ``world_frame`` (``C`` of :data:`~ext_observer.core.ahrs.estimator.WORLD_FRAMES`),
-    then turned by ``yaw_offset`` (rad) about that frame's z axis:
-    ``q = R_z(yaw_offset) ⊗ C ⊗ R_up(−declination) ⊗ q_enu``. For ENU and
-    NWU this is imu_filter_madgwick's ``R_z(yaw_offset − declination) ⊗ q``.
-
-Uncertainty
-    Each estimate carries the covariance of its orientation error
-    (:class:`~ext_observer.core.ahrs.uncertainty.AttitudeUncertainty`, stepped
-    with the estimator): 3×3, row-major, rad², about the x, y, z axes of
-    ``world_frame`` (the true attitude ``exp(δ) ⊗ q̂``): roll, pitch and yaw
-    variances as ``sensor_msgs/Imu``'s ``orientation_covariance`` and
-    robot_localization read them (REP 145). It is ``diag(V_t, V_t, V_h)``:
-    the same in ENU, NWU and NED and after the declination and yaw offset.
-
-Faults
-    A stamp older than the last step by more than ``backward_jump_threshold``
-    restarts the time line and the estimator; a step after a forward gap
-    resets it when ``forward_gap_action`` is ``reset``; an estimate that is
-    not finite or whose residual ``|q̂̄q̂ − 1|`` exceeds
-    ``divergence_max_residual`` is reinitialized from the sample at hand.
-    Each is counted (:attr:`RawImuPipeline.resets`,
-    :attr:`RawImuPipeline.reinitializations`).
+:class:`RawImuPipeline` takes a raw IMU's samples and fields as the node
+receives them (stamped in integer nanoseconds, in any order and of any
+quality: :class:`~ext_observer.pipeline.pairing.StepPairer` checks and
+counts them first) and returns the estimates the node publishes, each with
+its covariance (:class:`~ext_observer.core.ahrs.uncertainty.AttitudeUncertainty`).
+The node, the CSV and bag commands, calibrate and
+:func:`~ext_observer.attitude_from_imu` all call it, so their estimates
+are the node's to the bit. How samples, fields and faults are used:
+docs/raw_imu.md ("How samples are used"); the covariance: docs/covariance.md.
+The output's frame: the core's sensor → ENU estimate turned to true north,
+into ``world_frame`` (``C`` of :data:`~ext_observer.core.ahrs.estimator.WORLD_FRAMES`),
+then about that frame's z axis:
+``q = R_z(yaw_offset) ⊗ C ⊗ R_up(−declination) ⊗ q_enu``.
 """
 
 from collections import namedtuple
@@ -412,7 +370,7 @@ class RawImuEstimator:
         if starting:
             self._start(dt)
         else:
-            self.uncertainty.step(dt, gyr, q, core.rest, core.bias_variance)
+            self.uncertainty.step(dt, gyr, q, core.rest, core.bias_variance, core.clip_variance)
         # The state property's value, from the q the step returned.
         return (q if self._frame is None else multiply_floats(self._frame, q)), reason
 
@@ -463,7 +421,8 @@ class RawImuEstimator:
 
         ``world_frame``, ``use_mag``, ``initialized``, ``bias_x``, ``bias_y``,
         ``bias_z`` (rad/s), ``bias_std_x``, ``bias_std_y``, ``bias_std_z``
-        (its σ, rad/s), ``rest``, ``mag_disturbed``, ``residual``
+        (its σ, rad/s), ``gyro_clipped`` (samples at the gyro's range so
+        far), ``rest``, ``mag_disturbed``, ``residual``
         (``|q̂̄q̂ − 1|``), ``inclination_std_deg`` and ``heading_std_deg``
         (the σ of the published covariance, degrees); NaN before the first
         step.
@@ -474,13 +433,14 @@ class RawImuEstimator:
             q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3] - 1.0)
         bx, by, bz = core.bias
         sx, sy, sz = core.bias_std
+        clipped = core.clipped
         tracker = self.uncertainty
         started = q is not None and tracker.started
         return [('world_frame', self.world_frame), ('use_mag', bool(core.use_mag)),
                 ('initialized', q is not None), ('bias_x', float(bx)),
                 ('bias_y', float(by)), ('bias_z', float(bz)), ('bias_std_x', float(sx)),
                 ('bias_std_y', float(sy)), ('bias_std_z', float(sz)), ('rest', bool(core.rest)),
-                ('bias_learning', self._held_bias is None),
+                ('bias_learning', self._held_bias is None), ('gyro_clipped', clipped),
                 ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
                 ('inclination_std_deg',
                  math.degrees(tracker.inclination_std) if started else math.nan),

@@ -99,6 +99,7 @@ S_CLIPS = AHRS.field('clips')  # clipped samples counted
 S_CLIPPED = AHRS.field('clipped')  # the last sample's clipped variance (0: not clipped)
 S_GYR_LAST = AHRS.field('gyr_last', 3)  # the previous sample's rate, as measured
 S_GYR_PEAK = AHRS.field('gyr_peak')  # largest |rate| on any axis seen
+S_STUCK = AHRS.field('stuck', 3)  # samples each axis has repeated its rate at the peak
 S_REF_AGE = AHRS.field('ref_age')  # s of fields that confirmed the field references
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
@@ -116,6 +117,15 @@ _SQRT2 = math.sqrt(2.0)
 _REST_BIAS_SIGMA = math.radians(0.03)
 # A correction rate further than 3 σ from what the bias predicts teaches nothing.
 _GATE = 9.0
+# Rad/s: no gyro's range is below this (the smallest common one, ±125 °/s, is
+# 2.18 rad/s): a rate stuck at its largest magnitude below it is not clipped.
+_CLIP_FLOOR = 2.0
+# A rate this close to a known range (relative) is at it.
+_AT_RANGE = 1e-4
+# Unknown range: a rate repeated this many times more at the largest
+# magnitude seen is stuck (a smooth peak of a quantized rate repeats once;
+# none of BROAD's 22 trials repeats twice).
+_STUCK = 2.0
 
 
 # --- arithmetic ------------------------------------------------------------------
@@ -313,6 +323,10 @@ def _init_filters(s, gx, gy, gz, ax, ay, az):
     r = _matrix(s)
     for j in range(3):
         s[S_RZLP + j] = r[6 + j]
+    s[S_GYR_LAST] = gx
+    s[S_GYR_LAST + 1] = gy
+    s[S_GYR_LAST + 2] = gz
+    s[S_GYR_PEAK] = max(abs(gx), max(abs(gy), abs(gz)))
     s[S_REST_GYR] = gx
     s[S_REST_GYR + 1] = gy
     s[S_REST_GYR + 2] = gz
@@ -321,9 +335,60 @@ def _init_filters(s, gx, gy, gz, ax, ay, az):
     s[S_REST_ACC + 2] = az
 
 
+def _at_range(s, i, g):
+    """Whether rate ``g`` on axis ``i`` is at the gyro's range (and the axis's memory)."""
+    a = abs(g)
+    rng = s[P_GYRO_RANGE]
+    if rng > 0.0:
+        at = a >= rng * (1.0 - _AT_RANGE)
+    else:
+        # Unknown range: stuck at the largest magnitude seen.
+        same = a >= _CLIP_FLOOR and a == abs(s[S_GYR_LAST + i]) and a >= s[S_GYR_PEAK]
+        s[S_STUCK + i] = s[S_STUCK + i] + 1.0 if same else 0.0
+        at = s[S_STUCK + i] >= _STUCK
+    s[S_GYR_LAST + i] = g
+    return at
+
+
+def _watch_clipping(s, gx, gy, gz):
+    """
+    A sample at the gyro's range: count it, distrust the gyro, lean on the others.
+
+    The rate beyond the range is unknown: the sample adds ``(range dt)²``
+    per clipped axis to the attitude's variance (``S_CLIPPED``, for the
+    covariance); the inclination starts again from the running mean of the
+    specific force (as at the start: the gyro's integral is not trusted
+    across the stretch), the heading from the running mean of the next
+    fields, the bias learns nothing until the low-pass has settled again,
+    and the magnetometer calibration does not learn across the stretch.
+    """
+    dt = s[C_DT]
+    cx = _at_range(s, 0, gx)
+    cy = _at_range(s, 1, gy)
+    cz = _at_range(s, 2, gz)
+    peak = max(abs(gx), max(abs(gy), abs(gz)))
+    if peak > s[S_GYR_PEAK]:
+        s[S_GYR_PEAK] = peak
+    top = max(s[P_GYRO_RANGE], s[S_GYR_PEAK]) * dt
+    var = ((1.0 if cx else 0.0) + (1.0 if cy else 0.0) + (1.0 if cz else 0.0)) * top * top
+    s[S_CLIPPED] = var
+    if var == 0.0:
+        return
+    s[S_CLIPS] += 1.0
+    _restart_mean(s)
+    s[S_MAG_USED] = 0.0
+    if s[P_HAS_CAL] != 0.0:
+        mc_restart(s, MC0)
+        s[S_CAL_TURN] = 1.0
+        for i in range(1, 4):
+            s[S_CAL_TURN + i] = 0.0
+        s[S_CAL_WAIT] = math.inf
+
+
 def ahrs_update_gyr(s, gx, gy, gz):
     """Propagate with ``exp((ω − b̂) dt / 2)`` and apply the extension term."""
     dt = s[C_DT]
+    _watch_clipping(s, gx, gy, gz)
     bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
     ux = (gx - bx) * dt
     uy = (gy - by) * dt

@@ -360,6 +360,19 @@ class AhrsObserver:
         return (x * x + y * y + z * z) / 3.0
 
     @property
+    def clipped(self):
+        """Samples found at the gyro's range so far (``gyro_range``, or stuck at its peak)."""
+        k = self._kernels.ahrs
+        if self.batch is None:
+            return int(self._states[0][k.S_CLIPS])
+        return np.array([int(s[k.S_CLIPS]) for s in self._states])
+
+    @property
+    def clip_variance(self):
+        """What the last sample, at the gyro's range, adds to the variances (rad²; 0: none)."""
+        return self._slots(self._kernels.ahrs.S_CLIPPED, 1)[0]
+
+    @property
     def rest(self):
         """Whether rest is detected."""
         return self._flag(self._kernels.ahrs.S_REST)

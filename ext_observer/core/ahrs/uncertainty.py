@@ -283,7 +283,7 @@ class AttitudeUncertainty:
 
     # --- the steps ---------------------------------------------------------
 
-    def step(self, dt, gyr, q, rest, bias_var=None):
+    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None):
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
@@ -305,6 +305,10 @@ class AttitudeUncertainty:
             Kalman filter's, :attr:`AhrsObserver.bias_std
             <ext_observer.core.ahrs.estimator.AhrsObserver.bias_std>`): the
             model's is at least that. None: the model's alone.
+        clip_var : float or ndarray, optional
+            What a sample at the gyro's range adds to the angle's variances,
+            rad² (:attr:`AhrsObserver.clip_variance
+            <ext_observer.core.ahrs.estimator.AhrsObserver.clip_variance>`).
 
         """
         if dt != self._u[U_DT]:
@@ -320,6 +324,9 @@ class AttitudeUncertainty:
         if bias_var is not None:
             self._kernel.uncertainty_bias(
                 self._u, float(bias_var) if self._compiled else bias_var)
+        if clip_var is not None and np.any(clip_var):
+            self._kernel.uncertainty_clipped(
+                self._u, float(clip_var) if self._compiled else clip_var)
 
     def field(self, dt, gain, calibration=0.0, reference=math.nan):
         """

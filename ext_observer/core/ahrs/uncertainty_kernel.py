@@ -20,7 +20,7 @@ the compiled kernels, one crossing from Python per sample.
 
 import math
 
-from .ahrs_kernel import ahrs_update, bias_variance, P_MOTION_BIAS, S_INIT, S_REST
+from .ahrs_kernel import ahrs_update, bias_variance, P_MOTION_BIAS, S_CLIPPED, S_INIT, S_REST
 from .layout import Layout
 
 # Standard gravity, m/s²: turns the accelerometer's noise into a direction.
@@ -152,6 +152,17 @@ def uncertainty_bias(u, var):
     u[U_B] = var * (var > b) + b * (var <= b)
 
 
+def uncertainty_clipped(u, var):
+    """
+    A sample at the gyro's range: the angle's variances grow by ``var`` (rad²).
+
+    The estimator's ``(range dt)²`` per clipped axis: the rate beyond the
+    range is unknown (0 for a sample that did not clip: nothing changes).
+    """
+    u[U_PT] = u[U_PT] + var
+    u[U_PH] = u[U_PH] + var
+
+
 def uncertainty_variances(u):
     """The published variances: ``(V_t, V_h)``, rad² (tilt per horizontal axis, heading)."""
     t = u[U_PT] + u[U_TILT_FLOOR] + 0.5 * u[U_STAMP2] * u[U_WH2]
@@ -195,6 +206,8 @@ def sample_step(s, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
     if s[P_MOTION_BIAS] != 0.0:
         uncertainty_bias(u, (bias_variance(s, 0, 0) + bias_variance(s, 1, 1)
                              + bias_variance(s, 2, 2)) / 3.0)
+    if s[S_CLIPPED] != 0.0:
+        uncertainty_clipped(u, s[S_CLIPPED])
     t, h = uncertainty_variances(u)
     zero = 0.0 * t
     cov[0] = t
