@@ -13,7 +13,7 @@ would compile mutmut's rewritten source, or not use it).
 
 ``python mutation/run_mutmut.py [MODULE ...]`` (default: all of
 :data:`MODULES`; a module is a path or its file name) ``--max-children N``
-(default 2). Then ``--report`` prints the score and the survivors of what
+(default 2). The same modules again resume; other modules start afresh. Then ``--report`` prints the score and the survivors of what
 has run (``mutmut results``). Each module takes from minutes (the
 uncertainty kernel) to hours (the estimator's kernel) on 2 cores: see
 docs/tests.md#mutmut for what was measured.
@@ -76,6 +76,17 @@ def prepare(modules):
              'also_copy = ["config", "resource", "package.xml", "setup.py"]\n')
     with open(pyproject, 'w', encoding='utf-8') as f:
         f.write(text)
+    # mutmut keeps its mutants and its map of which test reaches which
+    # function across runs, also when other modules are to be mutated: then
+    # it generates none for them, or finds no test for them, and stops
+    # (measured). A new set of modules starts afresh (its results lost:
+    # report before changing the modules).
+    chosen = os.path.join(TREE, '.modules')
+    before = open(chosen, encoding='utf-8').read() if os.path.exists(chosen) else None
+    if before != repr(sorted(modules)):
+        shutil.rmtree(os.path.join(TREE, 'mutants'), ignore_errors=True)
+        with open(chosen, 'w', encoding='utf-8') as f:
+            f.write(repr(sorted(modules)))
 
 
 def environment():
