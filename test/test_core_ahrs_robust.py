@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty
 from test_core_ahrs_params import (angle_deg, DT, FIELD, first_index, qconj, qexp, qmul, RATE,
                                    rotate, rotated_field, simulate, still, tilt_deg, turning,
                                    wandering)
@@ -79,6 +80,47 @@ def test_a_start_in_motion_converges_within_3_s():
         errors.append(tilt_deg(est.update(gyr[k], acc[k], None, DT), truth[k]))
     assert errors[0] > 5.0
     assert max(errors[round(3.0 * RATE):]) < 2.0
+
+
+def start_errors_and_sigmas(truth, gyr, acc, seconds=5.0):
+    """The estimator and its covariance as the pipeline runs them: tilt errors and σ (°)."""
+    est = AhrsObserver(AhrsParams(), use_mag=False)
+    tracker = AttitudeUncertainty.for_estimator(est.params, use_mag=False)
+    errors, sigmas = [], []
+    for k in range(round(seconds * RATE)):
+        q = est.update(gyr[k], acc[k], None, DT)
+        if k == 0:
+            tracker.start(DT, acc[k])
+        else:
+            tracker.step(DT, gyr[k], q, est.rest, est.bias_variance, est.clip_variance, acc[k])
+        errors.append(tilt_deg(q, truth[k]))
+        sigmas.append(math.degrees(tracker.inclination_std))
+    return np.array(errors), np.array(sigmas)
+
+
+def test_the_covariance_says_how_unsure_a_start_in_motion_is():
+    # The shaken start of the test above: its first seconds' inclination
+    # errors within 2 σ as a calibrated σ has them (95 %), σ there far
+    # above a start at rest's; at rest σ stays small.
+    moving = simulate(
+        wandering(8.0, amplitude=1.0), q0=qexp((0.4, 0.3, 0.0)),
+        acc_extra=lambda k: (3.0 * math.sin(2.0 * math.pi * 1.3 * k * DT),
+                             2.0 * math.cos(2.0 * math.pi * 0.7 * k * DT), 0.0))
+    gyr, acc = noisy(moving[1], moving[2], 3)
+    errors, sigmas = start_errors_and_sigmas(moving[0], gyr, acc)
+    assert errors[0] > 5.0
+    assert np.mean(errors <= 2.0 * sigmas) >= 0.95
+    assert np.max(errors / sigmas) < 2.5
+    resting = simulate(still(8.0), q0=qexp((0.4, 0.3, 0.0)))
+    gyr, acc = noisy(resting[1], resting[2], 3)
+    errors, at_rest = start_errors_and_sigmas(resting[0], gyr, acc)
+    assert np.all(errors <= 2.0 * at_rest)
+    assert at_rest.max() < 1.5
+    first = round(RATE)
+    assert np.all(sigmas[:first] > 4.0 * at_rest[:first])
+    # Shrinking as the running mean averages, then as the low-pass forgets.
+    assert sigmas[round(2.0 * RATE) - 1] < 0.9 * sigmas[round(1.0 * RATE)]
+    assert sigmas[-1] < 0.5 * sigmas[round(2.0 * RATE)]
 
 
 def test_a_slow_constant_turn_in_6d():

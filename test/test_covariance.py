@@ -414,6 +414,7 @@ def test_replay_reproduces_the_pipelines_covariance():
                                      else None) for t in trials]
         for run, trial in zip(runs, trials):
             run.update({f'gyr{j}': trial.gyr[:, j] for j in range(3)})
+            run.update({f'acc{j}': trial.acc[:, j] for j in range(3)})
         ahrs = AhrsParams(mag_cal=False) if HAS_CALIBRATION else None
         for run, (tilt, heading) in zip(runs, covariance.replay(runs, ahrs_params=ahrs)):
             scored = np.isfinite(run['tilt'])

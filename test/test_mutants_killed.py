@@ -130,7 +130,7 @@ def _pair():
     est = AhrsObserver(AhrsParams(), use_mag=False)
     tracker = AttitudeUncertainty.for_estimator(est.params, use_mag=False)
     est.update((0.0, 0.0, 0.0), ROLLED, None, 0.01)
-    tracker.start(0.01)
+    tracker.start(0.01, ROLLED)
     return est, tracker
 
 
@@ -154,7 +154,7 @@ def test_the_one_call_sample_step_is_the_general_steps():
         assert outcome == uncertainty_kernel.SAMPLE_OK
         expected = general.update(gyr, acc, None, dt)
         tracker.step(dt, gyr, expected, general.rest, general.bias_variance,
-                     general.clip_variance)
+                     general.clip_variance, acc)
         assert tuple(q) == tuple(expected)
         assert tuple(cov) == tuple(tracker.covariance)
         t, h = tracker.tilt_variance, tracker.heading_variance

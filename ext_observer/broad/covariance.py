@@ -166,6 +166,9 @@ def replay(runs, params=None, ahrs_params=None):
     for i, r in enumerate(runs):
         states[:len(r['state']), :, i] = r['state']
     gyr = np.stack([stack(f'gyr{j}', 0.0) for j in range(3)], axis=1)
+    # The specific force, where every run logged it: how unsure the start is.
+    acc = (np.stack([stack(f'acc{j}', 0.0) for j in range(3)], axis=1)
+           if all('acc0' in r for r in runs) else None)
     rest, started = stack('rest', 0.0), stack('started', 0.0)
     bias_var = stack('bias_var', np.nan) if all('bias_var' in r for r in runs) else None
     if bias_var is not None and not np.isfinite(bias_var).any():
@@ -186,13 +189,14 @@ def replay(runs, params=None, ahrs_params=None):
             tracker.field(dt, np.where(seen, g, 0.0), np.where(seen, c, 0.0),
                           np.where(seen, u, np.nan))
 
-    tracker.start(dt)
+    tracker.start(dt, None if acc is None else acc[first])
     apply(0, first)
     for k in range(first, n):
         if k > first:
             tracker.step(dt, gyr[k], states[k], rest[k] > 0.5,
                          None if bias_var is None else np.nan_to_num(bias_var[k]),
-                         None if clip_var is None else np.nan_to_num(clip_var[k]))
+                         None if clip_var is None else np.nan_to_num(clip_var[k]),
+                         None if acc is None else acc[k])
         cov = tracker.covariance
         tilt[k], heading[k] = cov[0], cov[8]
         apply(1, k)
@@ -320,9 +324,10 @@ def _run_job(index):
     trials, modes, values = _JOB
     trial, mode = trials[index // len(modes)], modes[index % len(modes)]
     run = run_trial(trial, mode, values)
-    # The gyro rides along for replays.
+    # The gyro and the accelerometer ride along for replays.
     for j in range(3):
         run[f'gyr{j}'] = trial.gyr[:, j]
+        run[f'acc{j}'] = trial.acc[:, j]
     return index, run
 
 

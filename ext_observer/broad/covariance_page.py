@@ -251,11 +251,6 @@ def _limits_lines(summary):
 
 
 def _model_lines():
-    names = {
-        'gyro_noise': 'rad/s/√Hz', 'gyro_rate_noise': '1/√Hz', 'bias_std': 'rad/s',
-        'bias_time': 's', 'bias_init': 'rad/s', 'acc_noise': 'm/s²/√Hz',
-        'mag_noise': 'rad·√s', 'inclination_floor': 'rad', 'heading_floor': 'rad',
-        'stamp_error': 's'}
     how = {
         'gyro_noise': 'measured at rest (dev trials)',
         'gyro_rate_noise': 'tuned on dev',
@@ -266,9 +261,9 @@ def _model_lines():
         'inclination_floor': 'tuned on dev',
         'heading_floor': 'chosen on dev: deepest inside the bounds',
         'stamp_error': 'tuned on dev'}
-    lines = ['| parameter (`covariance.*`) | default | unit | chosen |', '|---|---:|---|---|']
-    for name, value in UncertaintyParams.DEFAULTS.items():
-        lines.append(f'| `{name}` | {value:g} | {names[name]} | {how[name]} |')
+    lines = ['| parameter (`covariance.*`) | how its default was chosen |', '|---|---|']
+    for name in UncertaintyParams.DEFAULTS:
+        lines.append(f'| `{name}` | {how[name]} |')
     return list(_MODEL) + lines + ['']
 
 
@@ -309,6 +304,88 @@ _INTRO = [
     '',
 ]
 
+# The model's equations (told once, here: docs/covariance.md).
+_EQUATIONS = """### The equations
+
+**The error.** `δ`, a small rotation of the world frame: the true attitude is
+`exp(δ) ⊗ q̂` (BROAD's error `q̂ ⊗ q_ref⁻¹` is `exp(−δ)`).
+Its x and y components are the inclination error, z the heading error.
+The estimator treats every horizontal direction alike, so the model keeps
+one variance `P_t` per horizontal axis, one `P_h` for the vertical,
+and no correlation between them (the body's turning mixes the body-frame
+causes; only their size is kept).
+
+**Per axis, two states.** The angle error `θ` and the gyro bias error `β` (rad/s), with a 2×2
+covariance `[[P, C], [C, B]]`. Between samples (interval `dt`)
+
+    θ ← θ + β dt + w,      var(w) = (gyro_noise² + (gyro_rate_noise |ω|)²) dt
+    β ← φ β + v,           φ = exp(−dt / bias_time),  var(v) = bias_std² (1 − φ²)
+
+the bias error a first-order Gauss-Markov process (it wanders by
+`bias_std` with correlation time `bias_time`; `B` starts at
+`bias_init²`). At rest the estimator learns the bias (gain `k_r` of
+`tau_rest`): `β ← (1 − k_r) β + k_r n`, `n` one gyro sample's
+noise. A complementary correction with gain `k` pulls the angle to a
+measurement with error `e`: `θ ← (1 − k) θ + k e`, so
+`P ← (1 − k)² P + k² R` and `C ← (1 − k) C`. Each update is a
+congruence plus a positive term, so the 2×2 stays positive definite.
+
+**The corrections.** Inclination: every sample, `k = 1 − exp(−dt / (tau_acc + tau_acc_gain))`
+(the world-frame low-pass in series with the Luenberger gain),
+`R = (acc_noise / g)² / dt`, one sample's direction noise. For small
+`k` the steady state is `P ≈ q τ / 2 + R dt / (2 τ)` for a process
+noise density `q` and a correction of time constant `τ`: the
+complementary filter's trade-off in closed form. Heading: only with a
+field that corrected it, with the gain the estimator applied
+(`R = mag_noise² / dt_field`). Without one (6D, fields rejected, a
+magnetometer still being calibrated) nothing shrinks `P_h`: it grows
+without bound.
+
+**The reference of the heading.** In 9D the heading's error is the drift `P_h` plus the error of the
+field the heading was taken from, `U`: unknown at the start
+(`HEADING_UNKNOWN`, a uniform angle), 0 once a field known to be good
+corrects it (`U` joins `P_h` and the correction shrinks both).
+While the magnetometer calibration learns, the estimator holds the
+heading it took from the field as given, and the caller may say what
+the calibration learned so far makes of that field: `U = min(U₀,
+turn² + quality² + heading_floor²)`, with `turn` the angle by which
+the calibration learned so far turns the field's heading (0 for a
+sensor that is calibrated already) and `quality` that calibration's
+own heading σ (infinite before it has learned anything).
+
+**The start.** For its first `tau_acc` seconds the estimator's inclination is the
+running mean of the world-frame specific force, and a moving body's sample is off
+gravity's direction by its translational acceleration `d`, up to `atan(|d| / g)`.
+Each sample shows `d` as its deviation from the estimate's vertical `g`:
+`(f_x, f_y, f_z − g)` in the world frame (the first sample, from which the estimate
+was taken, only `|f| − g`). With `m` the mean since the start of
+`max(d_z², (d_x² + d_y²) / 2) / g²` (a motion with no preferred direction shows on
+each axis alike), never below the first sample's, the tilt variance gains
+`S = atan(√m)² c / (c + t)` per horizontal axis, `t` the time since the start and
+`c` = 1 s (`START_CORRELATION`: how long a moving body's acceleration keeps its
+direction): what the running mean of `t` seconds still owes to the motion. After
+`tau_acc` the low-pass forgets it as it forgets any error, `S ← (1 − k)² S`. A start
+at rest keeps the accelerometer's own deviation (its noise and scale error): a small
+σ (`test_core_ahrs_robust.py::test_the_covariance_says_how_unsure_a_start_in_motion_is`).
+The estimate itself is not touched. Replays of logged runs (the tuning below) count
+it only where the run logged the specific force.
+
+**What is published.** The variances plus what the propagation does not model, each in
+physical units: the start's `S`, `inclination_floor` (the smallest inclination σ:
+translational acceleration, accelerometer calibration, mounting),
+`heading_floor` (a field bent where it is accepted, once a field has
+set the heading), the magnetometer calibration's own heading
+uncertainty when given (`raw_imu` gives it where the calibration is
+applied), and the error of a stamp off by `stamp_error`
+seconds, `|ω| stamp_error`, split over the world axes by the world
+rate. The 3×3 covariance about the world frame's x, y, z axes is
+`diag(V_t, V_t, V_h)`; the inclination σ is `√(2 V_t)` (the RMS of
+the tilt angle), the heading σ is `√V_h`. A diagonal with equal x and
+y entries is the same in ENU, NWU and NED and after any turn about the
+vertical (declination, yaw offset).
+
+"""
+
 _MODEL = [
     '## The model',
     '',
@@ -346,6 +423,11 @@ _MODEL = [
     'A sensor calibrated already gets a σ of a few degrees before the calibration has '
     'converged; one with a hard iron, a σ as large as its heading\'s error '
     '(`test_covariance.py::test_while_the_calibration_learns_the_heading_sigma_says_what_it_has_learned`).',
+    '- A start in motion: for its first `tau_acc` seconds the inclination is the running '
+    'mean of the specific force, and one sample of a moving body can be off by '
+    '`atan(|d| / g)` (`d` its translational acceleration): the tilt variance gains what '
+    'the samples\' deviation from gravity says the mean still owes, shrinking as the '
+    'mean averages, then forgotten as the low-pass forgets any error (below).',
     '- Then what the propagation does not model: `inclination_floor` (translational '
     'acceleration, accelerometer calibration, mounting), `heading_floor` (a field bent '
     'where it is accepted), the magnetometer calibration\'s own heading σ where the '
@@ -354,11 +436,13 @@ _MODEL = [
     'off by `stamp_error`, which puts the orientation off by |ω| times it (on BROAD the '
     'IMU and the optical reference are about 2.5 ms apart).',
     '',
+] + _EQUATIONS.rstrip('\n').split('\n') + ['',
     'Every update is a congruence plus a positive term, so the covariance stays symmetric '
     'and positive definite; `test_covariance.py` checks that for every input the node '
     'takes, and that the heading σ grows in 6D and while fields are rejected. The '
-    'parameters are the node\'s `covariance.*` (start-up only; '
-    '[parameters.md](parameters.md#imu_filter)):',
+    'parameters are the node\'s `covariance.*` (start-up only), the rows of '
+    '`UNCERTAINTY_TABLE` in `ext_observer/core/ahrs/uncertainty.py`: defaults, units and '
+    'ranges in the generated table of [parameters.md](parameters.md#imu_filter).',
     '',
 ]
 

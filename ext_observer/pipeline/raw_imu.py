@@ -368,15 +368,16 @@ class RawImuEstimator:
             q = core.update(gyr, acc, self.latest_field, dt)
             starting = True
         if starting:
-            self._start(dt)
+            self._start(dt, acc)
         else:
-            self.uncertainty.step(dt, gyr, q, core.rest, core.bias_variance, core.clip_variance)
+            self.uncertainty.step(dt, gyr, q, core.rest, core.bias_variance, core.clip_variance,
+                                  acc)
         # The state property's value, from the q the step returned.
         return (q if self._frame is None else multiply_floats(self._frame, q)), reason
 
-    def _start(self, dt):
+    def _start(self, dt, acc=None):
         """The core has just initialized (and used the latest field, if any)."""
-        self.uncertainty.start(dt)
+        self.uncertainty.start(dt, acc)
         self._fields_used = 0
         self._calibrated = True
         if self.latest_field is not None and self.core.use_mag:

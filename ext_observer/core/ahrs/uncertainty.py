@@ -18,11 +18,13 @@ import math
 import numpy as np
 
 from . import uncertainty_kernel as _plain
+from .ahrs_kernel import rotate
 from .tunables import Tunable, Tunables
 from .uncertainty_kernel import (
     GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,
     U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_K_ACC, U_K_REST, U_PH,
-    U_PHI, U_PT, U_Q_BIAS, U_Q_GYRO, U_Q_RATE, U_R_ACC, U_R_GYRO, U_SIZE, U_STAMP2, U_TAU_ACC,
+    U_PHI, U_PT, U_Q_BIAS, U_Q_GYRO, U_Q_RATE, U_R_ACC, U_R_GYRO, U_SIZE, U_STAMP2,
+    U_START_F, U_START_M, U_START_N, U_START_T, U_START_V, U_TAU_ACC,
     U_TAU_REST, U_TILT_FLOOR, U_UNKNOWN, U_WH2, U_WZ2)
 
 __all__ = [
@@ -37,6 +39,8 @@ __all__ = [
 # Variance of a heading known to be nothing better than uniform on (−π, π], rad².
 HEADING_UNKNOWN = math.pi * math.pi / 3.0
 _FLOAT64 = np.dtype(np.float64)
+# The slots uncertainty_start writes.
+_START_SLOTS = (U_START_T, U_START_N, U_START_M, U_START_F, U_START_V)
 
 
 def covariance_out(array):
@@ -251,12 +255,20 @@ class AttitudeUncertainty:
         self._unknown = 0.0
         self._calibration = 0.0
         self._wh2 = self._wz2 = 0.0
+        self._clear_start()
 
-    def start(self, dt):
+    def _clear_start(self):
+        u = self._u
+        u[U_START_T] = u[U_START_N] = u[U_START_M] = u[U_START_F] = u[U_START_V] = 0.0 * u[U_PT]
+
+    def start(self, dt, acc=None):
         """
         The estimator has just initialized from one accelerometer sample.
 
-        The inclination is that sample's direction; in 9D the heading is
+        The inclination is that sample's direction (``acc``, m/s², body: how
+        far a moving body's may be off, see
+        :func:`~ext_observer.core.ahrs.uncertainty_kernel.uncertainty_start`;
+        None: counted as at rest); in 9D the heading is
         unknown until a field corrects it (:meth:`field`, gain 1 for the
         first); in 6D the heading is the estimator's own start, and only
         its drift from there is counted. The bias is unknown
@@ -275,6 +287,36 @@ class AttitudeUncertainty:
         self._unknown = self.use_mag * HEADING_UNKNOWN
         self._calibration = 0.0
         self._wh2 = self._wz2 = 0.0
+        self._clear_start()
+        if acc is not None:
+            # The estimate was taken from this sample: only its norm shows.
+            ax, ay, az = acc
+            self._start_sample(dt, (0.0 * ax, 0.0 * ax, (ax * ax + ay * ay + az * az) ** 0.5))
+
+    def _start_sample(self, dt, f):
+        """The start's share for a world-frame specific force ``f`` (floats, or arrays ``(B,)``)."""
+        u, kernel = self._u, self._kernel
+        fx, fy, fz = f
+        if self._compiled or not np.ndim(fx):
+            if u[U_START_V] != 0.0 or u[U_START_T] < u[U_TAU_ACC]:
+                kernel.uncertainty_start(u, float(dt), float(fx), float(fy), float(fz))
+            return
+        # Many recordings: the same kernel on each one's floats.
+        columns = {i: np.array(np.broadcast_to(u[i], np.shape(fx)), dtype=float)
+                   for i in _START_SLOTS}
+        if not (columns[U_START_V].any() or (columns[U_START_T] < u[U_TAU_ACC]).any()):
+            return
+        one = list(u)
+        for b in range(len(fx)):
+            for i in _START_SLOTS:
+                one[i] = float(columns[i][b])
+            if one[U_START_V] != 0.0 or one[U_START_T] < one[U_TAU_ACC]:
+                kernel.uncertainty_start(one, float(dt), float(fx[b]), float(fy[b]),
+                                         float(fz[b]))
+            for i in _START_SLOTS:
+                columns[i][b] = one[i]
+        for i in _START_SLOTS:
+            u[i] = columns[i]
 
     def _coefficients(self, dt):
         if not (math.isfinite(dt) and dt > 0.0):
@@ -283,7 +325,7 @@ class AttitudeUncertainty:
 
     # --- the steps ---------------------------------------------------------
 
-    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None):
+    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None, acc=None):
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
@@ -309,6 +351,10 @@ class AttitudeUncertainty:
             What a sample at the gyro's range adds to the angle's variances,
             rad² (:attr:`AhrsObserver.clip_variance
             <ext_observer.core.ahrs.estimator.AhrsObserver.clip_variance>`).
+        acc : sequence of 3, optional
+            The specific force, m/s², body: how unsure the start still is
+            (one estimate, floats). None: nothing of the start is counted
+            (as at rest).
 
         """
         if dt != self._u[U_DT]:
@@ -327,6 +373,8 @@ class AttitudeUncertainty:
         if clip_var is not None and np.any(clip_var):
             self._kernel.uncertainty_clipped(
                 self._u, float(clip_var) if self._compiled else clip_var)
+        if acc is not None:
+            self._start_sample(dt, rotate(w, x, y, z, *acc))
 
     def field(self, dt, gain, calibration=0.0, reference=math.nan):
         """

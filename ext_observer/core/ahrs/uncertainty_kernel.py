@@ -20,7 +20,8 @@ the compiled kernels, one crossing from Python per sample.
 
 import math
 
-from .ahrs_kernel import ahrs_update, bias_variance, P_MOTION_BIAS, S_CLIPPED, S_INIT, S_REST
+from .ahrs_kernel import (ahrs_update, bias_variance, P_MOTION_BIAS, rotate, S_CLIPPED, S_INIT,
+                          S_REST)
 from .layout import Layout
 
 # Standard gravity, m/s²: turns the accelerometer's noise into a direction.
@@ -65,6 +66,14 @@ U_CALIBRATION = UNCERTAINTY.field('calibration')
 U_HEADING_SET = UNCERTAINTY.field('heading_set')
 U_WZ2 = UNCERTAINTY.field('wz2')
 U_WH2 = UNCERTAINTY.field('wh2')
+# The start (issue 27): s since it, samples and the mean of ((|f| − g)/g)² seen
+# since, and the variance per horizontal axis the running mean of the
+# specific force still owes to the motion (rad²).
+U_START_T = UNCERTAINTY.field('start_t')
+U_START_N = UNCERTAINTY.field('start_n')
+U_START_M = UNCERTAINTY.field('start_m')
+U_START_V = UNCERTAINTY.field('start_v')
+U_START_F = UNCERTAINTY.field('start_f')  # the first sample's ((|f| − g)/g)²
 U_SIZE = UNCERTAINTY.size
 
 # sample_step's outcomes: 0 the step ran; else the estimator stepped but the
@@ -75,6 +84,13 @@ SAMPLE_NON_FINITE = 1
 SAMPLE_RESIDUAL = 2
 SAMPLE_BAD_DT = 3
 SAMPLE_NOT_STARTED = 4
+
+# s: how long a moving body's translational acceleration keeps its direction
+# (a hand, a robot's base: a fraction of a second to a second); the running
+# mean of t seconds owes ``c / (c + t)`` of one sample's deviation.
+START_CORRELATION = 1.0
+# rad²: a start's share below this is forgotten (a millionth of a degree).
+_START_FORGOTTEN = 1e-16
 
 
 def uncertainty_coefficients(u, dt):
@@ -163,9 +179,46 @@ def uncertainty_clipped(u, var):
     u[U_PH] = u[U_PH] + var
 
 
+def uncertainty_start(u, dt, fx, fy, fz):
+    """
+    A sample's specific force in the world frame (m/s²): how unsure the start still is.
+
+    For its first ``tau_acc`` seconds the estimator's inclination is the
+    running mean of the world-frame specific force; a moving body's sample
+    is off gravity's direction by its translational acceleration ``d``, up
+    to ``atan(|d| / g)``. What each sample shows of ``d``: its deviation
+    from the vertical ``g`` of the estimate, ``(fx, fy, fz − g)`` (the
+    first sample, from which the estimate was taken, only ``|f| − g``).
+    The mean of ``max(d_z², (d_x² + d_y²) / 2) / g²`` since the start is one
+    sample's variance per horizontal axis (a motion with no preferred
+    direction shows on each axis alike), and the running mean of ``t``
+    seconds owes ``c / (c + t)`` of it (``c`` :data:`START_CORRELATION`).
+    Then the low-pass forgets it as any error (``(1 − k)²`` per sample).
+    A body at rest keeps the accelerometer's own deviation (its noise and
+    scale error): a small σ. Floats only (one estimate).
+    """
+    t = u[U_START_T]
+    if t < u[U_TAU_ACC]:
+        n = u[U_START_N] + 1.0
+        dz = fz - GRAVITY
+        e = max(dz * dz, 0.5 * (fx * fx + fy * fy)) / (GRAVITY * GRAVITY)
+        m = u[U_START_M] + (e - u[U_START_M]) / n
+        if n == 1.0:
+            u[U_START_F] = e
+        u[U_START_N] = n
+        u[U_START_M] = m
+        a = math.atan(math.sqrt(max(m, u[U_START_F])))
+        u[U_START_V] = a * a * START_CORRELATION / (START_CORRELATION + t)
+    else:
+        k = u[U_K_ACC]
+        v = (1.0 - k) * (1.0 - k) * u[U_START_V]
+        u[U_START_V] = v if v > _START_FORGOTTEN else 0.0
+    u[U_START_T] = t + dt
+
+
 def uncertainty_variances(u):
     """The published variances: ``(V_t, V_h)``, rad² (tilt per horizontal axis, heading)."""
-    t = u[U_PT] + u[U_TILT_FLOOR] + 0.5 * u[U_STAMP2] * u[U_WH2]
+    t = u[U_PT] + u[U_START_V] + u[U_TILT_FLOOR] + 0.5 * u[U_STAMP2] * u[U_WH2]
     h = (u[U_PH] + u[U_UNKNOWN]
          + u[U_HEADING_SET] * (u[U_HEADING_FLOOR] + u[U_CALIBRATION])
          + u[U_STAMP2] * u[U_WZ2])
@@ -203,6 +256,9 @@ def sample_step(s, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
     if abs(n2 - 1.0) > max_residual:
         return SAMPLE_RESIDUAL, w, x, y, z
     uncertainty_step(u, dt, gx, gy, gz, w, x, y, z, 1.0 if s[S_REST] != 0.0 else 0.0)
+    if u[U_START_V] != 0.0 or u[U_START_T] < u[U_TAU_ACC]:
+        fx, fy, fz = rotate(w, x, y, z, ax, ay, az)
+        uncertainty_start(u, dt, fx, fy, fz)
     if s[P_MOTION_BIAS] != 0.0:
         uncertainty_bias(u, (bias_variance(s, 0, 0) + bias_variance(s, 1, 1)
                              + bias_variance(s, 2, 2)) / 3.0)
