@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
-from test_core_ahrs_params import (angle_deg, DT, FIELD, first_index, qexp, RATE, rotated_field,
-                                   simulate, still, tilt_deg, turning, wandering)
+from test_core_ahrs_params import (angle_deg, DT, FIELD, first_index, qconj, qexp, qmul, RATE,
+                                   rotate, rotated_field, simulate, still, tilt_deg, turning,
+                                   wandering)
 
 DEG = math.pi / 180.0
 
@@ -157,3 +158,30 @@ def test_without_clipping_nothing_is_counted():
     for k in range(len(gyr)):
         est.update(gyr[k], acc[k], None, DT)
     assert est.clipped == 0 and est.clip_variance == 0.0
+
+
+def constant_turn(rate_hz, omega, bias):
+    """A constant body rate (rad/s) from a tilted start, 40 s: the inclination errors, the bias."""
+    dt = 1.0 / rate_hz
+    q0 = qexp((0.3, 0.2, 0.0))
+    est = AhrsObserver(AhrsParams(), use_mag=False)
+    errors = []
+    for k in range(int(40.0 * rate_hz)):
+        q = qmul(q0, qexp(tuple(omega * (k * dt))))
+        acc = rotate(qconj(q), (0.0, 0.0, 9.81))
+        errors.append(tilt_deg(est.update(tuple(omega + bias), acc, None, dt), q))
+    return errors, np.array(est.bias)
+
+
+def test_the_same_defaults_at_25_and_1000_hz():
+    # A fast constant body rate (1.5 rad/s about a tilted axis) with a bias
+    # of 1 °/s, no rest, sampled at 25 Hz and at 1 kHz: the gyro is
+    # integrated exactly over a sample and every gain comes from a time in
+    # seconds, so the same defaults give the same answer at both rates.
+    omega = np.array((0.6, -0.4, 1.3))
+    bias = np.array((0.6, 0.5, -0.62)) * DEG
+    slow, b_slow = constant_turn(25.0, omega, bias)
+    fast, b_fast = constant_turn(1000.0, omega, bias)
+    assert max(slow[-125:]) < 1.0 and max(fast[-5000:]) < 1.0
+    assert abs(slow[-1] - fast[-1]) < 0.02
+    assert np.abs(b_slow - b_fast).max() < 0.01 * DEG

@@ -54,8 +54,9 @@ from ext_observer.broad.scoring import (criteria, error_angles, group_means,
                                         VQF_RATIO_GOAL)
 from ext_observer.broad.stress import (BIAS, bias_of, blocks, clip_gyro, cut_at_movement,
                                        DESCRIPTIONS, downsample, first_movement,
-                                       GYRO_RANGE, half_of, LOW_RATE, trial_number, variant,
-                                       VARIANTS, variants, with_bias)
+                                       GYRO_RANGE, half_of, LABELS, LOW_RATE, RATIO_DONE,
+                                       RATIO_GOAL, trial_number, variant, VARIANTS, variants,
+                                       with_bias)
 from ext_observer.broad.stress_page import plot_stress, stress_markdown
 from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, MODE_KEYS,
                                            modes_of, ratio_to_vqf, run_stress,
@@ -72,7 +73,8 @@ __all__ = [
     'markdown', 'missing_anchor_packages', 'norm_deviation', 'plot', 'rmse_deg', 'run',
     'score', 'shown_path', 'summary', 'text_report', 'write_json',
     # The robustness benchmark (--stress).
-    'BIAS', 'DESCRIPTIONS', 'GYRO_RANGE', 'HALVES', 'LOW_RATE', 'MODE_KEYS',
+    'BIAS', 'DESCRIPTIONS', 'GYRO_RANGE', 'HALVES', 'LABELS', 'LOW_RATE', 'MODE_KEYS',
+    'RATIO_DONE', 'RATIO_GOAL',
     'STRESS_ANCHORS', 'VARIANTS', 'algorithms_of', 'bias_of', 'blocks', 'clip_gyro',
     'cut_at_movement', 'downsample', 'first_movement', 'half_counts', 'half_of', 'modes_of',
     'plot_stress', 'ratio_to_vqf', 'run_stress', 'stress_markdown', 'stress_summary',

@@ -42,6 +42,18 @@ DESCRIPTIONS = {
     'd': '(c) at 50 Hz (block averages)',
     'e': 'as recorded, gyro clipped at ±250 °/s per axis',
 }
+# The same, short, for table rows and figure labels.
+LABELS = {
+    'a': '(a) as recorded',
+    'b': '(b) cut at first movement',
+    'c': '(c) (b) + 1 °/s gyro bias',
+    'd': '(d) (c) at 50 Hz',
+    'e': '(e) gyro clipped ±250 °/s',
+}
+# The done-criterion on (b)–(e): ours at most this times VQF, in 6D
+# inclination and 9D total RMSE (goal: 0.9).
+RATIO_DONE = 1.0
+RATIO_GOAL = 0.9
 
 
 def _like(trial, gyr=None, acc=None, mag=None, quat=None, movement=None, rate=None,

@@ -19,7 +19,7 @@ import numpy as np
 
 from ext_observer.broad.names import ALGORITHMS, MODES, OURS
 from ext_observer.broad.run import log, run
-from ext_observer.broad.stress import DESCRIPTIONS, half_of, variant, VARIANTS
+from ext_observer.broad.stress import DESCRIPTIONS, half_of, LABELS, variant, VARIANTS
 
 # The anchors run by default: the best (VQF), its plain twin, and the
 # usual ROS one (Madgwick, imu_filter_madgwick's algorithm).
@@ -142,7 +142,7 @@ def table_rows(summ, half='all'):
             header.append(f'{mode} ours/VQF')
     rows = []
     for key in [k for k in VARIANTS if k in summ]:
-        row = [f'({key}) {DESCRIPTIONS[key]}']
+        row = [LABELS[key]]
         for mode in modes:
             for a in algorithms:
                 row.append(_fmt(summ[key].get(a, {}).get(mode, {}).get(half)))

@@ -37,6 +37,16 @@ accelerometer's low-pass, so the correction rate measures ``β`` through
 the low-passed ``R`` (in 9D the heading's corrections through its vertical
 row); see docs/raw_imu.md for what 6D cannot tell apart.
 
+The start does not rest on one sample: for the first ``tau_acc`` seconds
+the inclination follows the running mean of the world-frame specific force
+(VQF starts its low-pass so), then the low-pass, steady at that mean; the
+bias in motion learns once that low-pass has settled (one ``tau_acc`` more).
+Field references taken from the first field are trusted no longer than
+fields have confirmed them. A gyro at its range (``gyro_range``, or a rate
+stuck at its peak) is counted (``clipped``), widens the covariance
+(``clip_variance``), and the inclination and heading start again from their
+running means (docs/raw_imu.md#wherever-the-robot-starts).
+
 In 9D the magnetometer is calibrated online (``mag_cal``, on by default):
 :class:`~ext_observer.core.ahrs.magcal.MagCalibrator` learns hard and soft
 iron from the fields and the gyro; the heading waits for it (gyro-held)
