@@ -82,7 +82,8 @@ def prepare(modules):
     # (measured). A new set of modules starts afresh (its results lost:
     # report before changing the modules).
     chosen = os.path.join(TREE, '.modules')
-    before = open(chosen, encoding='utf-8').read() if os.path.exists(chosen) else None
+    before = (open(chosen, encoding='utf-8').read().strip() if os.path.exists(chosen)
+              else None)
     if before != repr(sorted(modules)):
         shutil.rmtree(os.path.join(TREE, 'mutants'), ignore_errors=True)
         with open(chosen, 'w', encoding='utf-8') as f:

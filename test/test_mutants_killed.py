@@ -16,7 +16,7 @@ import pytest
 from ext_observer.core.ahrs import uncertainty_kernel
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, GRAVITY, UncertaintyParams
-from ext_observer.pipeline.pairing import StepPairer
+from ext_observer.pipeline.pairing import BACKWARD_JUMP, StepPairer
 
 MS = 1_000_000
 S = 1_000_000_000
@@ -186,3 +186,47 @@ def test_the_one_call_sample_step_refuses_what_it_cannot_run():
         outcome = step(copy.copy(est.flat_state), copy.copy(tracker.state), cov, *turn, 0.01,
                        max_residual)[0]
         assert outcome == expected
+
+
+# The pairing rules at their edges (mutmut's survivors on pairing.py) --------------
+
+def test_a_sample_the_caller_rejects_is_received_and_dropped_with_its_reason():
+    pairer = StepPairer()
+    for count in (1, 2):
+        assert pairer.reject('increment', 'non_finite_increment') == 'non_finite_increment'
+        assert pairer.received['increment'] == count
+        assert pairer.drops['non_finite_increment'] == count
+    assert pairer.received['measurement'] == 0
+    assert pairer.accounted('increment') == 2
+
+
+def test_a_sample_backward_by_backward_jump_is_stale_and_one_nanosecond_more_a_jump():
+    pairer = StepPairer(timeout=0, backward_jump=1 * S)
+    t = 10 * S
+    pairer.add_angular_velocity(t, (0.1, 0.0, 0.0), 0)
+    assert pairer.add_angular_velocity(t - 1 * S, (0.1, 0.0, 0.0), 0) == 'stale_increment'
+    assert pairer.events['backward_jumps'] == 0
+    for count in (1, 2):
+        t -= 1 * S + 1
+        assert pairer.add_angular_velocity(t, (0.1, 0.0, 0.0), 0) == BACKWARD_JUMP
+        assert pairer.events['backward_jumps'] == count
+
+
+def test_a_field_at_stamp_1_is_taken_and_one_backward_by_backward_jump_is_stale():
+    pairer = StepPairer(timeout=0, backward_jump=1 * S)
+    assert pairer.add_field(1, (2e-5, 0.0, -4e-5)) is None
+    assert pairer.add_field(3 * S, (2e-5, 0.0, -4e-5)) is None
+    assert pairer.add_field(2 * S, (2e-5, 0.0, -4e-5)) == 'stale_measurement'
+    assert pairer.add_field(2 * S - 1, (2e-5, 0.0, -4e-5)) is None  # a jump back: taken
+    assert pairer.field_stamp == 2 * S - 1
+
+
+@pytest.mark.parametrize('constant_dt', [0.0, 0.005])
+def test_arrival_order_takes_a_repeated_stamp_only_with_a_constant_dt(constant_dt):
+    # imu_tools' constant_dt (i30): with arrival_order and a constant_dt > 0
+    # every sample is taken in the order it comes; without a constant_dt the
+    # stamps rule (a repeated one is a duplicate).
+    pairer = StepPairer(timeout=0, constant_dt=constant_dt, arrival_order=True)
+    pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0)
+    outcome = pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0)
+    assert outcome == (None if constant_dt > 0.0 else 'duplicate_increment')
