@@ -190,9 +190,9 @@ def test_the_fetch_runs_on_the_standard_library_alone(tmp_path):
     assert done.returncode == 0 and 'EXT_OBSERVER_BROAD_URL' in done.stdout
 
 
-def test_trials_read_in_a_child_meanwhile_equal_those_read_here(tmp_path):
-    # The broad command reads the trials in a forked child while it loads
-    # its kernels (broad.data.load_trials): the same arrays as load_trial.
+def test_trials_read_after_other_work_equal_those_read_alone(tmp_path):
+    # The broad command loads its kernels, then reads the trials
+    # (broad.data.load_trials): the same arrays as load_trial.
     for i, name in enumerate(ALL[:3]):
         _write_trial(str(tmp_path / f'{name}.hdf5'), n=40 + i)
     found = broad.find_trials(str(tmp_path))

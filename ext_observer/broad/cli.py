@@ -260,13 +260,13 @@ def _read(folder, args, progress):
                          f'{os.path.join(folder, "data_hdf5")}: {HOW_TO_GET}')
     found = find_trials(folder, args.trials)
     start = time.perf_counter()
-    # The estimator's compiled kernels load (numba's import and cache) on
-    # one core while the trials are read on the other.
+    # The estimator's compiled kernels load (numba's import and cache)
+    # before the trials are read, so the estimates start at once after.
     trials = load_trials(found, meanwhile=preload)
     if args.head:
         trials = [t.head(args.head) for t in trials]
-    progress(f'{len(trials)} trials read in {time.perf_counter() - start:.1f} s (and the '
-             'kernels loaded meanwhile)')
+    progress(f'{len(trials)} trials read in {time.perf_counter() - start:.1f} s (the '
+             'kernels loaded first)')
     groups = find_groups(folder, [t.name for t in trials], os.path.dirname(found[0][1]))
     return trials, groups
 

@@ -17,7 +17,6 @@ import fnmatch
 import glob
 import json
 import math
-import mmap
 import os
 
 import numpy as np
@@ -217,14 +216,12 @@ def load_trial(path, name=None):
 
 def load_trials(found, meanwhile=None):
     """
-    Read trials into :class:`Trial` objects while this process does something else.
+    Read trials into :class:`Trial` objects, after ``meanwhile()``.
 
-    A forked child reads the arrays into memory shared with this process
-    (their shapes are read here first), while this process runs
-    ``meanwhile()``: the command loads its compiled kernels (numba's import
-    and cache, about as long as reading BROAD) on the other core. Where
-    forking is not possible, or the child fails, the trials are read here
-    after ``meanwhile()``, as :func:`load_trial` reads them.
+    The broad command passes the loading of its compiled kernels as
+    ``meanwhile``. Reading in a forked child while they load was tried and
+    measured slower on these shared cores (docs/compiled.md), so the trials
+    are read here, as :func:`load_trial` reads them.
 
     Parameters
     ----------
@@ -237,45 +234,9 @@ def load_trials(found, meanwhile=None):
     list of Trial
 
     """
-    h5py = _h5py()
-    layout, offset = [], 0
-    for name, path in found:
-        with h5py.File(path, 'r') as f:
-            rate = _checked(f, path)
-            arrays = []
-            for key in _KEYS:
-                dtype, shape = np.dtype(f[key].dtype), f[key].shape
-                arrays.append((key, dtype, shape, offset))
-                offset += -(-int(np.prod(shape)) * dtype.itemsize // 64) * 64
-        layout.append((name, path, rate, arrays))
-    pid = None
-    if len(found) > 1 and hasattr(os, 'fork'):
-        shared = mmap.mmap(-1, max(offset, 1))  # anonymous, shared with a child
-        pid = os.fork()
-        if pid == 0:  # the child: fill the shared buffer, then leave at once
-            status = 1
-            try:
-                for name, path, rate, arrays in layout:
-                    with h5py.File(path, 'r') as f:
-                        for key, dtype, shape, start in arrays:
-                            f[key].read_direct(_view(shared, dtype, shape, start))
-                status = 0
-            finally:
-                os._exit(status)
-    try:
-        if meanwhile is not None:
-            meanwhile()
-    finally:
-        failed = pid is None or os.waitpid(pid, 0)[1] != 0
-    if failed:
-        return [load_trial(path, name) for name, path in found]
-    return [Trial(name, *(_view(shared, *spec[1:]) for spec in arrays), rate)
-            for name, path, rate, arrays in layout]
-
-
-def _view(buffer, dtype, shape, start):
-    count = int(np.prod(shape))
-    return np.frombuffer(buffer, dtype=dtype, count=count, offset=start).reshape(shape)
+    if meanwhile is not None:
+        meanwhile()
+    return [load_trial(path, name) for name, path in found]
 
 
 # --- the groups ------------------------------------------------------------

@@ -8,7 +8,6 @@ defaults); the anchors run one recording per task, in processes when
 the per-sample errors of one trial (for the figure) are kept.
 """
 
-import multiprocessing
 import sys
 import time
 
@@ -134,26 +133,14 @@ def _run_ours(trials, modes, plain, workers, result, keep, scored, progress, par
             keep(algorithm, mode, name, q, scores)
 
 
-# What the forked scorers read (set for the time of _score_all): no copies.
-_SCORING = None
-
-
-def _score_one(i):
-    mode, name, q = _SCORING[0][i]
-    return _SCORING[1](name, q)
-
-
 def _score_all(streams, scored, workers):
-    """``scored(name, q)`` of every stream, in order; in ``workers`` forked processes."""
-    global _SCORING
-    if workers <= 1 or len(streams) < 2:
-        return [scored(name, q) for _, name, q in streams]
-    _SCORING = (streams, scored)
-    try:
-        with multiprocessing.get_context('fork').Pool(min(workers, len(streams))) as pool:
-            return pool.map(_score_one, range(len(streams)), chunksize=4)
-    finally:
-        _SCORING = None
+    """
+    ``scored(name, q)`` of every stream, in order, in this process.
+
+    Scoring in forked workers was tried and measured slower on these shared
+    cores (docs/compiled.md); ``workers`` is kept for the callers.
+    """
+    return [scored(name, q) for _, name, q in streams]
 
 
 def _anchor_task(task):
