@@ -18,8 +18,8 @@ one estimator, not two copies to keep in sync; the two agree to rounding
 of its own (``S_INIT``: the estimate exists; ``S_HAS_REF``: the field
 references exist).
 
-The maths, step by step, is :mod:`~ext_observer.core.ahrs.estimator`'s docstring;
-here each function says which step it is. Quaternions ``(w, x, y, z)``,
+The maths, step by step, is docs/raw_imu.md's ("The estimator, step by
+step"); here each function says which step it is. Quaternions ``(w, x, y, z)``,
 sensor → ENU.
 """
 

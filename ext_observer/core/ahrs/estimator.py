@@ -1,81 +1,14 @@
 """
-Attitude from a raw IMU: gyro + accelerometer (+ magnetometer), ambient form.
+Attitude from a raw IMU, gyro + accelerometer (+ magnetometer): :class:`AhrsObserver`.
 
-The estimate ``q̂`` lives in R⁴ as in the paper's observer; nothing here
-renormalizes it. Each sample runs three steps, each a short function:
-
-``update_gyr``
-    Propagation with the bias-corrected body-frame increment,
-    ``p = q̂ ⊗ exp((ω − b̂) dt / 2)``, then the extension term of
-    Corollary 1, ``p − α ∇V(p)`` with ``V(x) = (x̄x − 1)²``, which pulls the
-    estimate back towards S³ (``|exp(·)| = 1``, so the gyro step preserves
-    ``V`` and the theorem applies with the S³ certificate).
-``update_acc``
-    Inclination. The specific force is rotated into the world frame with the
-    current estimate and low-pass filtered there (second-order Butterworth,
-    time constant ``tau_acc``); the filter's states are rotated along with
-    every correction, so they live in a frame that only the gyro moves and
-    translational accelerations average out. The measurement is
-    ``y = δ ⊗ q̂``, with ``δ`` the rotation that makes the filtered vector
-    vertical, and the update is the paper's Luenberger form with a scalar
-    gain, ``q̂ + κ_a (y − q̂)``.
-``update_mag``
-    Heading only. The field is rotated into the world frame and its
-    horizontal direction gives the heading error ``ψ``; the measurement is
-    ``y = R_z(ψ) ⊗ q̂`` (a rotation about the world vertical, so a disturbed
-    magnetometer can never tilt the estimate), with gain ``κ_m`` from
-    ``tau_mag``. A field whose norm or dip angle leaves its learned reference
-    is rejected; a new field that stays consistent while the body moves is
-    accepted after ``mag_new_time``.
-
-The gyro bias is learned at rest (rest detected from the gyro and the
-accelerometer) and, with ``tau_bias > 0`` (the default), in motion by a
-Kalman filter on the bias (VQF's idea; its own 3×3 covariance, σ
-``bias_std``): a bias error ``β`` turns the estimate by ``R β dt`` per
-sample, the inclination corrections take it back through the
-accelerometer's low-pass, so the correction rate measures ``β`` through
-the low-passed ``R`` (in 9D the heading's corrections through its vertical
-row); see docs/raw_imu.md for what 6D cannot tell apart.
-
-The start does not rest on one sample: for the first ``tau_acc`` seconds
-the inclination follows the running mean of the world-frame specific force
-(VQF starts its low-pass so), then the low-pass, steady at that mean; the
-bias in motion learns once that low-pass has settled (one ``tau_acc`` more).
-Field references taken from the first field are trusted no longer than
-fields have confirmed them. A gyro at its range (``gyro_range``, or a rate
-stuck at its peak) is counted (``clipped``), widens the covariance
-(``clip_variance``), and the inclination and heading start again from their
-running means (docs/raw_imu.md#wherever-the-robot-starts).
-
-In 9D the magnetometer is calibrated online (``mag_cal``, on by default):
-:class:`~ext_observer.core.ahrs.magcal.MagCalibrator` learns hard and soft
-iron from the fields and the gyro; the heading waits for it (gyro-held)
-and follows the calibrated field once it has converged. The phases are
-docs/calibration.md's ("Start-up: the heading waits for the calibration");
-``calibration_state`` says which one runs, and
-:meth:`AhrsObserver.load_calibration` starts from a saved calibration.
-
-Credit: several ideas here are VQF's (D. Laidig and T. Seel, "VQF: Highly
-accurate IMU orientation estimation with bias estimation and magnetic
-disturbance rejection", Information Fusion 90, 2023): the parameter set and
-its first defaults (time constants in seconds, thresholds in physical
-units), the accelerometer low-passed in a frame that only the gyro moves
-(VQF's inertial frame), rest detection from the low-passed gyro and
-accelerometer with the bias learned at rest, and the rejection of a field
-whose norm or dip leaves its learned reference, with a candidate field that
-is accepted after it has lasted while the body turns. The equations and the
-code are ours (the extension term and the Luenberger form are the paper's).
-
-Conventions: quaternions scalar first ``(w, x, y, z)``, sensor → world; the
-world frame is ENU (x east, y north, z up, REP-103); at rest the
-accelerometer reads about ``+9.81`` along the world vertical. Angular rate in
-rad/s, acceleration in m/s², the magnetic field in any unit (only its
-direction and its norm relative to the reference are used), time in s.
-
-The steps are written once, on a flat state, in
-:mod:`~ext_observer.core.ahrs.ahrs_kernel` (plain or compiled: the same
-estimates); :class:`AhrsObserver` wraps them for one estimate or a batch
-of ``(B,)`` arrays. Its parameters: :class:`AhrsParams`.
+The estimate ``q̂`` lives in R⁴ as in the paper's observer, held near S³ by
+the extension term and never renormalized. Each sample runs three steps,
+gyro, accelerometer (inclination) and magnetometer (heading only), written
+once on a flat state in :mod:`~ext_observer.core.ahrs.ahrs_kernel` (plain or
+compiled: the same estimates); this class wraps them for one estimate or a
+batch of ``(B,)`` arrays. The steps, the credit to VQF and the conventions
+(``(w, x, y, z)``, sensor → ENU, SI units) are docs/raw_imu.md's
+("The estimator, step by step"); the calibration's phases docs/calibration.md's.
 """
 
 import math
