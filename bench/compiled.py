@@ -62,7 +62,7 @@ def broad_figures(trials, progress=print):
     """Wall times on the trials (both modes) and the compiled/plain agreement."""
     from ext_observer.broad import score
     from ext_observer.broad.anchors import anchor_estimates
-    from ext_observer.core.ahrs.ahrs_batch import estimate_batch
+    from ext_observer.pipeline.batch import estimate_batch
     from ext_observer.pipeline.kernel_cache import load
     load()  # warm
     rate = trials[0].rate

@@ -18,7 +18,7 @@ import pytest
 
 from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
-from ext_observer.core.ahrs.ahrs_batch import estimate_batch
+from ext_observer.pipeline.batch import estimate_batch
 
 DATA = os.path.join(os.path.dirname(__file__), 'data')
 EXCERPTS = sorted(f for f in os.listdir(DATA) if f.endswith('.npz'))

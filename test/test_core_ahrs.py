@@ -7,7 +7,7 @@ from numpy.testing import assert_allclose
 import pytest
 
 from ext_observer.core import quaternion as quat
-from ext_observer.core.ahrs.ahrs_batch import estimate_batch
+from ext_observer.pipeline.batch import estimate_batch
 from ext_observer.core.ahrs.estimator import (AhrsObserver, AhrsParams,
                                     initial_attitude, world_from_enu)
 

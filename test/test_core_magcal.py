@@ -17,7 +17,7 @@ import pytest
 
 from ext_observer.recordings import calibrate
 from ext_observer.core import quaternion as quat
-from ext_observer.core.ahrs.ahrs_batch import estimate_batch
+from ext_observer.pipeline.batch import estimate_batch
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.magcal import check_calibration, MagCalibrator
 from test_core_ahrs import errors_deg, FIELD, RATE, rotate, synthetic

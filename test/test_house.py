@@ -237,7 +237,8 @@ def test_the_core_manages_no_processes_and_imports_no_ros():
                      else [node.module or ''] if isinstance(node, ast.ImportFrom) else [])
             for name in names:
                 top = name.split('.')[0]
-                assert top not in ('subprocess', 'fcntl', 'signal', 'threading', 'rclpy'), (
+                assert top not in ('subprocess', 'multiprocessing', 'fcntl', 'signal',
+                                   'threading', 'rclpy'), (
                     f'{path.relative_to(PACKAGE)} imports {name}')
                 assert not top.endswith(('_msgs', '_srvs')), path
                 assert not name.startswith(('ext_observer.pipeline', 'ext_observer.nodes',

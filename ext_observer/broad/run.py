@@ -49,7 +49,7 @@ def estimate_ours(trials, modes, variant, workers=1, params=None):
         Wall clock of the call.
 
     """
-    from ext_observer.core.ahrs.ahrs_batch import estimate_batch
+    from ext_observer.pipeline.batch import estimate_batch
     streams = [(t, m) for m in modes for t in trials]
     start = time.perf_counter()
     out = estimate_batch([t.gyr for t, _ in streams], [t.acc for t, _ in streams],

@@ -28,7 +28,7 @@ Rows without an estimate of their own
     The node publishes nothing for the first sample of a time line (it only
     sets ``t_0``) and for a dropped sample. So that every row has a unit
     quaternion, such a row repeats the latest estimate (before the first
-    one: the first), the rule :func:`~ext_observer.core.ahrs.ahrs_batch.estimate_batch`
+    one: the first), the rule :func:`~ext_observer.pipeline.batch.estimate_batch`
     applies to its inputs; :attr:`Recording.estimated` says which rows are
     the node's own estimates.
 """
@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from ext_observer.core.ahrs.ahrs_batch import hold_finite
+from ext_observer.pipeline.batch import hold_finite
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck

@@ -3,7 +3,7 @@ The raw-IMU estimator: numpy only (numba where installed), no ROS.
 
 ``estimator`` (AhrsObserver) wraps the steps of ``ahrs_kernel`` on a flat
 state whose fields ``layout`` declares once; ``ahrs_params`` the parameter
-table (rows of ``tunables``), ``ahrs_math`` frames and first attitude,
-``ahrs_batch`` many recordings. ``magcal*`` the online calibration,
+table (rows of ``tunables``), ``ahrs_math`` frames and first attitude.
+``magcal*`` the online calibration,
 ``uncertainty*`` the covariance, ``compiled`` the kernels compiled by numba.
 """

@@ -11,9 +11,9 @@ import multiprocessing
 
 import numpy as np
 
-from .ahrs_params import AhrsParams
-from .compiled import kernels
-from .estimator import AhrsObserver
+from ext_observer.core.ahrs.ahrs_params import AhrsParams
+from ext_observer.core.ahrs.compiled import kernels
+from ext_observer.core.ahrs.estimator import AhrsObserver
 
 __all__ = ['estimate_batch', 'hold_finite']
 
