@@ -227,3 +227,60 @@ def test_the_same_defaults_at_25_and_1000_hz():
     assert max(slow[-125:]) < 1.0 and max(fast[-5000:]) < 1.0
     assert abs(slow[-1] - fast[-1]) < 0.02
     assert np.abs(b_slow - b_fast).max() < 0.01 * DEG
+
+
+def test_a_field_rejected_for_60_s_becomes_the_references():
+    # Still for 30 s in one field (the references well confirmed), then the
+    # body, still, is in a field 10 % stronger and 20° off in heading for
+    # 90 s: it never turns, so no turn confirms the new field; after 60 s
+    # of rejection (the maximum rejection time) the references follow it
+    # and the heading with them.
+    new = rotated_field((0.0, 0.0, 1.0), math.radians(20.0), 1.1)
+    start = round(30.0 * RATE)
+
+    def field(k):
+        return FIELD if k < start else new
+
+    truth, gyr, acc, mag = simulate(still(120.0), field=field)
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True)
+    disturbed, heading = [], []
+    for k in range(len(gyr)):
+        q = est.update(gyr[k], acc[k], mag[k], DT)
+        disturbed.append(est.mag_disturbed)
+        heading.append(angle_deg(q, truth[k]))
+    assert not any(disturbed[:start])
+    assert all(disturbed[start + 1:start + round(59.0 * RATE)])
+    accepted = (start + round(59.0 * RATE) + first_index(disturbed[start + round(59.0 * RATE):],
+                                                         False)) * DT
+    assert 89.5 < accepted < 91.5
+    # Before: the heading held by the gyro (the truth's); after: it turns
+    # toward the new field's, 20° off the truth the simulation keeps
+    # (30 s later most of the way, at the heading's time constant).
+    assert heading[start + round(50.0 * RATE)] < 1.0
+    assert 15.0 < heading[-1] < 20.5
+
+
+def test_short_undisturbed_stretches_do_not_restart_the_rejection_time():
+    # As above, but the old field comes back for 0.5 s every 10 s (a body
+    # moving past the place it started): each good stretch takes back twice
+    # its length, so the new field is taken about 70 s after it appeared,
+    # where a timer restarted by any good field would never fire.
+    new = rotated_field((0.0, 0.0, 1.0), math.radians(20.0), 1.1)
+    start = round(30.0 * RATE)
+
+    def field(k):
+        if k < start:
+            return FIELD
+        return FIELD if ((k - start) % round(10.5 * RATE)) >= round(10.0 * RATE) else new
+
+    truth, gyr, acc, mag = simulate(still(130.0), field=field)
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True)
+    disturbed = []
+    for k in range(len(gyr)):
+        est.update(gyr[k], acc[k], mag[k], DT)
+        disturbed.append(est.mag_disturbed)
+    # The first new-field sample after acceptance that is not disturbed.
+    taken = [k for k in range(start, len(gyr))
+             if not disturbed[k] and field(k) is new]
+    assert taken, 'the new field was never taken'
+    assert 60.0 < (taken[0] - start) * DT < 80.0

@@ -101,6 +101,7 @@ S_GYR_LAST = AHRS.field('gyr_last', 3)  # the previous sample's rate, as measure
 S_GYR_PEAK = AHRS.field('gyr_peak')  # largest |rate| on any axis seen
 S_STUCK = AHRS.field('stuck', 3)  # samples each axis has repeated its rate at the peak
 S_REF_AGE = AHRS.field('ref_age')  # s of fields that confirmed the field references
+S_REJECTED = AHRS.field('rejected')  # s the field has been rejected as disturbed without a break
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 
@@ -126,6 +127,9 @@ _AT_RANGE = 1e-4
 # magnitude seen is stuck (a smooth peak of a quantized rate repeats once;
 # none of BROAD's 22 trials repeats twice).
 _STUCK = 2.0
+# s: a field rejected as disturbed for longer than this is the field (VQF's
+# maximum rejection time, Laidig & Seel 2023): the references follow it.
+_MAX_REJECTION = 60.0
 
 
 # --- arithmetic ------------------------------------------------------------------
@@ -193,6 +197,7 @@ def ahrs_reset(s):
     s[S_HAS_REF] = 0.0
     s[S_CAND_TIME] = 0.0
     s[S_MAG_USED] = 0.0
+    s[S_REJECTED] = 0.0
     _bias_forget(s)
     s[S_START] = 0.0
     s[S_START_N] = 0.0
@@ -665,7 +670,12 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     # than fields have confirmed the references: those taken from the
     # first field of a body that starts beside a magnet are not trusted
     # longer than the true field has been seen.
-    accept_new = disturbed and (s[S_CAND_TIME] >= min(s[P_MAG_NEW_TIME], s[S_REF_AGE]))
+    # A short undisturbed stretch takes back twice its length (VQF's rejection factor).
+    s[S_REJECTED] = s[S_REJECTED] + dt if disturbed else max(s[S_REJECTED] - 2.0 * dt, 0.0)
+    accept_new = disturbed and (s[S_CAND_TIME] >= min(s[P_MAG_NEW_TIME], s[S_REF_AGE])
+                                or s[S_REJECTED] >= _MAX_REJECTION)
+    if accept_new:
+        s[S_REJECTED] = 0.0
     if accept_new:
         ref_n, ref_d = s[S_CAND], s[S_CAND + 1]
         if s[S_REF_AGE] < s[P_MAG_NEW_TIME]:
