@@ -84,7 +84,7 @@ def test_the_estimators_fields_are_read_by_name():
 def _raw_imu_rows():
     from ext_observer.core.ahrs.ahrs_params import AHRS_TABLE
     from ext_observer.core.ahrs.uncertainty import UNCERTAINTY_TABLE
-    from ext_observer.pipeline.raw_imu import AHRS_PREFIX, COVARIANCE_PREFIX
+    from ext_observer.pipeline.imu_filter_parameters import AHRS_PREFIX, COVARIANCE_PREFIX
     return ([(AHRS_PREFIX, row) for row in AHRS_TABLE]
             + [(COVARIANCE_PREFIX, row) for row in UNCERTAINTY_TABLE])
 

@@ -39,7 +39,8 @@ from ext_observer.nodes.node_common import ParameterError
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS
 from ext_observer.nodes.observer_node import ObserverNode
-from ext_observer.pipeline.raw_imu import AHRS_PREFIX, RawImuEstimator
+from ext_observer.pipeline.imu_filter_parameters import AHRS_PREFIX
+from ext_observer.pipeline.raw_imu import RawImuEstimator
 from ros_helpers import installed, overrides, SECOND, values_of
 
 BEST_EFFORT = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)

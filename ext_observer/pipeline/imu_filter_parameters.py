@@ -17,18 +17,71 @@ ones: each a row of the core's table
 all. Plain data, no ROS: :mod:`ext_observer.nodes.imu_filter_node` declares them.
 """
 
-from ext_observer.core.ahrs.ahrs_params import AHRS_TABLE
+from ext_observer.core.ahrs.ahrs_params import AHRS_TABLE, AhrsParams
 from ext_observer.core.ahrs.estimator import WORLD_FRAMES
 from ext_observer.core.ahrs.magcal import check_calibration
-from ext_observer.core.ahrs.uncertainty import UNCERTAINTY_TABLE
+from ext_observer.core.ahrs.uncertainty import UNCERTAINTY_TABLE, UncertaintyParams
 from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_settings,
                                                    ParameterSpec, spec_from_tunable)
-from ext_observer.pipeline.raw_imu import (AHRS_PREFIX, ahrs_params, COVARIANCE_PREFIX,
-                                           uncertainty_params)
 
-__all__ = ['COMPLEMENTARY_UNUSED', 'COVARIANCE_MODES', 'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS',
-           'IMU_TOOLS_OPTIONS', 'IMU_TOOLS_UNUSED', 'MADGWICK_UNUSED', 'REPLACED_BY',
-           'covariance_estimated', 'covariance_text', 'imu_filter_settings', 'unused_text']
+__all__ = ['AHRS_PREFIX', 'COMPLEMENTARY_UNUSED', 'COVARIANCE_MODES', 'COVARIANCE_PREFIX',
+           'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'IMU_TOOLS_OPTIONS', 'IMU_TOOLS_UNUSED',
+           'MADGWICK_UNUSED', 'REPLACED_BY', 'ahrs_params', 'covariance_estimated',
+           'covariance_text', 'imu_filter_settings', 'uncertainty_params', 'unused_text']
+
+# The core's parameters are the node's parameters ahrs.<name>.
+AHRS_PREFIX = 'ahrs.'
+# The uncertainty model's are covariance.<name>.
+COVARIANCE_PREFIX = 'covariance.'
+
+
+def _prefixed(values, prefix, cls):
+    given = {name[len(prefix):]: value for name, value in values.items()
+             if name.startswith(prefix)}
+    try:
+        return cls(**given)
+    except ValueError as error:
+        raise ValueError(f'{prefix}*: {error}') from None
+
+
+def ahrs_params(values):
+    """
+    Return the core's parameters from the node's ``ahrs.*`` values.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter values by name (the node's).
+
+    Returns
+    -------
+    params : ext_observer.core.ahrs.estimator.AhrsParams
+
+    Raises
+    ------
+    ValueError
+        With the parameter's name and the core's reason.
+
+    """
+    return _prefixed(values, AHRS_PREFIX, AhrsParams)
+
+
+def uncertainty_params(values):
+    """
+    Return the uncertainty model's parameters from the node's ``covariance.*`` values.
+
+    Returns
+    -------
+    params : ext_observer.core.ahrs.uncertainty.UncertaintyParams
+
+    Raises
+    ------
+    ValueError
+        With the parameter's name and the reason.
+
+    """
+    return _prefixed(values, COVARIANCE_PREFIX, UncertaintyParams)
+
 
 # orientation_covariance of imu/data: the estimate's own, or orientation_stddev²;
 # 'auto' is 'fixed' when orientation_stddev is set to a positive value other

@@ -21,24 +21,19 @@ import math
 
 import numpy as np
 
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams, WORLD_FRAMES
+from ext_observer.core.ahrs.estimator import AhrsObserver, WORLD_FRAMES
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
-from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, covariance_out, UncertaintyParams
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, covariance_out
 from ext_observer.core.ahrs.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_OK, SAMPLE_RESIDUAL
 from ext_observer.core.validation import check_state
 from ext_observer.pipeline.guard import GUARD_REASONS
+from ext_observer.pipeline.imu_filter_parameters import ahrs_params, uncertainty_params
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
 
-__all__ = ['AHRS_PREFIX', 'COVARIANCE_PREFIX', 'Estimate', 'RESET_CAUSES', 'RawImuEstimator',
-           'RawImuPipeline', 'ahrs_params', 'heading_factor', 'pairing_settings',
-           'uncertainty_params']
-
-# The core's parameters are the node's parameters ahrs.<name>.
-AHRS_PREFIX = 'ahrs.'
-# The uncertainty model's are covariance.<name>.
-COVARIANCE_PREFIX = 'covariance.'
+__all__ = ['Estimate', 'RESET_CAUSES', 'RawImuEstimator', 'RawImuPipeline', 'heading_factor',
+           'pairing_settings']
 
 # Why the estimator restarted (the same causes as the nodes').
 RESET_CAUSES = ('backward_jump', 'clock_jump', 'forward_gap', 'service')
@@ -55,54 +50,6 @@ MAX_INCREMENT = 20.0
 # and the covariance of the orientation (9 floats, row-major, rad², about
 # world_frame's x, y, z axes).
 Estimate = namedtuple('Estimate', 'stamp state reason step covariance')
-
-
-def _prefixed(values, prefix, cls):
-    given = {name[len(prefix):]: value for name, value in values.items()
-             if name.startswith(prefix)}
-    try:
-        return cls(**given)
-    except ValueError as error:
-        raise ValueError(f'{prefix}*: {error}') from None
-
-
-def ahrs_params(values):
-    """
-    Return the core's parameters from the node's ``ahrs.*`` values.
-
-    Parameters
-    ----------
-    values : dict
-        Parameter values by name (the node's).
-
-    Returns
-    -------
-    params : ext_observer.core.ahrs.estimator.AhrsParams
-
-    Raises
-    ------
-    ValueError
-        With the parameter's name and the core's reason.
-
-    """
-    return _prefixed(values, AHRS_PREFIX, AhrsParams)
-
-
-def uncertainty_params(values):
-    """
-    Return the uncertainty model's parameters from the node's ``covariance.*`` values.
-
-    Returns
-    -------
-    params : ext_observer.core.ahrs.uncertainty.UncertaintyParams
-
-    Raises
-    ------
-    ValueError
-        With the parameter's name and the reason.
-
-    """
-    return _prefixed(values, COVARIANCE_PREFIX, UncertaintyParams)
 
 
 def _about_z(angle):
