@@ -5,7 +5,7 @@ import pathlib
 
 import pytest
 
-from ext_observer.core.ahrs import ahrs_kernel, magcal_layout, uncertainty_kernel
+from ext_observer.core.ahrs import ahrs_kernel, ahrs_layout, magcal_layout, uncertainty_kernel
 from ext_observer.core.ahrs.estimator import AhrsObserver
 from ext_observer.core.ahrs.layout import Layout
 
@@ -36,7 +36,7 @@ def _hand_numbered(folder):
 def test_the_kernels_slots_come_from_their_layout_tables():
     found = _hand_numbered(PACKAGE / 'core')
     assert len(found) <= 10, '\n'.join(found)
-    for module, layout, size in ((ahrs_kernel, ahrs_kernel.AHRS, ahrs_kernel.A_SIZE),
+    for module, layout, size in ((ahrs_layout, ahrs_layout.AHRS, ahrs_layout.A_SIZE),
                                  (magcal_layout, magcal_layout.MAGCAL, magcal_layout.MC_SIZE),
                                  (uncertainty_kernel, uncertainty_kernel.UNCERTAINTY,
                                   uncertainty_kernel.U_SIZE)):

@@ -25,87 +25,26 @@ sensor → ENU.
 
 import math
 
-from .layout import Layout
+from .ahrs_filters import clip, first_attitude, gain, rotate, rotation_matrix, steady
+# The layout's names (and bias_variance) are read from this module too: the
+# wrapper, the covariance and the tests see one module, plain or compiled.
+from .ahrs_layout import (  # noqa: F401
+                          AHRS, A_SIZE, C_BIAS_Q, C_BIAS_R, C_BW, C_DT, C_K_ACC, C_K_MAG, C_K_REF,
+                          C_K_REST, C_MAG_DT, MC0, PARAMETERS, P_ALPHA, P_BIAS_MAX,
+                          P_BIAS_SIGMA_MOTION, P_CAL_PERIOD, P_EXTENDED, P_GYRO_RANGE, P_HAS_CAL,
+                          P_MAG_DIP_TH, P_MAG_NEW_GYR, P_MAG_NEW_TIME, P_MAG_NORM_TH,
+                          P_MOTION_BIAS, P_REST_ACC, P_REST_GYR, P_REST_TIME, P_TAU_ACC,
+                          P_TAU_ACC_GAIN, P_TAU_BIAS, P_TAU_MAG, P_TAU_MAG_REF, P_TAU_REST,
+                          P_USE_MAG, S_ACC_STILL, S_BIAS, S_BIAS_P, S_CAL_LOADED, S_CAL_MOVED,
+                          S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN, S_CAL_WAIT, S_CAND, S_CAND_TIME,
+                          S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_HAS_REF, S_INIT, S_LP,
+                          S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REJECTED, S_REST,
+                          S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N, S_STUCK)
+from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F401
+                          learn_bias, rlp_steady)
 from .magcal_kernel import (MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn,
                             mc_restart)
 
-# --- the layout ----------------------------------------------------------------
-
-AHRS = Layout()
-# Parameters: AhrsParams's of the same name (set once by the wrapper).
-P_ALPHA = AHRS.parameter('alpha')
-P_TAU_ACC = AHRS.parameter('tau_acc')
-P_TAU_ACC_GAIN = AHRS.parameter('tau_acc_gain')
-P_TAU_MAG = AHRS.parameter('tau_mag')
-P_TAU_BIAS = AHRS.parameter('tau_bias')
-P_BIAS_MAX = AHRS.parameter('bias_max')
-P_REST_GYR = AHRS.parameter('rest_gyr')
-P_REST_ACC = AHRS.parameter('rest_acc')
-P_REST_TIME = AHRS.parameter('rest_time')
-P_TAU_REST = AHRS.parameter('tau_rest')
-P_MAG_NORM_TH = AHRS.parameter('mag_norm_th')
-P_MAG_DIP_TH = AHRS.parameter('mag_dip_th')
-P_MAG_NEW_TIME = AHRS.parameter('mag_new_time')
-P_MAG_NEW_GYR = AHRS.parameter('mag_new_gyr')
-P_TAU_MAG_REF = AHRS.parameter('tau_mag_ref')
-# Parameters the wrapper derives.
-P_USE_MAG = AHRS.field('use_mag')
-P_EXTENDED = AHRS.field('extended')  # variant 'extended' (1) or 'plain' (0)
-P_HAS_CAL = AHRS.field('has_cal')  # a magnetometer calibration runs (mag_cal and 9D)
-P_CAL_PERIOD = AHRS.field('cal_period')  # s: learn from a field at most this often
-P_MOTION_BIAS = AHRS.field('motion_bias')  # tau_bias > 0
-# Coefficients of the current intervals (NaN: not computed yet).
-C_DT = AHRS.field('dt')
-C_BW = AHRS.field('bw', 5)  # b0, b1, b2, a1, a2
-C_K_ACC = AHRS.field('k_acc')
-C_K_REST = AHRS.field('k_rest')
-C_MAG_DT = AHRS.field('mag_dt')
-C_K_MAG = AHRS.field('k_mag')
-C_K_REF = AHRS.field('k_ref')
-# The estimate and what it remembers.
-S_INIT = AHRS.field('init')
-S_Q = AHRS.field('q', 4)
-S_BIAS = AHRS.field('bias', 3)
-S_REST = AHRS.field('rest')
-S_REST_TIME = AHRS.field('time_at_rest')
-S_REST_GYR = AHRS.field('rest_gyr_lp', 3)
-S_REST_ACC = AHRS.field('rest_acc_lp', 3)
-S_LP = AHRS.field('lp', 6)  # the Butterworth states s1 (3), s2 (3)
-S_ACC_STILL = AHRS.field('acc_still')
-S_MAG_DIST = AHRS.field('mag_dist')
-S_HAS_REF = AHRS.field('has_ref')
-S_REF = AHRS.field('ref', 2)  # norm, dip
-S_CAND = AHRS.field('cand', 2)  # norm, dip of a new field
-S_CAND_TIME = AHRS.field('cand_time')
-S_MAG_USED = AHRS.field('mag_used')
-S_CAL_TURN = AHRS.field('cal_turn', 4)  # body rotation since the field last learned from
-S_CAL_RATE = AHRS.field('cal_rate', 3)  # the latest angular rate, bias removed
-S_CAL_WAIT = AHRS.field('cal_wait')
-S_CAL_MOVED = AHRS.field('cal_moved')
-S_CAL_SINCE = AHRS.field('cal_since')
-S_CAL_LOADED = AHRS.field('cal_loaded')
-# --- issue 27: the bias in motion, the start, a clipped gyro -----------------------
-P_BIAS_SIGMA_INIT = AHRS.parameter('bias_sigma_init')  # rad/s: σ of the bias at first
-P_BIAS_SIGMA_MOTION = AHRS.parameter('bias_sigma_motion')  # rad/s: in steady motion
-P_GYRO_RANGE = AHRS.parameter('gyro_range')  # rad/s: the gyro's range (0: unknown)
-C_BIAS_Q = AHRS.field('bias_q')  # rad²/s²: the bias's random walk per sample
-C_BIAS_R = AHRS.field('bias_r')  # (rad/s)²·s: noise density of a correction rate
-S_BIAS_P = AHRS.field('bias_p', 6)  # the bias's covariance, xx xy xz yy yz zz
-S_RLP = AHRS.field('r_lp', 18)  # Butterworth states of R(q̂) (s1 9, s2 9), rows x, y, z
-S_RZLP = AHRS.field('rz_lp', 3)  # R(q̂)'s z row low-passed by the heading correction
-S_START = AHRS.field('start')  # s since the start (or a clipped stretch)
-S_START_N = AHRS.field('start_n')  # samples in the running mean
-S_CLIPS = AHRS.field('clips')  # clipped samples counted
-S_CLIPPED = AHRS.field('clipped')  # the last sample's clipped variance (0: not clipped)
-S_GYR_LAST = AHRS.field('gyr_last', 3)  # the previous sample's rate, as measured
-S_GYR_PEAK = AHRS.field('gyr_peak')  # largest |rate| on any axis seen
-S_STUCK = AHRS.field('stuck', 3)  # samples each axis has repeated its rate at the peak
-S_REF_AGE = AHRS.field('ref_age')  # s of fields that confirmed the field references
-S_REJECTED = AHRS.field('rejected')  # s the field has been rejected as disturbed without a break
-A_SIZE = AHRS.size
-MC0 = A_SIZE  # the calibration's block starts here
-
-PARAMETERS = tuple(AHRS.parameters)
 
 _TINY = 1e-300
 # After a calibration is applied, the heading's time constant is this share
@@ -116,8 +55,6 @@ _SQRT2 = math.sqrt(2.0)
 # σ of the bias learned at rest (rad/s), VQF's value: the low-passed rate of
 # a body at rest is a far better measurement than any correction in motion.
 _REST_BIAS_SIGMA = math.radians(0.03)
-# A correction rate further than 3 σ from what the bias predicts teaches nothing.
-_GATE = 9.0
 # Rad/s: no gyro's range is below this (the smallest common one, ±125 °/s, is
 # 2.18 rad/s): a rate stuck at its largest magnitude below it is not clipped.
 _CLIP_FLOOR = 2.0
@@ -133,53 +70,6 @@ _MAX_REJECTION = 60.0
 
 
 # --- arithmetic ------------------------------------------------------------------
-
-def rotate(w, x, y, z, vx, vy, vz):
-    """``q v q̄ / |q|²``: vector ``v`` rotated by the rotation of ``q ≠ 0``."""
-    # v(w² − |u|²) + 2(u·v)u + 2w(u × v), over |q|².
-    n2 = w * w + x * x + y * y + z * z
-    s = (w * w - x * x - y * y - z * z)
-    d = 2.0 * (x * vx + y * vy + z * vz)
-    w2 = 2.0 * w
-    cx = y * vz - z * vy
-    cy = z * vx - x * vz
-    cz = x * vy - y * vx
-    return ((s * vx + d * x + w2 * cx) / n2,
-            (s * vy + d * y + w2 * cy) / n2,
-            (s * vz + d * z + w2 * cz) / n2)
-
-
-def _clip(v, lo, hi):
-    return lo if v < lo else hi if v > hi else v
-
-
-def _gain(tau, dt):
-    """Per-sample gain of a first-order filter with time constant ``tau``."""
-    return 1.0 - math.exp(-dt / tau)
-
-
-def first_attitude(ax, ay, az, has_mag, mx, my, mz, use_mag):
-    """
-    A first attitude from gravity (and the field's heading), ENU: a unit quaternion.
-
-    Without a field (``has_mag`` 0) the heading is that of the smallest
-    rotation taking the accelerometer's axis to the vertical.
-    """
-    n = math.sqrt(ax * ax + ay * ay + az * az)
-    n = n if n > 0.0 else 1.0
-    ax, ay, az = ax / n, ay / n, az / n
-    w, x, y = 1.0 + az, ay, -ax
-    d = math.sqrt(w * w + x * x + y * y)
-    flip = d < 1e-9
-    d = 1.0 if flip else d
-    w, x, y = (0.0, 1.0, 0.0) if flip else (w / d, x / d, y / d)
-    z = 0.0 * w
-    if not has_mag:
-        return w, x, y, z
-    hx, hy, _ = rotate(w, x, y, z, mx, my, mz)
-    psi = math.atan2(hx, hy) if use_mag else 0.0
-    c, s = math.cos(0.5 * psi), math.sin(0.5 * psi)
-    return c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w
 
 
 # --- state -----------------------------------------------------------------------
@@ -198,7 +88,7 @@ def ahrs_reset(s):
     s[S_CAND_TIME] = 0.0
     s[S_MAG_USED] = 0.0
     s[S_REJECTED] = 0.0
-    _bias_forget(s)
+    bias_forget(s)
     s[S_START] = 0.0
     s[S_START_N] = 0.0
     s[S_CLIPPED] = 0.0
@@ -229,8 +119,8 @@ def ahrs_coefficients(s, dt):
     s[C_BW + 2] = b0
     s[C_BW + 3] = 2.0 * (wc * wc - 1.0) / a0
     s[C_BW + 4] = (1.0 - k + wc * wc) / a0
-    s[C_K_ACC] = _gain(s[P_TAU_ACC_GAIN], dt)
-    s[C_K_REST] = _gain(s[P_TAU_REST], dt)
+    s[C_K_ACC] = gain(s[P_TAU_ACC_GAIN], dt)
+    s[C_K_REST] = gain(s[P_TAU_REST], dt)
     # The bias in motion: its σ would grow to bias_sigma_motion in tau_bias
     # alone, and a correction rate's noise density makes that σ the steady
     # one (and tau_bias the steady time constant of the estimate).
@@ -243,8 +133,8 @@ def ahrs_coefficients(s, dt):
 def ahrs_mag_coefficients(s, dt):
     """The heading's and the field references' gains for the field interval ``dt``."""
     s[C_MAG_DT] = dt
-    s[C_K_MAG] = _gain(s[P_TAU_MAG], dt)
-    s[C_K_REF] = _gain(s[P_TAU_MAG_REF], dt)
+    s[C_K_MAG] = gain(s[P_TAU_MAG], dt)
+    s[C_K_REF] = gain(s[P_TAU_MAG_REF], dt)
 
 
 # --- the three steps ---------------------------------------------------------------
@@ -273,43 +163,6 @@ def ahrs_update(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
     return s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
 
 
-def _steady(s, i, vx, vy, vz):
-    """The Butterworth states at ``s[i:i+3]``, ``s[i+3:i+6]`` steady for a constant ``v``."""
-    b1, b2, a1, a2 = s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
-    # Steady state of the transposed direct form II for a constant input.
-    s[i + 3] = (b2 - a2) * vx
-    s[i + 4] = (b2 - a2) * vy
-    s[i + 5] = (b2 - a2) * vz
-    s[i] = (b1 - a1) * vx + s[i + 3]
-    s[i + 1] = (b1 - a1) * vy + s[i + 4]
-    s[i + 2] = (b1 - a1) * vz + s[i + 5]
-
-
-def _lowpass(s, i, vx, vy, vz):
-    """One step of the Butterworth whose states are at ``s[i:i+6]``; its output."""
-    b0, b1, b2, a1, a2 = s[C_BW], s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
-    fx, fy, fz = b0 * vx + s[i], b0 * vy + s[i + 1], b0 * vz + s[i + 2]
-    s[i] = b1 * vx - a1 * fx + s[i + 3]
-    s[i + 1] = b1 * vy - a1 * fy + s[i + 4]
-    s[i + 2] = b1 * vz - a1 * fz + s[i + 5]
-    s[i + 3] = b2 * vx - a2 * fx
-    s[i + 4] = b2 * vy - a2 * fy
-    s[i + 5] = b2 * vz - a2 * fz
-    return fx, fy, fz
-
-
-def _matrix(s):
-    """The rows of ``R(q̂)`` (sensor → world), ``q̂`` of any nonzero norm."""
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    n2 = w * w + x * x + y * y + z * z
-    return ((w * w + x * x - y * y - z * z) / n2, 2.0 * (x * y - w * z) / n2,
-            2.0 * (x * z + w * y) / n2,
-            2.0 * (x * y + w * z) / n2, (w * w - x * x + y * y - z * z) / n2,
-            2.0 * (y * z - w * x) / n2,
-            2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
-            (w * w - x * x - y * y + z * z) / n2)
-
-
 def _restart_mean(s):
     """Start (again) from a running mean of the vertical: a start, or a clipped gyro."""
     s[S_START] = 0.0
@@ -325,7 +178,7 @@ def _init_filters(s, gx, gy, gz, ax, ay, az):
     s[S_LP + 1] = vy
     s[S_LP + 2] = vz
     _restart_mean(s)
-    r = _matrix(s)
+    r = rotation_matrix(s)
     for j in range(3):
         s[S_RZLP + j] = r[6 + j]
     s[S_GYR_LAST] = gx
@@ -453,9 +306,9 @@ def _detect_rest(s, gx, gy, gz):
     # as in motion.
     kr = k if rest else 0.0
     m = s[P_BIAS_MAX]
-    s[S_BIAS] = _clip(bx + kr * mx, -m, m)
-    s[S_BIAS + 1] = _clip(by + kr * my, -m, m)
-    s[S_BIAS + 2] = _clip(bz + kr * mz, -m, m)
+    s[S_BIAS] = clip(bx + kr * mx, -m, m)
+    s[S_BIAS + 1] = clip(by + kr * my, -m, m)
+    s[S_BIAS + 2] = clip(bz + kr * mz, -m, m)
     if rest:
         # Its variance as that of a measurement whose steady σ is
         # _REST_BIAS_SIGMA's: (1 − k)² P + k² r, r = 2 σ² / k.
@@ -523,10 +376,10 @@ def ahrs_update_acc(s, ax, ay, az):
     if starting:
         if s[S_START] >= s[P_TAU_ACC]:
             # The mean hands over to the low-pass, steady at it.
-            _steady(s, S_LP, s[S_LP], s[S_LP + 1], s[S_LP + 2])
-            _rlp_steady(s)
+            steady(s, S_LP, s[S_LP], s[S_LP + 1], s[S_LP + 2])
+            rlp_steady(s)
         else:
-            _rlp_steady(s)
+            rlp_steady(s)
         return
     # The corrections measure a bias once the low-pass has settled from
     # the start, one tau_acc after the running mean handed over.
@@ -534,98 +387,10 @@ def ahrs_update_acc(s, ax, ay, az):
     if not settled:
         s[S_START] += dt
     if s[P_MOTION_BIAS] != 0.0:
-        _learn_bias(s, rw, rx, ry, dt, settled)
+        learn_bias(s, rw, rx, ry, dt, settled)
 
 
 # --- the bias in motion: a Kalman filter on the corrections ------------------------
-
-def _bias_forget(s):
-    """Nothing known of the bias beyond its estimate: σ = bias_sigma_init per axis."""
-    p0 = s[P_BIAS_SIGMA_INIT] * s[P_BIAS_SIGMA_INIT]
-    s[S_BIAS_P] = p0
-    s[S_BIAS_P + 1] = 0.0
-    s[S_BIAS_P + 2] = 0.0
-    s[S_BIAS_P + 3] = p0
-    s[S_BIAS_P + 4] = 0.0
-    s[S_BIAS_P + 5] = p0
-
-
-def _rlp_steady(s):
-    """The low-passed ``R(q̂)`` steady at the current one."""
-    r = _matrix(s)
-    for j in range(3):
-        _steady(s, S_RLP + 6 * j, r[3 * j], r[3 * j + 1], r[3 * j + 2])
-
-
-def bias_variance(s, i, j):
-    """Element ``(i, j)`` of the bias estimate's covariance, (rad/s)²."""
-    a, b = (i, j) if i <= j else (j, i)
-    return s[S_BIAS_P + (a * (5 - a)) // 2 + b]
-
-
-def _bias_grow(s):
-    """The bias may have wandered: its variance grows, up to bias_sigma_init² per axis."""
-    p0 = s[P_BIAS_SIGMA_INIT] * s[P_BIAS_SIGMA_INIT]
-    q = s[C_BIAS_Q]
-    for d in (0, 3, 5):
-        v = s[S_BIAS_P + d] + q
-        s[S_BIAS_P + d] = v if v < p0 else max(s[S_BIAS_P + d], p0)
-
-
-def _bias_measure(s, hx, hy, hz, y, r):
-    """
-    One scalar measurement ``y = h · (b − b̂) + e``, ``var(e) = r``: the Kalman update.
-
-    ``h`` in the body frame; the estimate is clipped to bias_max per axis;
-    an innovation beyond 3 σ is not used.
-    """
-    p00, p01, p02 = s[S_BIAS_P], s[S_BIAS_P + 1], s[S_BIAS_P + 2]
-    p11, p12, p22 = s[S_BIAS_P + 3], s[S_BIAS_P + 4], s[S_BIAS_P + 5]
-    ux = p00 * hx + p01 * hy + p02 * hz
-    uy = p01 * hx + p11 * hy + p12 * hz
-    uz = p02 * hx + p12 * hy + p22 * hz
-    den = hx * ux + hy * uy + hz * uz + r
-    if y * y > _GATE * den:
-        # Not a bias: a correction of an error the model has no room for
-        # (a start, a gyro that clipped, an estimate turned by hand).
-        return
-    kx, ky, kz = ux / den, uy / den, uz / den
-    m = s[P_BIAS_MAX]
-    s[S_BIAS] = _clip(s[S_BIAS] + kx * y, -m, m)
-    s[S_BIAS + 1] = _clip(s[S_BIAS + 1] + ky * y, -m, m)
-    s[S_BIAS + 2] = _clip(s[S_BIAS + 2] + kz * y, -m, m)
-    s[S_BIAS_P] = p00 - kx * ux
-    s[S_BIAS_P + 1] = p01 - kx * uy
-    s[S_BIAS_P + 2] = p02 - kx * uz
-    s[S_BIAS_P + 3] = p11 - ky * uy
-    s[S_BIAS_P + 4] = p12 - ky * uz
-    s[S_BIAS_P + 5] = p22 - kz * uz
-
-
-def _learn_bias(s, rw, rx, ry, dt, settled):
-    """
-    In motion: the inclination correction ``r`` measures the bias error.
-
-    A bias error ``β = b − b̂`` (body) turns the estimate by ``R β dt``
-    (world) per sample; the corrections, which follow the low-passed
-    specific force, take it back: their rate averages ``−LP(R) β``, with
-    ``LP`` the accelerometer's low-pass. So ``−c/dt`` measures ``β``
-    through the low-passed ``R`` (its horizontal rows), with the noise of
-    a correction rate. A Kalman filter per sample on the bias, as VQF's
-    (Laidig & Seel 2023); rest keeps its own, better measurement. Not
-    before the low-pass has ``settled`` from a start.
-    """
-    r = _matrix(s)
-    hx, hy, hz = _lowpass(s, S_RLP, r[0], r[1], r[2])
-    gx, gy, gz = _lowpass(s, S_RLP + 6, r[3], r[4], r[5])
-    _lowpass(s, S_RLP + 12, r[6], r[7], r[8])
-    _bias_grow(s)
-    if s[S_REST] != 0.0 or not settled:
-        return
-    # Small-angle world rotation vector of r: (2 rx / rw, 2 ry / rw, 0).
-    var = s[C_BIAS_R] / dt
-    _bias_measure(s, hx, hy, hz, -2.0 * rx / (rw * dt), var)
-    _bias_measure(s, gx, gy, gz, -2.0 * ry / (rw * dt), var)
 
 
 def ahrs_update_mag(s, mx, my, mz, dt):
@@ -724,12 +489,12 @@ def ahrs_update_mag(s, mx, my, mz, dt):
         # disturbed far more often and for longer than gravity's direction:
         # its correction rate is trusted as much less as its loop is slower
         # (noise density times tau_mag / tau_acc).
-        r = _matrix(s)
+        r = rotation_matrix(s)
         for j in range(3):
             s[S_RZLP + j] += k_mag * (r[6 + j] - s[S_RZLP + j])
         if (kap == k_mag and used * k_mag > 1.0 and s[S_REST] == 0.0
                 and s[S_START] >= 2.0 * s[P_TAU_ACC]):
-            _bias_measure(s, s[S_RZLP], s[S_RZLP + 1], s[S_RZLP + 2], -2.0 * rz / (rw * dt),
+            bias_measure(s, s[S_RZLP], s[S_RZLP + 1], s[S_RZLP + 2], -2.0 * rz / (rw * dt),
                           s[C_BIAS_R] * s[P_TAU_MAG] / (s[P_TAU_ACC] * dt))
 
 

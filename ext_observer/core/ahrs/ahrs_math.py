@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from .ahrs_kernel import first_attitude
+from .ahrs_filters import first_attitude
 
 __all__ = ['WORLD_FRAMES', 'check_dt', 'initial_attitude', 'world_from_enu']
 

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from . import uncertainty_kernel as _plain
-from .ahrs_kernel import rotate
+from .ahrs_filters import rotate
 from .tunables import Tunable, Tunables
 from .uncertainty_kernel import (
     GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,

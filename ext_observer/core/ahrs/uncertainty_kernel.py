@@ -20,8 +20,10 @@ the compiled kernels, one crossing from Python per sample.
 
 import math
 
-from .ahrs_kernel import (ahrs_update, bias_variance, P_MOTION_BIAS, rotate, S_CLIPPED, S_INIT,
-                          S_REST)
+from .ahrs_filters import rotate
+from .ahrs_kernel import ahrs_update
+from .ahrs_layout import P_MOTION_BIAS, S_CLIPPED, S_INIT, S_REST
+from .bias_kernel import bias_variance
 from .layout import Layout
 
 # Standard gravity, m/s²: turns the accelerometer's noise into a direction.
