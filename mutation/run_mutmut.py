@@ -44,7 +44,13 @@ MODULES = {
         'test/test_magcal_lag.py', 'test/test_magcal_gate.py', 'test/test_core_magcal.py'],
     'ext_observer/core/ahrs/ahrs_kernel.py': [
         'test/test_core_ahrs.py', 'test/test_core_ahrs_params.py',
-        'test/test_new_field_axes.py', 'test/test_magcal_lag.py'],
+        'test/test_core_ahrs_robust.py', 'test/test_new_field_axes.py',
+        'test/test_magcal_lag.py'],
+    # The kernel's shared arithmetic and its bias in motion (split from it).
+    'ext_observer/core/ahrs/ahrs_filters.py': [
+        'test/test_core_ahrs.py', 'test/test_core_ahrs_params.py'],
+    'ext_observer/core/ahrs/bias_kernel.py': [
+        'test/test_core_ahrs_robust.py', 'test/test_core_ahrs_params.py'],
 }
 # Tests that start ROS nodes or need numba, BROAD or the benchmark's
 # packages are left out of the subsets (minutes each, or not about the
