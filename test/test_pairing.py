@@ -584,7 +584,8 @@ rates = st.one_of(st.tuples(small_float, small_float, small_float),
 specific_forces = st.one_of(st.tuples(st.floats(-20, 20), st.floats(-20, 20), st.just(9.8)),
                             st.tuples(any_float, any_float, any_float),
                             st.sampled_from([(0.0, 0.0, 0.0), (1e-300, 0.0, 0.0),
-                                             (4e-6, 0.0, 0.0), (1e200, 1e200, 0.0)]))
+                                             (4e-6, 0.0, 0.0), (1e200, 1e200, 0.0),
+                                             (math.inf, 0.0, 9.8)]))
 usual_sample = st.tuples(st.just('sample'), st.just(5 * MS),
                          st.tuples(small_float, small_float, small_float),
                          st.tuples(st.floats(-20, 20), st.floats(-20, 20), st.just(9.8)))
@@ -593,6 +594,10 @@ sample_operations = st.lists(st.one_of(
     st.tuples(st.just('sample'), sample_stamps, rates, specific_forces),
     st.tuples(st.just('sample'), sample_stamps, rates, specific_forces),
     st.tuples(st.just('field'), sample_stamps, st.just((2e-5, 0.0, -4e-5)), st.none()),
+    # A measurement (none comes with the raw IMU; a caller that pairs them
+    # would send them): the one-call path must step aside.
+    st.tuples(st.just('measurement'), st.none(), st.just((1.0, 0.0, 0.0, 0.0)),
+              st.integers(-10 * MS, 10 * MS)),
     st.tuples(st.just('restart'), st.none(), st.none(), st.none())), max_size=60)
 
 
@@ -604,12 +609,16 @@ def _pairer_state(pairer):
 
 @settings(max_examples=400, deadline=None)
 @given(sample_operations, st.sampled_from([0.0, 0.004]),
-       st.sampled_from([40 * MS, 300 * MS]))
-def test_add_sample_is_add_angular_velocity_then_pop_ready(ops, constant_dt, max_dt):
+       st.sampled_from([40 * MS, 300 * MS]), st.booleans(), st.sampled_from([0, 0, 20 * MS]),
+       st.sampled_from([3.0, 3.0, 0.004]))
+def test_add_sample_is_add_angular_velocity_then_pop_ready(ops, constant_dt, max_dt, arrival,
+                                                           timeout, max_increment):
     # The raw IMU's one-call path decides the usual sample itself: every
-    # outcome, step and counter is that of the two general calls.
-    settings_ = dict(timeout=0, depth=4, backward_jump=1 * S, forward_gap=500 * MS,
-                     max_dt=max_dt, constant_dt=constant_dt, max_increment=3.0)
+    # outcome, step and counter is that of the two general calls, in any
+    # configuration (arrival order, a timeout, a small max_increment).
+    settings_ = dict(timeout=timeout, depth=4, backward_jump=1 * S, forward_gap=500 * MS,
+                     max_dt=max_dt, constant_dt=constant_dt, max_increment=max_increment,
+                     arrival_order=arrival)
     fast, general = StepPairer(**settings_), StepPairer(**settings_)
     stamp = 2 * S
     for kind, delta, value, acc in ops:
@@ -622,6 +631,9 @@ def test_add_sample_is_add_angular_velocity_then_pop_ready(ops, constant_dt, max
             assert list(steps) == general.pop_ready(0)
         elif kind == 'field':
             assert fast.add_field(stamp, value) == general.add_field(stamp, value)
+        elif kind == 'measurement':
+            at = stamp + acc   # around the last sample's stamp
+            assert fast.add_measurement(at, value) == general.add_measurement(at, value)
         else:
             assert fast.restart() == general.restart()
         assert _pairer_state(fast) == _pairer_state(general)

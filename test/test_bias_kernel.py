@@ -1,0 +1,95 @@
+"""
+The gyro bias filter in motion against its documented model, in matrix form (no ROS).
+
+``bias_kernel.py`` keeps the bias's covariance as six numbers and updates
+it one scalar measurement at a time; here the same steps are the textbook
+Kalman filter written with numpy matrices: the update ``K = P h / (hᵀ P h
++ r)``, ``b += K y``, ``P -= K hᵀ P``; the gate (an innovation beyond 3 σ
+teaches nothing); the clip at bias_max; the growth of the variances up to
+bias_sigma_init². Found missing by mutmut (docs/tests.md#mutmut): the
+end-to-end tests learn the bias, but a covariance off in one element only
+slowed them down.
+"""
+
+import numpy as np
+import pytest
+
+from ext_observer.core.ahrs import bias_kernel as kernel
+from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_Q, P_BIAS_MAX, P_BIAS_SIGMA_INIT,
+                                                S_BIAS, S_BIAS_P)
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+
+# Element (i, j) of the covariance -> its slot among the six (xx xy xz yy yz zz).
+SLOT = {(0, 0): 0, (0, 1): 1, (0, 2): 2, (1, 1): 3, (1, 2): 4, (2, 2): 5}
+
+
+def state(p, bias=(0.0, 0.0, 0.0), bias_max=1.0, sigma_init=0.1):
+    """An estimator's flat state holding the bias ``bias`` and covariance ``p``."""
+    s = AhrsObserver(AhrsParams(), use_mag=False).flat_state
+    for i in range(3):
+        s[S_BIAS + i] = bias[i]
+    for (i, j), k in SLOT.items():
+        s[S_BIAS_P + k] = p[i, j]
+    s[P_BIAS_MAX] = bias_max
+    s[P_BIAS_SIGMA_INIT] = sigma_init
+    return s
+
+
+def covariance(s):
+    return np.array([[kernel.bias_variance(s, i, j) for j in range(3)] for i in range(3)])
+
+
+def random_covariance(rng, scale):
+    a = rng.normal(size=(3, 3))
+    return scale * (a @ a.T + 0.5 * np.eye(3))
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_a_bias_measurement_is_the_kalman_update(seed):
+    rng = np.random.default_rng(seed)
+    p = random_covariance(rng, 1e-4)
+    h = rng.normal(size=3)
+    r = 1e-4 * rng.uniform(0.5, 2.0)
+    bias = rng.normal(scale=0.01, size=3)
+    y = 0.5 * np.sqrt(h @ p @ h + r)   # within the gate
+    s = state(p, bias)
+    kernel.bias_measure(s, h[0], h[1], h[2], y, r)
+    gain = p @ h / (h @ p @ h + r)
+    assert [s[S_BIAS + i] for i in range(3)] == pytest.approx(bias + gain * y, rel=1e-12)
+    expected = p - np.outer(gain, h @ p)
+    assert covariance(s) == pytest.approx(expected, rel=1e-9, abs=1e-18)
+    # bias_variance reads the one symmetric matrix, whichever the order.
+    assert np.array_equal(covariance(s), covariance(s).T)
+
+
+def test_an_innovation_beyond_3_sigma_teaches_nothing_and_the_bias_is_clipped():
+    p = np.diag([1e-4, 2e-4, 3e-4])
+    h = np.array([0.6, -0.8, 0.0])
+    r = 1e-4
+    sigma = np.sqrt(h @ p @ h + r)   # 0.0134 rad/s
+    s = state(p)
+    before = np.array(s, dtype=float)
+    kernel.bias_measure(s, h[0], h[1], h[2], 3.01 * sigma, r)
+    assert np.array_equal(np.array(s, dtype=float), before, equal_nan=True)
+    kernel.bias_measure(s, h[0], h[1], h[2], 2.99 * sigma, r)
+    assert s[S_BIAS] > 0.0 and s[S_BIAS + 1] < 0.0 and s[S_BIAS + 2] == 0.0
+    # A bias_max below what it would learn: held at the bound, per axis.
+    s = state(p, bias_max=1e-3)
+    kernel.bias_measure(s, h[0], h[1], h[2], 2.99 * sigma, r)
+    assert [s[S_BIAS + i] for i in range(3)] == [1e-3, -1e-3, 0.0]
+
+
+def test_the_bias_variances_grow_by_q_up_to_bias_sigma_init_squared():
+    p = np.array([[1e-6, 2e-7, 0.0], [2e-7, 5e-3, 1e-7], [0.0, 1e-7, 2e-2]])
+    s = state(p, sigma_init=0.1)   # bias_sigma_init² = 0.01
+    q = 1e-6
+    s[C_BIAS_Q] = q
+    kernel._bias_grow(s)
+    grown = covariance(s)
+    # xx grows by q; yy by q (below the cap); zz, above the cap already,
+    # stays as it is (the growth never lowers a variance); off-diagonal kept.
+    assert np.diag(grown) == pytest.approx([1e-6 + q, 5e-3 + q, 2e-2], rel=1e-12)
+    assert grown[0, 1] == 2e-7 and grown[1, 2] == 1e-7
+    s[S_BIAS_P + SLOT[1, 1]] = 0.01 - 0.5 * q
+    kernel._bias_grow(s)
+    assert kernel.bias_variance(s, 1, 1) == pytest.approx(0.01, rel=1e-12)
