@@ -142,29 +142,35 @@ def mutmut(tree, *args):
     return subprocess.run(command, cwd=tree, env=environment(tree))
 
 
+def results(tree):
+    """mutmut's ``(mutant, status)`` of every mutant of ``tree``."""
+    if not os.path.isdir(os.path.join(tree, 'mutants')):
+        return []
+    out = subprocess.run([os.path.join(os.path.dirname(sys.executable), 'mutmut'), 'results',
+                          '--all', 'true'], cwd=tree, env=environment(tree),
+                         capture_output=True, text=True).stdout
+    return [tuple(part.strip() for part in line.rsplit(':', 1))
+            for line in out.splitlines() if ':' in line]
+
+
+def survivors(tree):
+    return [name for name, status in results(tree) if status == 'survived']
+
+
 def report(tree):
     """Print mutmut's results of what has run in ``tree``, and the score."""
     if not os.path.isdir(os.path.join(tree, 'mutants')):
         print(f'{os.path.basename(tree)}: not run')
         return {}
-    out = subprocess.run([os.path.join(os.path.dirname(sys.executable), 'mutmut'), 'results',
-                          '--all', 'true'], cwd=tree, env=environment(tree),
-                         capture_output=True, text=True).stdout
     counts = {}
-    survivors = []
-    for line in out.splitlines():
-        if ':' not in line:
-            continue
-        name, status = (part.strip() for part in line.rsplit(':', 1))
+    for _, status in results(tree):
         counts[status] = counts.get(status, 0) + 1
-        if status == 'survived':
-            survivors.append(name)
     killed = counts.get('killed', 0) + counts.get('timeout', 0)
     judged = killed + counts.get('survived', 0)
     print(f'{os.path.basename(tree)}:', ', '.join(f'{k} {v}' for k, v in sorted(counts.items())))
     if judged:
         print(f'score: {killed} of {judged} killed ({100.0 * killed / judged:.1f} %)')
-    for name in survivors:
+    for name in survivors(tree):
         print(f'survived: {name}')
     return counts
 
@@ -174,6 +180,8 @@ def main(argv=None):
     parser.add_argument('modules', nargs='*', help='default: all of MODULES')
     parser.add_argument('--max-children', type=int, default=2)
     parser.add_argument('--report', action='store_true', help='only print the results so far')
+    parser.add_argument('--survivors', action='store_true',
+                        help='rerun only the survivors of the last run (after adding tests)')
     args = parser.parse_args(argv)
     chosen = []
     for given in args.modules or list(MODULES):
@@ -182,10 +190,14 @@ def main(argv=None):
             parser.error(f'{given}: not one of {sorted(MODULES)}')
         chosen += match
     for module in chosen:
+        tree = tree_of([module])
         if not args.report:
+            # Survivors of the last run, before prepare() copies the tests again.
+            names = survivors(tree) if args.survivors else []
             prepare([module])
-            mutmut(tree_of([module]), 'run', '--max-children', str(args.max_children))
-        report(tree_of([module]))
+            if not args.survivors or names:
+                mutmut(tree, 'run', '--max-children', str(args.max_children), *names)
+        report(tree)
 
 
 if __name__ == '__main__':

@@ -15,8 +15,10 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs import bias_kernel as kernel
-from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_Q, P_BIAS_MAX, P_BIAS_SIGMA_INIT,
-                                                S_BIAS, S_BIAS_P)
+from ext_observer.core.ahrs.ahrs_filters import lowpass
+from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_Q, C_BIAS_R, C_BW, P_BIAS_MAX,
+                                                P_BIAS_SIGMA_INIT, S_BIAS, S_BIAS_P, S_Q,
+                                                S_REST, S_RLP)
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 
 # Element (i, j) of the covariance -> its slot among the six (xx xy xz yy yz zz).
@@ -37,6 +39,13 @@ def state(p, bias=(0.0, 0.0, 0.0), bias_max=1.0, sigma_init=0.1):
 
 def covariance(s):
     return np.array([[kernel.bias_variance(s, i, j) for j in range(3)] for i in range(3)])
+
+
+def rotation_matrix_of(q):
+    w, x, y, z = q
+    return ((w * w + x * x - y * y - z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), (w * w - x * x + y * y - z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), (w * w - x * x - y * y + z * z))
 
 
 def random_covariance(rng, scale):
@@ -93,3 +102,62 @@ def test_the_bias_variances_grow_by_q_up_to_bias_sigma_init_squared():
     s[S_BIAS_P + SLOT[1, 1]] = 0.01 - 0.5 * q
     kernel._bias_grow(s)
     assert kernel.bias_variance(s, 1, 1) == pytest.approx(0.01, rel=1e-12)
+
+
+def test_forgetting_the_bias_leaves_bias_sigma_init_on_each_axis_and_nothing_between():
+    rng = np.random.default_rng(3)
+    s = state(random_covariance(rng, 1e-4), sigma_init=0.02)
+    kernel.bias_forget(s)
+    assert covariance(s) == pytest.approx(0.02 ** 2 * np.eye(3), rel=1e-12, abs=0.0)
+
+
+# A Butterworth low-pass with unit DC gain (test_ahrs_filters.py).
+COEFFICIENTS = (0.05, 0.09, 0.03, -1.3, 0.47)
+
+
+def attitude_state(q, p, rest=0.0):
+    s = state(p)
+    for i in range(4):
+        s[S_Q + i] = q[i]
+    for k, c in enumerate(COEFFICIENTS):
+        s[C_BW + k] = c
+    s[S_REST] = rest
+    s[C_BIAS_Q] = 1e-9
+    s[C_BIAS_R] = 1e-5
+    kernel.rlp_steady(s)
+    return s
+
+
+def test_in_motion_two_corrections_measure_the_bias_through_the_rows_of_r():
+    # learn_bias's model (its docstring): the variances grow, then the two
+    # horizontal corrections are the measurements −2 r_x / (r_w dt) and
+    # −2 r_y / (r_w dt) of the bias through the low-passed R's rows x and y,
+    # of variance bias_r / dt. At a steady attitude the low-pass is R.
+    rng = np.random.default_rng(11)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    p = random_covariance(rng, 1e-5)
+    dt, rw, rx, ry = 0.01, 1.0, 2e-6, -3e-6
+    s = attitude_state(q, p)
+    kernel.learn_bias(s, rw, rx, ry, dt, True)
+    r = np.reshape(rotation_matrix_of(q), (3, 3))
+    expected = attitude_state(q, p)
+    kernel._bias_grow(expected)
+    kernel.bias_measure(expected, *r[0], -2.0 * rx / (rw * dt), 1e-5 / dt)
+    kernel.bias_measure(expected, *r[1], -2.0 * ry / (rw * dt), 1e-5 / dt)
+    assert [s[S_BIAS + i] for i in range(3)] != [0.0, 0.0, 0.0]
+    assert [s[S_BIAS + i] for i in range(3)] == pytest.approx(
+        [expected[S_BIAS + i] for i in range(3)], rel=1e-9)
+    assert covariance(s) == pytest.approx(covariance(expected), rel=1e-9)
+    # The low-passed R stays R (all three rows, steady).
+    for j in range(3):
+        assert lowpass(s, S_RLP + 6 * j, *r[j]) == pytest.approx(r[j], rel=1e-9, abs=1e-12)
+    # At rest, or before the low-pass has settled: the variances grow, no
+    # measurement.
+    for rest, settled in ((1.0, True), (0.0, False)):
+        s = attitude_state(q, p, rest=rest)
+        kernel.learn_bias(s, rw, rx, ry, dt, settled)
+        grown = attitude_state(q, p, rest=rest)
+        kernel._bias_grow(grown)
+        assert [s[S_BIAS + i] for i in range(3)] == [0.0, 0.0, 0.0]
+        assert covariance(s) == pytest.approx(covariance(grown), rel=1e-12)

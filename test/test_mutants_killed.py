@@ -423,3 +423,34 @@ def test_the_measurements_of_a_step_after_its_first_are_dropped_at_its_release()
     assert step.measurement == Y
     assert pairer.drops['unpaired_measurement'] == 2
     assert pairer.waiting('measurement') == 1
+
+
+@pytest.mark.parametrize('constant_dt', [0.0, 0.004])
+def test_the_one_call_step_is_the_trapezoid_of_the_two_rates(constant_dt):
+    # Slow rates, so that an increment off by any factor still passes the
+    # bound and shows; over the stamps' 5 ms, or constant_dt when given.
+    pairer = StepPairer(timeout=0, constant_dt=constant_dt)
+    acc = (0.0, 0.0, 9.8)
+    pairer.add_sample(2 * S, (0.001, -0.002, 0.0), acc)
+    outcome, [step] = pairer.add_sample(2 * S + 5 * MS, (0.003, 0.0, 0.001), acc)
+    dt = constant_dt or 0.005
+    assert outcome is None
+    assert step.increment == pytest.approx((0.002 * dt, -0.001 * dt, 0.0005 * dt), rel=1e-12)
+
+
+def test_a_measurement_for_a_given_increment_already_released_is_stale():
+    # The step of 2 s went on without one: its measurement, late, is stale
+    # (not taken, not a duplicate); one for the next stamp is taken.
+    pairer = StepPairer(timeout=0)
+    pairer.add_increment(2 * S, (0.0, 0.0, 0.0), 0)
+    [step] = pairer.pop_ready(0)
+    assert step.measurement is None
+    assert pairer.add_measurement(2 * S, Y) == 'stale_measurement'
+    # The increment again, corrected or not, is a duplicate.
+    assert pairer.add_increment(2 * S, (0.0, 0.0, 0.0), 0) == 'duplicate_increment'
+    assert pairer.add_measurement(3 * S, Y) is None
+    assert pairer.add_increment(3 * S, (0.0, 0.0, 0.0), 0) is None
+    [step] = pairer.pop_ready(0)
+    assert step.measurement == Y
+    # Corrected, its stamp again is a duplicate.
+    assert pairer.add_measurement(3 * S, Y) == 'duplicate_measurement'
