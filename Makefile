@@ -138,9 +138,10 @@ hosts-report: $(RUNTIME_STAMP)
 # its tests (every one must be killed; about 5 minutes; MUTANTS="name ..."
 # runs some). `make mutation` runs mutmut over the raw-IMU kernels, the
 # calibration, the uncertainty and the pairing rules with their fast tests,
-# in out/mutmut/ (resumable; hours for all of it on 2 cores:
-# MUTATION_ARGS="pairing.py" runs one module, "--report" prints the score).
-# Neither is part of make test or CI.
+# one module after the other, each in out/mutmut/<module>/ (resumable; hours
+# for all of it on 2 cores: MUTATION_ARGS="pairing.py" runs one module,
+# "--report" prints the scores, "--survivors" reruns the survivors after
+# tests were added). Neither is part of make test or CI.
 MUTATION_STAMP := $(VENV)/.ext_observer-mutation
 MUTANTS ?=
 MUTATION_ARGS ?=

@@ -98,8 +98,10 @@ def test_a_steady_butterworth_holds_a_constant_input():
 @pytest.mark.parametrize('seed', range(3))
 def test_the_first_attitude_takes_gravity_up_and_the_field_north(seed):
     rng = np.random.default_rng(200 + seed)
-    for _ in range(5):
-        acc = rng.normal(size=3) * rng.uniform(0.5, 20.0)
+    # Norms below and above 1: m/s², or g, or anything.
+    for magnitude in (0.3, 1.0, 9.8, 20.0):
+        acc = rng.normal(size=3)
+        acc *= magnitude / np.linalg.norm(acc)
         field = rng.normal(size=3)
         q = np.array(f.first_attitude(*acc, 0.0, 0.0, 0.0, 0.0, 1.0))
         assert q @ q == pytest.approx(1.0, rel=1e-12)

@@ -100,8 +100,10 @@ def test_the_bias_variances_grow_by_q_up_to_bias_sigma_init_squared():
     assert np.diag(grown) == pytest.approx([1e-6 + q, 5e-3 + q, 2e-2], rel=1e-12)
     assert grown[0, 1] == 2e-7 and grown[1, 2] == 1e-7
     s[S_BIAS_P + SLOT[1, 1]] = 0.01 - 0.5 * q
+    s[S_BIAS_P + SLOT[2, 2]] = 1e-3
     kernel._bias_grow(s)
     assert kernel.bias_variance(s, 1, 1) == pytest.approx(0.01, rel=1e-12)
+    assert kernel.bias_variance(s, 2, 2) == pytest.approx(1e-3 + q, rel=1e-12)
 
 
 def test_forgetting_the_bias_leaves_bias_sigma_init_on_each_axis_and_nothing_between():
