@@ -271,6 +271,7 @@ def test_a_sample_at_stamp_1_after_a_later_one_is_a_backward_jump():
     # Stamp 1 ns is a stamp (only 0 and below are refused), here 10 s back.
     pairer = StepPairer(timeout=0)
     pairer.add_angular_velocity(10 * S, (0.1, 0.0, 0.0), 0)
+    assert pairer.add_angular_velocity(0, (0.1, 0.0, 0.0), 0) == 'zero_stamp_increment'
     assert pairer.add_angular_velocity(1, (0.1, 0.0, 0.0), 0) == BACKWARD_JUMP
     assert pairer.pending_stamp == 1
     fresh = StepPairer(timeout=0)
@@ -454,3 +455,8 @@ def test_a_measurement_for_a_given_increment_already_released_is_stale():
     assert step.measurement == Y
     # Corrected, its stamp again is a duplicate.
     assert pairer.add_measurement(3 * S, Y) == 'duplicate_measurement'
+
+
+def test_an_unknown_setting_is_refused_by_name():
+    with pytest.raises(TypeError, match="unknown setting 'max_gap'"):
+        StepPairer().configure(max_gap=1)
