@@ -460,3 +460,9 @@ def test_a_measurement_for_a_given_increment_already_released_is_stale():
 def test_an_unknown_setting_is_refused_by_name():
     with pytest.raises(TypeError, match="unknown setting 'max_gap'"):
         StepPairer().configure(max_gap=1)
+
+
+def test_a_default_pairer_refuses_a_measurement_off_unit_norm_by_more_than_10_percent():
+    pairer = StepPairer()
+    assert pairer.add_measurement(2 * S, (1.09, 0.0, 0.0, 0.0)) is None
+    assert pairer.add_measurement(3 * S, (1.12, 0.0, 0.0, 0.0)) == 'norm_out_of_tolerance'
