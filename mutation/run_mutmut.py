@@ -219,7 +219,7 @@ def main(argv=None):
             # Survivors of the last run, before prepare() copies the tests again.
             names = survivors(tree) if args.survivors else []
             prepare([module])
-            if args.sample:
+            if args.sample and not args.survivors:
                 names = sample(tree, args.sample, args.max_children)
             if not args.survivors or names:
                 mutmut(tree, 'run', '--max-children', str(args.max_children), *names)

@@ -466,3 +466,33 @@ def test_a_default_pairer_refuses_a_measurement_off_unit_norm_by_more_than_10_pe
     pairer = StepPairer()
     assert pairer.add_measurement(2 * S, (1.09, 0.0, 0.0, 0.0)) is None
     assert pairer.add_measurement(3 * S, (1.12, 0.0, 0.0, 0.0)) == 'norm_out_of_tolerance'
+
+
+def test_a_starts_variance_is_its_documented_model_then_decays_sample_by_sample():
+    # uncertainty_start's model (its docstring): until tau_acc, the running
+    # mean m of e = max(dz², (fx² + fy²)/2)/g² (and the first sample's e, if
+    # larger) owes atan(√max(m, e₁))² c/(c + t) per horizontal axis; then the
+    # low-pass forgets it by (1 − k)² per sample, to zero below 1e-16.
+    tracker = AttitudeUncertainty.for_estimator(AhrsParams(tau_acc=0.2), use_mag=False)
+    dt = 0.01
+    tracker.start(dt)
+    u = tracker.state
+    K, C = uncertainty_kernel, uncertainty_kernel.START_CORRELATION
+    u[K.U_START_T] = u[K.U_START_N] = u[K.U_START_M] = u[K.U_START_V] = u[K.U_START_F] = 0.0
+    forces = [(3.0, 0.0, GRAVITY)] + [(0.5, -0.3, GRAVITY + 0.2)] * 40
+    errors = [max((fz - GRAVITY) ** 2, 0.5 * (fx * fx + fy * fy)) / GRAVITY ** 2
+              for fx, fy, fz in forces]
+    tau, k = u[K.U_TAU_ACC], u[K.U_K_ACC]   # the accelerometer's low-pass (0.25 s here)
+    assert k == pytest.approx(1.0 - math.exp(-dt / tau), rel=1e-12)
+    phases = []
+    for n, f in enumerate(forces, start=1):
+        t, before = u[K.U_START_T], u[K.U_START_V]
+        K.uncertainty_start(u, dt, *f)
+        if t < tau:
+            a = math.atan(math.sqrt(max(np.mean(errors[:n]), errors[0])))
+            assert u[K.U_START_V] == pytest.approx(a * a * C / (C + t), rel=1e-9), n
+        else:
+            assert u[K.U_START_V] == pytest.approx((1.0 - k) ** 2 * before, rel=1e-12), n
+        phases.append(t < tau)
+    assert abs(sum(phases) - round(tau / dt)) <= 1 and not phases[-1]
+    assert u[K.U_START_V] > 1e-6
