@@ -271,9 +271,11 @@ def load_trials(found, meanwhile=None):
     finally:
         with os.fdopen(read_end, 'rb') as pipe:
             failure = pipe.read()
-        os.waitpid(pid, 0)
+        _, status = os.waitpid(pid, 0)
     if failure:
         raise pickle.loads(failure)
+    if status:  # ended without a word (a signal): the arrays are not all read
+        raise OSError(f'the process reading the trials ended abnormally (wait status {status})')
     k = len(_KEYS)
     return [Trial(name, *arrays[i * k:(i + 1) * k], rates[i])
             for i, (name, _) in enumerate(found)]
