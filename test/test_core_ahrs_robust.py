@@ -381,8 +381,8 @@ def test_after_a_start_beside_a_magnet_the_true_field_sets_the_heading():
 
 
 def test_young_references_give_way_to_a_field_with_outliers():
-    # The references come from a first 0.5 s in a field 8 % weaker; then the
-    # body turns in the true field, one sample in 20 of it 7 % stronger (off
+    # The references come from a first 0.5 s in a field 8 % weaker, turning;
+    # then the body turns on in the true field, one sample in 20 of it 7 % stronger (off
     # the candidate's 5 %). Confirmed for 0.5 s only, the references are
     # young: an outlier takes back twice its length of the candidate's time
     # instead of starting it over, and the true field replaces them in
@@ -404,3 +404,16 @@ def test_young_references_give_way_to_a_field_with_outliers():
     taken = [k for k in range(round(0.6 * RATE), len(gyr)) if not disturbed[k] and k % 20]
     assert taken and taken[0] * DT < 2.0
     assert not any(disturbed[k] for k in range(round(3.0 * RATE), len(gyr)) if k % 20)
+    # References confirmed at rest are not young: after 3 s still in the
+    # weaker field, the same turns leave them (the outliers start the
+    # candidate over), as fields seen at one place's rest should.
+    rest = round(3.0 * RATE)
+    truth, gyr, acc, mag = simulate(np.concatenate([still(3.0), turning(10.0, 0.5)]),
+                                    q0=qexp((0.2, 0.1, 0.0)),
+                                    field=lambda k: weak if k < rest else field(k))
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True)
+    disturbed = []
+    for k in range(len(gyr)):
+        est.update(gyr[k], acc[k], mag[k], DT)
+        disturbed.append(est.mag_disturbed)
+    assert all(disturbed[k] for k in range(rest + round(0.1 * RATE), len(gyr)) if k % 20)

@@ -40,7 +40,7 @@ from .ahrs_layout import (  # noqa: F401
                           S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_HAS_REF, S_INIT, S_LP,
                           S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REJECTED, S_REST,
                           S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N, S_STUCK,
-                          S_WAIT_N, S_WAIT_TURN)
+                          S_REF_REST, S_WAIT_N, S_WAIT_TURN)
 from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F401
                           learn_bias, rlp_steady)
 from .magcal_kernel import (MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn,
@@ -418,6 +418,7 @@ def ahrs_update_mag(s, mx, my, mz, dt):
         s[S_CAND + 1] = dip
         s[S_HAS_REF] = 1.0
         s[S_REF_AGE] = 0.0
+        s[S_REF_REST] = 0.0
     ref_n, ref_d = s[S_REF], s[S_REF + 1]
     th_n, th_d = s[P_MAG_NORM_TH], s[P_MAG_DIP_TH]
     disturbed = (abs(norm - ref_n) > th_n * ref_n) or (abs(dip - ref_d) > th_d)
@@ -426,10 +427,11 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     # the references reject the field, so that a field that passes the
     # references' test now and then is not started over each time). A field
     # off the candidate starts it over; while the references are young
-    # (fewer than mag_new_time seconds of fields have confirmed them: a
-    # start in motion takes them from one sample) it only takes back twice
-    # its length, as for the rejection time: the spread of one sample's
-    # norm does not keep them for ever.
+    # (confirmed by fewer than mag_new_time seconds of fields, none at rest:
+    # a start in motion takes them from one sample, while a rest shows the
+    # place's field without the motion's spread) it only takes back twice
+    # its length, as for the rejection time, so that the spread of a moving
+    # body's field does not keep one sample's references for ever.
     cand_n, cand_d = s[S_CAND], s[S_CAND + 1]
     consistent = (abs(norm - cand_n) < th_n * cand_n) and (abs(dip - cand_d) < th_d)
     gx, gy, gz = s[S_REST_GYR], s[S_REST_GYR + 1], s[S_REST_GYR + 2]
@@ -437,7 +439,7 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     if consistent:
         if turning:
             s[S_CAND_TIME] += dt
-    elif s[S_REF_AGE] < s[P_MAG_NEW_TIME]:
+    elif s[S_REF_REST] == 0.0 and s[S_REF_AGE] < s[P_MAG_NEW_TIME]:
         s[S_CAND_TIME] = max(s[S_CAND_TIME] - 2.0 * dt, 0.0)
     else:
         s[S_CAND_TIME] = 0.0
@@ -466,10 +468,13 @@ def ahrs_update_mag(s, mx, my, mz, dt):
             s[S_MAG_USED] = 0.0
             _forget_wait(s)
         s[S_REF_AGE] = s[S_CAND_TIME]
+        s[S_REF_REST] = 0.0
     disturbed = disturbed and not accept_new
     use = valid and not disturbed and s[P_USE_MAG] != 0.0
     if use:
         s[S_REF_AGE] += dt
+        if s[S_REST] != 0.0:
+            s[S_REF_REST] = 1.0
         s[S_REF] = ref_n + kr * (norm - ref_n)
         s[S_REF + 1] = ref_d + kr * (dip - ref_d)
     else:

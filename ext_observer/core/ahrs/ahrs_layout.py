@@ -87,6 +87,7 @@ S_REJECTED = AHRS.field('rejected')  # s the field has been rejected as disturbe
 # the wait would have given it, had they been used as given, and their count.
 S_WAIT_TURN = AHRS.field('wait_turn')
 S_WAIT_N = AHRS.field('wait_n')
+S_REF_REST = AHRS.field('ref_rest')  # 1: fields at rest have confirmed the field references
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 
