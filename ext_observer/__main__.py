@@ -123,5 +123,28 @@ def main(argv=None):
         return 2
 
 
+def leave(code):
+    """
+    End this process with ``code``: at once where numba was loaded.
+
+    Unloading numba's compiled kernels makes the interpreter's teardown
+    slow (about 0.15 s of the broad command's 1.5 s, measured): once the
+    command is done, its output flushed and the exit handlers run, the
+    process leaves without it. Files the commands write are closed where
+    they are written.
+    """
+    code = 0 if code is None else code
+    if 'numba' not in sys.modules or not isinstance(code, int):
+        sys.exit(code)
+    import atexit
+    import logging
+    import os
+    atexit._run_exitfuncs()  # the multiprocessing and logging handlers
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
 if __name__ == '__main__':
-    sys.exit(main())
+    leave(main())

@@ -208,3 +208,31 @@ def test_trials_read_after_other_work_equal_those_read_alone(tmp_path):
     (tmp_path / 'broken.hdf5').write_bytes(b'not hdf5')
     with pytest.raises(OSError):
         data.load_trials(broad.find_trials(str(tmp_path)))
+    with pytest.raises(OSError):
+        data.load_trials(broad.find_trials(str(tmp_path)), meanwhile=lambda: None)
+
+
+def test_a_read_that_fails_in_the_forked_reader_is_raised_here(tmp_path):
+    # With meanwhile, a forked child reads the data while this process works:
+    # a file whose layout reads but whose data does not (a compressed
+    # dataset with its bytes damaged) gives the reader's error here.
+    import h5py
+    path = tmp_path / '01_damaged.hdf5'
+    n = 20000
+    with h5py.File(path, 'w') as f:
+        for key, width in (('imu_gyr', 3), ('imu_acc', 3), ('imu_mag', 3), ('opt_quat', 4)):
+            f.create_dataset(key, data=np.random.default_rng(1).standard_normal((n, width)),
+                             compression='gzip', chunks=(1000, width))
+        f['movement'] = np.ones(n, dtype=bool)
+        f.attrs['sampling_rate'] = 286.0
+    raw = bytearray(path.read_bytes())
+    middle = len(raw) // 2
+    raw[middle:middle + 4096] = bytes(4096)
+    path.write_bytes(bytes(raw))
+    found = broad.find_trials(str(tmp_path))
+    with pytest.raises(OSError):
+        broad.load_trial(str(path))
+    called = []
+    with pytest.raises(OSError):
+        data.load_trials(found, meanwhile=lambda: called.append(os.getpid()))
+    assert called == [os.getpid()]

@@ -7,6 +7,7 @@ from numpy.testing import assert_allclose
 import pytest
 
 from ext_observer.core import quaternion as quat
+from ext_observer.core.ahrs.compiled import kernels
 from ext_observer.pipeline.batch import estimate_batch
 from ext_observer.core.ahrs.estimator import (AhrsObserver, AhrsParams,
                                     initial_attitude, world_from_enu)
@@ -180,6 +181,13 @@ def test_workers_give_the_vectorized_estimates():
     assert [f.shape for f in forked] == [(1200, 4), (1200, 4), (900, 4)]
     for v, f in zip(vectorized, forked):
         assert_allclose(f, v, rtol=0, atol=1e-12)
+    # then: run on each estimate where it is made, its results in order.
+    norms = lambda i, q: (i, float(np.sum(q * q)))  # noqa: E731
+    for workers in (1, 2):
+        estimates, after = estimate_batch(*args, workers=workers, then=norms)
+        assert after == [(i, float(np.sum(v * v))) for i, v in enumerate(vectorized)]
+        for v, f in zip(vectorized, estimates):
+            assert_allclose(f, v, rtol=0, atol=1e-12)
     # The second recording's own tau_mag made a difference.
     alone = estimate_batch(gyr[1:2], acc[1:2], mag[1:2], [RATE], [True],
                            params=AhrsParams(mag_cal=False), workers=1)[0]
@@ -267,3 +275,19 @@ def test_non_finite_samples_of_a_recording_are_held(motion):
     assert np.all(np.isfinite(held))
     total, _, _ = errors_deg(held[1000:], clean[1000:])
     assert np.max(total) < 0.5
+
+
+@pytest.mark.parametrize('compiled', [False, True])
+def test_run_writes_into_the_array_given_and_refuses_one_it_cannot_fill(compiled):
+    if compiled and not kernels().compiled:
+        pytest.skip('numba is not installed')
+    _, gyr, acc, mag = synthetic(seconds=2.0, seed=3)
+    expected = AhrsObserver(compiled=compiled).run(gyr, acc, mag, 1.0 / RATE)
+    out = np.full((len(gyr), 4), np.nan)
+    q = AhrsObserver(compiled=compiled).run(gyr, acc, mag, 1.0 / RATE, out=out)
+    assert q is out
+    assert_allclose(out, expected, rtol=0, atol=0)
+    for bad in (np.zeros((len(gyr) - 1, 4)), np.zeros((4, len(gyr))).T,
+                np.zeros((len(gyr), 4), dtype=np.float32)):
+        with pytest.raises(ValueError, match='out must be'):
+            AhrsObserver(compiled=compiled).run(gyr, acc, mag, 1.0 / RATE, out=bad)

@@ -255,7 +255,7 @@ def test_the_calibration_sigma_counts_only_where_the_calibration_is_applied():
     turning_run(pipeline, 60.0, gyr=(0.0, 0.0, 0.5))
     calibration = pipeline.estimator.core.calibration
     assert calibration.state == 'converged' and not calibration.applied
-    _, gain, sigma, _ = pipeline.estimator.uncertainty.last_field
+    _, gain, sigma, _, _ = pipeline.estimator.uncertainty.last_field
     assert gain > 0.0 and sigma == 0.0 < calibration.quality
     # A loaded calibration is applied: the heading follows the calibrated
     # field, and the calibration's σ is part of the heading's.
@@ -263,7 +263,7 @@ def test_the_calibration_sigma_counts_only_where_the_calibration_is_applied():
     turning_run(pipeline, 10.0, gyr=(0.0, 0.0, 0.5))
     calibration = pipeline.estimator.core.calibration
     assert calibration.state == 'loaded' and calibration.applied
-    _, gain, sigma, _ = pipeline.estimator.uncertainty.last_field
+    _, gain, sigma, _, _ = pipeline.estimator.uncertainty.last_field
     assert gain > 0.0 and sigma == calibration.quality > 0.0
     assert stds(pipeline)[1] > math.degrees(calibration.quality)
 

@@ -49,8 +49,8 @@ from ext_observer.broad.page import markdown
 from ext_observer.broad.plots import plot
 from ext_observer.broad.report import fmt, text_report, write_json
 from ext_observer.broad.run import estimate_ours, log, run
-from ext_observer.broad.scoring import (criteria, error_angles, group_means,
-                                        norm_deviation, rmse_deg, score, summary,
+from ext_observer.broad.scoring import (combined_norms, criteria, error_angles, group_means,
+                                        norm_deviation, norm_parts, rmse_deg, score, summary,
                                         VQF_RATIO_GOAL)
 from ext_observer.broad.stress import (BIAS, bias_of, blocks, clip_gyro, cut_at_movement,
                                        DESCRIPTIONS, downsample, first_movement,
@@ -68,9 +68,11 @@ __all__ = [
     'IDENTITY', 'MADGWICK_BETA', 'MAHONY_KI', 'MAHONY_KP', 'MODES', 'NWU_TO_ENU', 'OURS',
     'OURS_PLAIN', 'PLOT_TRIAL', 'STANDARD_GRAVITY', 'Trial', 'VQF_RATIO_GOAL',
     'algorithms_in', 'anchor_estimates', 'attitude_from_acc_mag', 'build_parser',
-    'criteria', 'data_dir', 'error_angles', 'estimate_ours', 'find_groups', 'find_trials',
+    'combined_norms', 'criteria', 'data_dir', 'error_angles', 'estimate_ours', 'find_groups',
+    'find_trials',
     'fmt', 'group_means', 'groups_from_name', 'has_trials', 'load_trial', 'load_trials', 'log', 'main',
-    'markdown', 'missing_anchor_packages', 'norm_deviation', 'plot', 'rmse_deg', 'run',
+    'markdown', 'missing_anchor_packages', 'norm_deviation', 'norm_parts', 'plot', 'rmse_deg',
+    'run',
     'score', 'shown_path', 'summary', 'text_report', 'write_json',
     # The robustness benchmark (--stress).
     'BIAS', 'DESCRIPTIONS', 'GYRO_RANGE', 'HALVES', 'LABELS', 'LOW_RATE', 'MODE_KEYS',

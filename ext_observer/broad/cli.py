@@ -261,12 +261,12 @@ def _read(folder, args, progress):
     found = find_trials(folder, args.trials)
     start = time.perf_counter()
     # The estimator's compiled kernels load (numba's import and cache)
-    # before the trials are read, so the estimates start at once after.
-    trials = load_trials(found, meanwhile=preload)
+    # while the trials are read, so the estimates start at once after.
+    trials = load_trials(found, meanwhile=lambda: preload(node=False))
     if args.head:
         trials = [t.head(args.head) for t in trials]
     progress(f'{len(trials)} trials read in {time.perf_counter() - start:.1f} s (the '
-             'kernels loaded first)')
+             'kernels loaded meanwhile)')
     groups = find_groups(folder, [t.name for t in trials], os.path.dirname(found[0][1]))
     return trials, groups
 

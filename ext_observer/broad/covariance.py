@@ -80,9 +80,9 @@ def run_trial(trial, mode, values=None):
         ``heading`` (N, the published variances, rad², as ``imu/data``
         carries them: before the sample's field), ``rest``, ``started`` (the
         estimator initialized at this sample), ``gain``, ``calibration`` and
-        ``reference`` (what the sample's field told the uncertainty model:
-        NaN without one; ``gain0``, ``calibration0`` and ``reference0`` for
-        the field the start used),
+        ``reference`` and ``dip`` (what the sample's field told the
+        uncertainty model: NaN without one; ``gain0``, ``calibration0``,
+        ``reference0`` and ``dip0`` for the field the start used),
         ``rejected`` (a field came and did not correct the heading),
         ``bias_var`` (the estimator's bias variance, NaN when it learns no
         bias in motion), ``clip_var`` (what a sample at the gyro's range
@@ -95,8 +95,8 @@ def run_trial(trial, mode, values=None):
     n = len(trial)
     period = 1e9 / trial.rate
     out = {key: np.full(n, np.nan) for key in ('tilt', 'heading', 'gain', 'calibration',
-                                               'reference', 'gain0', 'calibration0',
-                                               'reference0', 'bias_var', 'clip_var')}
+                                               'reference', 'dip', 'gain0', 'calibration0',
+                                               'reference0', 'dip0', 'bias_var', 'clip_var')}
     out['state'] = np.full((n, 4), np.nan)
     for key in ('rest', 'rejected', 'started'):
         out[key] = np.zeros(n, dtype=bool)
@@ -116,14 +116,14 @@ def run_trial(trial, mode, values=None):
             out['bias_var'][k] = math.nan if bias_var is None else bias_var
             out['clip_var'][k] = core.clip_variance
             if tracker.last_field is not None:
-                out['gain0'][k], out['calibration0'][k], out['reference0'][k] = (
-                    tracker.last_field[1:])
+                (out['gain0'][k], out['calibration0'][k], out['reference0'][k],
+                 out['dip0'][k]) = tracker.last_field[1:]
         if mag is not None:
             tracker.last_field = None
             pipeline.field(stamp, mag[k])
             if tracker.last_field is not None:
-                out['gain'][k], out['calibration'][k], out['reference'][k] = (
-                    tracker.last_field[1:])
+                (out['gain'][k], out['calibration'][k], out['reference'][k],
+                 out['dip'][k]) = tracker.last_field[1:]
                 out['rejected'][k] = tracker.last_field[1] == 0.0
     out['dt'] = 1.0 / trial.rate
     return out
@@ -179,15 +179,21 @@ def replay(runs, params=None, ahrs_params=None):
         raise ValueError('replay needs runs that all start at the same sample and never restart')
     tilt, heading = np.full((n, len(runs)), np.nan), np.full((n, len(runs)), np.nan)
 
-    gains = [(stack('gain0', np.nan), stack('calibration0', 0.0), stack('reference0', np.nan)),
-             (stack('gain', np.nan), stack('calibration', 0.0), stack('reference', np.nan))]
+    def dips(key):
+        return stack(key, np.nan) if all(key in r for r in runs) else np.full((n, len(runs)),
+                                                                               np.nan)
+
+    gains = [(stack('gain0', np.nan), stack('calibration0', 0.0), stack('reference0', np.nan),
+              dips('dip0')),
+             (stack('gain', np.nan), stack('calibration', 0.0), stack('reference', np.nan),
+              dips('dip'))]
 
     def apply(which, k):
-        g, c, u = (a[k] for a in gains[which])
+        g, c, u, d = (a[k] for a in gains[which])
         seen = np.isfinite(g)
         if mag and seen.any():
             tracker.field(dt, np.where(seen, g, 0.0), np.where(seen, c, 0.0),
-                          np.where(seen, u, np.nan))
+                          np.where(seen, u, np.nan), np.where(seen, d, np.nan))
 
     tracker.start(dt, None if acc is None else acc[first])
     apply(0, first)

@@ -370,9 +370,22 @@ at rest keeps the accelerometer's own deviation (its noise and scale error): a s
 The estimate itself is not touched. Replays of logged runs (the tuning below) count
 it only where the run logged the specific force.
 
+**The heading of a start.** In 9D the first heading is the first field's horizontal part
+seen with the first sample's inclination, and a tilt error ε about the horizontal axis
+across the field turns that part by ε·|tan(dip)| (the dip of the estimator's field
+references). The heading keeps that error while it holds the field it was taken from
+(gyro-held while the calibration learns; a running mean of fields otherwise), with the
+weight `w₀` that field still has in it (1, then `(1 − κ)` per correction of gain κ);
+each correcting field brings the tilt error of its own time, `r ← (1 − κ) r + κ
+|tan(dip)| √S`. The heading's variance gains `(w₀ |tan(dip)| atan(√m) + r)²`, with
+`atan(√m)` one sample's tilt σ as the motion since the start shows it: the two are the
+same motion's error, added as σ
+(`test_core_ahrs_robust.py::test_the_covariance_says_how_unsure_the_heading_of_a_start_in_motion_is`).
+A start at rest gains next to nothing.
+
 **What is published.** The variances plus what the propagation does not model, each in
-physical units: the start's `S`, `inclination_floor` (the smallest inclination σ:
-translational acceleration, accelerometer calibration, mounting),
+physical units: the start's `S` (and its heading share), `inclination_floor` (the
+smallest inclination σ: translational acceleration, accelerometer calibration, mounting),
 `heading_floor` (a field bent where it is accepted, once a field has
 set the heading), the magnetometer calibration's own heading
 uncertainty when given (`raw_imu` gives it where the calibration is
@@ -427,7 +440,10 @@ _MODEL = [
     'mean of the specific force, and one sample of a moving body can be off by '
     '`atan(|d| / g)` (`d` its translational acceleration): the tilt variance gains what '
     'the samples\' deviation from gravity says the mean still owes, shrinking as the '
-    'mean averages, then forgotten as the low-pass forgets any error (below).',
+    'mean averages, then forgotten as the low-pass forgets any error (below). In 9D the '
+    'heading was taken from a field seen with that inclination, which the field\'s dip '
+    'turns by |tan(dip)| times the tilt error: the heading\'s σ gains that share, kept '
+    'while the heading holds that field and given up as later fields correct it (below).',
     '- Then what the propagation does not model: `inclination_floor` (translational '
     'acceleration, accelerometer calibration, mounting), `heading_floor` (a field bent '
     'where it is accepted), the magnetometer calibration\'s own heading σ where the '

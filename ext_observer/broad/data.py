@@ -18,6 +18,7 @@ import glob
 import json
 import math
 import os
+import pickle
 
 import numpy as np
 
@@ -216,12 +217,14 @@ def load_trial(path, name=None):
 
 def load_trials(found, meanwhile=None):
     """
-    Read trials into :class:`Trial` objects, after ``meanwhile()``.
+    Read trials into :class:`Trial` objects, while ``meanwhile()`` runs.
 
     The broad command passes the loading of its compiled kernels as
-    ``meanwhile``. Reading in a forked child while they load was tried and
-    measured slower on these shared cores (docs/compiled.md), so the trials
-    are read here, as :func:`load_trial` reads them.
+    ``meanwhile`` (numba's import and cache, about 0.4 s): where processes
+    can fork, a child reads the files into memory shared with this process
+    meanwhile (the shapes read first, the data written in place: nothing is
+    copied back). The arrays are those :func:`load_trial` reads; an error
+    of the reader is raised here, as :func:`load_trial` raises it.
 
     Parameters
     ----------
@@ -234,9 +237,57 @@ def load_trials(found, meanwhile=None):
     list of Trial
 
     """
-    if meanwhile is not None:
+    if meanwhile is None or not hasattr(os, 'fork'):
+        if meanwhile is not None:
+            meanwhile()
+        return [load_trial(path, name) for name, path in found]
+    h5py = _h5py()
+    from ext_observer.pipeline.batch import shared_arrays
+    rates, specs = [], []
+    for _, path in found:
+        with h5py.File(path, 'r') as f:
+            rates.append(_checked(f, path))
+            specs += [(f[k].shape, f[k].dtype) for k in _KEYS]
+    arrays = shared_arrays(specs)
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the reader: fill the arrays, or say what failed
+        status = 0
+        try:
+            os.close(read_end)
+            for i, (_, path) in enumerate(found):
+                with h5py.File(path, 'r') as f:
+                    for j, k in enumerate(_KEYS):
+                        if arrays[i * len(_KEYS) + j].size:
+                            f[k].read_direct(arrays[i * len(_KEYS) + j])
+        except BaseException as error:  # noqa: B036 (sent to the parent, raised there)
+            status = 1
+            with os.fdopen(write_end, 'wb') as pipe:
+                pipe.write(pickle.dumps(_picklable(error)))
+        os._exit(status)
+    os.close(write_end)
+    try:
         meanwhile()
-    return [load_trial(path, name) for name, path in found]
+    finally:
+        with os.fdopen(read_end, 'rb') as pipe:
+            failure = pipe.read()
+        _, status = os.waitpid(pid, 0)
+    if failure:
+        raise pickle.loads(failure)
+    if status:  # ended without a word (a signal): the arrays are not all read
+        raise OSError(f'the process reading the trials ended abnormally (wait status {status})')
+    k = len(_KEYS)
+    return [Trial(name, *arrays[i * k:(i + 1) * k], rates[i])
+            for i, (name, _) in enumerate(found)]
+
+
+def _picklable(error):
+    """``error`` where it pickles and unpickles; else an OSError that names it."""
+    try:
+        pickle.loads(pickle.dumps(error))
+        return error
+    except Exception:
+        return OSError(f'{type(error).__name__}: {error}')
 
 
 # --- the groups ------------------------------------------------------------

@@ -298,7 +298,8 @@ def _run_time(page):
     if OURS in secs:
         workers = meta.get('workers') or 1
         rows.append([OURS, f'{secs[OURS]:.1f} s',
-                     f'{page.n_trials} trials × {len(page.modes)} modes, one batched call'
+                     f'{page.n_trials} trials × {len(page.modes)} modes, one batched call '
+                     '(each estimate scored where it is made)'
                      + (f' ({workers} processes, each recording on floats)' if workers > 1
                         else ' (one process)')])
     if OURS_PLAIN in secs:

@@ -13,7 +13,7 @@ import time
 
 from ext_observer.broad.anchors import anchor_estimates
 from ext_observer.broad.names import ANCHORS, MODES, OURS, OURS_PLAIN
-from ext_observer.broad.scoring import error_angles, norm_deviation, score
+from ext_observer.broad.scoring import combined_norms, error_angles, norm_parts, score
 
 
 def log(text):
@@ -25,7 +25,7 @@ def _plural(count, word):
     return f'{count} {word}{"es" if count > 1 else ""}'
 
 
-def estimate_ours(trials, modes, variant, workers=1, params=None):
+def estimate_ours(trials, modes, variant, workers=1, params=None, then=None):
     """
     Run our estimator on every trial in every mode, in one batched call.
 
@@ -39,6 +39,9 @@ def estimate_ours(trials, modes, variant, workers=1, params=None):
         ``estimate_batch``'s processes (1: all in this process).
     params : AhrsParams, optional
         Default: the shipped defaults.
+    then : callable, optional
+        ``then(trial, mode, q)`` on each estimate where it is made (a
+        worker, with ``workers > 1``), as ``estimate_batch``'s ``then``.
 
     Returns
     -------
@@ -47,20 +50,29 @@ def estimate_ours(trials, modes, variant, workers=1, params=None):
         (``(w, x, y, z)``, sensor → ENU, not normalized).
     seconds : float
         Wall clock of the call.
+    after : dict
+        Only with ``then``: ``{mode: {trial: what then returned}}``.
 
     """
     from ext_observer.pipeline.batch import estimate_batch
     streams = [(t, m) for m in modes for t in trials]
     start = time.perf_counter()
+    each = None if then is None else (lambda i, q: then(streams[i][0], streams[i][1], q))
     out = estimate_batch([t.gyr for t, _ in streams], [t.acc for t, _ in streams],
                          [t.mag for t, _ in streams], [t.rate for t, _ in streams],
                          [m == '9D' for _, m in streams], params=params, variant=variant,
-                         workers=workers)
+                         workers=workers, then=each)
     seconds = time.perf_counter() - start
+    out, results = (out, None) if then is None else out
     estimates = {m: {} for m in modes}
     for (t, m), q in zip(streams, out):
         estimates[m][t.name] = q
-    return estimates, seconds
+    if then is None:
+        return estimates, seconds
+    after = {m: {} for m in modes}
+    for (t, m), result in zip(streams, results):
+        after[m][t.name] = result
+    return estimates, seconds, after
 
 
 def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
@@ -122,25 +134,18 @@ def _run_ours(trials, modes, plain, workers, result, keep, scored, progress, par
     for variant, algorithm in variants:
         progress(f'{algorithm}: {len(trials)} trials × {len(modes)} modes in one batched call, '
                  f'{_plural(workers, "process")} ({samples} samples each mode) ...')
-        estimates, seconds = estimate_ours(trials, modes, variant, workers, params)
+        # Each estimate is scored where it is made (in the workers too).
+        estimates, seconds, after = estimate_ours(
+            trials, modes, variant, workers, params,
+            then=lambda t, mode, q: (scored(t.name, q), norm_parts(q)))
         result['seconds'][algorithm] = seconds
         progress(f'{algorithm}: {seconds:.1f} s')
-        norms = {m: norm_deviation(list(estimates[m].values())) for m in modes}
-        norms['all'] = norm_deviation([q for m in modes for q in estimates[m].values()])
+        norms = {m: combined_norms([after[m][t.name][1] for t in trials]) for m in modes}
+        norms['all'] = combined_norms([after[m][t.name][1] for m in modes for t in trials])
         result['norms'][variant] = norms
-        streams = [(mode, name, q) for mode in modes for name, q in estimates[mode].items()]
-        for (mode, name, q), scores in zip(streams, _score_all(streams, scored, workers)):
-            keep(algorithm, mode, name, q, scores)
-
-
-def _score_all(streams, scored, workers):
-    """
-    ``scored(name, q)`` of every stream, in order, in this process.
-
-    Scoring in forked workers was tried and measured slower on these shared
-    cores (docs/compiled.md); ``workers`` is kept for the callers.
-    """
-    return [scored(name, q) for _, name, q in streams]
+        for mode in modes:
+            for name, q in estimates[mode].items():
+                keep(algorithm, mode, name, q, after[mode][name][0])
 
 
 def _anchor_task(task):

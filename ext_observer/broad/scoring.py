@@ -86,10 +86,22 @@ def norm_deviation(estimates):
     estimates : list of ndarray, shape (N_i, 4)
 
     """
-    if not estimates:
+    return combined_norms([norm_parts(q) for q in estimates])
+
+
+def norm_parts(q):
+    """``(sum, max, count)`` of ``|q̂̄q̂ − 1|`` over one recording's estimates, shape (N, 4)."""
+    d = np.abs(np.einsum('ij,ij->i', q, q) - 1.0)
+    return float(np.sum(d)), float(np.max(d)) if d.size else float('nan'), int(d.size)
+
+
+def combined_norms(parts):
+    """:func:`norm_deviation` from the :func:`norm_parts` of its recordings."""
+    count = sum(n for _, _, n in parts)
+    if not count:
         return {'mean': float('nan'), 'max': float('nan'), 'samples': 0}
-    d = np.concatenate([np.abs(np.einsum('ij,ij->i', q, q) - 1.0) for q in estimates])
-    return {'mean': float(np.mean(d)), 'max': float(np.max(d)), 'samples': int(d.size)}
+    return {'mean': sum(s for s, _, _ in parts) / count,
+            'max': max(m for _, m, n in parts if n), 'samples': count}
 
 
 def group_means(scores, groups, key):

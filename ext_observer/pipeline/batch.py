@@ -7,6 +7,7 @@ compiled by numba where it is installed, plain Python otherwise), in this
 process or shared among forked workers: the same estimator, the same results.
 """
 
+import mmap
 import multiprocessing
 
 import numpy as np
@@ -15,11 +16,11 @@ from ext_observer.core.ahrs.ahrs_params import AhrsParams
 from ext_observer.core.ahrs.compiled import kernels
 from ext_observer.core.ahrs.estimator import AhrsObserver
 
-__all__ = ['estimate_batch', 'hold_finite']
+__all__ = ['estimate_batch', 'hold_finite', 'shared_arrays']
 
 
 def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extended',
-                   workers=1):
+                   workers=1, then=None):
     """
     Run many recordings (one estimator each, same parameters).
 
@@ -43,11 +44,18 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
     variant : {'extended', 'plain'}
     workers : int
         Processes (forked; Linux and macOS); 1 runs in this process.
+    then : callable, optional
+        ``then(i, q)`` on recording ``i``'s estimates as soon as they are
+        made, where they are made (a worker); what it returns must pickle
+        (small: a score, not an array). For work on each recording that
+        can share the workers too.
 
     Returns
     -------
     list of ndarray, shape (N_i, 4)
         The ambient estimates ``q̂_k`` (not normalized), sensor → ENU.
+    list
+        Only with ``then``: what it returned for each recording.
 
     """
     global _JOB
@@ -61,32 +69,70 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
     use_mag = np.asarray(use_mag, dtype=bool)
     lengths = [len(g) for g in gyr]
     workers = max(1, min(int(workers), count))
-    _JOB = (gyr, acc, mag, use_mag, dt, params, variant)
-    out = [None] * count
+    _JOB = (gyr, acc, mag, use_mag, dt, params, variant, then, None)
+    out, after = [None] * count, [None] * count
     if workers > 1 and kernels().compiled:
         # The loop compiled (or loaded from numba's cache) once, before the workers fork.
         AhrsObserver(use_mag=False).run(np.zeros((1, 3)), np.array([[0.0, 0.0, 9.8]]), None, dt)
     try:
         if workers == 1:
             for i in range(count):
-                out[i] = _run_one(i)[1]
-            return out
-        order = sorted(range(count), key=lambda i: -lengths[i])
-        # Forked workers read the inputs from this module (no copies).
-        with multiprocessing.get_context('fork').Pool(workers) as pool:
-            for i, q in pool.imap_unordered(_run_one, order):
-                out[i] = q
-        return out
+                _, out[i], after[i] = _run_one(i)
+        else:
+            order = sorted(range(count), key=lambda i: -lengths[i])
+            # Forked workers read the inputs from this module and write the
+            # estimates into memory shared with this process: nothing is
+            # copied either way (pickling ~100 MB back cost more than the
+            # work it shared).
+            out = shared_arrays([(n, 4) for n in lengths])
+            _JOB = _JOB[:-1] + (out,)
+            with multiprocessing.get_context('fork').Pool(workers) as pool:
+                for i, _, result in pool.imap_unordered(_run_one, order):
+                    after[i] = result
     finally:
         _JOB = None
+    return out if then is None else (out, after)
 
 
 _JOB = None
 
 
+def shared_arrays(shapes, dtype=float):
+    """
+    Zeroed arrays in one anonymous shared mapping, which forked children write and this reads.
+
+    Parameters
+    ----------
+    shapes : list of tuple of int, or of (tuple of int, dtype)
+        Each array's shape, with its own dtype where given as a pair.
+    dtype : numpy dtype
+        Of the arrays given by shape alone.
+
+    Returns
+    -------
+    list of ndarray
+        C-contiguous, writable, one per shape; the mapping lives as long as
+        any of them.
+
+    """
+    specs = [(tuple(s[0]), np.dtype(s[1])) if len(s) == 2 and not np.isscalar(s[0])
+             else (tuple(s), np.dtype(dtype)) for s in shapes]
+    sizes = [int(np.prod(s, dtype=np.int64)) * d.itemsize for s, d in specs]
+    # Each array starts on a 64-byte boundary.
+    starts = np.concatenate([[0], np.cumsum([-(-n // 64) * 64 for n in sizes])])
+    buffer = mmap.mmap(-1, max(int(starts[-1]), 1))
+    return [np.frombuffer(buffer, dtype=d, count=n // d.itemsize, offset=int(start)).reshape(s)
+            for (s, d), n, start in zip(specs, sizes, starts)]
+
+
 def _run_one(i):
-    """Recording ``i`` of ``_JOB``: ``(i, estimates)``."""
-    gyr, acc, mag, use_mag, dt, params, variant = _JOB
+    """
+    Recording ``i`` of ``_JOB``: ``(i, estimates, then's result)``.
+
+    In a worker the estimates are written to the shared output and not
+    sent back (``None`` in their place).
+    """
+    gyr, acc, mag, use_mag, dt, params, variant, then, shared = _JOB
     if params is not None and any(np.ndim(v) for v in params.as_dict().values()):
         params = AhrsParams(**{name: value[i] if np.ndim(value) else value
                                for name, value in params.as_dict().items()})
@@ -94,7 +140,9 @@ def _run_one(i):
     g = hold_finite(np.asarray(gyr[i], dtype=float))
     a = hold_finite(np.asarray(acc[i], dtype=float))
     m = hold_finite(np.asarray(mag[i], dtype=float)) if use_mag[i] else None
-    return i, est.run(g, a, m, dt)
+    q = est.run(g, a, m, dt, out=None if shared is None else shared[i])
+    result = None if then is None else then(i, q)
+    return i, (q if shared is None else None), result
 
 
 def hold_finite(a):

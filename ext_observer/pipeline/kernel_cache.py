@@ -82,16 +82,24 @@ def load():
     return k
 
 
-def preload():
+def preload(node=True):
     """
     The kernels this process will run (``EXT_OBSERVER_COMPILED``), compiled ones ready now.
 
-    :func:`load` where the compiled kernels are wanted; the plain ones where
-    they are not, or where numba fails and they are not required.
+    :func:`load` where the compiled kernels are wanted (with ``node``
+    false, only what :func:`~ext_observer.pipeline.batch.estimate_batch`
+    calls: the broad command's whole recordings, without the node's
+    per-sample kernels); the plain ones where they are not, or where numba
+    fails and they are not required.
     """
     want, required = compiled.wanted(None)
     if want:
         try:
+            if not node:
+                k = compiled.kernels(True)
+                AhrsObserver(AhrsParams(), use_mag=False, compiled=True).run(
+                    np.zeros((1, 3)), np.array([[0.0, 0.0, 9.8]]), None, 0.01)
+                return k
             return load()
         except Exception:  # numba missing or failing: as kernels() falls back
             if required:

@@ -223,6 +223,8 @@ class RawImuEstimator:
         # and the field's own error is heading_floor's.
         sigma = (float(calibration.quality) if calibration is not None and calibration.applied
                  else 0.0)
+        # The references' dip: how far the start's tilt error turns a field's heading.
+        dip = core.field('ref')[1] if core.use_mag else math.nan
         if not (core.use_mag and calibrated and not core.mag_disturbed):
             reference = math.nan
             if not calibrated and core.use_mag and not core.mag_disturbed:
@@ -238,12 +240,13 @@ class RawImuEstimator:
                     reference = turn * turn + quality * quality
                 else:
                     reference = math.inf
-            self.uncertainty.field(dt, 0.0, 0.0, reference)
+            self.uncertainty.field(dt, 0.0, 0.0, reference, dip)
             return
         # AhrsObserver.update_mag: a running mean of the first fields, then
         # 1 − exp(−dt / tau_mag).
         self._fields_used += 1
-        self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma)
+        self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma,
+                               math.nan, dip)
 
     def use_kernels(self, kernels):
         """Go on with other kernels (plain or compiled): the core's and the covariance's."""

@@ -39,7 +39,8 @@ from .ahrs_layout import (  # noqa: F401
                           S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN, S_CAL_WAIT, S_CAND, S_CAND_TIME,
                           S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_HAS_REF, S_INIT, S_LP,
                           S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REJECTED, S_REST,
-                          S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N, S_STUCK)
+                          S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N, S_STUCK,
+                          S_REF_REST, S_WAIT_N, S_WAIT_TURN)
 from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F401
                           learn_bias, rlp_steady)
 from .magcal_kernel import (MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn,
@@ -88,6 +89,7 @@ def ahrs_reset(s):
     s[S_CAND_TIME] = 0.0
     s[S_MAG_USED] = 0.0
     s[S_REJECTED] = 0.0
+    _forget_wait(s)
     bias_forget(s)
     s[S_START] = 0.0
     s[S_START_N] = 0.0
@@ -235,6 +237,7 @@ def _watch_clipping(s, gx, gy, gz):
     s[S_CLIPS] += 1.0
     _restart_mean(s)
     s[S_MAG_USED] = 0.0
+    _forget_wait(s)
     if s[P_HAS_CAL] != 0.0:
         mc_restart(s, MC0)
         s[S_CAL_TURN] = 1.0
@@ -415,20 +418,36 @@ def ahrs_update_mag(s, mx, my, mz, dt):
         s[S_CAND + 1] = dip
         s[S_HAS_REF] = 1.0
         s[S_REF_AGE] = 0.0
+        s[S_REF_REST] = 0.0
     ref_n, ref_d = s[S_REF], s[S_REF + 1]
     th_n, th_d = s[P_MAG_NORM_TH], s[P_MAG_DIP_TH]
     disturbed = (abs(norm - ref_n) > th_n * ref_n) or (abs(dip - ref_d) > th_d)
-    # A new field: consistent with the candidate while the body turns.
+    # A new field: consistent with the candidate while the body turns
+    # (VQF's candidate, Laidig & Seel 2023: its time counts whether or not
+    # the references reject the field, so that a field that passes the
+    # references' test now and then is not started over each time). A field
+    # off the candidate starts it over; while the references are young
+    # (confirmed by fewer than mag_new_time seconds of fields, none at rest:
+    # a start in motion takes them from one sample, while a rest shows the
+    # place's field without the motion's spread) it only takes back twice
+    # its length, as for the rejection time, so that the spread of a moving
+    # body's field does not keep one sample's references for ever.
     cand_n, cand_d = s[S_CAND], s[S_CAND + 1]
     consistent = (abs(norm - cand_n) < th_n * cand_n) and (abs(dip - cand_d) < th_d)
     gx, gy, gz = s[S_REST_GYR], s[S_REST_GYR + 1], s[S_REST_GYR + 2]
     turning = gx * gx + gy * gy + gz * gz > s[P_MAG_NEW_GYR] ** 2
-    s[S_CAND_TIME] = (s[S_CAND_TIME] + dt) if (disturbed and consistent and turning) else 0.0
+    if consistent:
+        if turning:
+            s[S_CAND_TIME] += dt
+    elif s[S_REF_REST] == 0.0 and s[S_REF_AGE] < s[P_MAG_NEW_TIME]:
+        s[S_CAND_TIME] = max(s[S_CAND_TIME] - 2.0 * dt, 0.0)
+    else:
+        s[S_CAND_TIME] = 0.0
     kr = s[C_K_REF]
     if consistent:
         s[S_CAND] = cand_n + kr * (norm - cand_n)
         s[S_CAND + 1] = cand_d + kr * (dip - cand_d)
-    else:
+    elif s[S_CAND_TIME] == 0.0:
         s[S_CAND] = norm
         s[S_CAND + 1] = dip
     # A new field is accepted once it has lasted mag_new_time, or longer
@@ -447,11 +466,15 @@ def ahrs_update_mag(s, mx, my, mz, dt):
             # The fields the heading followed so far were the disturbed
             # ones: its running mean starts again from the new field.
             s[S_MAG_USED] = 0.0
+            _forget_wait(s)
         s[S_REF_AGE] = s[S_CAND_TIME]
+        s[S_REF_REST] = 0.0
     disturbed = disturbed and not accept_new
     use = valid and not disturbed and s[P_USE_MAG] != 0.0
     if use:
         s[S_REF_AGE] += dt
+        if s[S_REST] != 0.0:
+            s[S_REF_REST] = 1.0
         s[S_REF] = ref_n + kr * (norm - ref_n)
         s[S_REF + 1] = ref_d + kr * (dip - ref_d)
     else:
@@ -460,8 +483,22 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     s[S_MAG_DIST] = 1.0 if disturbed else 0.0
     if has_cal:
         # The heading waits for the calibration; before the body has
-        # first moved it is the field's as given, averaged (the start).
-        use = use and (s[MC0 + MC_READY] != 0.0 or s[S_CAL_MOVED] == 0.0)
+        # first moved it is the field's as given, averaged (the start), and
+        # the first field after the running mean started over (the fields
+        # it followed were disturbed ones) sets it as the first one did.
+        if s[MC0 + MC_READY] == 0.0 and s[S_CAL_MOVED] != 0.0 and s[S_MAG_USED] != 0.0:
+            if use:
+                _wait(s, psi)
+            use = False
+        elif s[S_WAIT_N] != 0.0:
+            if s[MC0 + MC_APPLIED] == 0.0:
+                # The sensor looked calibrated: the fields of the wait were
+                # right as given, and count as if the heading had used them.
+                half = 0.5 * s[S_WAIT_TURN]
+                _turn_heading(s, math.cos(half), math.sin(half))
+                psi = math.atan2(math.sin(psi - s[S_WAIT_TURN]), math.cos(psi - s[S_WAIT_TURN]))
+                s[S_MAG_USED] += s[S_WAIT_N]
+            _forget_wait(s)
 
     # Heading measurement y = R_z(ψ) ⊗ q̂; gain κ_m, a running average at first.
     used = s[S_MAG_USED] + (1.0 if use else 0.0)
@@ -496,6 +533,30 @@ def ahrs_update_mag(s, mx, my, mz, dt):
                 and s[S_START] >= 2.0 * s[P_TAU_ACC]):
             bias_measure(s, s[S_RZLP], s[S_RZLP + 1], s[S_RZLP + 2], -2.0 * rz / (rw * dt),
                           s[C_BIAS_R] * s[P_TAU_MAG] / (s[P_TAU_ACC] * dt))
+
+
+def _wait(s, psi):
+    """
+    A field while the heading waits for the calibration: what it would have done.
+
+    Were the calibration to find the field right as given (the sensor looks
+    calibrated), the heading should have followed this field as any other:
+    the turn it would have had by now follows the field's heading ``psi``
+    (rad, in the estimate's world frame) with the gain the heading would
+    have had (a running mean of the fields used, then ``k_mag``). The turn
+    is about the world vertical, which commutes with the body-frame
+    increments of the gyro in between.
+    """
+    n = s[S_MAG_USED] + s[S_WAIT_N] + 1.0
+    s[S_WAIT_N] += 1.0
+    kap = max(s[C_K_MAG], 1.0 / n)
+    d = psi - s[S_WAIT_TURN]
+    s[S_WAIT_TURN] += kap * math.atan2(math.sin(d), math.cos(d))
+
+
+def _forget_wait(s):
+    s[S_WAIT_TURN] = 0.0
+    s[S_WAIT_N] = 0.0
 
 
 def _turn_heading(s, rw, rz):

@@ -83,6 +83,11 @@ S_GYR_PEAK = AHRS.field('gyr_peak')  # largest |rate| on any axis seen
 S_STUCK = AHRS.field('stuck', 3)  # samples each axis has repeated its rate at the peak
 S_REF_AGE = AHRS.field('ref_age')  # s of fields that confirmed the field references
 S_REJECTED = AHRS.field('rejected')  # s the field has been rejected as disturbed without a break
+# While the heading waits for the calibration: the turn (rad) the fields of
+# the wait would have given it, had they been used as given, and their count.
+S_WAIT_TURN = AHRS.field('wait_turn')
+S_WAIT_N = AHRS.field('wait_n')
+S_REF_REST = AHRS.field('ref_rest')  # 1: fields at rest have confirmed the field references
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 

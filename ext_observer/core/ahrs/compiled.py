@@ -188,10 +188,16 @@ def kernels(compiled=None):
 
 def joined_source():
     """The kernels' source as one module: ``(text, sha256 hex)``."""
+    global _JOINED
     folder = os.path.dirname(os.path.abspath(__file__))
+    paths = [os.path.join(folder, name) for name in _SOURCES]
+    # Read once per process, unless a file changed since (its size or time).
+    stamp = tuple((os.stat(p).st_mtime_ns, os.stat(p).st_size) for p in paths)
+    if _JOINED is not None and _JOINED[0] == stamp:
+        return _JOINED[1]
     parts, defined = [], {}
-    for name in _SOURCES:
-        with open(os.path.join(folder, name), encoding='utf-8') as f:
+    for name, path in zip(_SOURCES, paths):
+        with open(path, encoding='utf-8') as f:
             text = f.read()
         tree = ast.parse(text)
         lines = text.splitlines()
@@ -205,22 +211,26 @@ def joined_source():
                 targets = [node.name]
             elif isinstance(node, ast.Assign):
                 targets = [t.id for t in node.targets if isinstance(t, ast.Name)]
-            definition = ast.unparse(node)
             for target in targets:
                 if target.startswith('__'):
                     continue
                 # The same constant in both files is harmless; anything else
                 # is not (a call, such as a Layout(), made twice is two objects).
-                if target in defined and (defined[target][1] != definition
+                if target in defined and (ast.unparse(defined[target][1]) != ast.unparse(node)
                                           or any(isinstance(n, ast.Call)
                                                  for n in ast.walk(node))):
                     raise RuntimeError(f'{target} is defined in both {defined[target][0]} and '
                                        f'{name}: the kernels are joined into one module')
-                defined[target] = (name, definition)
+                defined[target] = (name, node)
         kept = ['' if i in drop else line for i, line in enumerate(lines)]
         parts.append(f'# --- {name} ---\n' + '\n'.join(kept) + '\n')
     text = '\n'.join(parts)
-    return text, hashlib.sha256(text.encode('utf-8')).hexdigest()
+    joined = text, hashlib.sha256(text.encode('utf-8')).hexdigest()
+    _JOINED = stamp, joined
+    return joined
+
+
+_JOINED = None
 
 
 def cache_folder():

@@ -408,7 +408,7 @@ class AhrsObserver:
                               m[0, i], m[1, i], m[2, i], dt)
         return tuple(out.T.copy())
 
-    def run(self, gyr, acc, mag=None, dt=None):
+    def run(self, gyr, acc, mag=None, dt=None, out=None):
         """
         A whole recording at one interval, from where the estimate is.
 
@@ -420,11 +420,14 @@ class AhrsObserver:
         gyr, acc : array_like, shape (N, 3)
         mag : array_like, shape (N, 3), optional
         dt : float
+        out : ndarray, shape (N, 4), optional
+            Where to write the estimates (C-contiguous float64), e.g. memory
+            shared with the process that asked for them; default: a new array.
 
         Returns
         -------
         ndarray, shape (N, 4)
-            The estimate after each sample.
+            The estimate after each sample (``out`` where given).
 
         """
         if self.batch is not None:
@@ -436,15 +439,24 @@ class AhrsObserver:
             raise ValueError('gyr, acc and mag must have one row per sample')
         m = g if mag is None else np.ascontiguousarray(mag, dtype=float).reshape(-1, 3)
         count = len(g)
+        if out is not None and not (isinstance(out, np.ndarray) and out.shape == (count, 4)
+                                    and out.dtype == np.float64 and out.flags.c_contiguous
+                                    and out.flags.writeable):
+            raise ValueError(f'out must be a writable C-contiguous float64 array of shape '
+                             f'({count}, 4)')
         run = self._kernels.ahrs.ahrs_run
         s = self._states[0]
         if self.compiled:
-            out = np.empty((count, 4))
+            if out is None:
+                out = np.empty((count, 4))
             run(s, g, a, m, count, mag is not None, dt, out)
             return out
-        out = [[0.0] * 4 for _ in range(count)]
-        run(s, g.tolist(), a.tolist(), m.tolist(), count, mag is not None, dt, out)
-        return np.array(out)
+        rows = [[0.0] * 4 for _ in range(count)]
+        run(s, g.tolist(), a.tolist(), m.tolist(), count, mag is not None, dt, rows)
+        if out is None:
+            return np.array(rows).reshape(count, 4)
+        out[...] = np.array(rows).reshape(count, 4)
+        return out
 
     def _each(self, func, vector, *extra):
         if self.batch is None:

@@ -22,7 +22,8 @@ from .ahrs_filters import rotate
 from .tunables import Tunable, Tunables
 from .uncertainty_kernel import (
     GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,
-    U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_K_ACC, U_K_REST, U_PH,
+    U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_HS, U_HS_REST, U_HS_TAN,
+    U_HS_W0, U_K_ACC, U_K_REST, U_PH,
     U_PHI, U_PT, U_Q_BIAS, U_Q_GYRO, U_Q_RATE, U_R_ACC, U_R_GYRO, U_SIZE, U_STAMP2,
     U_START_F, U_START_M, U_START_N, U_START_T, U_START_V, U_TAU_ACC,
     U_TAU_REST, U_TILT_FLOOR, U_UNKNOWN, U_WH2, U_WZ2)
@@ -41,6 +42,8 @@ HEADING_UNKNOWN = math.pi * math.pi / 3.0
 _FLOAT64 = np.dtype(np.float64)
 # The slots uncertainty_start writes.
 _START_SLOTS = (U_START_T, U_START_N, U_START_M, U_START_F, U_START_V)
+# The slots of the heading's share of the start.
+_HS_SLOTS = (U_HS_W0, U_HS_TAN, U_HS_REST, U_HS)
 
 
 def covariance_out(array):
@@ -155,8 +158,8 @@ class AttitudeUncertainty:
     heading_set : bool or ndarray
         Whether a field has corrected the heading since the start.
     last_field : tuple or None
-        The latest :meth:`field`'s interval, gain, calibration σ and
-        reference variance, as given (a run can be replayed from them).
+        The latest :meth:`field`'s interval, gain, calibration σ, reference
+        variance and dip, as given (a run can be replayed from them).
 
     """
 
@@ -260,6 +263,8 @@ class AttitudeUncertainty:
     def _clear_start(self):
         u = self._u
         u[U_START_T] = u[U_START_N] = u[U_START_M] = u[U_START_F] = u[U_START_V] = 0.0 * u[U_PT]
+        for i in _HS_SLOTS:
+            u[i] = 0.0 * u[U_PT]
 
     def start(self, dt, acc=None):
         """
@@ -376,7 +381,7 @@ class AttitudeUncertainty:
         if acc is not None:
             self._start_sample(dt, rotate(w, x, y, z, *acc))
 
-    def field(self, dt, gain, calibration=0.0, reference=math.nan):
+    def field(self, dt, gain, calibration=0.0, reference=math.nan, dip=math.nan):
         """
         A field, and the gain with which it corrected the heading.
 
@@ -399,10 +404,14 @@ class AttitudeUncertainty:
             rad² (see the module's docstring; at most that of an unknown
             heading is counted, also for inf). NaN: nothing new (the
             default).
+        dip : float or ndarray
+            The dip of the estimator's field references, rad (NaN: none,
+            the default): how far the start's inclination error turns the
+            heading taken from a field (:meth:`_heading_start`).
 
         """
         dt = self._dt if dt is None else dt
-        self.last_field = (dt, gain, calibration, reference)
+        self.last_field = (dt, gain, calibration, reference, dip)
         if dt != self._field_dt:
             if not (math.isfinite(dt) and dt > 0.0):
                 raise ValueError(f'dt must be positive and finite, got {dt}')
@@ -433,6 +442,59 @@ class AttitudeUncertainty:
             unknown = np.where(given, np.minimum(ref, HEADING_UNKNOWN), unknown)
         st[U_UNKNOWN] = unknown
         st[U_CALIBRATION] = used * c2 + (1 - used) * st[U_CALIBRATION]
+        self._heading_start(gain, dip)
+
+    def _heading_start(self, gain, dip):
+        """
+        The heading's share of the start (9D), for a field with this gain and dip.
+
+        The estimator takes its first heading from the first field's
+        horizontal part, seen with the first sample's inclination: a moving
+        body's is off by its acceleration, ε per horizontal axis with one
+        sample's variance ``atan²(√max(m, f))`` (``m`` the mean of what the
+        samples since show of the motion, ``f`` the first one's;
+        :func:`~ext_observer.core.ahrs.uncertainty_kernel.uncertainty_start`),
+        and a tilt error about the axis across the field turns the field's
+        horizontal part by ε·|tan(dip)|. That error stays in the heading,
+        gyro-held, as long as the heading keeps that first field: its
+        weight ``w0`` shrinks by ``(1 − κ)`` with each field that corrects
+        the heading with gain κ. Each such field brings the inclination
+        error of its own time (the start's variance still owed, ``V``),
+        ``r ← (1 − κ) r + κ |tan(dip)| √V``; the two are the same motion's
+        error, added as σ: ``σ = w0 |tan(dip)| atan(√max(m, f)) + r``.
+        Before any field, and in 6D, nothing (the heading is unknown, or
+        the start's own).
+        """
+        st = self._u
+        w0, tan, rest = st[U_HS_W0], st[U_HS_TAN], st[U_HS_REST]
+        if not (np.ndim(dip) or np.ndim(gain) or np.ndim(w0)):
+            # One estimate (the node's path): floats.
+            if dip != dip:
+                return
+            t = abs(math.tan(dip))
+            one = math.atan(math.sqrt(max(st[U_START_M], st[U_START_F])))
+            if tan == 0.0:  # the first field: the heading was taken from it
+                w0, rest = 1.0, 0.0
+            else:
+                w0 = w0 * (1.0 - gain)
+                rest = (1.0 - gain) * rest + gain * t * math.sqrt(st[U_START_V])
+            st[U_HS_W0], st[U_HS_TAN], st[U_HS_REST] = w0, t, rest
+            st[U_HS] = w0 * t * one + rest
+            return
+        one = np.arctan(np.sqrt(np.maximum(st[U_START_M], st[U_START_F])))
+        now = np.sqrt(st[U_START_V])
+        with np.errstate(invalid='ignore'):
+            t = np.abs(np.tan(dip))
+        seen = np.isfinite(t)
+        t = np.where(seen, t, 0.0)
+        first = seen & (tan == 0.0)
+        k = np.where(first, 0.0, gain)
+        w0 = np.where(first, 1.0, w0 * (1.0 - k))
+        rest = np.where(first, 0.0, np.where(seen, (1.0 - k) * rest + k * t * now, rest))
+        tan = np.where(seen, t, tan)
+        hs = w0 * tan * one + rest
+        for i, v in ((U_HS_W0, w0), (U_HS_TAN, tan), (U_HS_REST, rest), (U_HS, hs)):
+            st[i] = float(v) if self._compiled or not np.ndim(v) else v
 
     def heading_gain(self, count, dt=None):
         """

@@ -76,6 +76,15 @@ U_START_N = UNCERTAINTY.field('start_n')
 U_START_M = UNCERTAINTY.field('start_m')
 U_START_V = UNCERTAINTY.field('start_v')
 U_START_F = UNCERTAINTY.field('start_f')  # the first sample's ((|f| − g)/g)²
+# The heading's share of the start (9D): a field's heading is its horizontal
+# part in the estimate's frame, which a tilt error ε turns by up to
+# ε·|tan(dip)|. The weight the heading still gives the field it was taken
+# from at the start, |tan(dip)| of the references, the share of the fields
+# since (σ, rad) and the whole σ published (rad).
+U_HS_W0 = UNCERTAINTY.field('hs_w0')
+U_HS_TAN = UNCERTAINTY.field('hs_tan')
+U_HS_REST = UNCERTAINTY.field('hs_rest')
+U_HS = UNCERTAINTY.field('hs')
 U_SIZE = UNCERTAINTY.size
 
 # sample_step's outcomes: 0 the step ran; else the estimator stepped but the
@@ -223,7 +232,7 @@ def uncertainty_variances(u):
     t = u[U_PT] + u[U_START_V] + u[U_TILT_FLOOR] + 0.5 * u[U_STAMP2] * u[U_WH2]
     h = (u[U_PH] + u[U_UNKNOWN]
          + u[U_HEADING_SET] * (u[U_HEADING_FLOOR] + u[U_CALIBRATION])
-         + u[U_STAMP2] * u[U_WZ2])
+         + u[U_STAMP2] * u[U_WZ2] + u[U_HS] * u[U_HS])
     return t, h
 
 
