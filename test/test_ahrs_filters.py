@@ -125,3 +125,34 @@ def test_the_first_attitude_upside_down_and_of_a_zero_vector():
     q = f.first_attitude(1e-12, 0.0, -9.8, 0.0, 0.0, 0.0, 0.0, 0.0)
     assert rotated(q, (1e-12, 0.0, -9.8)) == pytest.approx([0.0, 0.0, 9.8], abs=1e-9)
     assert f.first_attitude(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0) == (1.0, 0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize('tau, dt', [(0.5, 0.01), (3.0, 0.0025), (0.1, 0.04)])
+def test_the_coefficients_are_a_butterworth_at_1_over_2_pi_tau_and_first_order_gains(tau, dt):
+    # The accelerometer's low-pass (docs/raw_imu.md): second-order
+    # Butterworth, cutoff 1/(2π tau_acc): unit gain at DC, 1/√2 at the
+    # cutoff (prewarped: exact), zero at Nyquist; the gains 1 − e^(−dt/τ).
+    from ext_observer.core.ahrs.ahrs_kernel import ahrs_coefficients
+    from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_Q, C_BIAS_R, C_K_ACC, C_K_REST,
+                                                    P_BIAS_SIGMA_MOTION, P_TAU_ACC,
+                                                    P_TAU_ACC_GAIN, P_TAU_BIAS, P_TAU_REST)
+    s = AhrsObserver(AhrsParams(), use_mag=False).flat_state
+    s[P_TAU_ACC], s[P_TAU_ACC_GAIN], s[P_TAU_REST] = tau, 2.0 * tau, 5.0 * tau
+    s[P_BIAS_SIGMA_MOTION], s[P_TAU_BIAS] = 0.01, 20.0
+    ahrs_coefficients(s, dt)
+    b0, b1, b2, a1, a2 = (s[C_BW + k] for k in range(5))
+
+    def gain_at(omega):
+        z = np.exp(-1j * omega * dt)
+        return abs((b0 + b1 * z + b2 * z * z) / (1.0 + a1 * z + a2 * z * z))
+
+    assert gain_at(0.0) == pytest.approx(1.0, rel=1e-8)   # b0 ~ 1e-7: rounding
+    assert gain_at(1.0 / tau) == pytest.approx(math.sqrt(0.5), rel=1e-8)
+    assert gain_at(math.pi / dt) == pytest.approx(0.0, abs=1e-9)
+    assert b1 == pytest.approx(2.0 * b0, rel=1e-15) and b2 == b0
+    assert s[C_K_ACC] == pytest.approx(1.0 - math.exp(-dt / (2.0 * tau)), rel=1e-12)
+    assert s[C_K_REST] == pytest.approx(1.0 - math.exp(-dt / (5.0 * tau)), rel=1e-12)
+    # The bias in motion: σ² grows by bias_sigma_motion² dt / tau_bias per
+    # sample; a correction rate's noise density bias_sigma_motion² tau_bias.
+    assert s[C_BIAS_Q] == pytest.approx(1e-4 * dt / 20.0, rel=1e-12)
+    assert s[C_BIAS_R] == pytest.approx(1e-4 * 20.0, rel=1e-12)
