@@ -380,6 +380,27 @@ def test_the_norm_reference_follows_a_small_change_with_tau_mag_ref(tau_mag_ref)
     assert flagged(est, truth, gyr, acc, tuple(edge * 1.003 * v for v in FIELD))
 
 
+def test_the_dip_reference_follows_a_small_change_with_tau_mag_ref():
+    # The same for the dip: 2° steeper (within mag_dip_th 5°: used); after
+    # tau_mag_ref the reference has moved 1 - 1/e of the way, and the band
+    # of ±5° around it with it.
+    tau = 2.0
+    p = AhrsParams(tau_mag_ref=tau, mag_dip_th=math.radians(5.0))
+    est, truth, gyr, acc = learned(p, seconds=1.0)
+
+    def field(dip):
+        return (0.0, 45.0 * math.cos(dip), 45.0 * math.sin(dip))
+
+    for _ in range(round(tau * RATE)):
+        est.update(gyr, acc, rotate(qconj(truth), field(DIP - math.radians(2.0))), DT)
+        assert not est.mag_disturbed
+    reference = DIP - math.radians(2.0) * (1.0 - math.exp(-1.0))
+    for side in (1.0, -1.0):
+        edge = reference + side * math.radians(5.0)
+        assert not flagged(est, truth, gyr, acc, field(edge - side * math.radians(0.1)))
+        assert flagged(est, truth, gyr, acc, field(edge + side * math.radians(0.1)))
+
+
 # An upside-down start ---------------------------------------------------------------
 
 @pytest.mark.parametrize('use_mag', [False, True])
