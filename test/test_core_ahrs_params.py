@@ -261,6 +261,19 @@ def test_a_vertical_bias_is_learned_in_motion_from_the_field_only():
             assert max(map(abs, z)) == 0.0
 
 
+def test_a_bias_is_learned_in_motion_tilted_through_the_field_and_gravity():
+    # Pitched 30° and turning about the body's z: the world's vertical is
+    # no body axis, so the heading corrections measure the bias through all
+    # of R's low-passed z row, the inclination's through its x and y rows.
+    # The whole bias is learned, on each axis.
+    bias = (0.004, -0.006, 0.01)
+    _, gyr, acc, mag = simulate(turning(40.0, 0.3), q0=qexp((0.0, math.radians(30.0), 0.0)),
+                                bias=bias)
+    est = AhrsObserver(AhrsParams(tau_bias=5.0, tau_mag=2.0, mag_cal=False), use_mag=True)
+    learned_bias = run(est, gyr, acc, mag)[-1][3]
+    assert learned_bias == pytest.approx(bias, abs=5e-4)
+
+
 def test_bias_learned_in_motion_is_clipped_at_bias_max():
     # A bias of 0.03 rad/s on x: learned as it is under a bias_max of 0.05,
     # held at 0.02 under a bias_max of 0.02 (and never beyond).
