@@ -1,15 +1,18 @@
 """
-What the estimator's kernel must leave alone (no ROS): found by mutmut's sample of ahrs_kernel.py.
+Edges of the estimator's kernel that its other tests missed (no ROS): found by mutmut's samples.
 
 In 9D the IMU samples come without a field (fields have their own calls, at
 their own rate): a sample without one must not touch the field's state (a
 kernel that ran the field's step on the zeros of a missing field would take
 them as the references). A reset forgets the last field's verdict with the
-rest. Fast: part of ``make mutation``'s subset of the kernel
-(docs/tests.md#mutmut).
+rest. The gyro's increment is exact at any step size (at 100 Hz a wrong
+half-angle is a third-order error no other test sees). A gyro at its range
+is clipped on any axis. Fast: part of ``make mutation``'s subset of the
+kernel (docs/tests.md#mutmut).
 """
 
 import numpy as np
+import pytest
 
 from ext_observer.core.ahrs.ahrs_layout import S_HAS_REF, S_MAG_USED, S_REF
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
@@ -48,3 +51,39 @@ def test_a_reset_forgets_that_the_last_field_was_disturbed():
     assert est.mag_disturbed is True
     est.reset()
     assert est.mag_disturbed is False
+
+
+def test_the_gyros_increment_is_exact_for_any_step_size():
+    # Level, turning about the vertical in 6D (nothing corrects the heading)
+    # with a rate that changes a little each sample (never repeated: not a
+    # stuck gyro), 10 Hz: up to 0.35 rad per step. The heading is the sum of
+    # the steps' angles to rounding: the increment is the exact rotation of
+    # the step (the exponential map), not an approximation good only for
+    # small angles.
+    est = AhrsObserver(AhrsParams(), use_mag=False)
+    est.update((0.0, 0.0, 0.0), (0.0, 0.0, 9.81), None, 0.1)
+    heading = 0.0
+    for k in range(40):
+        rate = 2.5 + 0.025 * k
+        q = est.update((0.0, 0.0, rate), (0.0, 0.0, 9.81), None, 0.1)
+        heading += rate * 0.1
+        expected = (np.cos(0.5 * heading), 0.0, 0.0, np.sin(0.5 * heading))
+        assert np.allclose(q, expected, atol=1e-9) or np.allclose(q, np.negative(expected),
+                                                                  atol=1e-9), k
+
+
+def test_a_gyro_at_its_range_is_counted_on_any_axis_and_adds_range_dt_squared_per_axis():
+    # A known range of 4 rad/s: a sample at it on one axis, or on all three,
+    # is clipped; its variance is (range dt)² per clipped axis (docstring of
+    # _watch_clipping), zero again on the next good sample.
+    for axes in ((0,), (1,), (2,), (0, 1, 2)):
+        est = AhrsObserver(AhrsParams(gyro_range=4.0), use_mag=False)
+        est.update((0.0, 0.0, 0.0), TILTED, None, DT)
+        rate = [0.0, 0.0, 0.0]
+        for i in axes:
+            rate[i] = -4.0 if i == 1 else 4.0
+        est.update(tuple(rate), TILTED, None, DT)
+        assert est.clipped == 1, axes
+        assert est.clip_variance == pytest.approx(len(axes) * (4.0 * DT) ** 2, rel=1e-12)
+        est.update((0.0, 0.0, 0.0), TILTED, None, DT)
+        assert est.clipped == 1 and est.clip_variance == 0.0
