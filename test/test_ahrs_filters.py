@@ -127,8 +127,10 @@ def test_the_first_attitude_upside_down_and_of_a_zero_vector():
     assert f.first_attitude(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0) == (1.0, 0.0, 0.0, 0.0)
 
 
-@pytest.mark.parametrize('tau, dt', [(0.5, 0.01), (3.0, 0.0025), (0.1, 0.04)])
-def test_the_coefficients_are_a_butterworth_at_1_over_2_pi_tau_and_first_order_gains(tau, dt):
+@pytest.mark.parametrize('tau, dt, tau_bias', [(0.5, 0.01, 20.0), (3.0, 0.0025, 0.5),
+                                               (0.1, 0.04, 2.0)])
+def test_the_coefficients_are_a_butterworth_at_1_over_2_pi_tau_and_first_order_gains(tau, dt,
+                                                                                      tau_bias):
     # The accelerometer's low-pass (docs/raw_imu.md): second-order
     # Butterworth, cutoff 1/(2π tau_acc): unit gain at DC, 1/√2 at the
     # cutoff (prewarped: exact), zero at Nyquist; the gains 1 − e^(−dt/τ).
@@ -138,7 +140,7 @@ def test_the_coefficients_are_a_butterworth_at_1_over_2_pi_tau_and_first_order_g
                                                     P_TAU_ACC_GAIN, P_TAU_BIAS, P_TAU_REST)
     s = AhrsObserver(AhrsParams(), use_mag=False).flat_state
     s[P_TAU_ACC], s[P_TAU_ACC_GAIN], s[P_TAU_REST] = tau, 2.0 * tau, 5.0 * tau
-    s[P_BIAS_SIGMA_MOTION], s[P_TAU_BIAS] = 0.01, 20.0
+    s[P_BIAS_SIGMA_MOTION], s[P_TAU_BIAS] = 0.01, tau_bias
     ahrs_coefficients(s, dt)
     b0, b1, b2, a1, a2 = (s[C_BW + k] for k in range(5))
 
@@ -154,5 +156,5 @@ def test_the_coefficients_are_a_butterworth_at_1_over_2_pi_tau_and_first_order_g
     assert s[C_K_REST] == pytest.approx(1.0 - math.exp(-dt / (5.0 * tau)), rel=1e-12)
     # The bias in motion: σ² grows by bias_sigma_motion² dt / tau_bias per
     # sample; a correction rate's noise density bias_sigma_motion² tau_bias.
-    assert s[C_BIAS_Q] == pytest.approx(1e-4 * dt / 20.0, rel=1e-12)
-    assert s[C_BIAS_R] == pytest.approx(1e-4 * 20.0, rel=1e-12)
+    assert s[C_BIAS_Q] == pytest.approx(1e-4 * dt / tau_bias, rel=1e-12)
+    assert s[C_BIAS_R] == pytest.approx(1e-4 * tau_bias, rel=1e-12)
