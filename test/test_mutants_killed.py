@@ -473,18 +473,22 @@ def test_a_default_pairer_refuses_a_measurement_off_unit_norm_by_more_than_10_pe
     assert pairer.add_measurement(3 * S, (1.12, 0.0, 0.0, 0.0)) == 'norm_out_of_tolerance'
 
 
-def test_a_starts_variance_is_its_documented_model_then_decays_sample_by_sample():
+@pytest.mark.parametrize('first, then', [((3.0, 0.0, GRAVITY), (0.5, -0.3, GRAVITY + 0.2)),
+                                         ((0.3, 0.0, GRAVITY), (3.0, -2.0, GRAVITY + 0.5))])
+def test_a_starts_variance_is_its_documented_model_then_decays_sample_by_sample(first, then):
     # uncertainty_start's model (its docstring): until tau_acc, the running
     # mean m of e = max(dz², (fx² + fy²)/2)/g² (and the first sample's e, if
     # larger) owes atan(√max(m, e₁))² c/(c + t) per horizontal axis; then the
-    # low-pass forgets it by (1 − k)² per sample, to zero below 1e-16.
+    # low-pass forgets it by (1 − k)² per sample, to zero below 1e-16. The
+    # first sample's error larger than the rest's, then smaller (the mean
+    # rules).
     tracker = AttitudeUncertainty.for_estimator(AhrsParams(tau_acc=0.2), use_mag=False)
     dt = 0.01
     tracker.start(dt)
     u = tracker.state
     K, C = uncertainty_kernel, uncertainty_kernel.START_CORRELATION
     u[K.U_START_T] = u[K.U_START_N] = u[K.U_START_M] = u[K.U_START_V] = u[K.U_START_F] = 0.0
-    forces = [(3.0, 0.0, GRAVITY)] + [(0.5, -0.3, GRAVITY + 0.2)] * 40
+    forces = [first] + [then] * 40
     errors = [max((fz - GRAVITY) ** 2, 0.5 * (fx * fx + fy * fy)) / GRAVITY ** 2
               for fx, fy, fz in forces]
     tau, k = u[K.U_TAU_ACC], u[K.U_K_ACC]   # the accelerometer's low-pass (0.25 s here)
@@ -501,3 +505,23 @@ def test_a_starts_variance_is_its_documented_model_then_decays_sample_by_sample(
         phases.append(t < tau)
     assert abs(sum(phases) - round(tau / dt)) <= 1 and not phases[-1]
     assert u[K.U_START_V] > 1e-6
+
+
+def test_the_published_variances_are_the_sum_of_their_parts_and_b_the_larger():
+    # uncertainty_variances' sums, each part nonzero and distinct; the bias
+    # variance B the larger of its own and the estimator's, exactly (also
+    # when equal).
+    K = uncertainty_kernel
+    u = [0.0] * K.U_SIZE
+    parts = dict(U_PT=1.0, U_START_V=2.0, U_TILT_FLOOR=4.0, U_STAMP2=8.0, U_WH2=16.0,
+                 U_PH=32.0, U_UNKNOWN=64.0, U_HEADING_SET=1.0, U_HEADING_FLOOR=128.0,
+                 U_CALIBRATION=256.0, U_WZ2=512.0, U_HS=3.0)
+    for name, value in parts.items():
+        u[getattr(K, name)] = value
+    t, h = K.uncertainty_variances(u)
+    assert t == 1.0 + 2.0 + 4.0 + 0.5 * 8.0 * 16.0
+    assert h == 32.0 + 64.0 + 1.0 * (128.0 + 256.0) + 8.0 * 512.0 + 3.0 * 3.0
+    for before, var, after in ((2e-6, 1e-6, 2e-6), (1e-6, 2e-6, 2e-6), (1e-6, 1e-6, 1e-6)):
+        u[K.U_B] = before
+        K.uncertainty_bias(u, var)
+        assert u[K.U_B] == after
