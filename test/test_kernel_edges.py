@@ -7,14 +7,22 @@ kernel that ran the field's step on the zeros of a missing field would take
 them as the references). A reset forgets the last field's verdict with the
 rest. The gyro's increment is exact at any step size (at 100 Hz a wrong
 half-angle is a third-order error no other test sees). A gyro at its range
-is clipped on any axis. Fast: part of ``make mutation``'s subset of the
+is clipped on any axis, and one stuck from its first sample as one stuck
+later. A field with no horizontal part has no heading. With the
+calibration on: its turn is the gyro's rotation since its last field (a
+clip restarts it), a calibration loaded while running sets the heading at
+once, and after a calibration the heading follows with time constant t/2.
+Fast: part of ``make mutation``'s subset of the
 kernel (docs/tests.md#mutmut).
 """
+
+import math
 
 import numpy as np
 import pytest
 
-from ext_observer.core.ahrs.ahrs_layout import S_HAS_REF, S_MAG_USED, S_REF
+from ext_observer.core.ahrs.ahrs_filters import rotate
+from ext_observer.core.ahrs.ahrs_layout import S_CAL_TURN, S_HAS_REF, S_MAG_USED, S_REF
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 
 DT = 0.01
@@ -128,3 +136,131 @@ def test_a_reset_is_a_fresh_start():
             q = used.update(tuple(gyr[k]), tuple(acc[k]), m, DT)
             assert q == pytest.approx(fresh.update(tuple(gyr[k]), tuple(acc[k]), m, DT),
                                       abs=1e-12), (use_mag, k)
+
+
+LEVEL = (0.0, 0.0, 9.81)
+STILL = (0.0, 0.0, 0.0)
+
+
+def field_heading(q, field):
+    """The heading (rad, from north) of a body-frame field in the estimate's world frame."""
+    hx, hy, _ = rotate(*q, *field)
+    return math.atan2(hx, hy)
+
+
+def quat_mul(a, b):
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw])
+
+
+def quat_exp(v):
+    """``exp(v / 2)``: the rotation of vector ``v`` (rad) as a unit quaternion."""
+    t = float(np.linalg.norm(v))
+    return np.concatenate(([math.cos(0.5 * t)], math.sin(0.5 * t) / t * np.asarray(v)))
+
+
+def test_a_field_with_no_horizontal_part_says_nothing_of_the_heading():
+    # Level and still, 9D without a calibration: an exactly vertical field
+    # (dip -90 deg) has no heading and is not a field used; the first with a
+    # horizontal part (dip -85 deg, within mag_dip_th of the references) then
+    # sets the heading at once, as a first field does (a running mean of one).
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True)
+    for _ in range(50):
+        est.update(STILL, LEVEL, (0.0, 0.0, -4e-5), DT)
+    assert est.flat_state[S_MAG_USED] == 0.0
+    h, a = 4e-5 * math.cos(math.radians(85.0)), math.radians(60.0)
+    field = (h * math.cos(a), h * math.sin(a), -4e-5 * math.sin(math.radians(85.0)))
+    q = est.update(STILL, LEVEL, field, DT)
+    assert abs(field_heading(q, field)) < 1e-9
+
+
+def test_the_calibrations_turn_is_the_gyros_rotation_since_its_last_field_and_a_clip_restarts_it():
+    # 9D with the calibration (the default): IMU samples without a field,
+    # turning at 8 rad/s about a tilted axis (0.08 rad per step: the turn
+    # must be the exact rotation, not one right to first order). The turn
+    # the calibration predicts its next field with is exp(w t / 2), the
+    # gyro's rotation since the last field. A clipped sample restarts it:
+    # from then on it is the rotation since that sample began.
+    est = AhrsObserver(AhrsParams(gyro_range=20.0), use_mag=True)
+    est.update(STILL, LEVEL, FIELD, DT)
+    axis = np.array([0.3, -0.4, 0.866]) / np.linalg.norm([0.3, -0.4, 0.866])
+    rate = 8.0 * axis
+    for k in range(1, 31):
+        est.update(tuple(rate), LEVEL, None, DT)
+        turn = est.flat_state[S_CAL_TURN:S_CAL_TURN + 4]
+        assert np.allclose(turn, quat_exp(rate * k * DT), rtol=0.0, atol=1e-12), k
+    clip = np.array([20.0, 0.0, 0.0])
+    est.update(tuple(clip), LEVEL, None, DT)
+    assert est.clipped == 1
+    for k in range(1, 11):
+        est.update(tuple(rate), LEVEL, None, DT)
+        turn = est.flat_state[S_CAL_TURN:S_CAL_TURN + 4]
+        expected = quat_mul(quat_exp(clip * DT), quat_exp(rate * k * DT))
+        assert np.allclose(turn, expected, rtol=0.0, atol=1e-12), k
+
+
+def test_a_gyro_stuck_from_its_first_sample_is_clipped_as_one_stuck_later():
+    # Unknown range (gyro_range 0): a rate of at least 2 rad/s repeated
+    # exactly, at the largest magnitude seen, is the range (a stuck gyro)
+    # from its second repeat on. The first sample of all is the first of
+    # the repeats as any other.
+    for lead in (0, 5):
+        est = AhrsObserver(AhrsParams(), use_mag=False)
+        for k in range(lead):
+            est.update((0.1 * k, 0.0, 0.0), TILTED, None, DT)
+        counts = []
+        for _ in range(4):
+            est.update((3.0, -1.0, 0.5), TILTED, None, DT)
+            counts.append(est.clipped)
+        assert counts == [0, 0, 1, 2], lead
+
+
+def test_after_a_calibration_the_heading_follows_its_fields_with_time_constant_t_over_2():
+    # Level and still, a calibration loaded while running (its true field's
+    # heading taken at its next step); 2 s later the field's heading turns
+    # by 0.2 rad. The heading follows the calibrated fields with the gain
+    # max(k_mag, 1 - exp(-dt / max(1 s, t/2))), t since the calibration
+    # was applied (ahrs_update_mag's refinement; no running mean after a
+    # calibration): after 2 s more the residual is that rule's, about a
+    # quarter of the turn (k_mag alone would leave 0.88 of it), to within
+    # what the calibration, learning on, takes of the turn into its offset.
+    est = AhrsObserver(AhrsParams(), use_mag=True)
+    k_mag = 1.0 - math.exp(-DT / AhrsParams().tau_mag)
+    offset = np.array([3e-5, -1e-5, 0.0])
+    c, s = math.cos(0.2), math.sin(0.2)
+    turned = (FIELD[0] * c - FIELD[1] * s, FIELD[0] * s + FIELD[1] * c, FIELD[2])
+    for _ in range(100):
+        est.update(STILL, LEVEL, tuple(np.array(FIELD) + offset), DT)
+    est.load_calibration(tuple(offset), np.eye(3))
+    # The next field is the calibration's step (its period passed long ago).
+    for _ in range(200):
+        q = est.update(STILL, LEVEL, tuple(np.array(FIELD) + offset), DT)
+    assert abs(field_heading(q, FIELD)) < 1e-9
+    e = field_heading(q, turned)
+    assert abs(e) == pytest.approx(0.2)
+    for n in range(201, 401):
+        q = est.update(STILL, LEVEL, tuple(np.array(turned) + offset), DT)
+        kap = max(k_mag, 1.0 - math.exp(-DT / max(1.0, 0.5 * n * DT)))
+        e -= 2.0 * math.atan2(kap * math.sin(0.5 * e), 1.0 - kap + kap * math.cos(0.5 * e))
+    assert field_heading(q, turned) == pytest.approx(e, abs=0.01)
+    assert 0.15 < abs(field_heading(q, turned)) / 0.2 < 0.35
+
+
+def test_a_calibration_loaded_while_running_sets_the_heading_at_the_next_calibration_step():
+    # Level and still, a raw field with a hard-iron offset: the heading is
+    # the raw field's. Loaded while running, the calibration gives the true
+    # field, whose heading the estimate takes at once at the calibration's
+    # next step (within 1/mag_cal_rate), not over the refinement's seconds.
+    est = AhrsObserver(AhrsParams(), use_mag=True)
+    offset = np.array([3e-5, -1e-5, 0.0])
+    raw = tuple(np.array(FIELD) + offset)
+    for _ in range(100):
+        est.update(STILL, LEVEL, raw, DT)
+    assert abs(field_heading(est.q, FIELD)) > 0.3
+    est.load_calibration(tuple(offset), np.eye(3))
+    steps = int(math.ceil(1.0 / AhrsParams().mag_cal_rate / DT)) + 1
+    for _ in range(steps):
+        q = est.update(STILL, LEVEL, raw, DT)
+    assert abs(field_heading(q, FIELD)) < 1e-6
