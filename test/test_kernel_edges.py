@@ -12,6 +12,7 @@ later. A field with no horizontal part has no heading. With the
 calibration on: its turn is the gyro's rotation since its last field (a
 clip restarts it), a calibration loaded while running sets the heading at
 once, and after a calibration the heading follows with time constant t/2.
+A rest updates the bias's covariance and nothing after it.
 Fast: part of ``make mutation``'s subset of the
 kernel (docs/tests.md#mutmut).
 """
@@ -22,7 +23,8 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs.ahrs_filters import rotate
-from ext_observer.core.ahrs.ahrs_layout import S_CAL_TURN, S_HAS_REF, S_MAG_USED, S_REF
+from ext_observer.core.ahrs.ahrs_layout import (S_BIAS_P, S_CAL_TURN, S_HAS_REF, S_MAG_USED, S_REF,
+                                                S_RLP)
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 
 DT = 0.01
@@ -264,3 +266,20 @@ def test_a_calibration_loaded_while_running_sets_the_heading_at_the_next_calibra
     for _ in range(steps):
         q = est.update(STILL, LEVEL, raw, DT)
     assert abs(field_heading(q, FIELD)) < 1e-6
+
+
+def test_a_rest_touches_the_bias_and_its_covariance_but_not_the_low_passed_attitude():
+    # Level and still: one estimator detects the rest (rest_time 1.5 s, the
+    # default), the other never (rest_time 1000 s). The rest learns the
+    # bias (zero here) and updates its covariance; the low-passed R(q̂)
+    # that the bias learned in motion uses (the flat state's slots after
+    # the covariance's six) is the same in both, to the bit.
+    rest, never = (AhrsObserver(AhrsParams(rest_time=t), use_mag=False) for t in (1.5, 1000.0))
+    for _ in range(400):
+        rest.update(STILL, LEVEL, None, DT)
+        never.update(STILL, LEVEL, None, DT)
+    assert rest.rest and not never.rest
+    a, b = rest.flat_state, never.flat_state
+    assert not np.array_equal(a[S_BIAS_P:S_BIAS_P + 6], b[S_BIAS_P:S_BIAS_P + 6])
+    assert np.array_equal(a[S_RLP:S_RLP + 18], b[S_RLP:S_RLP + 18])
+    assert np.ptp(a[S_RLP:S_RLP + 18]) > 0.5   # R's states are not all zero
