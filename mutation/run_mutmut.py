@@ -57,6 +57,10 @@ MODULES = {
     'ext_observer/core/ahrs/bias_kernel.py': [
         'test/test_bias_kernel.py', 'test/test_core_ahrs_robust.py',
         'test/test_core_ahrs_params.py'],
+    # Its clipping and rest detection (split from it): the kernel's subset.
+    'ext_observer/core/ahrs/gyro_watch.py': [
+        'test/test_kernel_edges.py', 'test/test_core_ahrs.py', 'test/test_core_ahrs_params.py',
+        'test/test_core_ahrs_robust.py'],
 }
 # Tests that start ROS nodes or need numba, BROAD or the benchmark's
 # packages are left out of the subsets (minutes each, or not about the
@@ -76,7 +80,8 @@ SLOW = ('the_same_defaults_at_25_and_1000_hz or a_constant_bias_is_learned_in_mo
         ' or the_extension_term_holds_the_estimate_near_s3 or workers_give_the_vectorized'
         ' or a_lagging_field_is_learned_with_its_delay')
 # (the bias's own module keeps them: its tests in motion are the slow ones)
-FAST_ONLY = ('ext_observer/core/ahrs/ahrs_kernel.py', 'ext_observer/core/ahrs/ahrs_filters.py')
+FAST_ONLY = ('ext_observer/core/ahrs/ahrs_kernel.py', 'ext_observer/core/ahrs/ahrs_filters.py',
+             'ext_observer/core/ahrs/gyro_watch.py')
 
 
 def tree_of(modules):

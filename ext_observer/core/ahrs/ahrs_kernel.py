@@ -25,7 +25,7 @@ sensor → ENU.
 
 import math
 
-from .ahrs_filters import clip, first_attitude, gain, rotate, rotation_matrix, steady
+from .ahrs_filters import first_attitude, gain, rotate, rotation_matrix, steady
 # The layout's names (and bias_variance) are read from this module too: the
 # wrapper, the covariance and the tests see one module, plain or compiled.
 from .ahrs_layout import (  # noqa: F401
@@ -41,6 +41,7 @@ from .ahrs_layout import (  # noqa: F401
                           S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REJECTED, S_REST,
                           S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N, S_STUCK,
                           S_REF_REST, S_WAIT_N, S_WAIT_TURN)
+from .gyro_watch import clipped_variance, detect_rest
 from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F401
                           learn_bias, rlp_steady)
 from .magcal_kernel import (MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn,
@@ -53,18 +54,6 @@ _TINY = 1e-300
 _REFINE_SHARE = 0.5
 _REFINE_SHORTEST = 1.0
 _SQRT2 = math.sqrt(2.0)
-# σ of the bias learned at rest (rad/s), VQF's value: the low-passed rate of
-# a body at rest is a far better measurement than any correction in motion.
-_REST_BIAS_SIGMA = math.radians(0.03)
-# Rad/s: no gyro's range is below this (the smallest common one, ±125 °/s, is
-# 2.18 rad/s): a rate stuck at its largest magnitude below it is not clipped.
-_CLIP_FLOOR = 2.0
-# A rate this close to a known range (relative) is at it.
-_AT_RANGE = 1e-4
-# Unknown range: a rate repeated this many times more at the largest
-# magnitude seen is stuck (a smooth peak of a quantized rate repeats once;
-# none of BROAD's 22 trials repeats twice).
-_STUCK = 2.0
 # s: a field rejected as disturbed for longer than this is the field (VQF's
 # maximum rejection time, Laidig & Seel 2023): the references follow it.
 _MAX_REJECTION = 60.0
@@ -195,46 +184,18 @@ def _init_filters(s, gx, gy, gz, ax, ay, az):
     s[S_REST_ACC + 2] = az
 
 
-def _at_range(s, i, g):
-    """Whether rate ``g`` on axis ``i`` is at the gyro's range (and the axis's memory)."""
-    a = abs(g)
-    rng = s[P_GYRO_RANGE]
-    if rng > 0.0:
-        at = a >= rng * (1.0 - _AT_RANGE)
-    else:
-        # Unknown range: stuck at the largest magnitude seen.
-        same = a >= _CLIP_FLOOR and a == abs(s[S_GYR_LAST + i]) and a >= s[S_GYR_PEAK]
-        s[S_STUCK + i] = s[S_STUCK + i] + 1.0 if same else 0.0
-        at = s[S_STUCK + i] >= _STUCK
-    s[S_GYR_LAST + i] = g
-    return at
-
-
 def _watch_clipping(s, gx, gy, gz):
     """
-    A sample at the gyro's range: count it, distrust the gyro, lean on the others.
+    A sample at the gyro's range (:func:`clipped_variance`): distrust the gyro, lean on the others.
 
-    The rate beyond the range is unknown: the sample adds ``(range dt)²``
-    per clipped axis to the attitude's variance (``S_CLIPPED``, for the
-    covariance); the inclination starts again from the running mean of the
-    specific force (as at the start: the gyro's integral is not trusted
-    across the stretch), the heading from the running mean of the next
-    fields, the bias learns nothing until the low-pass has settled again,
-    and the magnetometer calibration does not learn across the stretch.
+    The inclination starts again from the running mean of the specific
+    force (as at the start: the gyro's integral is not trusted across the
+    stretch), the heading from the running mean of the next fields, the
+    bias learns nothing until the low-pass has settled again, and the
+    magnetometer calibration does not learn across the stretch.
     """
-    dt = s[C_DT]
-    cx = _at_range(s, 0, gx)
-    cy = _at_range(s, 1, gy)
-    cz = _at_range(s, 2, gz)
-    peak = max(abs(gx), max(abs(gy), abs(gz)))
-    if peak > s[S_GYR_PEAK]:
-        s[S_GYR_PEAK] = peak
-    top = max(s[P_GYRO_RANGE], s[S_GYR_PEAK]) * dt
-    var = ((1.0 if cx else 0.0) + (1.0 if cy else 0.0) + (1.0 if cz else 0.0)) * top * top
-    s[S_CLIPPED] = var
-    if var == 0.0:
+    if clipped_variance(s, gx, gy, gz) == 0.0:
         return
-    s[S_CLIPS] += 1.0
     _restart_mean(s)
     s[S_MAG_USED] = 0.0
     _forget_wait(s)
@@ -285,40 +246,7 @@ def ahrs_update_gyr(s, gx, gy, gz):
     s[S_Q + 1] = px
     s[S_Q + 2] = py
     s[S_Q + 3] = pz
-    _detect_rest(s, gx, gy, gz)
-
-
-def _detect_rest(s, gx, gy, gz):
-    k = s[C_K_REST]
-    lx, ly, lz = s[S_REST_GYR], s[S_REST_GYR + 1], s[S_REST_GYR + 2]
-    lx, ly, lz = lx + k * (gx - lx), ly + k * (gy - ly), lz + k * (gz - lz)
-    s[S_REST_GYR] = lx
-    s[S_REST_GYR + 1] = ly
-    s[S_REST_GYR + 2] = lz
-    bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
-    ex, ey, ez = gx - lx, gy - ly, gz - lz
-    dev = ex * ex + ey * ey + ez * ez
-    mx, my, mz = lx - bx, ly - by, lz - bz
-    mean = mx * mx + my * my + mz * mz
-    th = s[P_REST_GYR] * s[P_REST_GYR]
-    still = (dev < th) and (mean < th) and s[S_ACC_STILL] != 0.0
-    s[S_REST_TIME] = (s[S_REST_TIME] + s[C_DT]) if still else 0.0
-    rest = s[S_REST_TIME] >= s[P_REST_TIME]
-    s[S_REST] = 1.0 if rest else 0.0
-    # At rest the bias is the low-passed rate, within bias_max per axis
-    # as in motion.
-    kr = k if rest else 0.0
-    m = s[P_BIAS_MAX]
-    s[S_BIAS] = clip(bx + kr * mx, -m, m)
-    s[S_BIAS + 1] = clip(by + kr * my, -m, m)
-    s[S_BIAS + 2] = clip(bz + kr * mz, -m, m)
-    if rest:
-        # Its variance as that of a measurement whose steady σ is
-        # _REST_BIAS_SIGMA's: (1 − k)² P + k² r, r = 2 σ² / k.
-        a = (1.0 - k) * (1.0 - k)
-        add = 2.0 * k * _REST_BIAS_SIGMA * _REST_BIAS_SIGMA
-        for i in range(6):
-            s[S_BIAS_P + i] = a * s[S_BIAS_P + i] + (add if i == 0 or i == 3 or i == 5 else 0.0)
+    detect_rest(s, gx, gy, gz)
 
 
 def ahrs_update_acc(s, ax, ay, az):

@@ -42,8 +42,8 @@ __all__ = ['CompiledUnavailable', 'ENV', 'Kernels', 'PLAIN_COST', 'cache_folder'
 
 # In this order: each file's names are defined before the next one's functions use them.
 _SOURCES = ('layout.py', 'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
-            'ahrs_layout.py', 'ahrs_filters.py', 'bias_kernel.py', 'ahrs_kernel.py',
-            'uncertainty_kernel.py')
+            'ahrs_layout.py', 'ahrs_filters.py', 'bias_kernel.py', 'gyro_watch.py',
+            'ahrs_kernel.py', 'uncertainty_kernel.py')
 ENV = 'EXT_OBSERVER_COMPILED'
 # What running plain costs, measured (docs/compiled.md#without-numba): said
 # once at start by imu_filter_node and the broad, csv and bag commands.

@@ -1,0 +1,105 @@
+"""
+What the gyro's own samples say: a rate at the sensor's range, and a body at rest.
+
+Functions on the estimator's flat state (:mod:`~ext_observer.core.ahrs.ahrs_layout`),
+in the compiled subset of Python as :mod:`~ext_observer.core.ahrs.ahrs_kernel`,
+which calls them on every gyro sample: :func:`clipped_variance` finds the
+clipped axes (from ``gyro_range``, or a rate stuck at its peak) and
+:func:`detect_rest` the rest that the bias is learned from (VQF's rest
+detection, Laidig & Seel 2023). What the estimator does about a clipped
+sample stays in the kernel.
+"""
+
+import math
+
+from .ahrs_filters import clip
+from .ahrs_layout import (C_DT, C_K_REST, P_BIAS_MAX, P_GYRO_RANGE, P_REST_GYR, P_REST_TIME,
+                          S_ACC_STILL, S_BIAS, S_BIAS_P, S_CLIPPED, S_CLIPS, S_GYR_LAST,
+                          S_GYR_PEAK, S_REST, S_REST_GYR, S_REST_TIME, S_STUCK)
+
+# σ of the bias learned at rest (rad/s), VQF's value: the low-passed rate of
+# a body at rest is a far better measurement than any correction in motion.
+_REST_BIAS_SIGMA = math.radians(0.03)
+# Rad/s: no gyro's range is below this (the smallest common one, ±125 °/s, is
+# 2.18 rad/s): a rate stuck at its largest magnitude below it is not clipped.
+_CLIP_FLOOR = 2.0
+# A rate this close to a known range (relative) is at it.
+_AT_RANGE = 1e-4
+# Unknown range: a rate repeated this many times more at the largest
+# magnitude seen is stuck (a smooth peak of a quantized rate repeats once;
+# none of BROAD's 22 trials repeats twice).
+_STUCK = 2.0
+
+
+def _at_range(s, i, g):
+    """Whether rate ``g`` on axis ``i`` is at the gyro's range (and the axis's memory)."""
+    a = abs(g)
+    rng = s[P_GYRO_RANGE]
+    if rng > 0.0:
+        at = a >= rng * (1.0 - _AT_RANGE)
+    else:
+        # Unknown range: stuck at the largest magnitude seen.
+        same = a >= _CLIP_FLOOR and a == abs(s[S_GYR_LAST + i]) and a >= s[S_GYR_PEAK]
+        s[S_STUCK + i] = s[S_STUCK + i] + 1.0 if same else 0.0
+        at = s[S_STUCK + i] >= _STUCK
+    s[S_GYR_LAST + i] = g
+    return at
+
+
+def clipped_variance(s, gx, gy, gz):
+    """
+    The attitude variance a sample at the gyro's range adds (rad²); 0.0 if none is.
+
+    The rate beyond the range is unknown: each clipped axis adds
+    ``(range dt)²`` (``S_CLIPPED``, for the covariance), and the sample is
+    counted (``S_CLIPS``).
+    """
+    dt = s[C_DT]
+    cx = _at_range(s, 0, gx)
+    cy = _at_range(s, 1, gy)
+    cz = _at_range(s, 2, gz)
+    peak = max(abs(gx), max(abs(gy), abs(gz)))
+    if peak > s[S_GYR_PEAK]:
+        s[S_GYR_PEAK] = peak
+    top = max(s[P_GYRO_RANGE], s[S_GYR_PEAK]) * dt
+    var = ((1.0 if cx else 0.0) + (1.0 if cy else 0.0) + (1.0 if cz else 0.0)) * top * top
+    s[S_CLIPPED] = var
+    if var != 0.0:
+        s[S_CLIPS] += 1.0
+    return var
+
+
+def detect_rest(s, gx, gy, gz):
+    """
+    Rest (gyro and specific force still for ``rest_time``); at rest the bias is the low-passed rate.
+    """
+    k = s[C_K_REST]
+    lx, ly, lz = s[S_REST_GYR], s[S_REST_GYR + 1], s[S_REST_GYR + 2]
+    lx, ly, lz = lx + k * (gx - lx), ly + k * (gy - ly), lz + k * (gz - lz)
+    s[S_REST_GYR] = lx
+    s[S_REST_GYR + 1] = ly
+    s[S_REST_GYR + 2] = lz
+    bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
+    ex, ey, ez = gx - lx, gy - ly, gz - lz
+    dev = ex * ex + ey * ey + ez * ez
+    mx, my, mz = lx - bx, ly - by, lz - bz
+    mean = mx * mx + my * my + mz * mz
+    th = s[P_REST_GYR] * s[P_REST_GYR]
+    still = (dev < th) and (mean < th) and s[S_ACC_STILL] != 0.0
+    s[S_REST_TIME] = (s[S_REST_TIME] + s[C_DT]) if still else 0.0
+    rest = s[S_REST_TIME] >= s[P_REST_TIME]
+    s[S_REST] = 1.0 if rest else 0.0
+    # At rest the bias is the low-passed rate, within bias_max per axis
+    # as in motion.
+    kr = k if rest else 0.0
+    m = s[P_BIAS_MAX]
+    s[S_BIAS] = clip(bx + kr * mx, -m, m)
+    s[S_BIAS + 1] = clip(by + kr * my, -m, m)
+    s[S_BIAS + 2] = clip(bz + kr * mz, -m, m)
+    if rest:
+        # Its variance as that of a measurement whose steady σ is
+        # _REST_BIAS_SIGMA's: (1 − k)² P + k² r, r = 2 σ² / k.
+        a = (1.0 - k) * (1.0 - k)
+        add = 2.0 * k * _REST_BIAS_SIGMA * _REST_BIAS_SIGMA
+        for i in range(6):
+            s[S_BIAS_P + i] = a * s[S_BIAS_P + i] + (add if i == 0 or i == 3 or i == 5 else 0.0)
