@@ -50,7 +50,8 @@ MODULES = {
     # (test_magcal_lag.py is the calibration's: 21 s of the kernel's 99 s
     # under mutmut's trampolines, measured)
     'ext_observer/core/ahrs/ahrs_kernel.py': [
-        'test/test_ahrs_filters.py', 'test/test_kernel_edges.py', 'test/test_core_ahrs.py',
+        'test/test_ahrs_filters.py', 'test/test_kernel_edges.py', 'test/test_kernel_field.py',
+        'test/test_core_ahrs.py',
         'test/test_core_ahrs_params.py',
         'test/test_core_ahrs_robust.py', 'test/test_new_field_axes.py'],
     # The kernel's shared arithmetic and its bias in motion (split from it).
