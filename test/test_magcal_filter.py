@@ -140,7 +140,7 @@ def test_symmetrizing_takes_the_mean_of_p_and_its_transpose_and_nothing_else():
 # --- mc_predict --------------------------------------------------------------------
 
 
-@pytest.mark.parametrize('drift', [0.0, 0.004])
+@pytest.mark.parametrize('drift', [0.0, 0.004, 1.0])  # 1.0: within its range (to 10)
 def test_the_prediction_turns_the_field_and_adds_the_walks(drift):
     rng = np.random.default_rng(3)
     s = container(rng, field_rw=0.03, drift=drift)
