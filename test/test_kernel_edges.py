@@ -12,7 +12,8 @@ later. A field with no horizontal part has no heading. With the
 calibration on: its turn is the gyro's rotation since its last field (a
 clip restarts it), a calibration loaded while running sets the heading at
 once, and after a calibration the heading follows with time constant t/2.
-A rest updates the bias's covariance and nothing after it.
+A rest updates the bias's covariance and nothing after it. After a clip the
+inclination restarts from a mean of one sample.
 Fast: part of ``make mutation``'s subset of the
 kernel (docs/tests.md#mutmut).
 """
@@ -283,3 +284,30 @@ def test_a_rest_touches_the_bias_and_its_covariance_but_not_the_low_passed_attit
     assert not np.array_equal(a[S_BIAS_P:S_BIAS_P + 6], b[S_BIAS_P:S_BIAS_P + 6])
     assert np.array_equal(a[S_RLP:S_RLP + 18], b[S_RLP:S_RLP + 18])
     assert np.ptp(a[S_RLP:S_RLP + 18]) > 0.5   # R's states are not all zero
+
+
+def test_after_a_clip_the_inclination_restarts_from_a_mean_of_one_sample():
+    # Level and still for 3 s (the low-pass full of the vertical), then one
+    # sample at the gyro's range about x (0.2 rad in its step): the
+    # inclination starts again from the running mean of the specific force,
+    # so this very sample's correction is toward its own accelerometer
+    # alone (a mean of one, whatever the low-pass held): q ← r ⊗ q_gyro,
+    # r = (1 − κ) + κ δ, δ the rotation taking f = R(q_gyro) a to the
+    # vertical, κ = 1 − exp(−dt / tau_acc_gain).
+    params = AhrsParams(gyro_range=20.0)
+    est = AhrsObserver(params, use_mag=False)
+    for _ in range(300):
+        est.update(STILL, LEVEL, None, DT)
+    q0 = np.array(est.q)
+    clip = np.array([20.0, 0.0, 0.0])
+    acc = np.array([0.3, 1.1, 9.7])
+    q = np.array(est.update(tuple(clip), tuple(acc), None, DT))
+    assert est.clipped == 1
+    q_gyro = quat_mul(q0, quat_exp(clip * DT))
+    f = np.array(rotate(*q_gyro, *acc))
+    u = f / np.linalg.norm(f)
+    delta = np.array([1.0 + u[2], u[1], -u[0], 0.0])
+    delta /= np.linalg.norm(delta)
+    kap = 1.0 - math.exp(-DT / params.tau_acc_gain)
+    r = np.array([1.0 - kap, 0.0, 0.0, 0.0]) + kap * delta
+    assert np.allclose(q, quat_mul(r, q_gyro), rtol=0.0, atol=1e-12)
