@@ -240,8 +240,9 @@ def test_a_loaded_calibration_is_the_prior_without_covariance_and_applied():
     e = list(s)
     mk.mc_load_state(s, OFF, *prior, 1.25)
     put(e, MC_PRIOR_X, prior)
-    for slot, v in ((MC_PRIOR_SCALE, 1.25), (MC_HAS_PRIOR, 1.0), (MC_PRIOR_COV, 0.0),
-                    (MC_FRESH, 1.0), (MC_LOADED, 1.0), (MC_IDENTITY, 0.0),
+    put(e, MC_X + 3, prior)  # applied at once
+    for slot, v in ((MC_PRIOR_SCALE, 1.25), (MC_SCALE, 1.25), (MC_HAS_PRIOR, 1.0),
+                    (MC_PRIOR_COV, 0.0), (MC_FRESH, 1.0), (MC_LOADED, 1.0), (MC_IDENTITY, 0.0),
                     (MC_CONVERGED, 0.0)):
         e[OFF + slot] = v
     expect_cache(e)
@@ -449,6 +450,16 @@ def test_the_heading_between_two_fields_is_the_angle_of_their_horizontal_parts(s
     turned = (f * math.cos(angle) + np.cross(u, f) * math.sin(angle)
               + u * (u @ f) * (1.0 - math.cos(angle)) + 0.7 * u)
     assert mk.mc_heading_between(*u, *f, *turned) == pytest.approx(angle, rel=1e-9)
+
+
+def test_a_loaded_calibration_is_applied_before_the_next_field():
+    """A fault found here: applied from the next field on (the field as given till then)."""
+    from ext_observer.core.ahrs.magcal import MagCalibrator
+    cal = MagCalibrator()
+    soft, bias = np.array([[1.1, 0.02, 0.0], [0.02, 0.95, 0.01], [0.0, 0.01, 1.0]]), FIELD / 3
+    cal.load(bias, soft)
+    assert cal.applied
+    assert cal.apply(FIELD) == pytest.approx(np.linalg.solve(soft, FIELD - bias), rel=1e-12)
 
 
 def test_the_heading_turn_is_the_same_whatever_the_norm_of_the_axis():

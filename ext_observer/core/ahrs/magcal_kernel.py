@@ -122,6 +122,10 @@ def mc_load_state(s, o, x3, x4, x5, x6, x7, x8, x9, x10, x11, scale):
         s[p + 7] = x10
         s[p + 8] = x11
         s[o + MC_PRIOR_SCALE] = scale
+        # Applied at once, before the next field starts the filter from it.
+        for k in range(9):
+            s[o + MC_X + 3 + k] = s[p + k]
+        s[o + MC_SCALE] = scale
         s[o + MC_HAS_PRIOR] = 1.0
         s[o + MC_PRIOR_COV] = 0.0
         s[o + MC_FRESH] = 1.0
