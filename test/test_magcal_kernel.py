@@ -296,11 +296,11 @@ def test_without_a_live_field_assessing_only_clears_stale():
     assert_block(s, e)
 
 
-def learning(seed, with_up=True, scale=1e-10):
+def learning(seed, with_up=True, scale=1e-10, field=FIELD):
     """A calibration learning (not converged), its latest field seen, the hold not started."""
     s = estimator_state()
     random_calibration(s, np.random.default_rng(seed), scale)
-    seen(s, FIELD, UP if with_up else None)
+    seen(s, field, UP if with_up else None)
     s[OFF + MC_HEADING] = 1.0
     return s
 
@@ -333,16 +333,19 @@ def test_a_quality_below_the_threshold_starts_the_hold_from_the_calibration_now(
 
 @pytest.mark.parametrize('with_up', [True, False])
 @pytest.mark.parametrize('sign', [1.0, -1.0])
-@pytest.mark.parametrize('apart', [1.5, 2.5])
-def test_the_hold_starts_over_when_the_calibration_turned_the_heading(with_up, sign, apart):
+@pytest.mark.parametrize('apart', [1.5, 1.9, 2.1, 2.5])
+@pytest.mark.parametrize('held', [0.0, 0.5])
+def test_the_hold_starts_over_when_the_calibration_turned_the_heading(with_up, sign, apart,
+                                                                      held):
     """Turned by more than CAL_HOLD_TURN × heading since the hold started: held again from 0."""
-    s = learning(8, with_up)
-    s[OFF + MC_HELD] = 0.5
+    field = np.array([0.3, -0.35, -0.25])  # without an up, the axis: far from unit
+    s = learning(8, with_up, field=field)
+    s[OFF + MC_HELD] = held
     x = x_of(s)
     candidate = x[3:11] + sign * np.array([0.02, -0.01, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0])
     put(s, MC_CANDIDATE, candidate)
-    axis = UP if with_up else FIELD
-    turned = turn_about(axis, calibrated(x[3:11], FIELD), calibrated(candidate, FIELD))
+    axis = UP if with_up else field
+    turned = turn_about(axis, calibrated(x[3:11], field), calibrated(candidate, field))
     assert abs(turned) > 1e-3
     s[OFF + MC_HEADING] = abs(turned) / apart  # 2 × heading above or below the turn
     e = list(s)
@@ -353,7 +356,7 @@ def test_the_hold_starts_over_when_the_calibration_turned_the_heading(with_up, s
         put(e, MC_CANDIDATE, x[3:11])
         e[OFF + MC_HELD] = 0.0
     else:
-        e[OFF + MC_HELD] = 0.75
+        e[OFF + MC_HELD] = held + 0.25
     assert_block(s, e)
 
 
@@ -471,6 +474,18 @@ def test_the_heading_turn_is_the_same_whatever_the_norm_of_the_axis():
     turn = cal.heading_turn(FIELD, UP)
     assert abs(turn) > 0.05
     assert cal.heading_turn(FIELD, 40.0 * UP) == pytest.approx(turn, rel=1e-12)
+
+
+def test_a_calibrated_field_along_the_vertical_is_no_crash_nor_nan():
+    s = estimator_state()
+    random_calibration(s, np.random.default_rng(18))
+    put(s, MC_X + 3, (0.1, 0.2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    seen(s, (0.1, 0.2, -0.5), (0.0, 0.0, 1.0))  # calibrated: (0, 0, -0.5) exactly
+    s[OFF + MC_LOADED] = 1.0
+    mk.mc_assess(s, OFF, 0.01)
+    # No horizontal part (never exactly so in practice): a number, not a
+    # division by zero (0 today: nothing of the covariance lies across it).
+    assert s[OFF + MC_QUALITY] >= 0.0
 
 
 def test_a_calibrated_field_of_zero_has_no_heading():

@@ -106,6 +106,7 @@ def started(up=UP):
     """The estimator's calibration after its first field."""
     s = estimator_state()
     assert learn(s, FIELD, up=up) == 1.0
+    put(s, MC_FIELDS, (10.0, 7.0, 2.0, 3.0, 1.0, 2.0))  # counts so far: counted on
     return s
 
 
@@ -167,13 +168,15 @@ R = turn(0.05, (0.2, 0.5, 0.8))
 
 
 @pytest.mark.parametrize('offset, used', [(0.0, True), (3.0, False)])
-def test_a_field_learned_while_turning_is_counted_and_moves_the_refused_share(offset, used):
+@pytest.mark.parametrize('rate', [RATE, (0.3, 0.0, 0.0), (0.0, -0.3, 0.0), (0.0, 0.0, 0.3)])
+def test_a_field_learned_while_turning_is_counted_and_moves_the_refused_share(offset, used,
+                                                                              rate):
     s = started()
     s[OFF + MC_REFUSED_SHARE] = 0.5
     c = list(s)
     mf.mc_predict(c, OFF, *R, 0.05)
-    y = predicted(c, RATE) + offset * np.linalg.norm(FIELD)
-    e, live, use = step(s, y, R, 0.05, RATE, watched_share=0.0 if used else 1.0)
+    y = predicted(c, rate) + offset * np.linalg.norm(FIELD)
+    e, live, use = step(s, y, R, 0.05, rate, watched_share=0.0 if used else 1.0)
     assert use == used
     expect_seen(e, y, UP, True)
     expect_cache(e)
@@ -275,7 +278,7 @@ def test_a_field_the_caller_refuses_is_counted_and_watched_where_applied(applied
         mk.mc_cache(s, OFF)
     e, live, use = step(s, FIELD, R, 0.05, RATE, allow=False,
                         watched_share=1.0 if applied else None)
-    assert e[OFF + MC_REFUSED] == 1.0
+    assert e[OFF + MC_REFUSED] == 4.0
     expect_seen(e, (0.0, 0.0, 0.0), UP, False)
     expect_cache(e)
     assert_block(s, e)
@@ -355,3 +358,19 @@ def test_a_rate_that_is_not_finite_counts_as_zero(axis):
     assert_block(bad, zero)
     # (the rate counts: its lag's column of the filter's measurement)
     assert not np.array_equal(p_of(some), p_of(zero))
+
+
+def test_a_quality_at_the_threshold_is_not_watched():
+    s = started()
+    c = list(s)
+    mf.mc_predict(c, OFF, *R, 0.05)
+    y = predicted(c, RATE)
+    c = list(s)
+    learn(c, y, R, 0.05, RATE)
+    quality = c[OFF + MC_QUALITY]
+    for heading, watched in ((quality, 0.0), (math.nextafter(quality, math.inf), 1.0)):
+        c = list(s)
+        c[OFF + MC_HEADING] = heading
+        learn(c, y, R, 0.05, RATE)
+        assert c[OFF + MC_QUALITY] == quality
+        assert c[OFF + MC_WATCHING] == watched and c[OFF + MC_WATCHED] == watched
