@@ -41,9 +41,10 @@ MODULES = {
         'test/test_covariance.py', 'test/test_mutants_killed.py'],
     'ext_observer/pipeline/pairing.py': [
         'test/test_pairing.py', 'test/test_mutants_killed.py'],
-    # The calibration's filter (its state, prediction and update).
+    # The calibration's filter (its state, prediction and update): its
+    # known-answer tests, and the calibration's end to end but the slow.
     'ext_observer/core/ahrs/magcal_filter.py': [
-        'test/test_magcal_lag.py', 'test/test_magcal_gate.py', 'test/test_core_magcal.py'],
+        'test/test_magcal_filter.py', 'test/test_magcal_gate.py', 'test/test_core_magcal.py'],
     # The calibration's steps around the filter (learn, assess, watch, reset):
     # their known-answer tests, and the calibration's fast ones.
     'ext_observer/core/ahrs/magcal_kernel.py': [
@@ -52,7 +53,8 @@ MODULES = {
     # (test_magcal_lag.py is the calibration's: 21 s of the kernel's 99 s
     # under mutmut's trampolines, measured)
     'ext_observer/core/ahrs/ahrs_kernel.py': [
-        'test/test_ahrs_filters.py', 'test/test_kernel_edges.py', 'test/test_core_ahrs.py',
+        'test/test_ahrs_filters.py', 'test/test_kernel_edges.py', 'test/test_kernel_field.py',
+        'test/test_core_ahrs.py',
         'test/test_core_ahrs_params.py',
         'test/test_core_ahrs_robust.py', 'test/test_new_field_axes.py'],
     # The kernel's shared arithmetic and its bias in motion (split from it).
@@ -86,7 +88,10 @@ SLOW = ('the_same_defaults_at_25_and_1000_hz or a_constant_bias_is_learned_in_mo
 # (the bias's own module keeps them: its tests in motion are the slow ones)
 # The calibration's slow tests (seconds each plain) left out of its modules'
 # runs, where faster tests of the same functions stand for them.
-MAGCAL_FILTER_SLOW = ''
+MAGCAL_FILTER_SLOW = ('an_offset_that_changes_for_good or calibrate_as_the_node_would'
+                      ' or learns_it_runs_6d or a_world_fixed_disturbance'
+                      ' or keeps_its_own_field or broad_excerpt_with_an_offset'
+                      ' or a_loaded_calibration_is_used_at_once or forked_paths_agree')
 # (one line between: the filter's and the kernel's are chosen apart)
 MAGCAL_KERNEL_SLOW = ('an_offset_that_changes_for_good or a_csv_and_a_bag'
                       ' or the_estimator_learns_it_runs_6d or the_broad_excerpt_with_an_offset'
