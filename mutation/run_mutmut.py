@@ -45,9 +45,11 @@ MODULES = {
     # known-answer tests, and the calibration's end to end but the slow.
     'ext_observer/core/ahrs/magcal_filter.py': [
         'test/test_magcal_filter.py', 'test/test_magcal_gate.py', 'test/test_core_magcal.py'],
-    # The calibration's steps around the filter (learn, assess, watch, reset).
+    # The calibration's steps around the filter (learn, assess, watch, reset):
+    # their known-answer tests, and the calibration's fast ones.
     'ext_observer/core/ahrs/magcal_kernel.py': [
-        'test/test_magcal_lag.py', 'test/test_magcal_gate.py', 'test/test_core_magcal.py'],
+        'test/test_magcal_kernel.py', 'test/test_magcal_learn.py', 'test/test_magcal_gate.py',
+        'test/test_core_magcal.py'],
     # (test_magcal_lag.py is the calibration's: 21 s of the kernel's 99 s
     # under mutmut's trampolines, measured)
     'ext_observer/core/ahrs/ahrs_kernel.py': [
@@ -91,7 +93,10 @@ MAGCAL_FILTER_SLOW = ('an_offset_that_changes_for_good or calibrate_as_the_node_
                       ' or keeps_its_own_field or broad_excerpt_with_an_offset'
                       ' or a_loaded_calibration_is_used_at_once or forked_paths_agree')
 # (one line between: the filter's and the kernel's are chosen apart)
-MAGCAL_KERNEL_SLOW = ''
+MAGCAL_KERNEL_SLOW = ('an_offset_that_changes_for_good or a_csv_and_a_bag'
+                      ' or the_estimator_learns_it_runs_6d or the_broad_excerpt_with_an_offset'
+                      ' or a_world_fixed_disturbance or a_calibrated_sensor_keeps_its_own_field'
+                      ' or a_loaded_calibration_is_used_at_once or float_vectorized_and_forked')
 # Module: the tests left out of its runs, besides DESELECT.
 SLOW_OF = {
     'ext_observer/core/ahrs/ahrs_kernel.py': SLOW,

@@ -135,10 +135,12 @@ def ahrs_update(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
     if dt != s[C_DT]:
         ahrs_coefficients(s, dt)
     if s[S_INIT] == 0.0:
+        fx, fy, fz = mx, my, mz
         if has_mag and s[P_HAS_CAL] != 0.0:
-            # Identity until the calibration is converged or loaded.
-            mx, my, mz = mc_apply(s, MC0, mx, my, mz)
-        w, x, y, z = first_attitude(ax, ay, az, has_mag and s[P_USE_MAG] != 0.0, mx, my, mz,
+            # Identity until the calibration is converged or loaded (the
+            # field step below calibrates the field as given: once).
+            fx, fy, fz = mc_apply(s, MC0, mx, my, mz)
+        w, x, y, z = first_attitude(ax, ay, az, has_mag and s[P_USE_MAG] != 0.0, fx, fy, fz,
                                     s[P_USE_MAG] != 0.0)
         s[S_Q] = w
         s[S_Q + 1] = x

@@ -374,8 +374,9 @@ class MagCalibrator:
         """
         k, st, o = self._k, self._s, self._o
         f0, f1, f2 = k.mc_calibrated(st, o + MC_X + 3, mag[0], mag[1], mag[2])
-        return float(k.mc_heading_between(up[0], up[1], up[2], mag[0], mag[1], mag[2],
-                                          f0, f1, f2))
+        n = math.sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2]) or 1.0
+        return float(k.mc_heading_between(up[0] / n, up[1] / n, up[2] / n, mag[0], mag[1],
+                                          mag[2], f0, f1, f2))
 
     @property
     def counts(self):

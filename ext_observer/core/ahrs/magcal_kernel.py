@@ -122,6 +122,10 @@ def mc_load_state(s, o, x3, x4, x5, x6, x7, x8, x9, x10, x11, scale):
         s[p + 7] = x10
         s[p + 8] = x11
         s[o + MC_PRIOR_SCALE] = scale
+        # Applied at once, before the next field starts the filter from it.
+        for k in range(9):
+            s[o + MC_X + 3 + k] = s[p + k]
+        s[o + MC_SCALE] = scale
         s[o + MC_HAS_PRIOR] = 1.0
         s[o + MC_PRIOR_COV] = 0.0
         s[o + MC_FRESH] = 1.0
@@ -344,8 +348,9 @@ def mc_assess(s, o, dt):
         g0, g1, g2 = mc_calibrated(s, cand, y0, y1, y2)
         if has_up:
             turned = abs(mc_heading_between(u0, u1, u2, f0, f1, f2, g0, g1, g2))
-        else:
-            turned = abs(mc_heading_between(y0, y1, y2, f0, f1, f2, g0, g1, g2))
+        else:  # about the field as given, made unit (it has the field's unit)
+            n = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+            turned = abs(mc_heading_between(y0 / n, y1 / n, y2 / n, f0, f1, f2, g0, g1, g2))
         if turned > CAL_HOLD_TURN * heading:
             for k in range(8):
                 s[cand + k] = s[x + 3 + k]
@@ -439,7 +444,7 @@ def mc_calibrated(s, zd, y0, y1, y2):
 
 
 def mc_heading_between(u0, u1, u2, f0, f1, f2, g0, g1, g2):
-    """The angle (rad) about ``u`` from the horizontal part of ``f`` to that of ``g``."""
+    """The angle (rad) about ``u`` (unit) from the horizontal part of ``f`` to that of ``g``."""
     a0 = u1 * f2 - u2 * f1
     a1 = u2 * f0 - u0 * f2
     a2 = u0 * f1 - u1 * f0
