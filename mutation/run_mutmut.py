@@ -54,7 +54,7 @@ MODULES = {
     # under mutmut's trampolines, measured)
     'ext_observer/core/ahrs/ahrs_kernel.py': [
         'test/test_ahrs_filters.py', 'test/test_kernel_edges.py', 'test/test_kernel_field.py',
-        'test/test_core_ahrs.py',
+        'test/test_kernel_steps.py', 'test/test_core_ahrs.py',
         'test/test_core_ahrs_params.py',
         'test/test_core_ahrs_robust.py', 'test/test_new_field_axes.py'],
     # The kernel's shared arithmetic and its bias in motion (split from it).
@@ -65,7 +65,7 @@ MODULES = {
         'test/test_core_ahrs_params.py'],
     # Its clipping and rest detection (split from it): the kernel's subset.
     'ext_observer/core/ahrs/gyro_watch.py': [
-        'test/test_kernel_edges.py', 'test/test_core_ahrs.py', 'test/test_core_ahrs_params.py',
+        'test/test_kernel_edges.py', 'test/test_kernel_steps.py', 'test/test_core_ahrs.py', 'test/test_core_ahrs_params.py',
         'test/test_core_ahrs_robust.py'],
 }
 # Tests that start ROS nodes or need numba, BROAD or the benchmark's
