@@ -65,8 +65,8 @@ MODULES = {
         'test/test_core_ahrs_params.py'],
     # Its clipping and rest detection (split from it): the kernel's subset.
     'ext_observer/core/ahrs/gyro_watch.py': [
-        'test/test_kernel_edges.py', 'test/test_kernel_steps.py', 'test/test_core_ahrs.py', 'test/test_core_ahrs_params.py',
-        'test/test_core_ahrs_robust.py'],
+        'test/test_kernel_edges.py', 'test/test_kernel_steps.py', 'test/test_core_ahrs.py',
+        'test/test_core_ahrs_params.py', 'test/test_core_ahrs_robust.py'],
 }
 # Tests that start ROS nodes or need numba, BROAD or the benchmark's
 # packages are left out of the subsets (minutes each, or not about the
