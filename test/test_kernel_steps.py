@@ -124,7 +124,7 @@ def test_after_the_start_the_accelerometers_step_low_passes_the_world_frame_spec
 
 
 def first_rest(sample_of, seconds=3.0):
-    """The sample at which the estimator is first at rest (``sample_of(t)``: gyro, accelerometer)."""
+    """The first sample at which the estimator is at rest (``sample_of(t)``: gyro, acc)."""
     est = AhrsObserver(AhrsParams(), use_mag=False)
     for k in range(int(seconds / DT)):
         est.update(*sample_of(k * DT), None, DT)
