@@ -370,6 +370,8 @@ def test_in_motion_the_steady_heading_correction_teaches_the_bias_through_the_lo
         w, v = truth[0], truth[1:]
         truth = np.concatenate(([w * e[0] - v @ e[1:]], w * e[1:] + e[0] * v + np.cross(v, e[1:])))
         est.update(tuple(rate + bias), tuple(9.81 * up_of(truth)), None, DT)
+        if k == 0:   # the start: the low-passed row starts at R(q)'s
+            assert np.allclose(s[S_RZLP:S_RZLP + 3], up_of(est.q), rtol=0.0, atol=1e-14)
         body = rotate(truth[0], -truth[1], -truth[2], -truth[3], *field)
         before = np.array(s, dtype=float)
         ahrs_update_mag(s, *body, DT)
