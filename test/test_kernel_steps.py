@@ -141,6 +141,11 @@ def test_rest_is_found_rest_time_after_a_tilted_start_and_not_while_any_axis_sha
     # never at rest.
     k = first_rest(lambda t: (STILL, TILTED))
     assert k is not None and abs(k * DT - AhrsParams().rest_time) <= 2.5 * DT
+    # Set down at another tilt after 0.5 s (3 m/s² away): at rest once the
+    # mean (tau_rest 0.5 s) has followed every axis of it within rest_acc,
+    # about 0.9 s, and rest_time has passed: about 2.9 s.
+    k = first_rest(lambda t: (STILL, TILTED if t < 0.5 else (-0.9, 1.3, 9.6)), 4.0)
+    assert k is not None and 2.7 <= k * DT <= 3.1
     for axis in range(3):
         shake = np.zeros(3)
         shake[axis] = 1.0
