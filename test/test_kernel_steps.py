@@ -21,8 +21,12 @@ import pytest
 
 from ext_observer.core.ahrs.ahrs_filters import lowpass, rotate
 from ext_observer.core.ahrs.ahrs_kernel import ahrs_update_acc, ahrs_update_gyr
-from ext_observer.core.ahrs.ahrs_layout import (C_K_ACC, MC0, S_BIAS, S_BIAS_P, S_CAL_MOVED,
-                                                S_CAL_RATE, S_CLIPS, S_LP, S_Q, S_REST_GYR, S_START)
+from ext_observer.core.ahrs.ahrs_layout import (C_K_ACC, MC0, S_BIAS, S_BIAS_P, S_CAL_LOADED,
+                                                S_CAL_MOVED, S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN,
+                                                S_CAL_WAIT, S_CAND_TIME, S_CLIPPED, S_CLIPS,
+                                                S_HAS_REF, S_LP, S_MAG_DIST, S_MAG_USED, S_Q,
+                                                S_REJECTED, S_REST, S_REST_GYR, S_REST_TIME,
+                                                S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.gyro_watch import _REST_BIAS_SIGMA, detect_rest
 
@@ -239,3 +243,21 @@ def test_a_reset_leaves_the_state_a_new_estimators(mag_cal):
     differ = np.flatnonzero(~((x == y) | (np.isnan(x) & np.isnan(y))))
     assert list(differ) == [S_CLIPS], differ
     assert x[S_CLIPS] == 1.0 and y[S_CLIPS] == 0.0
+
+
+def test_a_new_estimator_has_counted_nothing_and_its_calibration_turn_is_none():
+    # A new estimator (and a reset one, which the test above compares with
+    # it) starts with no time counted: no rejection, candidate, rest or
+    # start time, no field used or waited for, no bias, no reference; with
+    # the calibration, no turn or rate since a field, the first field
+    # learned from at once (its wait infinite), the body not moved, no
+    # calibration applied (its time infinite) and none loaded.
+    est = AhrsObserver(AhrsParams(), use_mag=True)
+    s = np.array(est.flat_state, dtype=float)
+    zero = [S_REJECTED, S_CAND_TIME, S_REST_TIME, S_MAG_USED, S_WAIT_N, S_WAIT_TURN, S_START,
+            S_START_N, S_CLIPPED, S_HAS_REF, S_MAG_DIST, S_REST, S_CAL_MOVED, S_CAL_LOADED]
+    assert [s[i] for i in zero] == [0.0] * len(zero)
+    assert list(s[S_BIAS:S_BIAS + 3]) == [0.0] * 3
+    assert list(s[S_CAL_TURN:S_CAL_TURN + 4]) == [1.0, 0.0, 0.0, 0.0]
+    assert list(s[S_CAL_RATE:S_CAL_RATE + 3]) == [0.0] * 3
+    assert s[S_CAL_WAIT] == math.inf and s[S_CAL_SINCE] == math.inf
