@@ -164,10 +164,20 @@ def test_rest_is_found_rest_time_after_a_tilted_start_and_not_while_any_axis_sha
         assert first_rest(gyr_of) is None, axis
 
 
-def test_at_rest_the_bias_is_the_low_passed_rate_on_every_axis():
+@pytest.mark.parametrize('axis', [None, 0, 1, 2])
+def test_at_rest_the_bias_is_the_low_passed_rate_on_every_axis(axis):
+    # Still from the start, or after turning 1 s about one axis: the rest's
+    # low-passed rate follows every axis, so the body is at rest after
+    # rest_time and the bias learned is the rate on each axis.
     est = AhrsObserver(AhrsParams(), use_mag=False)
     bias = np.array([0.01, -0.02, 0.015])
-    for _ in range(700):
+    if axis is not None:
+        turn = bias.copy()
+        turn[axis] += 0.5
+        for _ in range(100):
+            est.update(tuple(turn), TILTED, None, DT)
+        assert not est.rest
+    for _ in range(1000):
         est.update(tuple(bias), TILTED, None, DT)
     assert est.rest
     assert np.allclose(est.flat_state[S_BIAS:S_BIAS + 3], bias, rtol=0.0, atol=1e-6)
