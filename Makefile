@@ -135,11 +135,12 @@ hosts-report: $(RUNTIME_STAMP)
 
 # Faults that matter (issue 31, docs/tests.md#mutation): `make mutation-list`
 # applies each mutant of mutation/mutants.toml in a copy of the tree and runs
-# its tests (every one must be killed; about 5 minutes; MUTANTS="name ..."
+# its tests (every one must be killed; about 3 minutes; MUTANTS="name ..."
 # runs some). `make mutation` runs mutmut over the raw-IMU kernels, the
 # calibration, the uncertainty and the pairing rules with their fast tests,
-# one module after the other, each in out/mutmut/<module>/ (resumable; hours
-# for all of it on 2 cores: MUTATION_ARGS="pairing.py" runs one module,
+# one module after the other, each in out/mutmut/<module>/ (resumable; 4 to
+# 20 minutes a module, about 75 minutes for all of it on 2 cores:
+# MUTATION_ARGS="pairing.py" runs one module,
 # "--report" prints the scores, "--survivors" reruns the survivors after
 # tests were added). Neither is part of make test or CI.
 MUTATION_STAMP := $(VENV)/.ext_observer-mutation
