@@ -67,15 +67,21 @@ def test_without_learning_in_motion_the_bias_stays_unknown():
     assert est.bias_variance is None
 
 
-def test_a_start_in_motion_converges_within_3_s():
-    # The body turns at up to 1 rad/s and shakes (±3 m/s² along a body axis)
-    # from the first sample: the first attitude, one sample's, is off by the
-    # shake; 3 s later the inclination is within 2°.
-    truth, gyr, acc, _ = simulate(
+def shaken_start():
+    """8 s turning at up to 1 rad/s, shaken ±3 m/s² from the first sample: truth, gyr, acc, mag."""
+    truth, gyr, acc, mag = simulate(
         wandering(8.0, amplitude=1.0), q0=qexp((0.4, 0.3, 0.0)),
         acc_extra=lambda k: (3.0 * math.sin(2.0 * math.pi * 1.3 * k * DT),
                              2.0 * math.cos(2.0 * math.pi * 0.7 * k * DT), 0.0))
     gyr, acc = noisy(gyr, acc, 3)
+    return truth, gyr, acc, mag
+
+
+def test_a_start_in_motion_converges_within_3_s():
+    # The body turns at up to 1 rad/s and shakes (±3 m/s² along a body axis)
+    # from the first sample: the first attitude, one sample's, is off by the
+    # shake; 3 s later the inclination is within 2°.
+    truth, gyr, acc, _ = shaken_start()
     est = AhrsObserver(AhrsParams(), use_mag=False)
     errors = []
     for k in range(len(gyr)):
@@ -104,12 +110,8 @@ def test_the_covariance_says_how_unsure_a_start_in_motion_is():
     # The shaken start of the test above: its first seconds' inclination
     # errors within 2 σ as a calibrated σ has them (95 %), σ there far
     # above a start at rest's; at rest σ stays small.
-    moving = simulate(
-        wandering(8.0, amplitude=1.0), q0=qexp((0.4, 0.3, 0.0)),
-        acc_extra=lambda k: (3.0 * math.sin(2.0 * math.pi * 1.3 * k * DT),
-                             2.0 * math.cos(2.0 * math.pi * 0.7 * k * DT), 0.0))
-    gyr, acc = noisy(moving[1], moving[2], 3)
-    errors, sigmas = start_errors_and_sigmas(moving[0], gyr, acc)
+    truth, gyr, acc, _ = shaken_start()
+    errors, sigmas = start_errors_and_sigmas(truth, gyr, acc)
     assert errors[0] > 5.0
     assert np.mean(errors <= 2.0 * sigmas) >= 0.95
     assert np.max(errors / sigmas) < 2.5
@@ -151,13 +153,8 @@ def test_the_covariance_says_how_unsure_the_heading_of_a_start_in_motion_is():
     # errors of the first seconds are within 2 σ as a calibrated σ has them
     # (95 %; with the inclination's share alone they reach 8 σ), and σ there
     # is far above a start at rest's.
-    moving = simulate(
-        wandering(8.0, amplitude=1.0), q0=qexp((0.4, 0.3, 0.0)),
-        acc_extra=lambda k: (3.0 * math.sin(2.0 * math.pi * 1.3 * k * DT),
-                             2.0 * math.cos(2.0 * math.pi * 0.7 * k * DT), 0.0))
-    gyr, acc = noisy(moving[1], moving[2], 3)
-    errors, sigmas = heading_errors_and_sigmas(moving[0], gyr, acc, moving[3],
-                                               **{'ahrs.mag_cal': False})
+    truth, gyr, acc, mag = shaken_start()
+    errors, sigmas = heading_errors_and_sigmas(truth, gyr, acc, mag, **{'ahrs.mag_cal': False})
     assert errors.max() > 8.0
     assert np.mean(errors <= 2.0 * sigmas) >= 0.95
     assert np.max(errors / sigmas) < 2.5
