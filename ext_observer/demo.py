@@ -113,16 +113,9 @@ def run_demo(steps=150, rate=30.0, seed=7, variant='extended', increment_max=10.
     """
     # Every process that starts a node keeps discovery on this machine.
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    import numpy as np
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
-
-    from ext_observer.core import attitude_error, manifold_distance
-    from ext_observer.nodes.gyro_node import GyroNode
-    from ext_observer.nodes.monitor_node import MonitorNode, STATUS_NAME
-    from ext_observer.nodes.observer_node import ObserverNode
 
     context = Context()
     init_kwargs = {} if domain_id is None else {'domain_id': domain_id}
@@ -138,67 +131,15 @@ def run_demo(steps=150, rate=30.0, seed=7, variant='extended', increment_max=10.
         previous_handler = signal.signal(
             signal.SIGINT, lambda signum, frame: interrupted.append(signum))
     try:
-        period = 1.0 / rate
-        nodes.append(ObserverNode(context=context, parameter_overrides=[
-            Parameter('variant', value=variant),
-            Parameter('initial_estimate', value=[float(v) for v in initial_estimate]),
-            Parameter('step_period', value=period),
-        ]))
-        nodes.append(MonitorNode(context=context, parameter_overrides=[
-            Parameter('diagnostic_period', value=0.5),
-            Parameter('window', value=max(10, int(rate))),
-        ]))
-        recorder = _make_recorder(context, STATUS_NAME)
-        nodes.append(recorder)
-        gyro = GyroNode(context=context, parameter_overrides=[
-            Parameter('rate_hz', value=float(rate)),
-            Parameter('steps', value=int(steps)),
-            Parameter('seed', value=int(seed)),
-            Parameter('increment_max', value=float(increment_max)),
-            Parameter('measurement_noise_std', value=float(noise)),
-        ])
-        nodes.append(gyro)
-        observer = nodes[0]
+        observer, recorder, gyro = _start_nodes(
+            context, nodes, rate, dict(variant=variant, initial_estimate=initial_estimate),
+            dict(steps=steps, seed=seed, increment_max=increment_max, noise=noise))
         for node in nodes:
             executor.add_node(node)
-
-        start = time.monotonic()
-        deadline = start + steps / rate + 15.0
-        reported = 0
-
-        def steps_done():
-            return observer.counts['steps_corrected'] + observer.counts['steps_propagated']
-
-        while time.monotonic() < deadline:
-            if interrupted:
-                raise KeyboardInterrupt
-            executor.spin_once(timeout_sec=0.05)
-            if progress is not None:
-                while reported < len(recorder.statuses):
-                    progress(time.monotonic() - start, steps_done(),
-                             recorder.statuses[reported])
-                    reported += 1
-            if gyro.finished and len(recorder.estimates) >= steps:
-                break
-        elapsed = time.monotonic() - start
-
-        estimates = dict(recorder.estimates)
-        truths = dict(recorder.truths)
-        if truths:
-            # Step 0: the initial estimate against the first truth q_0.
-            estimates[min(truths)] = tuple(float(v) for v in initial_estimate)
-        paired = _pair_by_stamp(estimates, truths, round(0.25e9 * period))
-        if paired:
-            est = np.array([estimates[e] for _, e in paired])
-            tru = np.array([truths[t] for t, _ in paired])
-            distance = manifold_distance(est)
-            error = attitude_error(est, tru)
-        else:
-            distance = error = np.zeros(0)
-        return dict(stamps=[t for t, _ in paired], distance=np.asarray(distance),
-                    attitude_error=np.asarray(error), steps_done=steps_done(),
-                    elapsed_s=elapsed, last_status=recorder.statuses[-1]
-                    if recorder.statuses else None)
+        elapsed = _spin_until_done(executor, observer, recorder, gyro, steps, rate,
+                                   progress, interrupted)
+        return _paired_result(recorder, initial_estimate, 1.0 / rate,
+                              dict(steps_done=_steps_done(observer), elapsed_s=elapsed))
     finally:
         executor.shutdown()
         for node in nodes:
@@ -206,6 +147,85 @@ def run_demo(steps=150, rate=30.0, seed=7, variant='extended', increment_max=10.
         rclpy.try_shutdown(context=context)
         if previous_handler is not None:
             signal.signal(signal.SIGINT, previous_handler)
+
+
+def _start_nodes(context, nodes, rate, observer_settings, gyro_settings):
+    """Create the observer, the monitor, the recorder and the gyro into ``nodes``."""
+    from rclpy.parameter import Parameter
+
+    from ext_observer.nodes.gyro_node import GyroNode
+    from ext_observer.nodes.monitor_node import MonitorNode, STATUS_NAME
+    from ext_observer.nodes.observer_node import ObserverNode
+
+    observer = ObserverNode(context=context, parameter_overrides=[
+        Parameter('variant', value=observer_settings['variant']),
+        Parameter('initial_estimate',
+                  value=[float(v) for v in observer_settings['initial_estimate']]),
+        Parameter('step_period', value=1.0 / rate),
+    ])
+    nodes.append(observer)
+    nodes.append(MonitorNode(context=context, parameter_overrides=[
+        Parameter('diagnostic_period', value=0.5),
+        Parameter('window', value=max(10, int(rate))),
+    ]))
+    recorder = _make_recorder(context, STATUS_NAME)
+    nodes.append(recorder)
+    gyro = GyroNode(context=context, parameter_overrides=[
+        Parameter('rate_hz', value=float(rate)),
+        Parameter('steps', value=int(gyro_settings['steps'])),
+        Parameter('seed', value=int(gyro_settings['seed'])),
+        Parameter('increment_max', value=float(gyro_settings['increment_max'])),
+        Parameter('measurement_noise_std', value=float(gyro_settings['noise'])),
+    ])
+    nodes.append(gyro)
+    return observer, recorder, gyro
+
+
+def _steps_done(observer):
+    return observer.counts['steps_corrected'] + observer.counts['steps_propagated']
+
+
+def _spin_until_done(executor, observer, recorder, gyro, steps, rate, progress, interrupted):
+    """Spin until the gyro has finished and every estimate is in (or a deadline); the time."""
+    start = time.monotonic()
+    deadline = start + steps / rate + 15.0
+    reported = 0
+    while time.monotonic() < deadline:
+        if interrupted:
+            raise KeyboardInterrupt
+        executor.spin_once(timeout_sec=0.05)
+        if progress is not None:
+            while reported < len(recorder.statuses):
+                progress(time.monotonic() - start, _steps_done(observer),
+                         recorder.statuses[reported])
+                reported += 1
+        if gyro.finished and len(recorder.estimates) >= steps:
+            break
+    return time.monotonic() - start
+
+
+def _paired_result(recorder, initial_estimate, period, result):
+    """Pair the recorded estimates with the truths; ``result`` with the distances and errors."""
+    import numpy as np
+
+    from ext_observer.core import attitude_error, manifold_distance
+
+    estimates = dict(recorder.estimates)
+    truths = dict(recorder.truths)
+    if truths:
+        # Step 0: the initial estimate against the first truth q_0.
+        estimates[min(truths)] = tuple(float(v) for v in initial_estimate)
+    paired = _pair_by_stamp(estimates, truths, round(0.25e9 * period))
+    if paired:
+        est = np.array([estimates[e] for _, e in paired])
+        tru = np.array([truths[t] for t, _ in paired])
+        distance = manifold_distance(est)
+        error = attitude_error(est, tru)
+    else:
+        distance = error = np.zeros(0)
+    return dict(result, stamps=[t for t, _ in paired], distance=np.asarray(distance),
+                attitude_error=np.asarray(error),
+                last_status=recorder.statuses[-1] if recorder.statuses else None)
 
 
 def _pair_by_stamp(estimates, truths, tolerance):

@@ -183,35 +183,10 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     """
     settings = node_settings(parameters, strict_types=True)
     storage = storage or _storage_of(str(path))
-    if storage not in STORAGES:
-        raise ValueError(f'storage must be one of {STORAGES}, got {storage!r}')
-    if not os.path.exists(path):
-        raise ValueError(f'{path}: no such bag')
-    if out is not None and os.path.exists(out):
-        raise ValueError(f'{out} exists (never overwritten: remove it or choose another '
-                         '--out)')
-    if out is not None and os.path.abspath(out).startswith(
-            os.path.join(os.path.abspath(path), '')):
-        raise ValueError(f'{out} is inside the input bag {path}: the input is only read')
+    _check_paths(path, out, storage)
     reader = BagReader(path)
-    roles = {'imu': _find(reader.connections, _absolute(imu_topic), (IMU_TYPE,), 'IMU',
-                          '--imu-topic')}
-    if settings['use_mag']:
-        roles['mag'] = _find(reader.connections, _absolute(mag_topic), (FIELD_TYPE,),
-                             'magnetic field', '--mag-topic; --no-mag for 6D')
-    if compare_topic is not None:
-        roles['reference'] = _find(reader.connections, _absolute(compare_topic),
-                                   tuple(REFERENCE_TYPES), 'reference', '--compare')
-    outputs = {'data': (_absolute(data_topic), IMU_TYPE,
-                        roles['imu'][0].ext.offered_qos_profiles),
-               'estimate': (_absolute(estimate_topic), QUATERNION_TYPE, [])}
-    for role, connections in roles.items():
-        if connections[0].topic in (outputs['data'][0], outputs['estimate'][0]):
-            raise ValueError(f'{connections[0].topic} is both an input ({role}) and an '
-                             'output: name the outputs with --data-topic and --estimate-topic')
-    topics = {role: (cs[0].topic, cs[0].msgtype, cs[0].ext.offered_qos_profiles)
-              for role, cs in roles.items()}
-    topics.update(outputs)
+    roles, topics = _roles_and_topics(reader, settings, (imu_topic, mag_topic, compare_topic),
+                                      (data_topic, estimate_topic))
     side = BagSide(reader, roles, out, storage, topics, settings)
     estimator = BagEstimator(settings, _Progress(side.total, progress))
     context = fork_context() if parallel else None
@@ -231,6 +206,51 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
                   {role: (topic, msgtype, counts[role])
                    for role, (topic, msgtype, _) in topics.items()},
                   {topics[role][0]: n for role, n in estimator.undecodable.items()})
+
+
+def _check_paths(path, out, storage):
+    """Refuse an unknown storage, a missing input, and an output that exists or lies inside it."""
+    if storage not in STORAGES:
+        raise ValueError(f'storage must be one of {STORAGES}, got {storage!r}')
+    if not os.path.exists(path):
+        raise ValueError(f'{path}: no such bag')
+    if out is not None and os.path.exists(out):
+        raise ValueError(f'{out} exists (never overwritten: remove it or choose another '
+                         '--out)')
+    if out is not None and os.path.abspath(out).startswith(
+            os.path.join(os.path.abspath(path), '')):
+        raise ValueError(f'{out} is inside the input bag {path}: the input is only read')
+
+
+def _roles_and_topics(reader, settings, inputs, outputs):
+    """
+    Find the input connections by role and name every topic of the run.
+
+    ``inputs`` are the IMU, field and reference topics (the last may be
+    None), ``outputs`` the data and estimate topics. Returns ``roles``
+    (role: the connections) and ``topics`` (role: name, type, QoS).
+    """
+    imu_topic, mag_topic, compare_topic = inputs
+    roles = {'imu': _find(reader.connections, _absolute(imu_topic), (IMU_TYPE,), 'IMU',
+                          '--imu-topic')}
+    if settings['use_mag']:
+        roles['mag'] = _find(reader.connections, _absolute(mag_topic), (FIELD_TYPE,),
+                             'magnetic field', '--mag-topic; --no-mag for 6D')
+    if compare_topic is not None:
+        roles['reference'] = _find(reader.connections, _absolute(compare_topic),
+                                   tuple(REFERENCE_TYPES), 'reference', '--compare')
+    data_topic, estimate_topic = outputs
+    written = {'data': (_absolute(data_topic), IMU_TYPE,
+                        roles['imu'][0].ext.offered_qos_profiles),
+               'estimate': (_absolute(estimate_topic), QUATERNION_TYPE, [])}
+    for role, connections in roles.items():
+        if connections[0].topic in (written['data'][0], written['estimate'][0]):
+            raise ValueError(f'{connections[0].topic} is both an input ({role}) and an '
+                             'output: name the outputs with --data-topic and --estimate-topic')
+    topics = {role: (cs[0].topic, cs[0].msgtype, cs[0].ext.offered_qos_profiles)
+              for role, cs in roles.items()}
+    topics.update(written)
+    return roles, topics
 
 
 def _compare_references(recording, references, topic):
