@@ -129,7 +129,7 @@ def markdown_table(table, spread=None, rows=None, columns=COLUMNS,
                     ref = paper[row][c][s]
                     diffs.append('—' if ref == 0 else
                                  f'{100 * (table[row][c][s] - ref) / ref:+.0f}%')
-            lines.append(f'| *difference* | ' + ' | '.join(diffs) + ' |')
+            lines.append('| *difference* | ' + ' | '.join(diffs) + ' |')
     return '\n'.join(lines)
 
 
@@ -181,13 +181,28 @@ def run(runs=1000, epochs=100, seed=0, seeds=1, alpha=0.01,
     settings = dict(runs=runs, epochs=epochs, alpha=alpha,
                     gyro_noise=gyro_noise, modes=modes)
     all_seeds = list(range(seed, seed + seeds))
-    # The first seed runs here (its histories feed the figures); the others
-    # run in worker processes, one per core, and return only their tables.
+    results = _run_seeds(all_seeds, settings, progress, keep_histories, on_histories)
+    results.sort(key=lambda r: r['seed'])
+    histories = results[0].pop('histories', {})
+    result = _summary(results, settings, all_seeds)
+    result['seconds'] = time.perf_counter() - start
+    if keep_histories:
+        result['_histories'] = histories
+    return result
+
+
+def _run_seeds(all_seeds, settings, progress, keep_histories, on_histories):
+    """
+    Run the experiments of each seed; return their results in the order they end.
+
+    The first seed runs here (its histories feed the figures); the others
+    run in worker processes, one per core, and return only their tables.
+    """
     results = []
     pool = None
-    if seeds > 1 and (os.cpu_count() or 1) > 1:
-        pool = concurrent.futures.ProcessPoolExecutor(
-            max_workers=min(seeds - 1, os.cpu_count()))
+    others = len(all_seeds) - 1
+    if others > 0 and (os.cpu_count() or 1) > 1:
+        pool = concurrent.futures.ProcessPoolExecutor(max_workers=min(others, os.cpu_count()))
     try:
         futures = ([pool.submit(_run_seed, s, **settings) for s in all_seeds[1:]]
                    if pool else [])
@@ -195,53 +210,50 @@ def run(runs=1000, epochs=100, seed=0, seeds=1, alpha=0.01,
                                  histories=keep_histories, **settings))
         if on_histories and keep_histories:
             on_histories({'_histories': results[0]['histories'],
-                          'epochs': epochs, 'gyro_noise_std': gyro_noise,
-                          'limit': accuracy_limit(0.1, epochs)})
+                          'epochs': settings['epochs'],
+                          'gyro_noise_std': settings['gyro_noise'],
+                          'limit': accuracy_limit(0.1, settings['epochs'])})
         if pool:
             for future in concurrent.futures.as_completed(futures):
                 results.append(future.result())
                 if progress:
-                    progress.advance(f'seed {results[-1]["seed"]}: all tables',
-                                     units=3)
+                    progress.advance(f'seed {results[-1]["seed"]}: all tables', units=3)
         else:
             for s in all_seeds[1:]:
                 results.append(_run_seed(s, progress=progress, **settings))
     finally:
         if pool:
             pool.shutdown(cancel_futures=True)
-    results.sort(key=lambda r: r['seed'])
-    histories = results[0].pop('histories', {})
-    fig1_factors = [r['fitted_factor'] for r in results]
-    fig1_residual_factors = [r['fitted_residual_factor'] for r in results]
+    return results
+
+
+def _summary(results, settings, all_seeds):
+    """The JSON-ready summary of the seeds' results (sorted by seed)."""
     tables = [r['table'] for r in results]
-    noisy_tables = [r['noisy_table'] for r in results]
     table, spread = _aggregate(tables)
-    noisy_table, noisy_spread = _aggregate(noisy_tables)
-    limit = accuracy_limit(0.1, epochs)
+    noisy_table, noisy_spread = _aggregate([r['noisy_table'] for r in results])
+    fig1_factors = [r['fitted_factor'] for r in results]
     cert = results[0]['certificate']
-    result = {
-        'runs': runs, 'epochs': epochs, 'seeds': list(range(seed, seed + seeds)),
-        'alpha': alpha,
+    return {
+        'runs': settings['runs'], 'epochs': settings['epochs'], 'seeds': list(all_seeds),
+        'alpha': settings['alpha'],
         'table': table,
         'table_spread': spread,
         'table_gyro_noise': noisy_table,
         'table_gyro_noise_spread': noisy_spread,
-        'gyro_noise_std': gyro_noise,
+        'gyro_noise_std': settings['gyro_noise'],
         'paper': PAPER_TABLE,
-        'limit': limit,
+        'limit': accuracy_limit(0.1, settings['epochs']),
         'figure1': {
             'fitted_factor': float(np.mean(fig1_factors)),
             'fitted_factor_spread': float(np.std(fig1_factors)),
-            'fitted_residual_factor': float(np.mean(fig1_residual_factors)),
+            'fitted_residual_factor': float(np.mean(
+                [r['fitted_residual_factor'] for r in results])),
             'certified_factor': cert.factor,
             'certificate': cert.to_dict(),
         },
         'best_mode': min(table, key=lambda row: table[row]['error']['mean']),
     }
-    result['seconds'] = time.perf_counter() - start
-    if keep_histories:
-        result['_histories'] = histories
-    return result
 
 
 def plot(result, out_dir):
@@ -366,24 +378,16 @@ def docs_markdown(result, figures, command, docs_dir='docs'):
     Every number in the text comes from ``result``, so regenerating the file
     keeps the prose true to the run.
     """
-    t, sp = result['table'], result['table_spread']
-    noisy = result['table_gyro_noise']
-    f1 = result['figure1']
-    cert = f1['certificate']
-    n = len(result['seeds'])
-    ext, plain = t['extended'], t['plain']
-    paper = PAPER_TABLE
-    best = result['best_mode']
-    best_noisy = min(noisy, key=lambda row: noisy[row]['error']['mean'])
-    rel = {row: {c: {s: _pct(t[row][c][s], paper[row][c][s])
-                     for s in ('mean', 'std', 'max')} for c in COLUMNS}
-           for row in ('extended', 'plain')}
-    stds = [rel[row][c]['std'] for row in rel for c in COLUMNS]
-    beats = all(ext[c][s] < plain[c][s] for c in COLUMNS
-                for s in ('mean', 'std', 'max'))
     fig = {os.path.basename(path): os.path.relpath(path, docs_dir)
            for path in figures}
-    lines = [
+    lines = (_header_lines(result, command) + _figure1_lines(result, fig)
+             + _observer_lines(result, fig) + _gain_mode_lines(result, fig))
+    return '\n'.join(lines)
+
+
+def _header_lines(result, command):
+    """The title, the command and the run's size."""
+    return [
         '# Reproduction of the paper\'s simulations',
         '',
         'Generated by',
@@ -399,6 +403,14 @@ def docs_markdown(result, figures, command, docs_dir='docs'):
         'Where a value reads `a ± b`, `a` is the mean over the seeds and `b` '
         'their standard deviation. The figures show the first seed.',
         '',
+    ]
+
+
+def _figure1_lines(result, fig):
+    """Figure 1: the extended kinematics' contraction, measured and certified."""
+    f1 = result['figure1']
+    cert = f1['certificate']
+    return [
         '## Figure 1: the extended kinematics converge to S³ (Section 3.1)',
         '',
         f"![Figure 1]({fig.get('figure1.png', '')})",
@@ -419,6 +431,22 @@ def docs_markdown(result, figures, command, docs_dir='docs'):
         'while near S³ the step contracts `q̄q − 1` by about `1 − 8α` = '
         f"{1 - 8 * result['alpha']:.2f} per epoch.",
         '',
+    ]
+
+
+def _observer_lines(result, fig):
+    """Figure 2 and Table 1: the paper's observers, what matches and what differs."""
+    t, sp = result['table'], result['table_spread']
+    n = len(result['seeds'])
+    ext, plain = t['extended'], t['plain']
+    paper = PAPER_TABLE
+    rel = {row: {c: {s: _pct(t[row][c][s], paper[row][c][s])
+                     for s in ('mean', 'std', 'max')} for c in COLUMNS}
+           for row in ('extended', 'plain')}
+    stds = [rel[row][c]['std'] for row in rel for c in COLUMNS]
+    beats = all(ext[c][s] < plain[c][s] for c in COLUMNS
+                for s in ('mean', 'std', 'max'))
+    return [
         '## Figure 2 and Table 1: the observers (Section 3.2)',
         '',
         f"![Figure 2]({fig.get('figure2.png', '')})",
@@ -479,6 +507,17 @@ def docs_markdown(result, figures, command, docs_dir='docs'):
         'than both paper observers: with a gain this small, removing the '
         'radial error outright helps more than damping it by α per step.',
         '',
+    ]
+
+
+def _gain_mode_lines(result, fig):
+    """Beyond the paper: the gain modes against the accuracy limit, with and without gyro noise."""
+    t, sp = result['table'], result['table_spread']
+    n = len(result['seeds'])
+    noisy = result['table_gyro_noise']
+    best = result['best_mode']
+    best_noisy = min(noisy, key=lambda row: noisy[row]['error']['mean'])
+    return [
         '## Beyond the paper: gain modes and the accuracy limit',
         '',
         f"![Gain modes]({fig.get('gain_modes.png', '')})",
@@ -510,7 +549,6 @@ def docs_markdown(result, figures, command, docs_dir='docs'):
         f"constant gain {noisy['extended']['error']['mean']:.4f}.",
         '',
     ]
-    return '\n'.join(lines)
 
 
 def build_parser():
