@@ -181,8 +181,8 @@ def test_the_velocity_is_passed_once_the_core_takes_it(monkeypatch):
     assert (vehicle.ESTIMATORS[vehicle.OURS_VELOCITY](sim, False) is None) == (real == ())
     monkeypatch.setattr(ext_observer, 'attitude_from_imu', takes_velocity)
     assert vehicle.velocity_parameters() == ('velocity', 'velocity_times')
-    q = vehicle.ESTIMATORS[vehicle.OURS_VELOCITY](sim, True)
-    np.testing.assert_array_equal(q, sim.quat)
+    estimate = vehicle.ESTIMATORS[vehicle.OURS_VELOCITY](sim, True)
+    np.testing.assert_array_equal(estimate.quaternions, sim.quat)
     np.testing.assert_array_equal(seen['velocity'], sim.velocity)
     np.testing.assert_array_equal(seen['velocity_times'], sim.times)
 
@@ -196,8 +196,11 @@ def test_every_estimator_runs_on_a_short_drive_and_the_report_renders():
     for name in ('ours', 'VQF', 'Madgwick', 'Fusion'):
         metrics = by[('9D', name)]['metrics']
         assert 0.0 <= metrics['inclination_manoeuvre'] < 20.0, name
+    # Ours reports its rest flags: the share of the manoeuvre it took for rest.
+    assert 0.0 <= by[('6D', 'ours')]['metrics']['rest_manoeuvre'] <= 1.0
     summary = vehicle.summarize(rows)
     assert vehicle.ratio(summary, ('short turn', '6D')) > 0.0
+    assert vehicle.rest_table(summary).splitlines()[-1].endswith('% |')
     results = {'rows': rows, 'seeds': 1, 'seconds': 1.0, 'versions': 'v',
                'command': 'python -m bench.vehicle', 'drives': [drive],
                'machine': {'commit': 'abc', 'date': 'd', 'cpu': 'c', 'cores': 2,

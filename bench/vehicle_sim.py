@@ -250,8 +250,8 @@ def _accel_brake(slope_deg):
     name = 'accelerate/brake ±0.3 g' + (f', {slope_deg:g}° uphill' if slope_deg else ', level')
     return Scenario(name=name, segments=(Segment(REST),) + cycle * 3, slope_deg=slope_deg,
                     kind='straight',
-                    description=f'3 × (±{BRAKE_G:g} g for {seconds:g} s to {a * seconds:.1f} m/s, '
-                                '5 s cruise, 5 s stop)')
+                    description=f'3 × (±{BRAKE_G:g} g for {seconds:g} s to '
+                                f'{a * seconds:.1f} m/s, 5 s cruise, 5 s stop)')
 
 
 def _rough():
