@@ -7,6 +7,7 @@ acceleration differentiated numerically, the gyro integrated back to the
 attitude); the report on made-up results.
 """
 
+import json
 import math
 
 import numpy as np
@@ -187,7 +188,7 @@ def test_the_velocity_is_passed_once_the_core_takes_it(monkeypatch):
     np.testing.assert_array_equal(seen['velocity_times'], sim.times)
 
 
-def test_every_estimator_runs_on_a_short_drive_and_the_report_renders():
+def test_every_estimator_runs_on_a_short_drive_and_the_report_renders(tmp_path):
     drive = Scenario(name='short turn', description='', kind='turn', speed0=10.0,
                      segments=(Segment(3.0), Segment(2.0, yaw_rate=0.3, manoeuvre=True)))
     rows = vehicle.run_scenarios([drive], seeds=1, progress=lambda text: None)
@@ -210,6 +211,12 @@ def test_every_estimator_runs_on_a_short_drive_and_the_report_renders():
     text = vehicle.render(results)
     assert '| short turn |' in text and 'commit `abc`' in text
     assert ('not yet available' in text) == (vehicle.velocity_parameters() == ())
+    # Saved results render again (--render), the page written where asked.
+    saved, page = tmp_path / 'results.json', tmp_path / 'vehicle.md'
+    del results['drives']
+    saved.write_text(json.dumps({**results, 'drive_names': [drive.name]}))
+    assert vehicle.main(['--render', str(saved), '--output', str(page)]) == 0
+    assert '| short turn |' in page.read_text()
 
 
 def _rows(values, seeds=(0, 1)):

@@ -518,13 +518,9 @@ def main(argv=None):
                 json.dump(results, out, indent=1)
     by_name = {d.name: d for d in vehicle_sim.scenarios()}
     results['drives'] = [by_name[n] for n in results['drive_names'] if n in by_name]
-    text = render(results)
-    print(text)
-    if not args.no_write:
-        with open(args.output, 'w') as out:
-            out.write(text)
-        _log(f'wrote {args.output}')
-    return 0
+    # `python -m bench`'s own writer: print, and write unless --no-write.
+    from bench.__main__ import _write
+    return _write(render(results), args)
 
 
 if __name__ == '__main__':
