@@ -165,12 +165,18 @@ class QosWatch:
         # a peer it could not name at the event.
         self._logged = {}
 
-    def subscription(self, topic, qos, hint=''):
-        """Return ``SubscriptionEventCallbacks`` for a subscription on ``topic``."""
+    def subscription(self, topic, qos, hint='', lost=None):
+        """
+        Return ``SubscriptionEventCallbacks`` for a subscription on ``topic``.
+
+        ``lost(info)``, if given, is called at rmw's message-lost event
+        (``info.total_count_change`` messages lost since the last one).
+        """
         name = self._node.resolve_topic_name(topic)
         self._endpoints[name] = ('subscription', qos, hint)
         return SubscriptionEventCallbacks(
-            incompatible_qos=lambda event: self._incompatible(name, event))
+            incompatible_qos=lambda event: self._incompatible(name, event),
+            message_lost=lost)
 
     def publisher(self, topic, qos, hint='', matched=None):
         """
