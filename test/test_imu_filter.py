@@ -10,6 +10,7 @@ unit expected, in the log once and in ``/diagnostics`` while it lasts.
 """
 
 import math
+import os
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -17,6 +18,7 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import Imu
 
+from conftest import REPO
 from broad_replay import errors_deg, load, offline as core_offline, rmse, START, TRIALS
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, quaternion_from_msg
 from ext_observer.core.ahrs.estimator import world_from_enu
@@ -555,3 +557,61 @@ def test_a_silent_imu_is_named_in_its_own_words_and_never_rounded_up(ros_context
         assert node._silent_texts({'increment': 1.99, 'measurement': 0.0}, 2.0) == {}
     finally:
         node.destroy_node()
+
+
+def test_lost_samples_go_warn_with_their_share_once_and_back_to_ok(
+        ros_processes, ros_context, spinner):
+    # The shipped executable; 100 Hz stamps published in real time: 2 s with
+    # every 20th sample missing (5 %), a hole of 25 samples, then 3 s whole
+    # (longer than the 2 s window).
+    process = ros_processes([installed('imu_filter_node'), '--ros-args', '-p',
+                             'diagnostic_period:=0.2', '-p', 'use_mag:=false'])
+    driver = spinner.add(Driver(ros_context))
+    statuses = []
+    driver.create_subscription(
+        DiagnosticArray, '/diagnostics', lambda msg: statuses.extend(
+            st for st in msg.status if st.name == 'imu_filter: inputs'), 10)
+    spinner.spin_until(lambda: driver.imu_publisher.get_subscription_count() == 1
+                       and statuses, 20.0, 'imu_filter_node')
+    k, missing = 0, 0
+
+    def publish(count, skip=None):
+        nonlocal k, missing
+        for _ in range(count):
+            if skip is not None and k % skip == skip - 1:
+                missing += 1
+            else:
+                driver.send_imu(START + k * SECOND // 100, (0.0, 0.0, 0.1), (0.0, 0.0, 9.81))
+                spinner.spin_for(0.01)
+            k += 1
+    publish(200, skip=20)
+    k += 25
+    missing += 25
+    publish(1)
+    spinner.spin_for(0.45)
+    lossy = statuses[-1]
+    publish(300)
+    spinner.spin_for(0.5)
+    last = statuses[-1]
+    values = values_of(lossy)
+    assert lossy.level == DiagnosticStatus.WARN, lossy.message
+    assert 'of the IMU samples lost over the last 2 s' in lossy.message
+    assert 0.04 <= float(values['samples_lost_share']) <= 0.2
+    assert float(values['sample_interval_s']) == 0.01
+    assert math.isclose(float(values['longest_hole_total_s']), 0.26)
+    # Stamps START on: far from the node clock, whose lag is reported as it is.
+    assert float(values['lag_s']) > 1.0
+    values = values_of(last)
+    assert last.level == DiagnosticStatus.OK, last.message
+    assert float(values['samples_lost_share']) == 0.0
+    assert int(values['samples_lost']) >= missing
+    assert int(values['samples_lost_queue']) >= 0
+    # Once per episode in the log, with what to do.
+    assert process.output.count('of the IMU samples lost over the last 2 s') == 1, \
+        process.output
+    assert 'IMU samples arriving whole again' in process.output
+    assert 'raise queue_depth' in process.output
+    # Every key of the status on the page.
+    with open(os.path.join(REPO, 'docs', 'diagnostics.md'), encoding='utf-8') as page:
+        text = page.read()
+    assert [key for key in values if f'`{key}`' not in text and ':' not in key] == []
