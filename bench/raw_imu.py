@@ -236,13 +236,16 @@ def load_samples():
     return np.concatenate(gyr), np.concatenate(acc), np.concatenate(mag)
 
 
-def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settle=False):
+def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settle=False,
+            window=None):
     """
     Publish into one target and return its CPU and output figures.
 
     With ``settle``, the window starts once the target's ``/diagnostics``
     says its kernels are no longer ``plain (...)``: a node that starts on the
-    plain kernels is measured as it runs for good.
+    plain kernels is measured as it runs for good. ``window(pid)``, if
+    given, is called with the target's pid as the publishing window opens
+    and again as it closes (:mod:`bench.profile_node` reads its threads).
 
     Returns
     -------
@@ -300,6 +303,8 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
         imu.header.frame_id = field.header.frame_id = 'imu_link'
         period = 1.0 / rate
         count = int(seconds * rate)
+        if window is not None:
+            window(child.proc.pid)
         load_before, start_cpu = load(), _cpu_seconds(child.proc.pid)
         start = time.monotonic()
         stamp0 = time.time_ns()
@@ -325,6 +330,8 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
         elapsed = time.monotonic() - start
         time.sleep(0.5)
         cpu = _cpu_seconds(child.proc.pid) - start_cpu
+        if window is not None:
+            window(child.proc.pid)
         stop.set()
         spinner.join(timeout=2.0)
         return dict(cpu_us_per_sample=cpu / count * 1e6, samples=count, fields=fields,

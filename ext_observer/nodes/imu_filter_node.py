@@ -29,6 +29,7 @@ parameters are :data:`~ext_observer.pipeline.imu_filter_parameters.IMU_FILTER_PA
 imu_tools' two filters' among them (``docs/raw_imu.md``).
 """
 
+import gc
 import os
 
 import numpy as np
@@ -351,6 +352,7 @@ class ImuFilterNode(EstimatorNode):
             # Between two samples (one executor thread): the same state, the
             # same estimates from here on, faster.
             self.pipeline.estimator.use_kernels(kernels)
+            gc.freeze()     # numba's objects too (node_common._spin)
             if compiler.compiling:
                 self.get_logger().info(f'compiled kernels ready after {compiler.seconds:.1f} '
                                        's: the estimator goes on with them')
