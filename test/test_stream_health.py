@@ -1,12 +1,13 @@
-"""StreamHealth: samples lost from the stamps, the window, episodes, the lag (no ROS)."""
+"""StreamHealth: samples lost from the stamps, the window, episodes, the lag; the causes named (no ROS)."""
 
 import math
 
 from hypothesis import given, settings, strategies as st
 import numpy as np
 
-from ext_observer.pipeline.stream_health import (MAX_PENDING, MIN_INTERVALS, StreamHealth,
-                                                 THRESHOLD)
+from ext_observer.nodes.stream_watch import StreamWatch
+from ext_observer.pipeline.stream_health import (MAX_PENDING, MIN_INTERVALS, Report,
+                                                 StreamHealth, THRESHOLD)
 
 MS = 1_000_000
 SECOND = 1_000_000_000
@@ -158,3 +159,25 @@ def test_losses_counted_exactly_on_a_grid(kept, period_ms):
         assert report.share == (missing / len(kept) if missing else 0.0)
         assert report.warn == (report.share > THRESHOLD)
     assert report.lost <= missing
+
+
+def report_with(lag, share=0.05):
+    return Report(1000, 50, share, 50, 0.05, 0.05, 0.001, lag, True, True, False)
+
+
+def test_the_likely_cause_names_what_to_do():
+    watch = StreamWatch(None, 'IMU samples')
+    watch.cpu_share = 0.2
+    behind = watch.cause(report_with(0.2), 0)
+    assert behind.startswith('the node falls behind its input (200 ms behind the stamps)')
+    assert 'lower the IMU rate' in behind and 'raise queue_depth' in behind
+    assert watch.cause(report_with(0.001), 7).startswith(
+        'the node falls behind its input (7 lost in its queue)')
+    before = watch.cause(report_with(0.001), 0)
+    assert before.startswith('lost before they reach the node, which keeps up (1 ms behind')
+    # Stamps from another clock: no lag to judge by.
+    assert 'lag unknown' in watch.cause(report_with(3e6), 0)
+    assert 'lag unknown' in watch.cause(report_with(-5.0), 0)
+    watch.cpu_share = 0.95
+    assert watch.cause(report_with(3e6), 0).startswith(
+        'the node falls behind its input (95% of a core)')
