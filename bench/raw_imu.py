@@ -51,7 +51,7 @@ DATA = os.path.join(REPO, 'test', 'data')
 # factor of the bare relay's.
 NODE_GOAL = 1.2
 TARGETS = ('relay', 'imu_filter')
-# With --serialized: the relay on bytes (bench.relay.RawImuRelay) and the node
+# With --serialized: the relay on bytes (RawImuRelay) and the node
 # with serialized_io false, beside the two above.
 RAW_RELAY, TYPED = 'raw_relay', 'imu_filter_typed'
 # With --floor: a third target between them (see step_only_node).
@@ -76,10 +76,12 @@ class ImuRelay:
     Parameters
     ----------
     context : rclpy.context.Context
+    raw : bool
+        Take the inputs as CDR bytes (:class:`RawImuRelay`).
 
     """
 
-    def __init__(self, context):
+    def __init__(self, context, raw=False):
         from geometry_msgs.msg import QuaternionStamped
         from rclpy.node import Node
         from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -95,8 +97,10 @@ class ImuRelay:
         self._estimate = QuaternionStamped()
         self._estimate.quaternion.w = 1.0
         inputs = QoSProfile(depth=RELAY_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.node.create_subscription(Imu, 'imu/data_raw', self.imu_data_raw_callback, inputs)
-        self.node.create_subscription(MagneticField, 'imu/mag', self.imu_mag_callback, inputs)
+        self.node.create_subscription(Imu, 'imu/data_raw', self.imu_data_raw_callback, inputs,
+                                      raw=raw)
+        self.node.create_subscription(MagneticField, 'imu/mag', self.imu_mag_callback, inputs,
+                                      raw=raw)
         self._out = Imu()
         self._out.orientation.w = 1.0
 
@@ -114,6 +118,31 @@ class ImuRelay:
         self.publisher.publish(out)
         self._estimate.header.stamp = msg.header.stamp
         self.estimate_publisher.publish(self._estimate)
+
+
+class RawImuRelay(ImuRelay):
+    """
+    The relay on bytes: what a serialized node cannot do with less.
+
+    The inputs taken as CDR bytes; per sample the sample's bytes published as
+    they came on ``imu/data``, and an ``attitude_estimate`` of fixed bytes
+    with the sample's stamp: no message object on either side.
+    """
+
+    def __init__(self, context):
+        from rclpy.serialization import serialize_message
+        super().__init__(context, raw=True)
+        template = serialize_message(self._estimate)
+        self._head, self._tail = template[:4], template[12:]
+
+    def imu_mag_callback(self, raw):
+        """Keep the latest field's bytes."""
+        self.field = raw
+
+    def imu_data_raw_callback(self, raw):
+        """Publish the sample's bytes and an estimate with its stamp."""
+        self.publisher.publish(raw)
+        self.estimate_publisher.publish(self._head + raw[4:12] + self._tail)
 
 
 def step_only_node():
@@ -183,16 +212,12 @@ def _step_only_main(argv):
 def _relay_main(argv):
     parser = argparse.ArgumentParser(prog='python -m bench.raw_imu relay')
     parser.add_argument('--executor', choices=EXECUTORS, default='events')
-    parser.add_argument('--raw', action='store_true', help='bench.relay.RawImuRelay')
+    parser.add_argument('--raw', action='store_true', help='RawImuRelay: on bytes')
     args = parser.parse_args(argv)
     import rclpy
     context = rclpy.Context()
     rclpy.init(context=context)
-    if args.raw:
-        from bench.relay import RawImuRelay
-        relay = RawImuRelay(context)
-    else:
-        relay = ImuRelay(context)
+    relay = RawImuRelay(context) if args.raw else ImuRelay(context)
     executor = make_executor(args.executor, context)
     executor.add_node(relay.node)
     print('ready', flush=True)

@@ -140,56 +140,6 @@ class PollingRelay(RelayNode):
                     subscription.callback(taken[0])
 
 
-class RawImuRelay:
-    """
-    The raw-IMU relay on bytes: what a serialized node cannot do with less.
-
-    ``imu/data_raw`` and ``imu/mag`` taken as CDR bytes (``raw=True``), the
-    sample's bytes published as they came on ``imu/data``, and per sample an
-    ``attitude_estimate`` made of fixed bytes with the sample's stamp: no
-    message object on either side. The QoS of
-    :class:`bench.raw_imu.ImuRelay` (inputs best effort, outputs reliable).
-
-    Parameters
-    ----------
-    context : rclpy.context.Context
-    depth : int
-
-    """
-
-    def __init__(self, context, depth=100):
-        from geometry_msgs.msg import QuaternionStamped
-        from rclpy.node import Node
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-        from rclpy.serialization import serialize_message
-        from sensor_msgs.msg import Imu, MagneticField
-        self.node = Node('imu_relay', context=context)
-        self.field = None
-        out = QoSProfile(depth=depth)
-        self.publisher = self.node.create_publisher(Imu, 'imu/data', out)
-        self.estimate_publisher = self.node.create_publisher(
-            QuaternionStamped, 'attitude_estimate', out)
-        estimate = QuaternionStamped()
-        estimate.header.frame_id = 'world'
-        estimate.quaternion.w = 1.0
-        template = serialize_message(estimate)
-        self._head, self._tail = template[:4], template[12:]
-        inputs = QoSProfile(depth=depth, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.node.create_subscription(Imu, 'imu/data_raw', self.imu_data_raw_callback,
-                                      inputs, raw=True)
-        self.node.create_subscription(MagneticField, 'imu/mag', self.imu_mag_callback,
-                                      inputs, raw=True)
-
-    def imu_mag_callback(self, raw):
-        """Keep the latest field's bytes."""
-        self.field = raw
-
-    def imu_data_raw_callback(self, raw):
-        """Publish the sample's bytes and an estimate with its stamp."""
-        self.publisher.publish(raw)
-        self.estimate_publisher.publish(self._head + raw[4:12] + self._tail)
-
-
 def main(argv=None):
     """Run the relay until SIGINT."""
     parser = argparse.ArgumentParser(prog='python -m bench.relay')
