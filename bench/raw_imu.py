@@ -51,6 +51,9 @@ DATA = os.path.join(REPO, 'test', 'data')
 # factor of the bare relay's.
 NODE_GOAL = 1.2
 TARGETS = ('relay', 'imu_filter')
+# With --serialized: the relay on bytes (RawImuRelay) and the node
+# with serialized_io false, beside the two above.
+RAW_RELAY, TYPED = 'raw_relay', 'imu_filter_typed'
 # With --floor: a third target between them (see step_only_node).
 FLOOR = 'step_only'
 # Below this share of the samples coming back as outputs, a target (or the
@@ -73,10 +76,12 @@ class ImuRelay:
     Parameters
     ----------
     context : rclpy.context.Context
+    raw : bool
+        Take the inputs as CDR bytes (:class:`RawImuRelay`).
 
     """
 
-    def __init__(self, context):
+    def __init__(self, context, raw=False):
         from geometry_msgs.msg import QuaternionStamped
         from rclpy.node import Node
         from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -92,8 +97,10 @@ class ImuRelay:
         self._estimate = QuaternionStamped()
         self._estimate.quaternion.w = 1.0
         inputs = QoSProfile(depth=RELAY_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.node.create_subscription(Imu, 'imu/data_raw', self.imu_data_raw_callback, inputs)
-        self.node.create_subscription(MagneticField, 'imu/mag', self.imu_mag_callback, inputs)
+        self.node.create_subscription(Imu, 'imu/data_raw', self.imu_data_raw_callback, inputs,
+                                      raw=raw)
+        self.node.create_subscription(MagneticField, 'imu/mag', self.imu_mag_callback, inputs,
+                                      raw=raw)
         self._out = Imu()
         self._out.orientation.w = 1.0
 
@@ -111,6 +118,31 @@ class ImuRelay:
         self.publisher.publish(out)
         self._estimate.header.stamp = msg.header.stamp
         self.estimate_publisher.publish(self._estimate)
+
+
+class RawImuRelay(ImuRelay):
+    """
+    The relay on bytes: what a serialized node cannot do with less.
+
+    The inputs taken as CDR bytes; per sample the sample's bytes published as
+    they came on ``imu/data``, and an ``attitude_estimate`` of fixed bytes
+    with the sample's stamp: no message object on either side.
+    """
+
+    def __init__(self, context):
+        from rclpy.serialization import serialize_message
+        super().__init__(context, raw=True)
+        template = serialize_message(self._estimate)
+        self._head, self._tail = template[:4], template[12:]
+
+    def imu_mag_callback(self, raw):
+        """Keep the latest field's bytes."""
+        self.field = raw
+
+    def imu_data_raw_callback(self, raw):
+        """Publish the sample's bytes and an estimate with its stamp."""
+        self.publisher.publish(raw)
+        self.estimate_publisher.publish(self._head + raw[4:12] + self._tail)
 
 
 def step_only_node():
@@ -180,11 +212,12 @@ def _step_only_main(argv):
 def _relay_main(argv):
     parser = argparse.ArgumentParser(prog='python -m bench.raw_imu relay')
     parser.add_argument('--executor', choices=EXECUTORS, default='events')
+    parser.add_argument('--raw', action='store_true', help='RawImuRelay: on bytes')
     args = parser.parse_args(argv)
     import rclpy
     context = rclpy.Context()
     rclpy.init(context=context)
-    relay = ImuRelay(context)
+    relay = RawImuRelay(context) if args.raw else ImuRelay(context)
     executor = make_executor(args.executor, context)
     executor.add_node(relay.node)
     print('ready', flush=True)
@@ -198,12 +231,15 @@ def target_args(label, executor):
     """The command line of a target (``relay`` or ``imu_filter``) on ``executor``."""
     if label == 'relay':
         return ['-m', 'bench.raw_imu', 'relay', '--executor', executor]
+    if label == RAW_RELAY:
+        return ['-m', 'bench.raw_imu', 'relay', '--executor', executor, '--raw']
     if label == FLOOR:
         return ['-m', 'bench.raw_imu', FLOOR, '--executor', executor, '--ros-args', '-p',
                 'use_mag:=true']
     script = os.path.join(os.path.dirname(sys.executable), 'imu_filter_node')
     command = [script] if os.path.exists(script) else ['-m', 'ext_observer.nodes.imu_filter_node']
-    return command + ['--executor', executor, '--ros-args', '-p', 'use_mag:=true']
+    command += ['--executor', executor, '--ros-args', '-p', 'use_mag:=true']
+    return command + (['-p', 'serialized_io:=false'] if label == TYPED else [])
 
 
 def _cpu_seconds(pid):
@@ -225,13 +261,16 @@ def load_samples():
     return np.concatenate(gyr), np.concatenate(acc), np.concatenate(mag)
 
 
-def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settle=False):
+def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settle=False,
+            window=None):
     """
     Publish into one target and return its CPU and output figures.
 
     With ``settle``, the window starts once the target's ``/diagnostics``
     says its kernels are no longer ``plain (...)``: a node that starts on the
-    plain kernels is measured as it runs for good.
+    plain kernels is measured as it runs for good. ``window(pid)``, if
+    given, is called with the target's pid as the publishing window opens
+    and again as it closes (:mod:`bench.profile_node` reads its threads).
 
     Returns
     -------
@@ -289,6 +328,8 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
         imu.header.frame_id = field.header.frame_id = 'imu_link'
         period = 1.0 / rate
         count = int(seconds * rate)
+        if window is not None:
+            window(child.proc.pid)
         load_before, start_cpu = load(), _cpu_seconds(child.proc.pid)
         start = time.monotonic()
         stamp0 = time.time_ns()
@@ -314,6 +355,8 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
         elapsed = time.monotonic() - start
         time.sleep(0.5)
         cpu = _cpu_seconds(child.proc.pid) - start_cpu
+        if window is not None:
+            window(child.proc.pid)
         stop.set()
         spinner.join(timeout=2.0)
         return dict(cpu_us_per_sample=cpu / count * 1e6, samples=count, fields=fields,
@@ -386,6 +429,32 @@ def floor_line(result):
             f'counters: {m["imu_filter"] - m[FLOOR]:.0f} µs per sample more')
 
 
+# CPU per IMU sample of the node on bytes against the typed relay's, same run:
+# at most this (the goal 0.4).
+SERIALIZED_GOAL = 0.6
+
+
+def ratios_lines(result):
+    """Each target's CPU per sample against the typed relay's: medians and round by round."""
+    cpu = {label: [r['cpu_us_per_sample'] for r in rows]
+           for label, rows in result['runs'].items()}
+    relay = cpu.get('relay')
+    if not relay:
+        return []
+    lines = []
+    for label, values in cpu.items():
+        if label == 'relay' or not values:
+            continue
+        rounds = [v / r for v, r in zip(values, relay)]
+        lines.append(f'{label} / relay: {statistics.median(values) / statistics.median(relay):.2f}'
+                     f'× (medians; rounds {", ".join(f"{x:.2f}" for x in rounds)})')
+    if RAW_RELAY in cpu:
+        ratio = statistics.median(cpu['imu_filter']) / statistics.median(relay)
+        lines.append(f'goal: imu_filter (serialized_io) ≤ {SERIALIZED_GOAL:g}× the typed '
+                     f'relay: {ratio:.2f}×: {verdict(ratio <= SERIALIZED_GOAL)}')
+    return lines
+
+
 def short_outputs(runs):
     """The fewest outputs of each target that got fewer than :data:`COMPLETE` back in a run."""
     return {label: min(r['outputs'] for r in rows) for label, rows in runs.items()
@@ -404,7 +473,7 @@ def short_text(result):
 
 
 def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds=3,
-            log_dir=None, progress=None, floor=False):
+            log_dir=None, progress=None, floor=False, serialized=False):
     """
     Run the relay and the node in interleaved rounds; return the runs and the verdict.
 
@@ -420,6 +489,8 @@ def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds
     # One run of one target varies by about ±10 % (the machine's other
     # work); interleaved rounds and medians keep the ratio steady.
     targets = (TARGETS[0], FLOOR, TARGETS[1]) if floor else TARGETS
+    if serialized:
+        targets = (TARGETS[0], RAW_RELAY, TYPED, TARGETS[1])
     runs = {label: [] for label in targets}
     for round_ in range(rounds):
         for index, label in enumerate(targets):
@@ -430,7 +501,7 @@ def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds
                 runs[label].append(measure(
                     target_args(label, executor), domain_id, samples, rate, mag_rate,
                     seconds, os.path.join(log_dir, f'raw_imu_{label}_{executor}.log'),
-                    settle=label != 'relay'))
+                    settle=label not in ('relay', RAW_RELAY)))
     result = {'executor': executor, 'rate': rate, 'mag_rate': mag_rate, 'seconds': seconds,
               'rounds': rounds, 'runs': runs}
     result.update(summarize(runs))
@@ -469,6 +540,9 @@ def main(argv=None):
     parser.add_argument('--executor', choices=EXECUTORS, default='events')
     parser.add_argument('--floor', action='store_true',
                         help=f'also the {FLOOR} target: the estimate\'s arithmetic alone')
+    parser.add_argument('--serialized', action='store_true',
+                        help=f'also {RAW_RELAY} (the relay on bytes) and {TYPED} (the node '
+                             'with serialized_io false)')
     parser.add_argument('--log-dir', default=os.path.join(REPO, 'out', 'bench'))
     parser.add_argument('--json', metavar='PATH', help='also write the results there')
     args = parser.parse_args(argv)
@@ -476,12 +550,14 @@ def main(argv=None):
         parser.error('--rounds must be at least 1')
     result = compare(args.executor, args.rate, args.mag_rate, args.seconds, args.rounds,
                      args.log_dir, lambda text: print(text, file=sys.stderr, flush=True),
-                     floor=args.floor)
+                     floor=args.floor, serialized=args.serialized)
     print(table(result))
     print()
     print(goal_line(result))
     if floor_line(result):
         print(floor_line(result))
+    for line in ratios_lines(result):
+        print(line)
     if args.json:
         with open(args.json, 'w') as out:
             json.dump(result, out, indent=1)

@@ -10,6 +10,7 @@ unit expected, in the log once and in ``/diagnostics`` while it lasts.
 """
 
 import math
+import os
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -17,11 +18,13 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import Imu
 
+from conftest import REPO
 from broad_replay import errors_deg, load, offline as core_offline, rmse, START, TRIALS
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, quaternion_from_msg
 from ext_observer.core.ahrs.estimator import world_from_enu
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
+from ext_observer.nodes.stream_watch import StreamWatch
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import heading_factor, RawImuPipeline
 from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
@@ -555,3 +558,70 @@ def test_a_silent_imu_is_named_in_its_own_words_and_never_rounded_up(ros_context
         assert node._silent_texts({'increment': 1.99, 'measurement': 0.0}, 2.0) == {}
     finally:
         node.destroy_node()
+
+
+def test_lost_samples_go_warn_with_their_share_once_and_back_to_ok(
+        ros_processes, ros_context, spinner):
+    # The shipped executable; 100 Hz stamps published in real time: 2 s with
+    # every 20th sample missing (5 %), a hole of 25 samples, then 3 s whole
+    # (longer than the 2 s window).
+    process = ros_processes([installed('imu_filter_node'), '--ros-args', '-p',
+                             'diagnostic_period:=0.2', '-p', 'use_mag:=false'])
+    driver = spinner.add(Driver(ros_context))
+    statuses = []
+    driver.create_subscription(
+        DiagnosticArray, '/diagnostics', lambda msg: statuses.extend(
+            st for st in msg.status if st.name == 'imu_filter: inputs'), 10)
+    spinner.spin_until(lambda: driver.imu_publisher.get_subscription_count() == 1
+                       and statuses, 20.0, 'imu_filter_node')
+    k, missing = 0, 0
+
+    def publish(count, skip=None):
+        # At 100 Hz of the wall clock, the statuses taken between samples.
+        nonlocal k, missing
+        due = time.monotonic()
+        for _ in range(count):
+            if skip is not None and k % skip == skip - 1:
+                missing += 1
+            else:
+                driver.send_imu(START + k * SECOND // 100, (0.0, 0.0, 0.1), (0.0, 0.0, 9.81))
+            k += 1
+            due += 0.01
+            while time.monotonic() < due:
+                spinner.executor.spin_once(timeout_sec=max(0.0, due - time.monotonic()))
+    publish(250, skip=20)
+    lossy = statuses[-1]
+    k += 25
+    missing += 25
+    publish(50)
+    holed = statuses[-1]
+    publish(300)
+    last = statuses[-1]
+    values = values_of(lossy)
+    assert lossy.level == DiagnosticStatus.WARN, lossy.message
+    assert 'of the IMU samples lost over the last 2 s' in lossy.message
+    # 5 % of what the window holds (its edges cut the pattern a little).
+    assert 0.03 <= float(values['samples_lost_share']) <= 0.08
+    assert float(values['sample_interval_s']) == 0.01
+    # Stamps START on: far from the node clock, whose lag is reported as it is.
+    assert float(values['lag_s']) > 1.0
+    values = values_of(holed)
+    assert holed.level == DiagnosticStatus.WARN, holed.message
+    assert math.isclose(float(values['longest_hole_total_s']), 0.26)
+    values = values_of(last)
+    assert last.level == DiagnosticStatus.OK, last.message
+    assert float(values['samples_lost_share']) == 0.0
+    assert int(values['samples_lost']) >= missing
+    assert int(values['samples_lost_queue']) >= 0
+    # Once per episode in the log, with what to do.
+    assert process.output.count('of the IMU samples lost over the last 2 s') == 1, \
+        process.output
+    assert 'IMU samples arriving whole again' in process.output
+    assert 'raise queue_depth' in process.output
+    # The stream's keys on the page.
+    with open(os.path.join(REPO, 'docs', 'diagnostics.md'), encoding='utf-8') as page:
+        text = page.read()
+    keys = [key for key, _ in StreamWatch(ImuFilterNode, '').key_values()]
+    assert set(keys) <= values.keys()
+    assert [key for key in keys + ['undecodable_increment', 'undecodable_measurement']
+            if f'`{key}`' not in text] == []

@@ -173,14 +173,16 @@ class EstimatorNode(Node):
 
     # Inputs ---------------------------------------------------------------
 
-    def _subscribe(self, msg_type, topic, callback, reliability=None):
+    def _subscribe(self, msg_type, topic, callback, reliability=None, raw=False, lost=None):
         """
         Subscribe to an input at ``queue_depth``.
 
         With ``reliability`` (a ``ReliabilityPolicy``), exactly that; without,
         the sensor-data profile (best effort, volatile: it takes reliable and
         best-effort publishers alike), overridable with
-        ``qos_overrides.<topic>.subscription.*``.
+        ``qos_overrides.<topic>.subscription.*``. With ``raw`` the callback
+        gets the serialized message (CDR bytes); ``lost(info)``, if given, is
+        rmw's message-lost event of the subscription.
         """
         depth = self.parameters.settings['queue_depth']
         if reliability is not None:
@@ -188,18 +190,18 @@ class EstimatorNode(Node):
             hint = ("set this node's input_reliability to best_effort"
                     if reliability == ReliabilityPolicy.RELIABLE else '')
             return self.create_subscription(
-                msg_type, topic, callback, qos,
-                event_callbacks=self.qos.subscription(topic, qos, hint))
+                msg_type, topic, callback, qos, raw=raw,
+                event_callbacks=self.qos.subscription(topic, qos, hint, lost))
         qos = QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
                          reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE)
         name = self.resolve_topic_name(topic)
         return self.create_subscription(
-            msg_type, topic, callback, qos,
+            msg_type, topic, callback, qos, raw=raw,
             qos_overriding_options=QoSOverridingOptions.with_default_policies(),
             event_callbacks=self.qos.subscription(
                 topic, qos, f'set qos_overrides.{name}.subscription.reliability to '
-                'best_effort'))
+                'best_effort', lost))
 
     def imu_matched_callback(self, info):
         """A subscription to ``imu/data`` came or went."""

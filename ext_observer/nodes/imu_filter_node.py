@@ -29,25 +29,30 @@ parameters are :data:`~ext_observer.pipeline.imu_filter_parameters.IMU_FILTER_PA
 imu_tools' two filters' among them (``docs/raw_imu.md``).
 """
 
+import gc
 import os
 
+import numpy as np
 from geometry_msgs.msg import QuaternionStamped, TransformStamped, Vector3Stamped
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Imu, MagneticField
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, Header
 from std_srvs.srv import Trigger
 
 from ext_observer.recordings.calibrate import write_params
+from ext_observer.recordings.cdr import (decode_field, frame_id, ImuData, imu_layout,
+                                         QuaternionStamped as EstimateBytes, Undecodable)
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
 from ext_observer.core.ahrs.compiled import plain_warning
 from ext_observer.pipeline.kernel_cache import BackgroundCompile, start_plan
-from ext_observer.nodes.estimator_node import EstimatorNode
+from ext_observer.nodes.estimator_node import EstimatorNode, LOG_THROTTLE
 from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
                                                          imu_filter_settings, unused_text)
 from ext_observer.nodes.node_common import run_node
+from ext_observer.nodes.stream_watch import StreamWatch
 from ext_observer.pipeline.imu_tools import (raw_attitude, rpy_from_quaternion,
                                              transform_from_estimate, without_gravity)
-from ext_observer.pipeline.pairing import BACKWARD_JUMP
+from ext_observer.pipeline.pairing import BACKWARD_JUMP, KINDS
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 
 __all__ = ['IMU_FILTER_PARAMETERS', 'ImuFilterNode', 'IMU_TOPIC', 'MAG_TOPIC', 'main']
@@ -113,9 +118,17 @@ class ImuFilterNode(EstimatorNode):
         # itself (stamps), the node those it is told of (clock, service).
         self.resets = self.pipeline.resets
         self.reinitializations = self.pipeline.reinitializations
-        self.increment_subscription = self._subscribe(Imu, IMU_TOPIC, self.imu_data_raw_callback)
+        self.stream = StreamWatch(self, self.INPUT_WORDS['increment'])
+        # Inputs that did not decode (serialized_io), by kind.
+        self.undecodable = dict.fromkeys(KINDS, 0)
+        self._covariance_out = np.zeros(9)
+        serialized = settings['serialized_io']
+        self.increment_subscription = self._subscribe(
+            Imu, IMU_TOPIC, self.imu_data_raw_serialized_callback if serialized
+            else self.imu_data_raw_callback, raw=serialized, lost=self.stream.message_lost)
         self.measurement_subscription = (
-            self._subscribe(MagneticField, MAG_TOPIC, self.imu_mag_callback)
+            self._subscribe(MagneticField, MAG_TOPIC, self.imu_mag_serialized_callback
+                            if serialized else self.imu_mag_callback, raw=serialized)
             if settings['use_mag'] else None)
         self._estimate_msg = QuaternionStamped()
         self._status_steps = self._status_fields = 0
@@ -148,7 +161,8 @@ class ImuFilterNode(EstimatorNode):
             + (f' and {self.measurement_subscription.topic_name}' if settings['use_mag']
                else ' (use_mag false: heading free)')
             + f', world frame {settings["world_frame"]}, '
-            f'{self.pipeline.estimator.core.params}')
+            f'{self.pipeline.estimator.core.params}'
+            + ('' if serialized else '; serialized_io false: messages deserialized'))
         logger.info(covariance_text(settings))
         self.compiler = None
         if plan == 'plain' and plain_warning():
@@ -198,28 +212,19 @@ class ImuFilterNode(EstimatorNode):
         # The estimated covariance is written straight into the message that
         # goes out (its own float64 array): no copy.
         covariance = msg.orientation_covariance if self._covariance_estimated else None
-        # No clock is read: the steps wait for nothing.
-        outcome, estimate = self.pipeline.imu(stamp, (v.x, v.y, v.z), (a.x, a.y, a.z),
-                                              covariance)
-        if outcome == BACKWARD_JUMP:
-            self._backward_jump(stamp, reset=False)
-        if estimate is None:
+        state = self._run(stamp, (v.x, v.y, v.z), (a.x, a.y, a.z), covariance)
+        if state is None:
             return
-        if estimate.step.gap:
-            self._forward_gap(estimate.step, reset=False)
-        if estimate.reason is not None:
-            self._reinitialized(estimate.reason, estimate.step.stamp, 'the sample',
-                                count=False)
-        w, x, y, z = estimate.state
+        w, x, y, z = state
         out = self._estimate_msg
         out.header.stamp = header_stamp
         q = out.quaternion
         q.w, q.x, q.y, q.z = w, x, y, z
         self.estimate_publisher.publish(out)
         if self.rpy_filtered_publisher is not None:
-            self._publish_debug(msg.header, estimate.state, (a.x, a.y, a.z))
+            self._publish_debug(msg.header, state, (a.x, a.y, a.z))
         if self.tf_broadcaster is not None:
-            self._broadcast(msg.header, estimate.state)
+            self._broadcast(msg.header, state)
         if self._publish_imu:
             # The sample itself goes out, its header, rates and covariances
             # passed through (as imu_filter_madgwick does): the message is
@@ -233,6 +238,76 @@ class ImuFilterNode(EstimatorNode):
             if self._remove_gravity:
                 a.x, a.y, a.z = without_gravity((a.x, a.y, a.z), self.observer.q)
             self.imu_publisher.publish(msg)
+
+    def _run(self, stamp, gyr, acc, covariance):
+        """Run the pipeline on a sample and report what it did; return the state or None."""
+        # No clock is read: the steps wait for nothing.
+        outcome, estimate = self.pipeline.imu(stamp, gyr, acc, covariance)
+        if outcome == BACKWARD_JUMP:
+            self._backward_jump(stamp, reset=False)
+        self.stream.sample(stamp)
+        if estimate is None:
+            return None
+        if estimate.step.gap:
+            self._forward_gap(estimate.step, reset=False)
+        if estimate.reason is not None:
+            self._reinitialized(estimate.reason, estimate.step.stamp, 'the sample',
+                                count=False)
+        return estimate.state
+
+    def imu_data_raw_serialized_callback(self, raw):
+        """
+        Take one IMU sample as CDR bytes; publish the estimate of its step as bytes.
+
+        The same estimates and messages as :meth:`imu_data_raw_callback`
+        (docs/nodes.md#serialized-inputs-and-outputs), without a message
+        object: rclpy neither deserializes the input nor serializes the outputs.
+        """
+        try:
+            order, body, stamp, gyr, acc = imu_layout(raw)
+        except Undecodable as error:
+            self._undecodable('increment', error)
+            return
+        covariance = self._covariance_out if self._covariance_estimated else None
+        state = self._run(stamp, gyr, acc, covariance)
+        if state is None:
+            return
+        w, x, y, z = state
+        self.estimate_publisher.publish(self._estimate_bytes(stamp, w, x, y, z))
+        if self.rpy_filtered_publisher is not None or self.tf_broadcaster is not None:
+            header = Header(frame_id=frame_id(raw))
+            header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+            if self.rpy_filtered_publisher is not None:
+                self._publish_debug(header, state, acc)
+            if self.tf_broadcaster is not None:
+                self._broadcast(header, state)
+        if self._publish_imu:
+            if covariance is not None:
+                # The array is float64 in this machine's order (little endian).
+                covariance = (covariance.tobytes() if order
+                              else covariance.astype('>f8').tobytes())
+            self.imu_publisher.publish(self._imu_data.filled(
+                raw, order, body, w, x, y, z, covariance,
+                without_gravity(acc, self.observer.q) if self._remove_gravity else None))
+
+    def imu_mag_serialized_callback(self, raw):
+        """Take a magnetic field (T) as CDR bytes and correct the heading with it."""
+        try:
+            stamp, field = decode_field(raw)
+        except Undecodable as error:
+            self._undecodable('measurement', error)
+            return
+        self.pipeline.field(stamp, field)
+
+    def _undecodable(self, kind, error):
+        self.undecodable[kind] += 1
+        topic = IMU_TOPIC if kind == 'increment' else MAG_TOPIC
+        self.get_logger().warning(
+            f'{self.resolve_topic_name(topic)}: a message that does not decode ({error}); '
+            f'dropped (undecodable_{kind} in /diagnostics)', throttle_duration_sec=LOG_THROTTLE)
+
+    def _forget_samples(self):
+        self.stream.restart()
 
     def _broadcast(self, header, state):
         """The orientation on /tf, as imu_filter_madgwick's publishTransform."""
@@ -277,6 +352,7 @@ class ImuFilterNode(EstimatorNode):
             # Between two samples (one executor thread): the same state, the
             # same estimates from here on, faster.
             self.pipeline.estimator.use_kernels(kernels)
+            gc.freeze()     # numba's objects too (node_common._spin)
             if compiler.compiling:
                 self.get_logger().info(f'compiled kernels ready after {compiler.seconds:.1f} '
                                        's: the estimator goes on with them')
@@ -314,6 +390,8 @@ class ImuFilterNode(EstimatorNode):
         self._covariance_estimated = settings['covariance_estimated']
         self._remove_gravity = settings['remove_gravity_vector']
         self._estimate_msg.header.frame_id = settings['frame_id']
+        self._estimate_bytes = EstimateBytes(settings['frame_id'])
+        self._imu_data = ImuData(settings['orientation_stddev'])
 
     def _apply_parameters(self, settings, changed):
         super()._apply_parameters(settings, changed)
@@ -328,7 +406,15 @@ class ImuFilterNode(EstimatorNode):
         if self.compiler is not None:
             now = 'plain (compiling)' if self.compiler.compiling else 'plain (loading)'
             values = [(key, now if key == 'kernels' else value) for key, value in values]
-        return values + [(f'implausible_{kind}', count) for kind, count in units.items()]
+        return (values + [(f'implausible_{kind}', count) for kind, count in units.items()]
+                + self.stream.key_values())
+
+    def faults(self):
+        """The fault counters (EstimatorNode's), and the inputs that did not decode."""
+        counters = super().faults()
+        counters.update((f'undecodable_{kind}', count)
+                        for kind, count in self.undecodable.items())
+        return counters
 
     def _problems(self, steps):
         parts = []
@@ -360,6 +446,7 @@ class ImuFilterNode(EstimatorNode):
         self._unit_counts = dict(units.counts)
         parts.extend(self._clipping_problems())
         parts.extend(self._calibration_problems())
+        parts.extend(self.stream.problems(self._clock.now().nanoseconds))
         return parts
 
     def _clipping_problems(self):

@@ -31,7 +31,7 @@ import struct
 __all__ = ['FIELD_TYPE', 'IMU_TYPE', 'ImuData', 'QUATERNION_TYPE', 'REFERENCE_TYPES',
            'QuaternionStamped', 'Undecodable', 'decode_field', 'decode_imu',
            'decode_orientation', 'encode_field', 'encode_imu', 'encode_quaternion_stamped',
-           'imu_layout']
+           'frame_id', 'imu_layout']
 
 SECOND = 1_000_000_000
 IMU_TYPE = 'sensor_msgs/msg/Imu'
@@ -50,6 +50,7 @@ _RATES = (struct.Struct('>3d72x3d'), struct.Struct('<3d72x3d'))
 # sensor_msgs/Imu after the header, bytes.
 _IMU_COVARIANCE = 32
 _IMU_GYR = 104
+_IMU_ACC = 200
 _IMU_SIZE = 296
 _FIELD_SIZE = 96
 
@@ -65,6 +66,15 @@ def _header(raw):
     order = raw[1]
     sec, nanosec, length = _HEAD[order].unpack_from(raw, 4)
     return order, sec * SECOND + nanosec, 4 + ((12 + length + 7) & -8)
+
+
+def frame_id(raw):
+    """Return the ``header.frame_id`` of a message that starts with a Header."""
+    order, _, _ = _header(raw)
+    length = _HEAD[order].unpack_from(raw, 4)[2]
+    if length < 1 or len(raw) < 16 + length:
+        raise Undecodable(f'frame_id of {length} bytes in a message of {len(raw)}')
+    return bytes(raw[16:15 + length]).decode('utf-8', 'replace')
 
 
 def imu_layout(raw):
@@ -199,7 +209,21 @@ class ImuData:
 
         ``covariance``: 9 floats, row-major, rad²; None: ``orientation_stddev``'s.
         """
+        return self.filled(raw, order, body, w, x, y, z,
+                           None if covariance is None else self._nine[order](*covariance))
+
+    def filled(self, raw, order, body, w, x, y, z, covariance=None, acc=None):
+        """
+        The same with ``covariance`` as 72 bytes in the sample's byte order.
+
+        ``acc``: the linear acceleration to write instead of the sample's (m/s²).
+        """
         n = (w * w + x * x + y * y + z * z) ** 0.5
-        return b''.join((raw[:body], _QUATERNION[order].pack(x / n, y / n, z / n, w / n),
-                         self._covariance[order] if covariance is None
-                         else self._nine[order](*covariance), raw[body + _IMU_GYR:]))
+        parts = [raw[:body], _QUATERNION[order].pack(x / n, y / n, z / n, w / n),
+                 self._covariance[order] if covariance is None else covariance]
+        if acc is None:
+            parts.append(raw[body + _IMU_GYR:])
+        else:
+            parts += (raw[body + _IMU_GYR:body + _IMU_ACC], _VECTOR[order].pack(*acc),
+                      raw[body + _IMU_ACC + 24:])
+        return b''.join(parts)
