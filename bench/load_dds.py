@@ -429,6 +429,7 @@ def run_case(messages, trial_rate, mode, speed, busy, log_dir, index=0, settle=T
         recorder = Child('recorder', ['-m', 'bench.load_dds', 'record', out], env,
                          os.path.join(log_dir, f'load_recorder_{index}.log'))
         stack.callback(recorder.stop)
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
         context = rclpy.Context()
         rclpy.init(context=context, domain_id=domain_id)
         stack.callback(rclpy.try_shutdown, context=context)
