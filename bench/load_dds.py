@@ -259,6 +259,28 @@ def loss_by_cause(sent, answered, last_values):
             'node_drops': drops}
 
 
+def holes(answered, rate):
+    """
+    The runs of samples without an answer (sample 0 only starts the time line).
+
+    Returns
+    -------
+    dict
+        ``count``, ``longest_ms`` (the longest run, ms at the trial's rate),
+        ``first_s`` (where the first one starts, s into the trial; None
+        without any).
+
+    """
+    missing = ~np.asarray(answered, dtype=bool)
+    missing[:1] = False
+    edges = np.diff(np.concatenate([[0], missing.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    if not starts.size:
+        return {'count': 0, 'longest_ms': 0.0, 'first_s': None}
+    return {'count': int(starts.size), 'longest_ms': float(np.max(ends - starts)) * 1e3 / rate,
+            'first_s': float(starts[0]) / rate}
+
+
 def analyze(trial, mode, outputs, statuses, reference):
     """
     The figures of one case.
@@ -312,6 +334,7 @@ def analyze(trial, mode, outputs, statuses, reference):
             'answered_movement': int(keep.sum()), 'share': share,
             'share_movement': float(keep.sum() / max(1, movement.sum())),
             'lost': loss_by_cause(count, int(len(index)), last),
+            'holes': holes(answered, trial.rate),
             'error_key': key, 'dds': dds, 'batch': batch,
             'ratio': dds[key] / batch[key] if batch[key] else math.nan,
             'z2': z2, 'apart_max_deg': math.degrees(float(np.max(apart))) if apart.size
@@ -358,7 +381,8 @@ def node_command(mode):
     return command + ['--ros-args', '-p', f'use_mag:={"true" if mode == "9D" else "false"}']
 
 
-def _wait_for(ready, node, executor, children, timeout, what):
+def _wait_for(ready, executor, children, timeout, what):
+    # Spins the replayer's node meanwhile (its /diagnostics watch).
     deadline = time.monotonic() + timeout
     while not ready():
         for child in children:
@@ -449,11 +473,11 @@ def run_case(messages, trial_rate, mode, speed, busy, log_dir, index=0, settle=T
                     and driver.count_publishers('imu/data') > 0
                     and driver.count_subscribers('imu/data') > 0)
 
-        _wait_for(connected, driver, executor, (node, recorder), START_TIMEOUT, 'connection')
+        _wait_for(connected, executor, (node, recorder), START_TIMEOUT, 'connection')
         if settle:
             # Measured as it runs for good: once the compiled kernels are in.
-            _wait_for(lambda: kernels and not kernels[-1].startswith('plain ('), driver,
-                      executor, (node, recorder), SETTLE_TIMEOUT, 'compiled kernels')
+            _wait_for(lambda: kernels and not kernels[-1].startswith('plain ('), executor,
+                      (node, recorder), SETTLE_TIMEOUT, 'compiled kernels')
         driver.destroy_subscription(watch)
         executor.spin_once(timeout_sec=0.5)  # the node sees the recorder's match
         load_before, cpu_before = load(), cpu_seconds(node.proc.pid)

@@ -70,6 +70,9 @@ def test_a_case_counts_its_answers_and_its_losses_by_where_they_happened():
     assert row['z2']['heading'] == pytest.approx(1.0)
     assert row['z2']['inclination'] == pytest.approx(0.0, abs=1e-12)
     assert row['apart_max_deg'] == pytest.approx(0.0, abs=1e-6)
+    # Samples 1-39 and 90-99 (sample 0 only starts the time line).
+    assert row['holes'] == {'count': 2, 'longest_ms': pytest.approx(39 / RATE * 1e3),
+                            'first_s': pytest.approx(1 / RATE)}
 
 
 def test_a_status_without_the_counters_leaves_the_causes_unknown():
