@@ -37,8 +37,8 @@ RAW_IMU = (
 )
 # Lost samples and a busy machine: both halves in full, or a short DDS run.
 LOAD = ['bench.load']
-LOAD_QUICK = ['bench.load', '--dds-only', '--seconds', '20', '--speeds', '1', '4',
-              '--modes', '9D', '--fields', '100']
+LOAD_QUICK = ['bench.load', '--dds-only', '--start', '30', '--seconds', '20',
+              '--speeds', '1', '4', '--modes', '9D', '--fields', '100']
 RAW_IMU_QUICK = (
     ('node_events', ['bench.raw_imu', '--executor', 'events', '--seconds', '2',
                      '--rounds', '1']),

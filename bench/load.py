@@ -47,7 +47,7 @@ def _log(text):
 
 
 def batch_half():
-    """``(batch_rows, batch_markdown)`` of ``bench.load_batch``, or None where the tree lacks it."""
+    """``(batch_rows, batch_markdown)`` of ``bench.load_batch``; None where the tree lacks it."""
     try:
         from bench.load_batch import batch_markdown, batch_rows
     except ModuleNotFoundError as error:
@@ -192,7 +192,8 @@ def dds_section(dds):
         return '\n'.join(lines + [dds['missing']])
     rows, t = dds['rows'], dds['trial']
     lines += [
-        f'BROAD dev trial `{t["name"]}`, {t["seconds"]:.0f} s from its start ({t["samples"]} '
+        f'BROAD dev trial `{t["name"]}`, {t["seconds"]:.0f} s from {t.get("start", 0):g} s '
+        f'into it ({t["samples"]} '
         f'IMU samples at {t["rate"]:.1f} Hz, {t["movement"]} of them scored movement '
         'samples), serialized before the replay and published as bytes with the trial\'s '
         'stamps at 1/rate, paced by the monotonic clock at each speed, into '
@@ -210,8 +211,8 @@ def dds_section(dds):
         'the answered movement samples of the error² over the variance that `imu/data` '
         'carried (inclination √(2 V_t), heading √V_h: [covariance.md](covariance.md)). '
         '*loss said*: a status at WARN that speaks of lost or dropped samples, where '
-        'more than 1 % was lost. *CPU*: the node\'s utime + stime (`/proc`) from the first sample sent until its '
-        'output stopped, over the samples answered.', '']
+        'more than 1 % was lost. *CPU*: the node\'s utime + stime (`/proc`) from the first '
+        'sample sent until its output stopped, over the samples answered.', '']
     lines += [f'- {v}' for v in verdicts(rows)]
     notes = dds_notes(rows)
     if notes:
@@ -263,6 +264,16 @@ def render(results):
 
 # --- running -----------------------------------------------------------------
 
+def cut(trial, start=0.0, seconds=None):
+    """The part of ``trial`` from ``start`` s on, ``seconds`` long (None: to its end)."""
+    from ext_observer.broad.data import Trial
+    first = int(round(start * trial.rate))
+    last = len(trial) if seconds is None else first + int(round(seconds * trial.rate))
+    part = slice(first, last)
+    return Trial(trial.name, trial.gyr[part], trial.acc[part], trial.mag[part],
+                 trial.quat[part], trial.movement[part], trial.rate)
+
+
 def run_dds(args):
     """The DDS half's result: the trial, its rows (or ``missing``)."""
     from ext_observer.broad.data import data_dir, find_trials, HOW_TO_GET, load_trial
@@ -270,16 +281,15 @@ def run_dds(args):
         name, path = find_trials(data_dir(args.data), [args.trial])[0]
     except ValueError:
         return {'missing': f'No BROAD trial `{args.trial}` found ({HOW_TO_GET}).'}
-    trial = load_trial(path, name)
-    if args.seconds:
-        trial = trial.head(args.seconds)
+    trial = cut(load_trial(path, name), args.start, args.seconds)
     case_list = load_dds.cases(args.speeds, args.fields, args.loads, args.modes)
     estimate = sum(len(trial) / trial.rate / c[1] + CASE_OVERHEAD for c in case_list)
     _log(f'DDS: {len(case_list)} cases on {name} ({len(trial) / trial.rate:.0f} s), about '
          f'{estimate / 60:.0f} min')
     rows = load_dds.dds_rows(trial, case_list, args.log_dir, progress=_log)
     return {'trial': {'name': name, 'samples': len(trial), 'rate': trial.rate,
-                      'seconds': len(trial) / trial.rate, 'movement': int(trial.movement.sum())},
+                      'seconds': len(trial) / trial.rate, 'movement': int(trial.movement.sum()),
+                      'start': args.start},
             'rows': rows}
 
 
@@ -311,8 +321,10 @@ def build_parser():
     parser.add_argument('--data', help='folder of BROAD\'s HDF5 files (default: as make broad)')
     parser.add_argument('--trial', default=DEFAULT_TRIAL,
                         help=f'the DDS half\'s trial (name or prefix; default {DEFAULT_TRIAL})')
+    parser.add_argument('--start', type=float, default=0.0,
+                        help='replay the trial from this second on (default 0)')
     parser.add_argument('--seconds', type=float,
-                        help='replay only the trial\'s first seconds (default: all of it)')
+                        help='replay only this many seconds of the trial (default: to its end)')
     parser.add_argument('--speeds', type=float, nargs='+', default=list(load_dds.SPEEDS),
                         help='times real time')
     parser.add_argument('--fields', type=_field_rate, nargs='+',

@@ -375,7 +375,7 @@ def busy_cores(seconds, cores=None):
 
 
 def node_command(mode):
-    """The installed ``imu_filter_node`` (beside this interpreter) with ``use_mag`` for ``mode``."""
+    """The installed ``imu_filter_node`` (beside this interpreter), ``use_mag`` by ``mode``."""
     script = os.path.join(os.path.dirname(sys.executable), 'imu_filter_node')
     command = [script] if os.path.exists(script) else ['-m', 'ext_observer.nodes.imu_filter_node']
     return command + ['--ros-args', '-p', f'use_mag:={"true" if mode == "9D" else "false"}']
@@ -463,8 +463,9 @@ def run_case(messages, trial_rate, mode, speed, busy, log_dir, index=0, settle=T
         imu_pub = driver.create_publisher(Imu, 'imu/data_raw', qos_profile_sensor_data)
         mag_pub = driver.create_publisher(MagneticField, 'imu/mag', qos_profile_sensor_data)
         kernels = []
-        watch = driver.create_subscription(DiagnosticArray, '/diagnostics', lambda msg: kernels.extend(
-            kv.value for st in msg.status for kv in st.values if kv.key == 'kernels'), 10)
+        watch = driver.create_subscription(
+            DiagnosticArray, '/diagnostics', lambda msg: kernels.extend(
+                kv.value for st in msg.status for kv in st.values if kv.key == 'kernels'), 10)
         recorder.expect('ready', START_TIMEOUT)
 
         def connected():

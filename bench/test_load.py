@@ -100,6 +100,14 @@ def test_the_field_rows_follow_the_field_rate():
     assert set(np.diff(rows)) <= {2, 3}
 
 
+def test_a_cut_is_the_part_of_the_trial_asked_for():
+    trial = _trial()
+    trial.gyr[:, 0] = np.arange(COUNT)
+    part = load.cut(trial, 0.1, 0.2)
+    assert len(part) == 40 and part.gyr[0, 0] == 20 and part.movement.all()
+    assert len(load.cut(trial, 0.25)) == COUNT - 50
+
+
 def _results(rows, **more):
     results = {'machine': {'commit': 'abc1234', 'date': 'today', 'cores': 2, 'cpu': 'cpu',
                            'python': '3', 'numpy': '2', 'rclpy': '7', 'rmw': 'rmw',
