@@ -77,6 +77,18 @@ while time.monotonic() < end and os.getppid() == parent:
         x += 1
 '''
 
+# The node and the recorder are started through this: killed with the
+# benchmark even when it is killed itself (PR_SET_PDEATHSIG survives exec).
+GUARD_SOURCE = '''
+import ctypes, os, signal, sys
+try:
+    ctypes.CDLL(None).prctl(1, signal.SIGKILL)
+except (AttributeError, OSError):
+    pass
+if os.getppid() == int(sys.argv[1]):
+    os.execv(sys.argv[2], sys.argv[2:])
+'''
+
 
 # --- what is sent ------------------------------------------------------------
 
@@ -377,8 +389,14 @@ def busy_cores(seconds, cores=None):
 def node_command(mode):
     """The installed ``imu_filter_node`` (beside this interpreter), ``use_mag`` by ``mode``."""
     script = os.path.join(os.path.dirname(sys.executable), 'imu_filter_node')
-    command = [script] if os.path.exists(script) else ['-m', 'ext_observer.nodes.imu_filter_node']
+    command = ([script] if os.path.exists(script)
+               else [sys.executable, '-m', 'ext_observer.nodes.imu_filter_node'])
     return command + ['--ros-args', '-p', f'use_mag:={"true" if mode == "9D" else "false"}']
+
+
+def guarded(command):
+    """``command`` (an executable's path first) that ends when this process does."""
+    return [sys.executable, '-c', GUARD_SOURCE, str(os.getpid())] + list(command)
 
 
 def _wait_for(ready, executor, children, timeout, what):
@@ -447,10 +465,11 @@ def run_case(messages, trial_rate, mode, speed, busy, log_dir, index=0, settle=T
         tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix='load-'))
         env = ros_env(domain_id)
         out = os.path.join(tmp, 'record.pickle')
-        node = Child('imu_filter_node', node_command(mode), env,
+        node = Child('imu_filter_node', guarded(node_command(mode)), env,
                      os.path.join(log_dir, f'load_node_{index}.log'))
         stack.callback(node.stop)
-        recorder = Child('recorder', ['-m', 'bench.load_dds', 'record', out], env,
+        recorder = Child('recorder', guarded([sys.executable, '-m', 'bench.load_dds', 'record',
+                                              out]), env,
                          os.path.join(log_dir, f'load_recorder_{index}.log'))
         stack.callback(recorder.stop)
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

@@ -8,6 +8,9 @@ seconds of a BROAD excerpt into ``imu_filter_node``).
 
 import math
 import os
+import signal
+import subprocess
+import sys
 import time
 import types
 
@@ -161,6 +164,40 @@ def test_the_busy_loops_end_by_themselves_and_with_their_context():
     with load_dds.busy_cores(60.0, cores=1) as pids:
         assert _alive(pids[0])
     assert not _alive(pids[0])
+
+
+# A parent that starts a busy loop or a guarded process, says its pid, and waits.
+_PARENT = {
+    'busy': 'with load_dds.busy_cores(60.0, cores=1) as pids:\n'
+            '    print(pids[0], flush=True)\n'
+            '    time.sleep(60.0)',
+    'guarded': 'p = subprocess.Popen(load_dds.guarded(["/bin/sleep", "60"]))\n'
+               'print(p.pid, flush=True)\n'
+               'time.sleep(60.0)',
+}
+
+
+@pytest.mark.parametrize('kind', sorted(_PARENT))
+def test_what_the_benchmark_starts_ends_when_it_is_killed(kind):
+    source = 'import subprocess, time\nfrom bench import load_dds\n' + _PARENT[kind]
+    parent = subprocess.Popen([sys.executable, '-c', source], cwd=REPO, stdout=subprocess.PIPE,
+                              text=True)
+    pid = None
+    try:
+        pid = int(parent.stdout.readline())
+        assert _alive(pid)
+        parent.kill()
+        parent.wait(5.0)
+        deadline = time.monotonic() + 5.0
+        while _alive(pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _alive(pid)
+    finally:
+        parent.kill()
+        parent.wait(5.0)
+        parent.stdout.close()
+        if pid is not None and _alive(pid):
+            os.kill(pid, signal.SIGKILL)
 
 
 def _alive(pid):
