@@ -4,7 +4,9 @@
 Sections: batch core (with ``reproduce --seeds 5``), node throughput and
 latency (relay and observer, per executor), accuracy beside the limit, the
 node's profile, and the raw-IMU estimator (``imu_filter_node`` beside a
-relay, its callbacks' parts, the core over BROAD) with issue 11's goals.
+relay, its callbacks' parts, the core over BROAD) with issue 11's goals;
+``load`` runs ``python -m bench.load``, which writes its own page,
+``docs/load.md``, beside the output.
 Progress goes to stderr, the Markdown to stdout and to
 ``docs/performance.md``. Timing never fails the run; a section that cannot
 run (a node that does not start, no BROAD data) is reported as such.
@@ -22,7 +24,7 @@ import time
 from bench import machine, report
 from bench.procs import REPO, reserved_domain_id, ros_env
 
-SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu', 'compiled')
+SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu', 'compiled', 'load')
 # The raw-IMU benchmarks, each a command of its own that prints its figures
 # and verdict (its output goes to stderr here) and writes them with --json.
 RAW_IMU = (
@@ -33,6 +35,10 @@ RAW_IMU = (
     ('direct', ['bench.raw_imu_direct']),
     ('batch', ['bench.broad_batch', '--runs', '3', '--vectorized']),
 )
+# Lost samples and a busy machine: both halves in full, or a short DDS run.
+LOAD = ['bench.load']
+LOAD_QUICK = ['bench.load', '--dds-only', '--start', '30', '--seconds', '20',
+              '--speeds', '1', '4', '--modes', '9D', '--fields', '100']
 RAW_IMU_QUICK = (
     ('node_events', ['bench.raw_imu', '--executor', 'events', '--seconds', '2',
                      '--rounds', '1']),
@@ -150,6 +156,24 @@ def _compiled(quick):
             return json.load(f)
 
 
+def _load(quick, args):
+    """Run ``python -m bench.load`` (its page beside the output); return a note."""
+    command = LOAD_QUICK if quick else LOAD
+    extra = [] if args.no_write else ['--docs', os.path.dirname(os.path.abspath(args.output))]
+    if args.log_dir:
+        extra += ['--log-dir', args.log_dir]
+    _log(f'load: python -m {" ".join(command + extra)} ...')
+    start = time.monotonic()
+    # Its progress goes to stderr; the page it prints is in its own file.
+    done = subprocess.run([sys.executable, '-m', *command, *extra], cwd=REPO,
+                          stdout=subprocess.DEVNULL)
+    shown = ' '.join(command[1:])
+    return (f'Lost samples and a busy machine: `python -m bench.load {shown}` took '
+            f'{time.monotonic() - start:.0f} s' + (', its page is load.md' if not args.no_write
+                                                    else '')
+            + (f' (exit code {done.returncode})' if done.returncode else '') + '.')
+
+
 def build_parser():
     """Return the parser of ``python -m bench``."""
     parser = argparse.ArgumentParser(
@@ -212,6 +236,8 @@ def main(argv=None):
         results['raw_imu'] = _raw_imu(args.quick, args.log_dir)
     if 'compiled' in sections:
         results['compiled'] = _compiled(args.quick)
+    if 'load' in sections:
+        notes.append(_load(args.quick, args))
     notes.append(f'The whole run took {time.monotonic() - start:.0f} s.')
     results['machine']['load_end'] = machine.load()
     results['notes'] = notes
