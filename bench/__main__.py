@@ -24,7 +24,8 @@ import time
 from bench import machine, report
 from bench.procs import REPO, reserved_domain_id, ros_env
 
-SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu', 'compiled', 'load')
+SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu', 'compiled', 'load',
+            'vehicle')
 # The raw-IMU benchmarks, each a command of its own that prints its figures
 # and verdict (its output goes to stderr here) and writes them with --json.
 RAW_IMU = (
@@ -35,6 +36,9 @@ RAW_IMU = (
     ('direct', ['bench.raw_imu_direct']),
     ('batch', ['bench.broad_batch', '--runs', '3', '--vectorized']),
 )
+# A road vehicle: every drive over three seeds, or the level drives once.
+VEHICLE = ['bench.vehicle']
+VEHICLE_QUICK = ['bench.vehicle', '--quick']
 # Lost samples and a busy machine: both halves in full, or a short DDS run.
 LOAD = ['bench.load']
 LOAD_QUICK = ['bench.load', '--dds-only', '--start', '30', '--seconds', '20',
@@ -158,19 +162,31 @@ def _compiled(quick):
 
 def _load(quick, args):
     """Run ``python -m bench.load`` (its page beside the output); return a note."""
-    command = LOAD_QUICK if quick else LOAD
     extra = [] if args.no_write else ['--docs', os.path.dirname(os.path.abspath(args.output))]
     if args.log_dir:
         extra += ['--log-dir', args.log_dir]
-    _log(f'load: python -m {" ".join(command + extra)} ...')
+    return _page_benchmark('Lost samples and a busy machine', LOAD_QUICK if quick else LOAD,
+                           extra, None if args.no_write else 'load.md')
+
+
+def _vehicle(quick, args):
+    """Run ``python -m bench.vehicle`` (its page beside the output); return a note."""
+    extra = (['--no-write'] if args.no_write else
+             ['--output', os.path.join(os.path.dirname(os.path.abspath(args.output)),
+                                       'vehicle.md')])
+    return _page_benchmark('A road vehicle', VEHICLE_QUICK if quick else VEHICLE, extra,
+                           None if args.no_write else 'vehicle.md')
+
+
+def _page_benchmark(label, command, extra, page):
+    """Run a benchmark that writes its own page; return the note that says how long it took."""
+    _log(f'{label.lower()}: python -m {" ".join(command + extra)} ...')
     start = time.monotonic()
     # Its progress goes to stderr; the page it prints is in its own file.
     done = subprocess.run([sys.executable, '-m', *command, *extra], cwd=REPO,
                           stdout=subprocess.DEVNULL)
-    shown = ' '.join(command[1:])
-    return (f'Lost samples and a busy machine: `python -m bench.load {shown}` took '
-            f'{time.monotonic() - start:.0f} s' + (', its page is load.md' if not args.no_write
-                                                    else '')
+    return (f'{label}: `python -m {" ".join(command)}` took '
+            f'{time.monotonic() - start:.0f} s' + (f', its page is {page}' if page else '')
             + (f' (exit code {done.returncode})' if done.returncode else '') + '.')
 
 
@@ -238,6 +254,8 @@ def main(argv=None):
         results['compiled'] = _compiled(args.quick)
     if 'load' in sections:
         notes.append(_load(args.quick, args))
+    if 'vehicle' in sections:
+        notes.append(_vehicle(args.quick, args))
     notes.append(f'The whole run took {time.monotonic() - start:.0f} s.')
     results['machine']['load_end'] = machine.load()
     results['notes'] = notes
