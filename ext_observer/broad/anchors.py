@@ -5,7 +5,7 @@ VQF and BasicVQF (``vqf``), Madgwick and Mahony (``ahrs``) and Fusion
 (``imufusion``); the estimator never calls them. Each runs at the settings
 its authors advise: VQF's and BasicVQF's defaults, BROAD's trial-agnostic
 best for Madgwick and Mahony, Fusion's README's settings; Fusion also at its
-package defaults (:data:`FUSION_DEFAULTS`), which its README advises against.
+package defaults (:data:`FUSION_DEFAULTS`: no rejection, no gyro range).
 
 Each anchor gets the raw samples (rad/s, m/s², µT; Fusion °/s and g) and
 its output is brought to scalar-first ``(w, x, y, z)``, sensor → ENU (the
