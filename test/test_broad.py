@@ -356,6 +356,76 @@ def test_anchor_frames_on_a_static_sensor(anchor, mode):
         assert np.degrees(total).max() < 1.0
 
 
+def _tilted_for_a_while(gyro_noise, rate=100.0, rest=10.0, pushed=3.0):
+    """A level sensor at rest, then pushed sideways: its specific force 30° off up."""
+    rng = np.random.default_rng(1)
+    n, m = int((rest + pushed) * rate), int(pushed * rate)
+    acc = np.tile((0.0, 0.0, 9.81), (n, 1))
+    acc[-m:] = 9.81 * np.array([math.sin(math.radians(30.0)), 0.0, math.cos(math.radians(30.0))])
+    return (gyro_noise * rng.standard_normal((n, 3)), acc + 0.01 * rng.standard_normal((n, 3)),
+            np.tile((0.0, 20.0, -40.0), (n, 1)))
+
+
+def _inclination_at_end(est):
+    return math.degrees(broad.error_angles(est[-1], (1.0, 0.0, 0.0, 0.0))[2])
+
+
+def test_fusion_runs_at_its_readmes_settings_and_at_its_package_defaults():
+    imufusion = pytest.importorskip('imufusion')
+    assert broad.ANCHORS[-2:] == ('Fusion', broad.FUSION_DEFAULTS)
+    assert broad.ANCHOR_PACKAGES[broad.FUSION_DEFAULTS] == 'imufusion'
+    readme = broad.fusion_settings(250.0)
+    assert readme == pytest.approx({'sample_rate': 250.0, 'gain': 0.5, 'gyroscope_range': 2000.0,
+                                    'acceleration_rejection': 10.0, 'magnetic_rejection': 10.0,
+                                    'rejection_timeout': 5.0})
+    assert broad.fusion_settings(50.0, math.radians(250.0))['gyroscope_range'] == pytest.approx(
+        250.0)
+    assert broad.fusion_settings(250.0, readme=False) == {'sample_rate': 250.0}
+    # The names are the package's: each setting reads back as given.
+    given = imufusion.AhrsSettings(**readme)
+    assert {k: getattr(given, k) for k in readme} == pytest.approx(readme)
+
+
+def test_fusions_settings_reach_the_filter():
+    """
+    Pushed sideways for 3 s, Fusion at its README's settings rejects the accelerometer.
+
+    At the package defaults it follows it; a gyro range below the gyro's
+    noise restarts Fusion at every sample (no rejection while it starts),
+    one above it does not: the range is passed, and in °/s.
+    """
+    gyr, acc, mag = _tilted_for_a_while(gyro_noise=math.radians(0.1))
+
+    def inclination(anchor, **kw):
+        return _inclination_at_end(broad.anchor_estimates(anchor, gyr, acc, mag, 100.0, False,
+                                                          **kw))
+    assert inclination('Fusion') < 2.0
+    assert inclination('Fusion', gyro_range=math.radians(1.0)) < 2.0
+    assert inclination('Fusion', gyro_range=math.radians(0.02)) > 15.0
+    assert inclination(broad.FUSION_DEFAULTS) > 15.0
+
+
+def test_pages_name_no_absolute_path_and_fusions_settings():
+    command = ('python -m ext_observer broad --data /work/shared/broad --json=/tmp/x/broad.json '
+               '--docs docs --trials 01')
+    shown, folder = broad.shown_command(command, '/work/shared/broad')
+    assert '/work' not in shown and not folder.startswith('/')
+    assert shown.endswith(' --docs docs --trials 01') and '--json=' in shown
+    assert os.path.normpath(os.path.join(REPO, folder)) == '/work/shared/broad'
+    assert broad.shown_command('x --data ../shared/broad', '../shared/broad') == (
+        'x --data ../shared/broad', '../shared/broad')
+    groups = broad.find_groups('/nonexistent', NAMES)
+    meta = dict(_meta(NAMES), command=command, data='/work/shared/broad')
+    page = broad.markdown(_fake_result(NAMES), groups, meta, {}, REPO)
+    made_by = next(line for line in page.splitlines() if line.startswith('**Made by**'))
+    assert '/work' not in made_by and f'on the data in `{folder}`' in made_by
+    for needed in ("Fusion (`imufusion`) at its README's settings: gain 0.5, gyro range 2000 °/s",
+                   'acceleration rejection 10°, magnetic rejection 10°',
+                   'rejection timeout (recovery trigger period) 5 s', '`Bias`',
+                   f'"{broad.FUSION_DEFAULTS}"'):
+        assert needed in page
+
+
 # --- end to end ------------------------------------------------------------
 
 @pytest.mark.timeout(240)

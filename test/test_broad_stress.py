@@ -143,12 +143,12 @@ def test_halves_are_even_and_odd_trial_numbers():
 
 # --- the runner on synthetic data --------------------------------------------
 
-def rotating_trial(name, seconds=24.0, rate=100.0):
-    """A sensor turning about a tilted axis at 40 °/s after 4 s of rest, ENU field."""
+def rotating_trial(name, seconds=24.0, rate=100.0, speed=40.0):
+    """A sensor turning about a tilted axis at ``speed`` °/s after 4 s of rest, ENU field."""
     n = int(seconds * rate)
     t = np.arange(n) / rate
     axis = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
-    w = np.where(t >= 4.0, math.radians(40.0), 0.0)
+    w = np.where(t >= 4.0, math.radians(speed), 0.0)
     gyr = w[:, None] * axis
     angle = np.cumsum(w) / rate
     half = 0.5 * angle
@@ -198,6 +198,27 @@ def test_runner_scores_ours_and_vqf_on_every_variant(tmp_path):
         assert title in page
     assert '](figures/robustness.png)' in page
     assert (tmp_path / 'figures' / 'robustness.png').stat().st_size > 1000
+
+
+def test_fusion_runs_in_both_rows_and_is_told_each_variants_gyro_range():
+    assert broad.STRESS_ANCHORS[-2:] == ('Fusion', broad.FUSION_DEFAULTS)
+    assert broad.GYRO_RANGES == {**{k: broad.BROAD_GYRO_RANGE for k in stress.VARIANTS},
+                                 'e': stress.GYRO_RANGE}
+    # Turning at 300 °/s: clipped at 250 °/s in (e), where Fusion is told
+    # that range (and restarts on the clipped samples), not BROAD's sensor's.
+    trial = rotating_trial('02_fast', seconds=12.0, speed=300.0)
+    out = run_stress([trial], keys=('a', 'e'), modes=('6D',),
+                     anchors=('Fusion', broad.FUSION_DEFAULTS), progress=lambda text: None)
+    for key in ('a', 'e'):
+        for anchor in ('Fusion', broad.FUSION_DEFAULTS):
+            assert 0.0 <= out['scores'][key][anchor]['6D']['02_fast']['inclination_rmse_deg'] < 90
+
+    def clipped(gyro_range):
+        result = broad.run([stress.variant(trial, 'e')], ('6D',), ('Fusion',),
+                           progress=lambda text: None, gyro_range=gyro_range)
+        return result['scores']['Fusion']['6D']['02_fast']
+    assert out['scores']['e']['Fusion']['6D']['02_fast'] == clipped(stress.GYRO_RANGE)
+    assert out['scores']['e']['Fusion']['6D']['02_fast'] != clipped(broad.BROAD_GYRO_RANGE)
 
 
 # --- end to end ------------------------------------------------------------

@@ -36,16 +36,18 @@ is importable from here.
 """
 
 from ext_observer.broad.anchors import (anchor_estimates, ANCHOR_PACKAGES,
-                                        attitude_from_acc_mag, IDENTITY, MADGWICK_BETA,
-                                        MAHONY_KI, MAHONY_KP, missing_anchor_packages,
-                                        NWU_TO_ENU, STANDARD_GRAVITY)
+                                        attitude_from_acc_mag, BROAD_GYRO_RANGE,
+                                        FUSION_README, fusion_settings, IDENTITY,
+                                        MADGWICK_BETA, MAHONY_KI, MAHONY_KP,
+                                        missing_anchor_packages, NWU_TO_ENU,
+                                        STANDARD_GRAVITY)
 from ext_observer.broad.cli import build_parser, main, PLOT_TRIAL
 from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_groups,
                                      find_trials, groups_from_name, has_trials, HOW_TO_GET,
                                      load_trial, load_trials, shown_path, Trial)
-from ext_observer.broad.names import (algorithms_in, ALGORITHMS, ANCHORS, MODES, OURS,
-                                      OURS_PLAIN)
-from ext_observer.broad.page import markdown
+from ext_observer.broad.names import (algorithms_in, ALGORITHMS, ANCHORS, FUSION_DEFAULTS,
+                                      MODES, OURS, OURS_PLAIN)
+from ext_observer.broad.page import fusion_text, markdown, shown_command
 from ext_observer.broad.plots import plot
 from ext_observer.broad.report import fmt, text_report, write_json
 from ext_observer.broad.run import estimate_ours, log, run
@@ -59,12 +61,14 @@ from ext_observer.broad.stress import (BIAS, bias_of, blocks, clip_gyro, cut_at_
                                        with_bias)
 from ext_observer.broad.stress_page import plot_stress, stress_markdown
 from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, MODE_KEYS,
-                                           modes_of, ratio_to_vqf, run_stress,
+                                           GYRO_RANGES, modes_of, ratio_to_vqf, run_stress,
                                            STRESS_ANCHORS, stress_summary, table_rows,
                                            text_table, write_stress_json)
 
 __all__ = [
-    'ALGORITHMS', 'ANCHOR_PACKAGES', 'ANCHORS', 'DEFAULT_DIRS', 'ENV_VAR', 'HOW_TO_GET',
+    'ALGORITHMS', 'ANCHOR_PACKAGES', 'ANCHORS', 'BROAD_GYRO_RANGE', 'DEFAULT_DIRS', 'ENV_VAR',
+    'FUSION_DEFAULTS', 'FUSION_README', 'HOW_TO_GET', 'fusion_settings', 'fusion_text',
+    'shown_command',
     'IDENTITY', 'MADGWICK_BETA', 'MAHONY_KI', 'MAHONY_KP', 'MODES', 'NWU_TO_ENU', 'OURS',
     'OURS_PLAIN', 'PLOT_TRIAL', 'STANDARD_GRAVITY', 'Trial', 'VQF_RATIO_GOAL',
     'algorithms_in', 'anchor_estimates', 'attitude_from_acc_mag', 'build_parser',
@@ -75,7 +79,8 @@ __all__ = [
     'run',
     'score', 'shown_path', 'summary', 'text_report', 'write_json',
     # The robustness benchmark (--stress).
-    'BIAS', 'DESCRIPTIONS', 'GYRO_RANGE', 'HALVES', 'LABELS', 'LOW_RATE', 'MODE_KEYS',
+    'BIAS', 'DESCRIPTIONS', 'GYRO_RANGE', 'GYRO_RANGES', 'HALVES', 'LABELS', 'LOW_RATE',
+    'MODE_KEYS',
     'RATIO_DONE', 'RATIO_GOAL',
     'STRESS_ANCHORS', 'VARIANTS', 'algorithms_of', 'bias_of', 'blocks', 'clip_gyro',
     'cut_at_movement', 'downsample', 'first_movement', 'half_counts', 'half_of', 'modes_of',

@@ -2,7 +2,10 @@
 The anchors, run on a BROAD recording for comparison only.
 
 VQF and BasicVQF (``vqf``), Madgwick and Mahony (``ahrs``) and Fusion
-(``imufusion``); the estimator never calls them.
+(``imufusion``); the estimator never calls them. Each runs at the settings
+its authors advise: VQF's and BasicVQF's defaults, BROAD's trial-agnostic
+best for Madgwick and Mahony, Fusion's README's settings; Fusion also at its
+package defaults (:data:`FUSION_DEFAULTS`: no rejection, no gyro range).
 
 Each anchor gets the raw samples (rad/s, m/s², µT; Fusion °/s and g) and
 its output is brought to scalar-first ``(w, x, y, z)``, sensor → ENU (the
@@ -16,17 +19,27 @@ import math
 
 import numpy as np
 
-from ext_observer.broad.names import ANCHORS
+from ext_observer.broad.names import ANCHORS, FUSION_DEFAULTS
 from ext_observer.core.quaternion import conjugate, multiply
 
 # Packages each anchor needs (PyPI names = import names).
 ANCHOR_PACKAGES = {'VQF': 'vqf', 'BasicVQF': 'vqf', 'Madgwick': 'ahrs',
-                   'Mahony': 'ahrs', 'Fusion': 'imufusion'}
+                   'Mahony': 'ahrs', 'Fusion': 'imufusion', FUSION_DEFAULTS: 'imufusion'}
 # BROAD's trial-agnostic best parameters for Madgwick and Mahony.
 MADGWICK_BETA = 0.12
 MAHONY_KP = 0.74
 MAHONY_KI = 0.0012
 STANDARD_GRAVITY = 9.80665  # m/s²; Fusion takes the specific force in g
+# The gyro range of BROAD's sensor (myon aktos-t), rad/s: its files do not
+# state it; the recordings reach 1352 °/s, beyond a 1000 °/s range, and
+# ±2000 °/s is the widest usual one (and that of Fusion's own example).
+BROAD_GYRO_RANGE = math.radians(2000.0)
+# Fusion's README, "Algorithm settings": gain 0.5, acceleration and magnetic
+# rejection 10°, rejection (recovery trigger) period 5 s (imufusion 1.3's
+# rejection_timeout is in seconds); the gyro range is the data's. Its README
+# also advises the gyro offset correction (imufusion.Bias) beside the AHRS.
+FUSION_README = {'gain': 0.5, 'acceleration_rejection': 10.0, 'magnetic_rejection': 10.0,
+                 'rejection_timeout': 5.0}
 
 _H = math.sqrt(0.5)
 # Left factors C with q_ENU = C ⊗ q_anchor, for sensor → world outputs.
@@ -151,19 +164,43 @@ def _run_mahony(gyr, acc, mag, rate, use_mag):
     return _to_enu(q, IDENTITY)
 
 
-def _run_fusion(gyr, acc, mag, rate, use_mag):
+def fusion_settings(rate, gyro_range=BROAD_GYRO_RANGE, readme=True):
+    """
+    Return the keyword arguments of Fusion's ``AhrsSettings`` for a recording.
+
+    Parameters
+    ----------
+    rate : float
+        Hz.
+    gyro_range : float
+        The range of the gyro that recorded the data, rad/s (given to
+        Fusion in °/s: beyond 98 % of it Fusion restarts, as after clipping).
+    readme : bool
+        The settings of Fusion's README (:data:`FUSION_README`), else the
+        package defaults (no rejection, no gyro range), only the rate set.
+
+    """
+    if not readme:
+        return {'sample_rate': rate}
+    return dict(FUSION_README, sample_rate=rate, gyroscope_range=math.degrees(gyro_range))
+
+
+def _run_fusion(gyr, acc, mag, rate, use_mag, gyro_range=BROAD_GYRO_RANGE, readme=True):
     import imufusion
     # Fusion: gyro in °/s, specific force in g, field in any unit; output
     # (w, x, y, z), sensor → NWU, its default convention (imufusion 1.3's
     # AhrsSettings ignores a convention given to its constructor, so the
     # default is kept and converted here). Checked on BROAD: with NWU→ENU
     # the 9D total RMSE on 01_undisturbed_slow_rotation_A is 3.3°, without
-    # it 93°; the 6D inclination is 0.7°. Settings: the package defaults
-    # (gain 0.5, rejection off) at BROAD's rate.
+    # it 93°; the 6D inclination is 0.7°.
     f = imufusion.Ahrs()
-    f.set_settings(imufusion.AhrsSettings(sample_rate=rate))
+    f.set_settings(imufusion.AhrsSettings(**fusion_settings(rate, gyro_range, readme)))
     f.set_sample_period(1.0 / rate)
     gyr_deg = np.degrees(gyr)
+    if readme:  # the README's gyro offset correction, at its package settings
+        bias = imufusion.Bias()
+        bias.set_settings(imufusion.BiasSettings(sample_rate=rate))
+        gyr_deg = np.array([bias.update(g) for g in gyr_deg]).reshape(gyr_deg.shape)
     acc_g = acc / STANDARD_GRAVITY
     q = np.empty((len(gyr), 4))
     if use_mag:
@@ -177,16 +214,18 @@ def _run_fusion(gyr, acc, mag, rate, use_mag):
     return _to_enu(q, NWU_TO_ENU)
 
 
+# Runners of (gyr, acc, mag, rate, use_mag, gyro_range); only Fusion reads the range.
 _RUNNERS = {
-    'VQF': lambda *a: _run_vqf(*a, basic=False),
-    'BasicVQF': lambda *a: _run_vqf(*a, basic=True),
-    'Madgwick': _run_madgwick,
-    'Mahony': _run_mahony,
-    'Fusion': _run_fusion,
+    'VQF': lambda *a: _run_vqf(*a[:5], basic=False),
+    'BasicVQF': lambda *a: _run_vqf(*a[:5], basic=True),
+    'Madgwick': lambda *a: _run_madgwick(*a[:5]),
+    'Mahony': lambda *a: _run_mahony(*a[:5]),
+    'Fusion': lambda *a: _run_fusion(*a, readme=True),
+    FUSION_DEFAULTS: lambda *a: _run_fusion(*a, readme=False),
 }
 
 
-def anchor_estimates(anchor, gyr, acc, mag, rate, use_mag):
+def anchor_estimates(anchor, gyr, acc, mag, rate, use_mag, gyro_range=BROAD_GYRO_RANGE):
     """
     Run one anchor on one recording; return its estimate, sensor → ENU.
 
@@ -200,6 +239,9 @@ def anchor_estimates(anchor, gyr, acc, mag, rate, use_mag):
         Hz.
     use_mag : bool
         9D where true, 6D otherwise.
+    gyro_range : float
+        The range of the gyro that recorded the data, rad/s (default
+        BROAD's sensor's, :data:`BROAD_GYRO_RANGE`); Fusion is told it.
 
     Returns
     -------
@@ -211,7 +253,8 @@ def anchor_estimates(anchor, gyr, acc, mag, rate, use_mag):
         raise ValueError(f'anchor must be one of {ANCHORS}, got {anchor!r}')
     c = np.ascontiguousarray
     return _RUNNERS[anchor](c(gyr, dtype=float), c(acc, dtype=float),
-                            c(mag, dtype=float), float(rate), bool(use_mag))
+                            c(mag, dtype=float), float(rate), bool(use_mag),
+                            float(gyro_range))
 
 
 def missing_anchor_packages():

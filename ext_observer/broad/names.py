@@ -9,8 +9,10 @@ the extension term, then the anchors).
 MODES = ('9D', '6D')
 OURS = 'ext_observer'
 OURS_PLAIN = 'ext_observer_plain'
+# Fusion at its package defaults, beside 'Fusion' at its README's settings.
+FUSION_DEFAULTS = 'Fusion (package defaults)'
 # The anchors, in the order of the tables.
-ANCHORS = ('VQF', 'BasicVQF', 'Madgwick', 'Mahony', 'Fusion')
+ANCHORS = ('VQF', 'BasicVQF', 'Madgwick', 'Mahony', 'Fusion', FUSION_DEFAULTS)
 ALGORITHMS = (OURS, OURS_PLAIN) + ANCHORS
 
 

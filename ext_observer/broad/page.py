@@ -6,11 +6,14 @@ The page ``docs/broad.md``: one function per section, in the page's order.
 figures are) and returns its Markdown lines, ending with a blank one.
 """
 
+import math
 import os
 
-from ext_observer.broad.anchors import MADGWICK_BETA, MAHONY_KI, MAHONY_KP
-from ext_observer.broad.data import DEFAULT_DIRS, ENV_VAR
-from ext_observer.broad.names import algorithms_in, ANCHORS, MODES, OURS, OURS_PLAIN
+from ext_observer.broad.anchors import (BROAD_GYRO_RANGE, FUSION_README, MADGWICK_BETA,
+                                        MAHONY_KI, MAHONY_KP)
+from ext_observer.broad.data import DEFAULT_DIRS, ENV_VAR, TREE
+from ext_observer.broad.names import (algorithms_in, ANCHORS, FUSION_DEFAULTS, MODES, OURS,
+                                      OURS_PLAIN)
 from ext_observer.broad.report import fmt
 from ext_observer.broad.scoring import criteria, group_means, summary, VQF_RATIO_GOAL
 
@@ -45,6 +48,41 @@ class _Page:
     def link(self, path):
         """The link to ``path`` from the page's folder."""
         return os.path.relpath(path, self.docs_dir).replace(os.sep, '/')
+
+
+def _relative(path):
+    """``path`` relative to the repository when absolute: a reader's paths are not ours."""
+    return os.path.relpath(path, TREE).replace(os.sep, '/') if os.path.isabs(path) else path
+
+
+def shown_command(command, data=None):
+    """
+    Return a command and its data folder as a page shows them: no absolute path.
+
+    Each absolute path in ``command`` (``--data /x`` or ``--data=/x``) and
+    ``data`` are written relative to the repository; the rest as typed.
+    """
+    words = []
+    for word in command.split(' '):
+        option, sep, value = word.partition('=')
+        words.append(option + sep + _relative(value) if sep and option.startswith('--')
+                     else _relative(word))
+    return ' '.join(words), (None if data is None else _relative(data))
+
+
+def fusion_text(gyro):
+    """
+    How Fusion runs, for the pages: its README's settings, then its package defaults.
+
+    ``gyro`` says the gyro range it is given (Markdown), e.g. ``'2000 °/s'``.
+    """
+    s = FUSION_README
+    return (f"Fusion (`imufusion`) at its README's settings: gain {s['gain']:g}, gyro range "
+            f"{gyro}, acceleration rejection {s['acceleration_rejection']:g}°, magnetic "
+            f"rejection {s['magnetic_rejection']:g}°, rejection timeout (recovery trigger "
+            f"period) {s['rejection_timeout']:g} s, and its gyro offset correction (`Bias`, "
+            f'package settings) before the AHRS; and as "{FUSION_DEFAULTS}", `AhrsSettings` '
+            'with the rate only (no rejection, no gyro range, no offset correction)')
 
 
 def _group_label(group, level):
@@ -94,9 +132,10 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
 
 def _intro(page):
     meta = page.meta
-    made_by = f'**Made by** `{meta["command"]}`'
-    if meta.get('data'):
-        made_by += f' on the data in `{meta["data"]}`'
+    command, data = shown_command(meta['command'], meta.get('data'))
+    made_by = f'**Made by** `{command}`'
+    if data:
+        made_by += f' on the data in `{data}`'
     made_by += (f' at commit `{meta["commit"]}`'
                 + (' (with uncommitted changes to the estimator or this benchmark)'
                    if meta.get('dirty') else '')
@@ -107,7 +146,9 @@ def _intro(page):
         'This page measures the raw-IMU estimator of ext_observer (gyro + accelerometer, '
         f'+ magnetometer in 9D; [`{os.path.basename(_AHRS)}`]({page.link(_AHRS)})) '
         'on real recordings with optical ground truth, against VQF, BasicVQF, Madgwick, '
-        'Mahony and Fusion run in the same command, so that its accuracy can be judged '
+        "Mahony and Fusion (at its README's settings, and at its package defaults) run in "
+        'the same command, each at the settings its authors advise, so that its accuracy '
+        'can be judged '
         'against the best open estimators (issue 11). It is generated; do not edit it '
         'by hand.',
         '',
@@ -142,12 +183,15 @@ def _method(page):
         'trials (`AhrsParams()`: '
         + ', '.join(f'{k} = {v:g}' for k, v in meta['params'].items()) + '), '
         'all trials and both modes in one batched call. '
-        '**Anchors**, from PyPI, defaults unless stated: VQF and BasicVQF '
-        '(`vqf`, causal `updateBatch`), Madgwick (`ahrs`, β = '
-        f'{MADGWICK_BETA}) and Mahony (`ahrs`, Kp = {MAHONY_KP}, Ki = {MAHONY_KI}), '
-        "BROAD's trial-agnostic best, started from the first sample's gravity and field "
-        "(gravity alone in 6D) as BROAD's example does, and Fusion (`imufusion`, package "
-        "defaults). "
+        '**Anchors**, from PyPI, each at the settings its authors advise: VQF and '
+        "BasicVQF (`vqf`, causal `updateBatch`) at their defaults, the authors' "
+        f'recommendation; Madgwick (`ahrs`, β = {MADGWICK_BETA}) and Mahony (`ahrs`, '
+        f"Kp = {MAHONY_KP}, Ki = {MAHONY_KI}) at BROAD's trial-agnostic best, started "
+        "from the first sample's gravity and field (gravity alone in 6D) as BROAD's "
+        'example does; ' + fusion_text(
+            f"{math.degrees(BROAD_GYRO_RANGE):.0f} °/s (BROAD's sensor, a myon aktos-t: its "
+            'files do not state its range; the recordings reach 1352 °/s, beyond a 1000 °/s '
+            'range)') + '. '
         'Versions: ' + ', '.join(f'{k} {v}' for k, v in meta['versions'].items()) + '.',
         '',
         '**Scoring**, as BROAD does: both quaternions normalized, e = q̂ ⊗ q_ref⁻¹ '
@@ -307,7 +351,7 @@ def _run_time(page):
     for anchor in ANCHORS:
         if anchor in secs:
             rows.append([anchor, f'{secs[anchor]:.1f} s',
-                         'compiled' if anchor in ('VQF', 'BasicVQF', 'Fusion')
+                         'compiled' if anchor in ('VQF', 'BasicVQF', 'Fusion', FUSION_DEFAULTS)
                          else 'pure Python (`ahrs`), one call per sample'])
     if 'anchors_wall' in secs:
         jobs = meta.get('jobs') or 1
@@ -352,7 +396,8 @@ def _anchor_frames():
             ['VQF, BasicVQF', 'sensor → ENU', 'identity'],
             ['Madgwick (`ahrs`)', 'sensor → NWU', 'R_z(+90°) ⊗ q'],
             ['Mahony (`ahrs`)', 'sensor → ENU', 'identity'],
-            ['Fusion (`imufusion`)', 'sensor → NWU (default convention)', 'R_z(+90°) ⊗ q'],
+            ['Fusion (`imufusion`), both rows', 'sensor → NWU (default convention)',
+             'R_z(+90°) ⊗ q'],
         ], numeric=False) + ['']
 
 

@@ -11,7 +11,7 @@ the per-sample errors of one trial (for the figure) are kept.
 import sys
 import time
 
-from ext_observer.broad.anchors import anchor_estimates
+from ext_observer.broad.anchors import anchor_estimates, BROAD_GYRO_RANGE
 from ext_observer.broad.names import ANCHORS, MODES, OURS, OURS_PLAIN
 from ext_observer.broad.scoring import combined_norms, error_angles, norm_parts, score
 
@@ -76,7 +76,7 @@ def estimate_ours(trials, modes, variant, workers=1, params=None, then=None):
 
 
 def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
-        plot_trial=None, progress=log, params=None):
+        plot_trial=None, progress=log, params=None, gyro_range=BROAD_GYRO_RANGE):
     """
     Score the estimator (and the anchors) on the trials.
 
@@ -98,6 +98,9 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
     progress : callable
     params : AhrsParams, optional
         Our estimator's parameters (default: the shipped defaults).
+    gyro_range : float
+        The range of the gyro that recorded the trials, rad/s, for the
+        anchors that are told it (Fusion); default BROAD's sensor's.
 
     Returns
     -------
@@ -124,7 +127,7 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
             result['series'].setdefault(algorithm, {})[mode] = series
 
     _run_ours(trials, modes, plain, workers, result, keep, scored, progress, params)
-    _run_anchors(trials, modes, anchors, jobs, result, keep, progress)
+    _run_anchors(trials, modes, anchors, jobs, result, keep, progress, gyro_range)
     return result
 
 
@@ -149,14 +152,15 @@ def _run_ours(trials, modes, plain, workers, result, keep, scored, progress, par
 
 
 def _anchor_task(task):
-    anchor, trial, mode = task
+    anchor, trial, mode, gyro_range = task
     start = time.perf_counter()
-    q = anchor_estimates(anchor, trial.gyr, trial.acc, trial.mag, trial.rate, mode == '9D')
+    q = anchor_estimates(anchor, trial.gyr, trial.acc, trial.mag, trial.rate, mode == '9D',
+                         gyro_range)
     return q, time.perf_counter() - start
 
 
-def _run_anchors(trials, modes, anchors, jobs, result, keep, progress):
-    tasks = [(a, t, m) for a in anchors for m in modes for t in trials]
+def _run_anchors(trials, modes, anchors, jobs, result, keep, progress, gyro_range):
+    tasks = [(a, t, m, gyro_range) for a in anchors for m in modes for t in trials]
     if not tasks:
         return
     progress(f'anchors: {", ".join(anchors)} ({len(tasks)} runs, '
@@ -169,7 +173,7 @@ def _run_anchors(trials, modes, anchors, jobs, result, keep, progress):
             done = list(_progress_iter(outputs, tasks, progress))
     else:
         done = list(_progress_iter(map(_anchor_task, tasks), tasks, progress))
-    for (anchor, t, mode), (q, seconds) in zip(tasks, done):
+    for (anchor, t, mode, _), (q, seconds) in zip(tasks, done):
         keep(anchor, mode, t.name, q)
         result['seconds'][anchor] = result['seconds'].get(anchor, 0.0) + seconds
     result['seconds']['anchors_wall'] = time.perf_counter() - start
@@ -177,7 +181,7 @@ def _run_anchors(trials, modes, anchors, jobs, result, keep, progress):
 
 def _progress_iter(outputs, tasks, progress):
     last = None
-    for (anchor, _, mode), out in zip(tasks, outputs):
+    for (anchor, _, mode, _), out in zip(tasks, outputs):
         if (anchor, mode) != last:
             progress(f'  {anchor} {mode} ...')
             last = (anchor, mode)

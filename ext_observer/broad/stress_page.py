@@ -7,12 +7,14 @@ variant is, the tables (all trials, tuning half, report half), the ratio of
 ours to VQF, how the run was made and the credit to BROAD.
 """
 
+import math
 import os
 
 import numpy as np
 
-from ext_observer.broad.anchors import MADGWICK_BETA
-from ext_observer.broad.names import OURS
+from ext_observer.broad.anchors import BROAD_GYRO_RANGE, MADGWICK_BETA
+from ext_observer.broad.names import FUSION_DEFAULTS, OURS
+from ext_observer.broad.page import fusion_text, shown_command
 from ext_observer.broad.stress import (BIAS, DESCRIPTIONS, GYRO_RANGE, LABELS, LOW_RATE,
                                        RATIO_DONE, RATIO_GOAL, trial_number, VARIANTS)
 from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, modes_of,
@@ -48,8 +50,9 @@ def stress_markdown(out, meta, figure=None, docs_dir='.'):
     summ = stress_summary(out['scores'])
     counts = half_counts(meta['trials'])
     keys = [k for k in VARIANTS if k in summ]
-    made_by = (f'**Made by** `{meta["command"]}`'
-               + (f' on the data in `{meta["data"]}`' if meta.get('data') else '')
+    command, data = shown_command(meta['command'], meta.get('data'))
+    made_by = (f'**Made by** `{command}`'
+               + (f' on the data in `{data}`' if data else '')
                + f' at commit `{meta["commit"]}`'
                + (' (with uncommitted changes to the estimator or this benchmark)'
                   if meta.get('dirty') else '')
@@ -130,12 +133,17 @@ _ANCHOR_NOTES = {
     'BasicVQF': 'BasicVQF (`vqf`)',
     'Madgwick': f'Madgwick (`ahrs`, β = {MADGWICK_BETA}, started from the first sample)',
     'Mahony': 'Mahony (`ahrs`)',
-    'Fusion': 'Fusion (`imufusion`)',
+    # Fusion is told the range of the data it is fed: the clip in (e).
+    'Fusion': fusion_text(f'{math.degrees(BROAD_GYRO_RANGE):.0f} °/s (in (e) '
+                          f'{math.degrees(GYRO_RANGE):.0f} °/s, the clip)'),
+    FUSION_DEFAULTS: f'{FUSION_DEFAULTS}: `imufusion`, `AhrsSettings` with the rate only',
 }
 
 
 def _scoring(meta):
-    anchors = [_ANCHOR_NOTES[a] for a in meta.get('anchors', ())]
+    ran = meta.get('anchors', ())
+    # Fusion's text names its package defaults too.
+    anchors = [_ANCHOR_NOTES[a] for a in ran if not (a == FUSION_DEFAULTS and 'Fusion' in ran)]
     params = meta.get('params')
     overrides = meta.get('overrides')
     ours = ('ours with ' + (f'`--param {" --param ".join(overrides)}`, otherwise its shipped '

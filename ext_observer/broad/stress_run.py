@@ -17,13 +17,18 @@ import time
 
 import numpy as np
 
-from ext_observer.broad.names import ALGORITHMS, MODES, OURS
+from ext_observer.broad.anchors import BROAD_GYRO_RANGE
+from ext_observer.broad.names import ALGORITHMS, FUSION_DEFAULTS, MODES, OURS
 from ext_observer.broad.run import log, run
-from ext_observer.broad.stress import DESCRIPTIONS, half_of, LABELS, variant, VARIANTS
+from ext_observer.broad.stress import (DESCRIPTIONS, GYRO_RANGE, half_of, LABELS, variant,
+                                       VARIANTS)
 
-# The anchors run by default: the best (VQF), its plain twin, and the
-# usual ROS one (Madgwick, imu_filter_madgwick's algorithm).
-STRESS_ANCHORS = ('VQF', 'BasicVQF', 'Madgwick')
+# The anchors run by default: the best (VQF), its plain twin, the usual ROS
+# one (Madgwick, imu_filter_madgwick's algorithm), and Fusion, the one told
+# the gyro's range (at its README's settings and at its package defaults).
+STRESS_ANCHORS = ('VQF', 'BasicVQF', 'Madgwick', 'Fusion', FUSION_DEFAULTS)
+# The gyro range of each variant's data (rad/s): the clipped one's is the clip.
+GYRO_RANGES = {key: GYRO_RANGE if key == 'e' else BROAD_GYRO_RANGE for key in VARIANTS}
 # The score each mode is judged on.
 MODE_KEYS = {'6D': 'inclination_rmse_deg', '9D': 'total_rmse_deg'}
 # The halves of the trials: all, even-numbered (tuning), odd-numbered (report).
@@ -64,7 +69,7 @@ def run_stress(trials, keys=VARIANTS, modes=MODES, anchors=STRESS_ANCHORS, jobs=
         varied = [variant(t, key) for t in trials]
         progress(f'variant {key}: {DESCRIPTIONS[key]} ...')
         result = run(varied, modes, anchors, jobs=jobs, workers=workers, progress=progress,
-                     params=params)
+                     params=params, gyro_range=GYRO_RANGES[key])
         out['scores'][key] = result['scores']
         out['seconds'][key] = dict(result['seconds'], wall=time.perf_counter() - start)
         out['samples'][key] = int(sum(len(t) for t in varied))
