@@ -91,7 +91,8 @@ NOT_RUN = {
 
 
 def fenced_blocks(page):
-    """Yield ``(line, tag, text, lead_in)`` of each fenced block of ``page``.
+    """
+    Yield ``(line, tag, text, lead_in)`` of each fenced block of ``page``.
 
     ``lead_in`` is the paragraph just before the block.
     """
