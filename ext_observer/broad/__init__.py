@@ -42,7 +42,8 @@ from ext_observer.broad.anchors import (anchor_estimates, ANCHOR_PACKAGES,
 from ext_observer.broad.cli import build_parser, main, PLOT_TRIAL
 from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_groups,
                                      find_trials, groups_from_name, has_trials, HOW_TO_GET,
-                                     load_trial, load_trials, shown_path, Trial)
+                                     load_trial, load_trials, shown_command, shown_path,
+                                     Trial)
 from ext_observer.broad.names import (algorithms_in, ALGORITHMS, ANCHORS, MODES, OURS,
                                       OURS_PLAIN)
 from ext_observer.broad.page import markdown
@@ -73,7 +74,7 @@ __all__ = [
     'fmt', 'group_means', 'groups_from_name', 'has_trials', 'load_trial', 'load_trials', 'log', 'main',
     'markdown', 'missing_anchor_packages', 'norm_deviation', 'norm_parts', 'plot', 'rmse_deg',
     'run',
-    'score', 'shown_path', 'summary', 'text_report', 'write_json',
+    'score', 'shown_command', 'shown_path', 'summary', 'text_report', 'write_json',
     # The robustness benchmark (--stress).
     'BIAS', 'DESCRIPTIONS', 'GYRO_RANGE', 'HALVES', 'LABELS', 'LOW_RATE', 'MODE_KEYS',
     'RATIO_DONE', 'RATIO_GOAL',
