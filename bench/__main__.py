@@ -23,6 +23,7 @@ import time
 
 from bench import machine, report
 from bench.procs import REPO, reserved_domain_id, ros_env
+from ext_observer.broad.data import shown_command
 
 SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu', 'compiled', 'load',
             'vehicle')
@@ -148,16 +149,19 @@ def _compiled(quick):
     """Issue 19's figures: ``python -m bench.compiled --json`` (the node's CPU is section 6's)."""
     args = ['bench.compiled'] + (['--sections', 'steps'] if quick else [])
     _log(f'compiled kernels: python -m {" ".join(args)} ...')
-    with tempfile.TemporaryDirectory(prefix='bench-') as tmp:
-        out = os.path.join(tmp, 'compiled.json')
-        with reserved_domain_id(40) as domain_id:
-            done = subprocess.run([sys.executable, '-m', *args, '--json', out], cwd=REPO,
-                                  env=ros_env(domain_id), stdout=subprocess.DEVNULL)
-        if not os.path.exists(out):
-            return {'error': f'`python -m {" ".join(args)}` ended with exit code '
-                             f'{done.returncode} and no result'}
-        with open(out) as f:
-            return json.load(f)
+    # Relative to the repository, as the page shows the command (a reader can rerun it).
+    out = os.path.join('out', 'bench_compiled.json')
+    os.makedirs(os.path.join(REPO, 'out'), exist_ok=True)
+    if os.path.exists(os.path.join(REPO, out)):
+        os.remove(os.path.join(REPO, out))
+    with reserved_domain_id(40) as domain_id:
+        done = subprocess.run([sys.executable, '-m', *args, '--json', out], cwd=REPO,
+                              env=ros_env(domain_id), stdout=subprocess.DEVNULL)
+    if not os.path.exists(os.path.join(REPO, out)):
+        return {'error': f'`python -m {" ".join(args)}` ended with exit code '
+                         f'{done.returncode} and no result'}
+    with open(os.path.join(REPO, out)) as f:
+        return json.load(f)
 
 
 def _load(quick, args):
@@ -231,7 +235,7 @@ def main(argv=None):
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     start = time.monotonic()
     results = {'machine': machine.describe(),
-               'command': ' '.join(['python -m bench'] + argv)}
+               'command': shown_command(['python -m bench', *argv])}
     notes = []
     if 'batch' in sections:
         results['batch'] = _batch(args.quick)

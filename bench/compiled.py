@@ -181,7 +181,9 @@ def _node_start(executable, cache, domain_id, timeout=300.0):
                              lambda msg: seen.append((time.perf_counter(), msg)), 10)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    path = shutil.which(executable) or os.path.join(os.path.dirname(sys.executable), executable)
+    # This interpreter's own executable first: not another install's on PATH.
+    path = os.path.join(os.path.dirname(sys.executable), executable)
+    path = path if os.path.exists(path) else shutil.which(executable)
     env = _env(EXT_OBSERVER_CACHE=cache, ROS_DOMAIN_ID=str(domain_id))
     start = time.perf_counter()
     proc = subprocess.Popen([path, '--ros-args', '-p', 'diagnostic_period:=0.05'], env=env,
@@ -450,7 +452,8 @@ def main(argv=None):
     import numba
     from bench import machine
     facts = machine.describe()
-    meta = {'command': 'python -m bench.compiled ' + ' '.join(argv or sys.argv[1:]),
+    from ext_observer.broad.data import shown_command
+    meta = {'command': shown_command(['python -m bench.compiled', *(argv or sys.argv[1:])]),
             'commit': facts['commit'], 'numba': numba.__version__,
             'machine': f'{facts["cpu"]}, {facts["cores"]} cores, Python {facts["python"]}, '
                        f'{facts["date"]}'}

@@ -19,13 +19,13 @@ import argparse
 import json
 import math
 import os
-import shlex
 import signal
 import sys
 import time
 
 from bench import load_dds, machine
 from bench.procs import REPO
+from ext_observer.broad.data import shown_command
 
 DEFAULT_TRIAL = '09'
 # What the node should do with every core busy (the done-criteria of the
@@ -55,12 +55,6 @@ def batch_half():
             raise
         return None
     return batch_rows, batch_markdown
-
-
-def shown_command(argv):
-    """``python -m bench.load`` and its arguments, absolute paths made relative to the tree."""
-    words = [os.path.relpath(w, REPO) if os.path.isabs(w) else w for w in argv]
-    return ' '.join(['python -m bench.load'] + [shlex.quote(w) for w in words])
 
 
 # --- the DDS table -----------------------------------------------------------
@@ -355,7 +349,7 @@ def main(argv=None):
     # SIGTERM ends the run through the finally blocks that stop the children.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     start = time.monotonic()
-    results = {'machine': machine.describe(), 'command': shown_command(argv),
+    results = {'machine': machine.describe(), 'command': shown_command(['python -m bench.load', *argv]),
                'note': args.note}
     if not args.dds_only:
         results['batch'] = run_batch(args)

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from bench import load, load_dds
+from ext_observer.broad.data import shown_command
 from bench.procs import REPO
 from ext_observer.broad.data import Trial
 
@@ -115,7 +116,7 @@ def _results(rows, **more):
     results = {'machine': {'commit': 'abc1234', 'date': 'today', 'cores': 2, 'cpu': 'cpu',
                            'python': '3', 'numpy': '2', 'rclpy': '7', 'rmw': 'rmw',
                            'load_start': 1.0, 'load_end': 2.0},
-               'command': load.shown_command(['--dds-only', '--json', os.path.join(
+               'command': shown_command(['python -m bench.load', '--dds-only', '--json', os.path.join(
                    REPO, 'out', 'load.json')]),
                'seconds': 12.0,
                'dds': {'trial': {'name': '07_made_up', 'samples': COUNT, 'rate': RATE,

@@ -276,6 +276,12 @@ def test_data_folder_is_the_option_then_the_environment_then_the_defaults(tree, 
     assert broad.data_dir('given') == 'given'
     assert broad.shown_path(str(shared)) == '../shared/broad'
     assert broad.shown_path(str(fetched)) == 'data/broad'
+    # A page never holds this machine's absolute paths, typed or not.
+    assert broad.shown_command(['python -m ext_observer broad', '--data', str(shared),
+                                f'--json={fetched}/b.json', '--docs', 'docs']) == (
+        'python -m ext_observer broad --data ../shared/broad --json=data/broad/b.json '
+        '--docs docs')
+    assert not os.path.isabs(broad.shown_path('/elsewhere/broad'))
 
 
 def test_without_data_the_command_says_how_to_get_it_in_one_line(tree, capsys):
@@ -408,12 +414,12 @@ def test_fusions_settings_reach_the_filter():
 def test_pages_name_no_absolute_path_and_fusions_settings():
     command = ('python -m ext_observer broad --data /work/shared/broad --json=/tmp/x/broad.json '
                '--docs docs --trials 01')
-    shown, folder = broad.shown_command(command, '/work/shared/broad')
+    shown, folder = broad.shown_meta({'command': command, 'data': '/work/shared/broad'})
     assert '/work' not in shown and not folder.startswith('/')
     assert shown.endswith(' --docs docs --trials 01') and '--json=' in shown
     assert os.path.normpath(os.path.join(REPO, folder)) == '/work/shared/broad'
-    assert broad.shown_command('x --data ../shared/broad', '../shared/broad') == (
-        'x --data ../shared/broad', '../shared/broad')
+    assert broad.shown_meta({'command': 'x --data ../shared/broad', 'data': '../shared/broad'}) \
+        == ('x --data ../shared/broad', '../shared/broad')
     groups = broad.find_groups('/nonexistent', NAMES)
     meta = dict(_meta(NAMES), command=command, data='/work/shared/broad')
     page = broad.markdown(_fake_result(NAMES), groups, meta, {}, REPO)

@@ -5,11 +5,10 @@ Every fenced block in those pages carries a tag that says what it is:
 
 - ``bash``: commands that run here, from the repository's folder after the
   quick start; this test runs every one of them. A command that starts a
-  node must stay up for :data:`UP_SECONDS` and end with exit code 0 on
-  Ctrl-C (SIGINT); any other command must end with exit code 0 within
-  :data:`TIMEOUT`. ``source .venv/bin/activate`` is applied to the commands
-  after it, as in a shell; a page that says its commands are written "as
-  after ``source .venv/bin/activate``" runs them so from the start.
+  node must come up (its first log line: the node is built, past its
+  imports) within :data:`TIMEOUT`, stay up for :data:`STAY_SECONDS`, and
+  end with exit code 0 on Ctrl-C (SIGINT); any other command must end with
+  exit code 0 within :data:`TIMEOUT`.
 - ``shell``: commands that do not run here; each is listed in
   :data:`NOT_RUN` with the reason, and the test fails on one that is not.
 - ``python``: Python that runs as it is (in a fresh interpreter of the
@@ -17,6 +16,18 @@ Every fenced block in those pages carries a tag that says what it is:
 - ``text``, ``yaml``: output, layouts and file contents, not run.
 
 An untagged block fails the test: a new page must say which of these it is.
+
+Each command runs in the environment its page tells the reader to use:
+with ``.venv`` activated after a ``source .venv/bin/activate`` line of its
+block, or when the paragraph leading into the block says to run it (names
+``source .venv/bin/activate``); else as on a machine whose own Python has
+nothing: ``.venv/bin`` is not on ``PATH``, ``python`` and ``python3`` are
+an interpreter without packages, and ``pip``, ``pytest`` and the package's
+executables are not found (:func:`bare_bin`;
+:func:`test_outside_the_venv_nothing_of_the_project_is_found` checks it).
+So a command that needs ``.venv`` and is not written so fails here,
+whatever the machine has installed; and
+:func:`test_a_command_that_needs_the_venv_says_so` fails on one before it runs.
 """
 
 import os
@@ -26,6 +37,7 @@ import signal
 import subprocess
 import sys
 import time
+import venv
 
 import pytest
 
@@ -35,10 +47,21 @@ PAGES = ['README.md'] + sorted(
     os.path.join('docs', name) for name in os.listdir(os.path.join(REPO, 'docs'))
     if name.endswith('.md'))
 TAGS = {'bash', 'shell', 'python', 'text', 'yaml'}
+# Seconds a command may take, and a node to come up: generous, for a
+# machine loaded by the rest of the suite.
 TIMEOUT = 120.0
-# How a page says that its commands run in the activated venv.
-ACTIVATED = 'as after `source .venv/bin/activate`'
-UP_SECONDS = 3.0
+# Seconds a node must stay up once every node of its block is up.
+STAY_SECONDS = 1.0
+# Seconds a node may take to end on Ctrl-C.
+END_SECONDS = 60.0
+ACTIVATE = 'source .venv/bin/activate'
+# The first line a ROS node logs (rcutils' format): it is built, past its imports.
+NODE_LOG_LINE = re.compile(r'^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[\d+\.\d+\] \[', re.M)
+with open(os.path.join(REPO, 'setup.py'), encoding='utf-8') as _setup:
+    EXECUTABLES = tuple(re.findall(r"'(\w+) = ext_observer\.", _setup.read()))
+# First words of commands that only run where the venv is: its interpreter,
+# its tools and the package's executables.
+NEEDS_VENV = ('python', 'python3', 'pip', 'pip3', 'pytest', 'colcon') + EXECUTABLES
 
 # Commands (their first words) and Python blocks (their first line) that do
 # not run here, with the reason.
@@ -68,7 +91,11 @@ NOT_RUN = {
 
 
 def fenced_blocks(page):
-    """Yield ``(line, tag, text)`` of each fenced block of ``page``."""
+    """
+    Yield ``(line, tag, text, lead_in)`` of each fenced block of ``page``.
+
+    ``lead_in`` is the paragraph just before the block.
+    """
     with open(os.path.join(REPO, page), encoding='utf-8') as file:
         lines = file.read().splitlines()
     start = tag = None
@@ -78,7 +105,14 @@ def fenced_blocks(page):
         if start is None:
             start, tag = number, line[3:].strip()
         else:
-            yield start, tag, '\n'.join(lines[start:number - 1])
+            first = start - 1
+            while first > 0 and not lines[first - 1].strip():
+                first -= 1
+            end = first
+            while (first > 0 and lines[first - 1].strip()
+                   and not lines[first - 1].startswith('```')):
+                first -= 1
+            yield start, tag, '\n'.join(lines[start:number - 1]), ' '.join(lines[first:end])
             start = None
 
 
@@ -106,7 +140,18 @@ def reason_not_run(command):
 
 def all_blocks():
     return [(page, line, tag, text) for page in PAGES
-            for line, tag, text in fenced_blocks(page)]
+            for line, tag, text, _ in fenced_blocks(page)]
+
+
+def activated_in_words(page, line):
+    """Whether the paragraph leading into the block at ``line`` says to activate the venv."""
+    lead_in = next(lead for number, _, _, lead in fenced_blocks(page) if number == line)
+    return f'`{ACTIVATE}`' in lead_in
+
+
+def needs_the_venv(command):
+    """Whether ``command`` runs a program that only ``.venv`` has (by its first word)."""
+    return shlex.split(command)[0] in NEEDS_VENV
 
 
 def test_every_block_says_what_it_is():
@@ -122,16 +167,40 @@ def test_every_command_not_run_says_why():
     assert not missing, f'shell commands with no reason in NOT_RUN: {missing}'
 
 
-def _environment(ros_domain_id, active):
+@pytest.fixture(scope='session')
+def bare_bin(tmp_path_factory):
+    """
+    A clean machine's programs: the bin folder of a venv without packages.
+
+    ``python`` and ``python3`` there have no packages; the venv's other
+    programs (:data:`NEEDS_VENV`) are there as commands that fail, so that
+    no copy elsewhere on this machine's ``PATH`` (pyenv's, the system's) is found.
+    """
+    folder = tmp_path_factory.mktemp('bare') / 'venv'
+    venv.EnvBuilder(with_pip=False).create(folder)
+    bin_dir = folder / 'bin'
+    for name in NEEDS_VENV:
+        if not (bin_dir / name).exists():
+            (bin_dir / name).write_text(
+                f'#!/bin/sh\necho "{name}: not installed outside .venv" >&2\nexit 127\n')
+            (bin_dir / name).chmod(0o755)
+    return str(bin_dir)
+
+
+def _environment(ros_domain_id, active, bare_bin):
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
-    env.pop('VIRTUAL_ENV', None)
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1',
+               RCUTILS_LOGGING_BUFFERED_STREAM='0')
+    for name in ('VIRTUAL_ENV', 'PYTHONPATH', 'PYTHONHOME'):
+        env.pop(name, None)
     bin_dir = os.path.dirname(sys.executable)
-    path = [p for p in env.get('PATH', '').split(os.pathsep) if p != bin_dir]
+    path = [p for p in env.get('PATH', '').split(os.pathsep)
+            if p and os.path.abspath(p) != bin_dir]
+    # What `source .venv/bin/activate` does for the commands after it; else
+    # the clean machine's programs come first.
+    path.insert(0, bin_dir if active else bare_bin)
     if active:
-        # What `source .venv/bin/activate` does for the commands after it.
         env['VIRTUAL_ENV'] = os.path.dirname(bin_dir)
-        path.insert(0, bin_dir)
     env['PATH'] = os.pathsep.join(path)
     return env
 
@@ -158,44 +227,96 @@ def _end(process, timeout):
         return None
 
 
+def _wait_until_up(nodes, where):
+    """Wait for each node's first log line; fail if one ends or :data:`TIMEOUT` passes."""
+    deadline = time.monotonic() + TIMEOUT
+    waiting = list(nodes)
+    while waiting:
+        command, process, log, _ = waiting[0]
+        output = log.read_text(errors='replace')
+        assert process.poll() is None, f'{where}: {command!r} ended early:\n{output}'
+        if NODE_LOG_LINE.search(output):
+            waiting.pop(0)
+            continue
+        assert time.monotonic() < deadline, (
+            f'{where}: {command!r} not up (no log line) after {TIMEOUT:g} s:\n{output}')
+        time.sleep(0.1)
+
+
 BASH = [(page, line, text) for page, line, tag, text in all_blocks() if tag == 'bash']
 
 
+def test_a_command_that_needs_the_venv_says_so():
+    # A reader who jumps to a block must see that it runs in .venv: in the
+    # block (the activate line, or .venv/bin/ in front) or just before it.
+    unsaid = []
+    for page, line, text in BASH:
+        active = activated_in_words(page, line)
+        for command in commands(text):
+            active = active or command == ACTIVATE
+            if not active and needs_the_venv(command):
+                unsaid.append(f'{page}:{line}: {command[:60]}')
+    assert not unsaid, (f'commands that need .venv with no `{ACTIVATE}` in or just before '
+                        f'their block, nor .venv/bin/ in front: {unsaid}')
+
+
+def test_outside_the_venv_nothing_of_the_project_is_found(ros_domain_id, bare_bin):
+    # What makes a command that needs .venv fail outside it, on any machine.
+    outside = _environment(ros_domain_id, False, bare_bin)
+    inside = _environment(ros_domain_id, True, bare_bin)
+    for python in ('python', 'python3'):
+        # (ext_observer itself imports from this folder, up to its numpy.)
+        for module in ('numpy', 'rclpy', 'ext_observer.core'):
+            probe = [python, '-c', f'import {module}']
+            assert subprocess.run(probe, cwd=REPO, env=outside,
+                                  capture_output=True).returncode != 0, probe
+    for name in NEEDS_VENV[2:]:
+        done = subprocess.run(['bash', '-c', f'{name} --help'], cwd=REPO, env=outside,
+                              capture_output=True, text=True, timeout=TIMEOUT)
+        assert done.returncode != 0, (name, done.stdout)
+    # The same commands run in the activated venv.
+    done = subprocess.run(['bash', '-c', 'python -c "import numpy, ext_observer.core, rclpy" '
+                           '&& pytest --version && command -v ' + ' '.join(EXECUTABLES)],
+                          cwd=REPO, env=inside, capture_output=True, text=True, timeout=TIMEOUT)
+    assert done.returncode == 0, done.stderr
+    assert len(EXECUTABLES) >= 4
+
+
 @pytest.mark.parametrize('page, line, text', BASH, ids=[f'{p}:{n}' for p, n, _ in BASH])
-def test_bash_block_runs_as_written(page, line, text, ros_domain_id, tmp_path):
-    with open(os.path.join(REPO, page), encoding='utf-8') as file:
-        active = ACTIVATED in ' '.join(file.read().split())
+def test_bash_block_runs_as_written(page, line, text, ros_domain_id, bare_bin, tmp_path):
+    where = f'{page}:{line}'
+    active = activated_in_words(page, line)
     runs = []
     try:
         for index, command in enumerate(commands(text)):
-            if command == 'source .venv/bin/activate':
+            if command == ACTIVATE:
                 active = True
                 continue
             assert reason_not_run(command) is None, (
-                f'{page}:{line}: {command!r} is in NOT_RUN: tag its block shell')
-            env = _environment(ros_domain_id, active)
+                f'{where}: {command!r} is in NOT_RUN: tag its block shell')
+            env = _environment(ros_domain_id, active, bare_bin)
             process, log = _run(command, env, tmp_path, index)
             runs.append((command, process, log, _starts_a_node(command)))
             if not runs[-1][3]:
                 code = _end(process, TIMEOUT)
-                assert code == 0, (f'{page}:{line}: {command!r} ended with {code}:\n'
+                assert code == 0, (f'{where}: {command!r} ended with {code}:\n'
                                    f'{log.read_text(errors="replace")}')
-        # The nodes of the block run side by side: each must stay up, then end
-        # cleanly on Ctrl-C.
+        # The nodes of the block run side by side: each must come up and stay
+        # up, then end cleanly on Ctrl-C.
         nodes = [run for run in runs if run[3]]
-        deadline = time.monotonic() + UP_SECONDS
-        while time.monotonic() < deadline and all(p.poll() is None for _, p, _, _ in nodes):
-            time.sleep(0.1)
+        _wait_until_up(nodes, where)
+        if nodes:
+            time.sleep(STAY_SECONDS)
         for command, process, log, _ in nodes:
-            assert process.poll() is None, (f'{page}:{line}: {command!r} ended early:\n'
+            assert process.poll() is None, (f'{where}: {command!r} ended early:\n'
                                             f'{log.read_text(errors="replace")}')
         for _, process, _, _ in nodes:
             os.killpg(process.pid, signal.SIGINT)
         for command, process, log, _ in nodes:
-            code = _end(process, 15.0)
+            code = _end(process, END_SECONDS)
             output = log.read_text(errors='replace')
-            assert code == 0, f'{page}:{line}: {command!r} ended with {code} on Ctrl-C:\n{output}'
-            assert 'Traceback' not in output, f'{page}:{line}: {command!r}:\n{output}'
+            assert code == 0, f'{where}: {command!r} ended with {code} on Ctrl-C:\n{output}'
+            assert 'Traceback' not in output, f'{where}: {command!r}:\n{output}'
     finally:
         # Whatever failed above, no process of the block outlives the test.
         for _, process, _, _ in runs:

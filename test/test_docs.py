@@ -12,6 +12,8 @@ The documentation stays true to the code.
   GitHub's anchor rules.
 - Every page of ``docs/`` is in the index ``docs/README.md`` and opens with
   a sentence; the README stays short.
+- No page holds a path of the machine that wrote it (a generated page's
+  data folder or temporary file): paths are relative to the repository.
 """
 
 import fnmatch
@@ -27,6 +29,11 @@ from conftest import REPO
 DOCS = os.path.join(REPO, 'docs')
 README = os.path.join(REPO, 'README.md')
 README_MAX_LINES = 150
+# Absolute paths that only one machine has: home folders, temporary
+# folders, this checkout's own. (/opt/ros/jazzy, where ROS installs, is everyone's.)
+MACHINE_PATH = re.compile(
+    r'(?<![\w.~-])(/(?:work|tmp|root|home|Users|var/folders|private|mnt)/'
+    + '|' + re.escape(os.path.dirname(REPO)) + '/|' + re.escape(REPO) + r'\b)')
 
 
 def _read(path):
@@ -266,3 +273,16 @@ def test_broad_data_is_credited(page):
     text = _read(os.path.join(REPO, page))
     if 'BROAD' in text:
         assert 'Laidig et al. 2021' in text and 'CC BY 4.0' in text
+
+
+def test_no_page_holds_a_path_of_the_machine_that_made_it():
+    found = [f'{os.path.relpath(page, REPO)}:{text[:match.start()].count(chr(10)) + 1}: '
+             f'{text[match.start():match.start() + 40].split()[0]}'
+             for page in _pages() for text in [_read(page)]
+             for match in MACHINE_PATH.finditer(text)]
+    assert not found, f'paths of one machine (write them relative to the repository): {found}'
+    # The pattern finds what it must, and not a relative path or ROS's own.
+    assert MACHINE_PATH.search('--data /work/shared/broad') and MACHINE_PATH.search(
+        '`/tmp/bench-1/compiled.json`') and MACHINE_PATH.search(REPO + '/docs') and \
+        MACHINE_PATH.search('file:///tmp/mirror.git')
+    assert not MACHINE_PATH.search('../shared/broad ../../tmp/x /opt/ros/jazzy/setup.bash')

@@ -283,7 +283,11 @@ def test_transform_is_imu_filter_madgwicks_and_its_reverse():
     assert (parent, child, r) == ('imu_link', 'odom', (0.5, -0.5, 0.5, -0.5))
 
 
-def test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest(ros_context, spinner):
+# Every world frame: in NED the published orientation's z points down, so
+# gravity removed with it instead of the estimator's own (ENU) would be added.
+@pytest.mark.parametrize('frame', ['enu', 'nwu', 'ned'])
+def test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest(
+        ros_context, spinner, frame):
     from geometry_msgs.msg import Vector3Stamped
     from std_msgs.msg import Bool
 
@@ -295,7 +299,8 @@ def test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest(ros_conte
 
     node = spinner.add(ImuFilterNode(
         node_name='debugged', context=ros_context, parameter_overrides=overrides(
-            publish_debug_topics=True, remove_gravity_vector=True, yaw_offset=0.3)))
+            publish_debug_topics=True, remove_gravity_vector=True, yaw_offset=0.3,
+            world_frame=frame)))
     driver = spinner.add(Driver(ros_context))
     out = {'imu': {}, 'filtered': {}, 'raw': {}, 'steady': []}
 

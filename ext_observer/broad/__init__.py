@@ -44,10 +44,11 @@ from ext_observer.broad.anchors import (anchor_estimates, ANCHOR_PACKAGES,
 from ext_observer.broad.cli import build_parser, main, PLOT_TRIAL
 from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_groups,
                                      find_trials, groups_from_name, has_trials, HOW_TO_GET,
-                                     load_trial, load_trials, shown_path, Trial)
+                                     load_trial, load_trials, shown_command, shown_path,
+                                     Trial)
 from ext_observer.broad.names import (algorithms_in, ALGORITHMS, ANCHORS, FUSION_DEFAULTS,
                                       MODES, OURS, OURS_PLAIN)
-from ext_observer.broad.page import fusion_text, markdown, shown_command
+from ext_observer.broad.page import fusion_text, markdown, shown_meta
 from ext_observer.broad.plots import plot
 from ext_observer.broad.report import fmt, text_report, write_json
 from ext_observer.broad.run import estimate_ours, log, run
@@ -68,7 +69,7 @@ from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, M
 __all__ = [
     'ALGORITHMS', 'ANCHOR_PACKAGES', 'ANCHORS', 'BROAD_GYRO_RANGE', 'DEFAULT_DIRS', 'ENV_VAR',
     'FUSION_DEFAULTS', 'FUSION_README', 'HOW_TO_GET', 'fusion_settings', 'fusion_text',
-    'shown_command',
+    'shown_meta',
     'IDENTITY', 'MADGWICK_BETA', 'MAHONY_KI', 'MAHONY_KP', 'MODES', 'NWU_TO_ENU', 'OURS',
     'OURS_PLAIN', 'PLOT_TRIAL', 'STANDARD_GRAVITY', 'Trial', 'VQF_RATIO_GOAL',
     'algorithms_in', 'anchor_estimates', 'attitude_from_acc_mag', 'build_parser',
@@ -77,7 +78,7 @@ __all__ = [
     'fmt', 'group_means', 'groups_from_name', 'has_trials', 'load_trial', 'load_trials', 'log', 'main',
     'markdown', 'missing_anchor_packages', 'norm_deviation', 'norm_parts', 'plot', 'rmse_deg',
     'run',
-    'score', 'shown_path', 'summary', 'text_report', 'write_json',
+    'score', 'shown_command', 'shown_path', 'summary', 'text_report', 'write_json',
     # The robustness benchmark (--stress).
     'BIAS', 'DESCRIPTIONS', 'GYRO_RANGE', 'GYRO_RANGES', 'HALVES', 'LABELS', 'LOW_RATE',
     'MODE_KEYS',

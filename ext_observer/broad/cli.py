@@ -21,7 +21,7 @@ import numpy as np
 from ext_observer.broad.anchors import missing_anchor_packages
 from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_groups,
                                      find_trials, has_trials, HOW_TO_GET, load_trials,
-                                     shown_path, TREE)
+                                     shown_command, shown_path, TREE)
 from ext_observer.broad.names import ANCHORS, MODES
 from ext_observer.broad.page import markdown
 from ext_observer.broad.plots import plot
@@ -132,7 +132,7 @@ def main(argv=None):
         return 2
     meta = dict(
         source,
-        command=('python -m ext_observer broad ' + ' '.join(argv)).strip(),
+        command=shown_command(['python -m ext_observer broad', *argv]),
         data=shown_path(folder),
         machine=_machine(),
         versions=_versions(),
@@ -158,7 +158,7 @@ def main(argv=None):
 def _covariance(args, argv, source, folder, trials, groups, progress):
     """The covariance benchmark (``--covariance``) on the trials read."""
     from ext_observer.broad.covariance_page import report
-    meta = dict(source, command=('python -m ext_observer broad ' + ' '.join(argv)).strip(),
+    meta = dict(source, command=shown_command(['python -m ext_observer broad', *argv]),
                 data=shown_path(folder), machine=_machine())
     # The covariance is the node's: its pipeline and uncertainty model count too.
     meta['dirty'] = bool(_git('status', '--porcelain', '--', *_ESTIMATOR_FILES,
@@ -185,7 +185,7 @@ def _stress(args, argv, source, folder, trials, anchors, progress):
                      progress=progress, params=params)
     names = [t.name for t in trials]
     meta = dict(source,
-                command=('python -m ext_observer broad ' + ' '.join(argv)).strip(),
+                command=shown_command(['python -m ext_observer broad', *argv]),
                 data=shown_path(folder), machine=_machine(), versions=_versions(),
                 trials=names, anchors=list(anchors), variants=list(keys), head=args.head,
                 workers=args.workers, jobs=args.jobs, wall=time.perf_counter() - start,

@@ -90,11 +90,19 @@ def data_dir(given=None):
 
 
 def shown_path(path):
-    """Return ``path`` as a page shows it: relative to the tree when close to it."""
-    relative = os.path.relpath(os.path.abspath(path), TREE)
-    if relative.startswith(os.path.join(os.pardir, os.pardir)):
-        return os.path.abspath(path)
-    return relative.replace(os.sep, '/')
+    """Return ``path`` as a page shows it: relative to the tree (the reader's folders differ)."""
+    return os.path.relpath(os.path.abspath(path), TREE).replace(os.sep, '/')
+
+
+def shown_command(words):
+    """Return the command ``words`` as a page shows it: absolute paths as :func:`shown_path`."""
+    shown = []
+    for word in words:
+        option, equals, value = word.rpartition('=') if word.startswith('-') else ('', '', word)
+        if os.path.isabs(value):
+            value = shown_path(value)
+        shown.append(option + equals + value)
+    return ' '.join(shown).strip()
 
 
 # --- the trials ------------------------------------------------------------

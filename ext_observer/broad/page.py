@@ -11,7 +11,7 @@ import os
 
 from ext_observer.broad.anchors import (BROAD_GYRO_RANGE, FUSION_README, MADGWICK_BETA,
                                         MAHONY_KI, MAHONY_KP)
-from ext_observer.broad.data import DEFAULT_DIRS, ENV_VAR, TREE
+from ext_observer.broad.data import DEFAULT_DIRS, ENV_VAR, shown_command, shown_path
 from ext_observer.broad.names import (algorithms_in, ANCHORS, FUSION_DEFAULTS, MODES, OURS,
                                       OURS_PLAIN)
 from ext_observer.broad.report import fmt
@@ -50,24 +50,11 @@ class _Page:
         return os.path.relpath(path, self.docs_dir).replace(os.sep, '/')
 
 
-def _relative(path):
-    """``path`` relative to the repository when absolute: a reader's paths are not ours."""
-    return os.path.relpath(path, TREE).replace(os.sep, '/') if os.path.isabs(path) else path
-
-
-def shown_command(command, data=None):
-    """
-    Return a command and its data folder as a page shows them: no absolute path.
-
-    Each absolute path in ``command`` (``--data /x`` or ``--data=/x``) and
-    ``data`` are written relative to the repository; the rest as typed.
-    """
-    words = []
-    for word in command.split(' '):
-        option, sep, value = word.partition('=')
-        words.append(option + sep + _relative(value) if sep and option.startswith('--')
-                     else _relative(word))
-    return ' '.join(words), (None if data is None else _relative(data))
+def shown_meta(meta):
+    """The command and data folder of ``meta`` as a page shows them, no absolute path (older results too)."""
+    data = meta.get('data')
+    return (shown_command(meta['command'].split(' ')),
+            None if data is None else (shown_path(data) if os.path.isabs(data) else data))
 
 
 def fusion_text(gyro):
@@ -132,7 +119,7 @@ def markdown(result, groups, meta, figures, docs_dir, tuning=None):
 
 def _intro(page):
     meta = page.meta
-    command, data = shown_command(meta['command'], meta.get('data'))
+    command, data = shown_meta(meta)
     made_by = f'**Made by** `{command}`'
     if data:
         made_by += f' on the data in `{data}`'

@@ -14,7 +14,7 @@ import numpy as np
 
 from ext_observer.broad.anchors import BROAD_GYRO_RANGE, MADGWICK_BETA
 from ext_observer.broad.names import FUSION_DEFAULTS, OURS
-from ext_observer.broad.page import fusion_text, shown_command
+from ext_observer.broad.page import fusion_text, shown_meta
 from ext_observer.broad.stress import (BIAS, DESCRIPTIONS, GYRO_RANGE, LABELS, LOW_RATE,
                                        RATIO_DONE, RATIO_GOAL, trial_number, VARIANTS)
 from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, modes_of,
@@ -50,7 +50,7 @@ def stress_markdown(out, meta, figure=None, docs_dir='.'):
     summ = stress_summary(out['scores'])
     counts = half_counts(meta['trials'])
     keys = [k for k in VARIANTS if k in summ]
-    command, data = shown_command(meta['command'], meta.get('data'))
+    command, data = shown_meta(meta)
     made_by = (f'**Made by** `{command}`'
                + (f' on the data in `{data}`' if data else '')
                + f' at commit `{meta["commit"]}`'
