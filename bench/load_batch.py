@@ -338,11 +338,15 @@ def main(argv=None):
     parser.add_argument('--cases', nargs='*', choices=[c[0] for c in CASES])
     parser.add_argument('--algorithms', nargs='*', choices=ALGORITHMS, default=list(ALGORITHMS))
     parser.add_argument('--modes', nargs='*', choices=MODES, default=list(MODES))
+    parser.add_argument('--set', nargs='*', default=[], metavar='NAME=VALUE',
+                        help='ours: imu_filter_node parameter values (numbers)')
     parser.add_argument('--json', metavar='PATH', help='also write the rows there')
     args = parser.parse_args(argv)
+    parameters = {k: float(v) for k, v in (item.split('=', 1) for item in args.set)}
     try:
         rows = batch_rows(args.data, args.trials, args.jobs, args.cases, args.algorithms,
-                          args.modes, progress=lambda t: print(t, file=sys.stderr, flush=True))
+                          args.modes, parameters or None,
+                          progress=lambda t: print(t, file=sys.stderr, flush=True))
     except ValueError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2

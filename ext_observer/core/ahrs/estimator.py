@@ -316,6 +316,24 @@ class AhrsObserver:
         return self._slots(self._kernels.ahrs.S_CLIPPED, 1)[0]
 
     @property
+    def holes(self):
+        """Holes in the stream bridged so far (``hole_kernel``: intervals much longer than usual)."""
+        k = self._kernels.ahrs
+        if self.batch is None:
+            return int(self._states[0][k.S_HOLES])
+        return np.array([int(s[k.S_HOLES]) for s in self._states])
+
+    @property
+    def hole_variance(self):
+        """What the last sample's hole adds to the variances (rad² per axis; 0: none)."""
+        return self._slots(self._kernels.ahrs.S_HOLE_VAR, 1)[0]
+
+    @property
+    def step_interval(self):
+        """The interval the last step's coefficients are for, s (a hole's keeps the usual one)."""
+        return self._slots(self._kernels.ahrs.C_DT, 1)[0]
+
+    @property
     def rest(self):
         """Whether rest is detected."""
         return self._flag(self._kernels.ahrs.S_REST)

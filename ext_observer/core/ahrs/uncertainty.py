@@ -330,7 +330,7 @@ class AttitudeUncertainty:
 
     # --- the steps ---------------------------------------------------------
 
-    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None, acc=None):
+    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None, acc=None, hole=None):
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
@@ -360,6 +360,11 @@ class AttitudeUncertainty:
             The specific force, m/s², body: how unsure the start still is
             (one estimate, floats). None: nothing of the start is counted
             (as at rest).
+        hole : tuple of 2 float, optional
+            A hole the estimator bridged: ``(extra, var)``, the seconds beyond
+            ``dt`` (the usual interval, whose coefficients the step kept) and
+            the bridge's variance per axis, rad²
+            (:func:`~ext_observer.core.ahrs.uncertainty_kernel.uncertainty_hole`).
 
         """
         if dt != self._u[U_DT]:
@@ -378,6 +383,8 @@ class AttitudeUncertainty:
         if clip_var is not None and np.any(clip_var):
             self._kernel.uncertainty_clipped(
                 self._u, float(clip_var) if self._compiled else clip_var)
+        if hole is not None:
+            self._kernel.uncertainty_hole(self._u, float(hole[0]), float(hole[1]))
         if acc is not None:
             self._start_sample(dt, rotate(w, x, y, z, *acc))
 
