@@ -40,7 +40,8 @@ from .ahrs_layout import (  # noqa: F401
                           S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_HAS_REF, S_INIT, S_LP,
                           S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REJECTED, S_REST,
                           S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N, S_STUCK,
-                          S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_VAR, S_HOLES, S_WAIT_N,
+                          S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR, S_HOLES,
+                          S_WAIT_N,
                           S_WAIT_TURN)
 from .gyro_watch import clipped_variance, detect_rest
 from .hole_kernel import (acc_deviation, calibration_restart, forget_wait, hole_after, hole_ends,
@@ -86,6 +87,7 @@ def ahrs_reset(s):
     s[S_START_N] = 0.0
     s[S_CLIPPED] = 0.0
     s[S_ACC_DEV] = 0.0
+    s[S_HOLE_T0] = 0.0
     hole_ends(s)
     # The learned calibration stays; the field is followed afresh.
     calibration_restart(s)

@@ -384,7 +384,7 @@ class AttitudeUncertainty:
             self._kernel.uncertainty_clipped(
                 self._u, float(clip_var) if self._compiled else clip_var)
         if hole is not None:
-            self._kernel.uncertainty_hole(self._u, float(hole[0]), float(hole[1]))
+            self._kernel.uncertainty_hole(self._u, float(hole[0]), float(hole[1]), True)
         if acc is not None:
             self._start_sample(dt, rotate(w, x, y, z, *acc))
 
