@@ -163,3 +163,35 @@ def test_a_run_with_bursts_lost_turns_as_the_body_does():
     assert turn_error(bridged) < 1.0 and turn_error(dropped) > 10.0
     holes = np.flatnonzero(np.diff(times) > 0.1) + 1
     assert np.all(bridged.heading_std[holes] > bridged.heading_std[holes - 1])
+
+
+def test_the_general_steps_follow_a_hole_as_the_one_call_sample_does():
+    # The node's one call (sample_step) and the steps one at a time (the
+    # start, or a sample that failed the guard) bridge, grow and restart alike.
+    from ext_observer.pipeline.raw_imu import RawImuPipeline
+    from ext_observer.recordings.recording import node_settings
+
+    def lost(t):
+        keep = np.mod(t - 0.3, 1.0) >= 0.2
+        keep[:2] = True
+        return keep
+
+    gyr, acc, times, _, _ = _turning(200.0, 4.0, lost)
+    runs = []
+    for general in (False, True):
+        pipeline = RawImuPipeline(node_settings({'use_mag': False}), compiled=False)
+        est = pipeline.estimator
+        out = []
+        for g, a, t in zip(gyr.tolist(), acc.tolist(), times):
+            stamp = 1_000_000_000 + round(t * 1e9)
+            if general:
+                for step in pipeline.pairer.add_sample(stamp, g, a)[1]:
+                    state, _ = est._general_step(g, a, (step.end - step.stamp) * 1e-9)
+                    out.append(tuple(state) + tuple(est.uncertainty.covariance))
+            else:
+                estimate = pipeline.imu(stamp, g, a)[1]
+                if estimate is not None:
+                    out.append(tuple(estimate.state) + tuple(estimate.covariance))
+        runs.append(np.array(out))
+    assert est.core.holes >= 3
+    np.testing.assert_allclose(runs[1], runs[0], rtol=1e-12, atol=1e-15)

@@ -329,7 +329,8 @@ class RawImuEstimator:
                 self._fields_used = 0
             self.uncertainty.step(step_dt, gyr, q, core.rest, core.bias_variance,
                                   core.clip_variance, acc,
-                                  (dt - step_dt, hole) if hole != 0.0 else None)
+                                  (dt - step_dt, hole, core.hole_restart) if hole != 0.0
+                                  else None)
         # The state property's value, from the q the step returned.
         return (q if self._frame is None else multiply_floats(self._frame, q)), reason
 
