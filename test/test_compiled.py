@@ -300,3 +300,36 @@ def test_without_numba_the_node_warns_once_with_the_cost(ros_processes):
     assert node.output.count('numba cannot be imported') == 1, node.output
     line = next(li for li in node.output.splitlines() if 'numba cannot be imported' in li)
     assert line.startswith('[WARN]') and line.endswith(compiled_module.PLAIN_COST), line
+
+
+@needs_numba
+@pytest.mark.parametrize('mode', ['9D', '6D'])
+def test_compiled_and_plain_agree_to_the_bit_across_holes(mode):
+    # Samples lost at random and in bursts (holes bridged, means restarted,
+    # the covariance grown and restarted): the same estimates and
+    # covariances, bit for bit.
+    from test_covariance import node_settings
+    from ext_observer.pipeline.raw_imu import RawImuPipeline
+    gyr, acc, mag, rate = _excerpt(EXCERPTS[0])
+    rng = np.random.default_rng(7)
+    keep = rng.random(len(gyr)) >= 0.3
+    keep &= np.mod(np.arange(len(gyr)) / rate, 2.0) >= 0.15
+    keep[:2] = True
+    index = np.flatnonzero(keep)[:5000]
+    period = round(1e9 / rate)
+    runs = []
+    for compiled in (False, True):
+        pipeline = RawImuPipeline(node_settings(use_mag=mode == '9D'), compiled=compiled)
+        states, covariances = [], []
+        for k in index:
+            stamp = 1_000_000_000 + int(k) * period
+            pipeline.field(stamp, tuple(1e-6 * mag[k]))
+            _, estimate = pipeline.imu(stamp, tuple(gyr[k]), tuple(acc[k]))
+            if estimate is not None:
+                states.append(estimate.state)
+                covariances.append(tuple(estimate.covariance))
+        runs.append((np.array(states), np.array(covariances),
+                     pipeline.estimator.core.holes))
+    assert runs[0][2] == runs[1][2] > 100
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])

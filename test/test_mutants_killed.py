@@ -156,8 +156,11 @@ def test_the_one_call_sample_step_is_the_general_steps(use_mag):
             one.flat_state, one_tracker.state, cov, *gyr, *acc, dt, 0.01)
         assert outcome == uncertainty_kernel.SAMPLE_OK
         expected = general.update(gyr, acc, None, dt)
-        tracker.step(dt, gyr, expected, general.rest, general.bias_variance,
-                     general.clip_variance, acc)
+        # 0.005 s to 0.02 s is a hole: the step keeps the usual interval.
+        hole, usual = general.hole_variance, general.step_interval
+        tracker.step(usual, gyr, expected, general.rest, general.bias_variance,
+                     general.clip_variance, acc,
+                     (dt - usual, hole, general.hole_restart) if hole else None)
         assert tuple(q) == tuple(expected)
         assert tuple(cov) == tuple(tracker.covariance)
         t, h = tracker.tilt_variance, tracker.heading_variance

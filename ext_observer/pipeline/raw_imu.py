@@ -21,7 +21,9 @@ import math
 
 import numpy as np
 
+from ext_observer.core.ahrs.ahrs_layout import S_HOLE_VAR
 from ext_observer.core.ahrs.estimator import AhrsObserver, WORLD_FRAMES
+from ext_observer.core.ahrs.hole_kernel import HOLE_RESTART
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, covariance_out
@@ -289,6 +291,8 @@ class RawImuEstimator:
         except (ValueError, OverflowError, ZeroDivisionError):
             outcome = None
         if outcome == SAMPLE_OK:
+            if core.flat_state[S_HOLE_VAR] > HOLE_RESTART:
+                self._fields_used = 0  # the heading's mean starts again (hole_kernel)
             if self._held_bias is not None:
                 core.bias = self._held_bias
             return ((w, x, y, z) if self._frame is None
@@ -320,8 +324,13 @@ class RawImuEstimator:
         if starting:
             self._start(dt, acc)
         else:
-            self.uncertainty.step(dt, gyr, q, core.rest, core.bias_variance, core.clip_variance,
-                                  acc)
+            hole, step_dt = core.hole_variance, core.step_interval
+            if hole > HOLE_RESTART:
+                self._fields_used = 0
+            self.uncertainty.step(step_dt, gyr, q, core.rest, core.bias_variance,
+                                  core.clip_variance, acc,
+                                  (dt - step_dt, hole, core.hole_restart) if hole != 0.0
+                                  else None)
         # The state property's value, from the q the step returned.
         return (q if self._frame is None else multiply_floats(self._frame, q)), reason
 

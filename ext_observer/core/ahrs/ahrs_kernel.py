@@ -40,12 +40,15 @@ from .ahrs_layout import (  # noqa: F401
                           S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_HAS_REF, S_INIT, S_LP,
                           S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REJECTED, S_REST,
                           S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N, S_STUCK,
-                          S_REF_REST, S_WAIT_N, S_WAIT_TURN)
+                          S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR, S_HOLES,
+                          S_WAIT_N,
+                          S_WAIT_TURN)
 from .gyro_watch import clipped_variance, detect_rest
+from .hole_kernel import (acc_deviation, calibration_restart, forget_wait, hole_after, hole_ends,
+                          hole_rate, hole_starts, hole_variance, restart_mean)
 from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F401
                           learn_bias, rlp_steady)
-from .magcal_kernel import (MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn,
-                            mc_restart)
+from .magcal_kernel import MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn
 
 
 _TINY = 1e-300
@@ -78,20 +81,19 @@ def ahrs_reset(s):
     s[S_CAND_TIME] = 0.0
     s[S_MAG_USED] = 0.0
     s[S_REJECTED] = 0.0
-    _forget_wait(s)
+    forget_wait(s)
     bias_forget(s)
     s[S_START] = 0.0
     s[S_START_N] = 0.0
     s[S_CLIPPED] = 0.0
+    s[S_ACC_DEV] = 0.0
+    s[S_HOLE_T0] = 0.0
+    hole_ends(s)
+    # The learned calibration stays; the field is followed afresh.
+    calibration_restart(s)
     if s[P_HAS_CAL] != 0.0:
-        # The learned calibration stays; the field is followed afresh.
-        mc_restart(s, MC0)
-        s[S_CAL_TURN] = 1.0
-        for i in range(1, 4):
-            s[S_CAL_TURN + i] = 0.0
         for i in range(3):
             s[S_CAL_RATE + i] = 0.0
-        s[S_CAL_WAIT] = math.inf
         s[S_CAL_MOVED] = 0.0  # the body has not turned yet
         s[S_CAL_SINCE] = math.inf  # time since a calibration was applied
         s[S_CAL_LOADED] = 0.0
@@ -132,8 +134,14 @@ def ahrs_mag_coefficients(s, dt):
 
 def ahrs_update(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
     """One IMU sample: gyro, then accelerometer, then magnetometer (``has_mag``); the estimate."""
+    hole = False
     if dt != s[C_DT]:
-        ahrs_coefficients(s, dt)
+        # A hole keeps the usual interval's coefficients (hole_kernel).
+        hole = hole_starts(s, dt)
+        if not hole:
+            ahrs_coefficients(s, dt)
+    elif s[S_HOLE_RUN] != 0.0:
+        hole_ends(s)
     if s[S_INIT] == 0.0:
         fx, fy, fz = mx, my, mz
         if has_mag and s[P_HAS_CAL] != 0.0:
@@ -148,21 +156,14 @@ def ahrs_update(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
         s[S_Q + 3] = z
         s[S_INIT] = 1.0
         _init_filters(s, gx, gy, gz, ax, ay, az)
+    elif hole:
+        ahrs_bridge(s, gx, gy, gz, dt)
     else:
         ahrs_update_gyr(s, gx, gy, gz)
     ahrs_update_acc(s, ax, ay, az)
     if has_mag and s[P_USE_MAG] != 0.0:
-        ahrs_update_mag(s, mx, my, mz, s[C_DT])
+        ahrs_update_mag(s, mx, my, mz, dt)
     return s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-
-
-def _restart_mean(s):
-    """Start (again) from a running mean of the vertical: a start, or a clipped gyro."""
-    s[S_START] = 0.0
-    s[S_START_N] = 0.0
-    s[S_LP + 3] = 0.0
-    s[S_LP + 4] = 0.0
-    s[S_LP + 5] = 0.0
 
 
 def _init_filters(s, gx, gy, gz, ax, ay, az):
@@ -170,7 +171,7 @@ def _init_filters(s, gx, gy, gz, ax, ay, az):
     s[S_LP] = vx
     s[S_LP + 1] = vy
     s[S_LP + 2] = vz
-    _restart_mean(s)
+    restart_mean(s)
     r = rotation_matrix(s)
     for j in range(3):
         s[S_RZLP + j] = r[6 + j]
@@ -198,25 +199,41 @@ def _watch_clipping(s, gx, gy, gz):
     """
     if clipped_variance(s, gx, gy, gz) == 0.0:
         return
-    _restart_mean(s)
+    restart_mean(s)
     s[S_MAG_USED] = 0.0
-    _forget_wait(s)
-    if s[P_HAS_CAL] != 0.0:
-        mc_restart(s, MC0)
-        s[S_CAL_TURN] = 1.0
-        for i in range(1, 4):
-            s[S_CAL_TURN + i] = 0.0
-        s[S_CAL_WAIT] = math.inf
+    forget_wait(s)
+    calibration_restart(s)
 
 
 def ahrs_update_gyr(s, gx, gy, gz):
     """Propagate with ``exp((ω − b̂) dt / 2)`` and apply the extension term."""
-    dt = s[C_DT]
     _watch_clipping(s, gx, gy, gz)
+    _propagate(s, gx, gy, gz, gx, gy, gz, s[C_DT])
+    detect_rest(s, gx, gy, gz)
+
+
+def ahrs_bridge(s, gx, gy, gz, dt):
+    """
+    The gyro step across a hole of ``dt`` s (:mod:`~ext_observer.core.ahrs.hole_kernel`).
+
+    The rotation from the mean rate of the samples on both sides; the
+    sample's own rate for the rest (clipping, rest detection, the
+    calibration), with the usual interval's coefficients.
+    """
+    rx, ry, rz = hole_rate(s, gx, gy, gz, dt)
+    var = hole_variance(gx - s[S_GYR_LAST], gy - s[S_GYR_LAST + 1], gz - s[S_GYR_LAST + 2], dt)
+    _watch_clipping(s, gx, gy, gz)
+    _propagate(s, rx, ry, rz, gx, gy, gz, dt)
+    detect_rest(s, gx, gy, gz)
+    hole_after(s, var)
+
+
+def _propagate(s, rx, ry, rz, gx, gy, gz, dt):
+    """``q̂ ← q̂ ⊗ exp((r − b̂) dt / 2)``, the extension term; ``g`` the sample's rate."""
     bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
-    ux = (gx - bx) * dt
-    uy = (gy - by) * dt
-    uz = (gz - bz) * dt
+    ux = (rx - bx) * dt
+    uy = (ry - by) * dt
+    uz = (rz - bz) * dt
     # exp of the half increment: (cos(θ/2), sin(θ/2)/θ · u), θ = |u|; the
     # tiny term only keeps θ = 0 (then u = 0) from dividing by zero.
     t = math.sqrt(ux * ux + uy * uy + uz * uz)
@@ -248,7 +265,6 @@ def ahrs_update_gyr(s, gx, gy, gz):
     s[S_Q + 1] = px
     s[S_Q + 2] = py
     s[S_Q + 3] = pz
-    detect_rest(s, gx, gy, gz)
 
 
 def ahrs_update_acc(s, ax, ay, az):
@@ -266,6 +282,7 @@ def ahrs_update_acc(s, ax, ay, az):
     w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
     vx, vy, vz = rotate(w, x, y, z, ax, ay, az)
     dt = s[C_DT]
+    acc_deviation(s, vx, vy, vz, dt)
     starting = s[S_START] < s[P_TAU_ACC]
     if starting:
         # The first tau_acc seconds (from the start, or after a clipped
@@ -396,7 +413,7 @@ def ahrs_update_mag(s, mx, my, mz, dt):
             # The fields the heading followed so far were the disturbed
             # ones: its running mean starts again from the new field.
             s[S_MAG_USED] = 0.0
-            _forget_wait(s)
+            forget_wait(s)
         s[S_REF_AGE] = s[S_CAND_TIME]
         s[S_REF_REST] = 0.0
     disturbed = disturbed and not accept_new
@@ -428,7 +445,7 @@ def ahrs_update_mag(s, mx, my, mz, dt):
                 _turn_heading(s, math.cos(half), math.sin(half))
                 psi = math.atan2(math.sin(psi - s[S_WAIT_TURN]), math.cos(psi - s[S_WAIT_TURN]))
                 s[S_MAG_USED] += s[S_WAIT_N]
-            _forget_wait(s)
+            forget_wait(s)
 
     # Heading measurement y = R_z(ψ) ⊗ q̂; gain κ_m, a running average at first.
     used = s[S_MAG_USED] + (1.0 if use else 0.0)
@@ -482,11 +499,6 @@ def _wait(s, psi):
     kap = max(s[C_K_MAG], 1.0 / n)
     d = psi - s[S_WAIT_TURN]
     s[S_WAIT_TURN] += kap * math.atan2(math.sin(d), math.cos(d))
-
-
-def _forget_wait(s):
-    s[S_WAIT_TURN] = 0.0
-    s[S_WAIT_N] = 0.0
 
 
 def _turn_heading(s, rw, rz):

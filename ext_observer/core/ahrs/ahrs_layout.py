@@ -88,6 +88,12 @@ S_REJECTED = AHRS.field('rejected')  # s the field has been rejected as disturbe
 S_WAIT_TURN = AHRS.field('wait_turn')
 S_WAIT_N = AHRS.field('wait_n')
 S_REF_REST = AHRS.field('ref_rest')  # 1: fields at rest have confirmed the field references
+# A hole in the stream (hole_kernel): an interval much longer than the usual one.
+S_HOLE_RUN = AHRS.field('hole_run')  # s of holes in a row (longer: the rate changed)
+S_HOLE_VAR = AHRS.field('hole_var')  # rad² per axis the last step's hole adds (0: none)
+S_HOLES = AHRS.field('holes')  # holes bridged
+S_HOLE_T0 = AHRS.field('hole_t0')  # s the inclination's restarted mean weighs the old as (−1: kept)
+S_ACC_DEV = AHRS.field('acc_dev')  # the specific force's recent deviation from gravity, (1/g)²
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 

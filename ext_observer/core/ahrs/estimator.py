@@ -302,18 +302,40 @@ class AhrsObserver:
         x, y, z = self.bias_std
         return (x * x + y * y + z * z) / 3.0
 
+    def _count(self, slot):
+        if self.batch is None:
+            return int(self._states[0][slot])
+        return np.array([int(s[slot]) for s in self._states])
+
     @property
     def clipped(self):
         """Samples found at the gyro's range so far (``gyro_range``, or stuck at its peak)."""
-        k = self._kernels.ahrs
-        if self.batch is None:
-            return int(self._states[0][k.S_CLIPS])
-        return np.array([int(s[k.S_CLIPS]) for s in self._states])
+        return self._count(self._kernels.ahrs.S_CLIPS)
 
     @property
     def clip_variance(self):
         """What the last sample, at the gyro's range, adds to the variances (rad²; 0: none)."""
         return self._slots(self._kernels.ahrs.S_CLIPPED, 1)[0]
+
+    @property
+    def holes(self):
+        """Holes in the stream bridged so far (``hole_kernel``: intervals much longer than usual)."""
+        return self._count(self._kernels.ahrs.S_HOLES)
+
+    @property
+    def hole_variance(self):
+        """What the last sample's hole adds to the variances (rad² per axis; 0: none)."""
+        return self._slots(self._kernels.ahrs.S_HOLE_VAR, 1)[0]
+
+    @property
+    def hole_restart(self):
+        """After a hole: the seconds the inclination's restarted mean weighs the old as (−1: kept)."""
+        return self._slots(self._kernels.ahrs.S_HOLE_T0, 1)[0]
+
+    @property
+    def step_interval(self):
+        """The interval the last step's coefficients are for, s (a hole's keeps the usual one)."""
+        return self._slots(self._kernels.ahrs.C_DT, 1)[0]
 
     @property
     def rest(self):

@@ -330,7 +330,7 @@ class AttitudeUncertainty:
 
     # --- the steps ---------------------------------------------------------
 
-    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None, acc=None):
+    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None, acc=None, hole=None):
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
@@ -360,6 +360,14 @@ class AttitudeUncertainty:
             The specific force, m/s², body: how unsure the start still is
             (one estimate, floats). None: nothing of the start is counted
             (as at rest).
+        hole : tuple of 3 float, optional
+            A hole the estimator bridged: ``(extra, var, t0)``, the seconds
+            beyond ``dt`` (the usual interval, whose coefficients the step
+            kept), the bridge's variance per axis, rad²
+            (:func:`~ext_observer.core.ahrs.uncertainty_kernel.uncertainty_hole`),
+            and the seconds the restarted inclination mean weighs the old as
+            (negative: not restarted; :func:`~ext_observer.core.ahrs.uncertainty_kernel.
+            uncertainty_restart`).
 
         """
         if dt != self._u[U_DT]:
@@ -372,12 +380,17 @@ class AttitudeUncertainty:
                                           1.0 if rest else 0.0)
         else:
             self._kernel.uncertainty_step(self._u, dt, gx, gy, gz, w, x, y, z, rest)
+        if hole is not None and hole[2] >= 0.0:
+            self._kernel.uncertainty_restart(self._u, float(hole[2]))
         if bias_var is not None:
             self._kernel.uncertainty_bias(
                 self._u, float(bias_var) if self._compiled else bias_var)
         if clip_var is not None and np.any(clip_var):
             self._kernel.uncertainty_clipped(
                 self._u, float(clip_var) if self._compiled else clip_var)
+        if hole is not None:
+            self._kernel.uncertainty_hole(self._u, float(hole[0]), float(hole[1]),
+                                          hole[2] < 0.0)
         if acc is not None:
             self._start_sample(dt, rotate(w, x, y, z, *acc))
 

@@ -22,7 +22,7 @@ import math
 
 from .ahrs_filters import rotate
 from .ahrs_kernel import ahrs_update
-from .ahrs_layout import P_MOTION_BIAS, S_CLIPPED, S_INIT, S_REST
+from .ahrs_layout import C_DT, P_MOTION_BIAS, S_CLIPPED, S_HOLE_T0, S_HOLE_VAR, S_INIT, S_REST
 from .bias_kernel import bias_variance
 from .layout import Layout
 
@@ -190,6 +190,39 @@ def uncertainty_clipped(u, var):
     u[U_PH] = u[U_PH] + var
 
 
+def uncertainty_hole(u, extra, var, tilt):
+    """
+    A hole bridged: the angle's variances grow by what the usual step did not count.
+
+    The estimator bridged ``extra`` s more than the usual interval (the
+    step counted that one): the gyro's noise and the bias over that time,
+    and ``var`` (rad² per axis), the bridge's own error
+    (:func:`~ext_observer.core.ahrs.hole_kernel.hole_variance`); the
+    inclination's only where its mean was not restarted (``tilt``).
+    """
+    g = u[U_GYRO_NOISE]
+    grow = g * g * extra + u[U_B] * extra * extra + var
+    if tilt:
+        u[U_PT] = u[U_PT] + grow
+    u[U_PH] = u[U_PH] + grow
+
+
+def uncertainty_restart(u, t0):
+    """
+    The estimator restarted the inclination's mean after a hole, the old weighed as ``t0`` s.
+
+    Its inclination is a running mean again, as at a start that has run
+    for ``t0`` s: the start's share follows from the samples from now on
+    (:func:`uncertainty_start`), and the propagated variance is the
+    accelerometer's own.
+    """
+    u[U_START_T] = t0
+    u[U_START_N] = 0.0
+    u[U_START_M] = 0.0
+    u[U_PT] = u[U_R_ACC]
+    u[U_CT] = 0.0
+
+
 def uncertainty_start(u, dt, fx, fy, fz):
     """
     A sample's specific force in the world frame (m/s²): how unsure the start still is.
@@ -266,15 +299,22 @@ def sample_step(s, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
         return SAMPLE_NON_FINITE, w, x, y, z
     if abs(n2 - 1.0) > max_residual:
         return SAMPLE_RESIDUAL, w, x, y, z
-    uncertainty_step(u, dt, gx, gy, gz, w, x, y, z, 1.0 if s[S_REST] != 0.0 else 0.0)
+    # The usual interval: dt itself, or the one a hole's step kept.
+    step_dt = s[C_DT]
+    uncertainty_step(u, step_dt, gx, gy, gz, w, x, y, z, 1.0 if s[S_REST] != 0.0 else 0.0)
+    hole = s[S_HOLE_VAR]
+    if hole != 0.0 and s[S_HOLE_T0] >= 0.0:
+        uncertainty_restart(u, s[S_HOLE_T0])
     if u[U_START_V] != 0.0 or u[U_START_T] < u[U_TAU_ACC]:
         fx, fy, fz = rotate(w, x, y, z, ax, ay, az)
-        uncertainty_start(u, dt, fx, fy, fz)
+        uncertainty_start(u, step_dt, fx, fy, fz)
     if s[P_MOTION_BIAS] != 0.0:
         uncertainty_bias(u, (bias_variance(s, 0, 0) + bias_variance(s, 1, 1)
                              + bias_variance(s, 2, 2)) / 3.0)
     if s[S_CLIPPED] != 0.0:
         uncertainty_clipped(u, s[S_CLIPPED])
+    if hole != 0.0:
+        uncertainty_hole(u, dt - step_dt, hole, s[S_HOLE_T0] < 0.0)
     t, h = uncertainty_variances(u)
     zero = 0.0 * t
     cov[0] = t

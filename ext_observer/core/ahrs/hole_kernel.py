@@ -1,0 +1,172 @@
+"""
+Holes in the stream: an IMU interval much longer than the usual one, bridged.
+
+A driver that falls behind, a queue that overflows, a USB burst lost: the
+sample after a hole closes an interval of many usual ones. The estimator
+then integrates the rotation across the hole from the gyro samples on both
+sides (as the usual steps would have, had the rate changed linearly
+across the hole), keeps the coefficients of the usual interval (a one-off long
+``dt`` would upset the Butterworth low-pass, whose states belong to its
+coefficients), says how unsure the bridge is (:func:`hole_variance`, which
+the covariance adds), and where that is large starts its means again, as
+after a start or a clipped gyro: the inclination from the running mean of
+the next specific forces, the heading from that of the next fields. The
+magnetometer calibration learns nothing across a hole it cannot trust.
+docs/raw_imu.md ("Holes in the stream") has the figures that chose the
+constants. Plain Python that numba compiles, as
+:mod:`~ext_observer.core.ahrs.ahrs_kernel`.
+"""
+
+import math
+
+from .ahrs_layout import (C_DT, MC0, P_HAS_CAL, P_TAU_ACC, S_ACC_DEV, S_CAL_TURN, S_CAL_WAIT,
+                          S_GYR_LAST, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR, S_HOLES, S_INIT, S_LP, S_MAG_USED,
+                          S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
+from .magcal_kernel import mc_restart
+
+# An interval longer than this many times the usual one is a hole (one
+# sample lost makes it twice the usual).
+HOLE_FACTOR = 1.5
+# s: holes in a row for longer than this are not holes: the rate itself has
+# changed, and the interval becomes the usual one (with 40 % of the samples
+# lost at random, holes follow each other for a few tens of ms).
+HOLE_RUN_TIME = 0.5
+# The bridge's error across a hole of T seconds, per axis: this share of the
+# rate's change across it times T, and a rate random walk of this intensity
+# (rad²/s³, its Brownian bridge: q T³ / 12) for the holes whose rates on both
+# sides happen to agree. Fitted on the even-numbered BROAD trials
+# (docs/raw_imu.md#holes-in-the-stream).
+HOLE_RATE_CHANGE = 0.26
+HOLE_RATE_WALK = 1.0
+# rad²: a hole whose variance exceeds this starts the inclination's and the
+# heading's means again; above HOLE_CALIBRATION the magnetometer
+# calibration follows the field afresh (learns nothing across the hole).
+HOLE_RESTART = math.radians(2.0) ** 2
+HOLE_CALIBRATION = math.radians(0.5) ** 2
+# s: how long a moving body's translational acceleration keeps its direction
+# after a hole (shorter than a start's START_CORRELATION: on the even trials
+# 0.3 s recovers the inclination of 200 ms holes faster than 1 s, 6.0° against
+# 7.8° on the fast rotation), and over how long the estimator follows its
+# size (acc_deviation).
+HOLE_CORRELATION = 0.3
+HOLE_DEVIATION_TIME = 1.0
+# Standard gravity, m/s².
+GRAVITY = 9.80665
+
+
+def restart_mean(s):
+    """Start (again) from a running mean of the vertical: a start, a clipped gyro, a hole."""
+    s[S_START] = 0.0
+    s[S_START_N] = 0.0
+    s[S_LP + 3] = 0.0
+    s[S_LP + 4] = 0.0
+    s[S_LP + 5] = 0.0
+
+
+def forget_wait(s):
+    """Forget the turn the fields of a wait for the calibration would have given the heading."""
+    s[S_WAIT_TURN] = 0.0
+    s[S_WAIT_N] = 0.0
+
+
+def calibration_restart(s):
+    """The magnetometer calibration follows the field afresh: it learns nothing across a gap."""
+    if s[P_HAS_CAL] != 0.0:
+        mc_restart(s, MC0)
+        s[S_CAL_TURN] = 1.0
+        for i in range(1, 4):
+            s[S_CAL_TURN + i] = 0.0
+        s[S_CAL_WAIT] = math.inf
+
+
+def hole_starts(s, dt):
+    """
+    Whether the interval ``dt`` (s; not the coefficients' own) is a hole to bridge.
+
+    A hole: more than :data:`HOLE_FACTOR` times the usual interval (the
+    coefficients' ``C_DT``), an estimate to bridge, and holes in a row for
+    less than :data:`HOLE_RUN_TIME` before. Otherwise the step is a usual
+    one (:func:`hole_ends`) and the caller takes ``dt`` as the new interval.
+    """
+    if s[S_INIT] != 0.0 and dt > HOLE_FACTOR * s[C_DT] and s[S_HOLE_RUN] < HOLE_RUN_TIME:
+        s[S_HOLE_RUN] += dt
+        return True
+    hole_ends(s)
+    return False
+
+
+def hole_ends(s):
+    """A usual step: no hole in a row, nothing to add to the covariance."""
+    s[S_HOLE_RUN] = 0.0
+    s[S_HOLE_VAR] = 0.0
+
+
+def hole_rate(s, gx, gy, gz, dt):
+    """
+    The rate to integrate across a hole of ``dt`` s (rad/s), from the samples on both sides.
+
+    The step the usual ones would have made, had the samples lost lain on
+    the straight line between the two: each usual step integrates its
+    closing sample's rate, so ``L = dt / C_DT`` steps weigh the new sample
+    ``(L + 1) / (2L)`` and the one before the hole the rest (one step: the
+    usual step; a long hole: the trapezoid).
+    """
+    w = 0.5 + 0.5 * s[C_DT] / dt
+    lx, ly, lz = s[S_GYR_LAST], s[S_GYR_LAST + 1], s[S_GYR_LAST + 2]
+    return lx + w * (gx - lx), ly + w * (gy - ly), lz + w * (gz - lz)
+
+
+def hole_variance(dx, dy, dz, dt):
+    """The trapezoid's error variance per axis (rad²) over ``dt`` s, the rate changing by ``d``."""
+    return (HOLE_RATE_CHANGE * HOLE_RATE_CHANGE * (dx * dx + dy * dy + dz * dz) * dt * dt
+            + HOLE_RATE_WALK * dt * dt * dt / 12.0)
+
+
+def acc_deviation(s, vx, vy, vz, dt):
+    """
+    Follow how far the world-frame specific force ``v`` (m/s²) strays from gravity.
+
+    ``max(d_z², (d_x² + d_y²) / 2) / g²`` of its deviation ``d`` from
+    ``(0, 0, g)``, averaged over about :data:`HOLE_DEVIATION_TIME`: one
+    sample's variance per horizontal axis of the vertical it shows (a
+    moving body's translational acceleration), which a hole's own is
+    weighed against.
+    """
+    dz = vz - GRAVITY
+    e = max(dz * dz, 0.5 * (vx * vx + vy * vy)) / (GRAVITY * GRAVITY)
+    k = min(dt / HOLE_DEVIATION_TIME, 1.0)
+    s[S_ACC_DEV] += k * (e - s[S_ACC_DEV])
+
+
+def hole_after(s, var):
+    """
+    What a bridged hole of variance ``var`` (rad² per axis) leaves: counted, the means restarted.
+
+    The inclination: the low-pass's mean of the specific force before the
+    hole is off by the hole's error; the mean of ``t`` seconds of new
+    samples by ``m c / (c + t)`` (``m`` one sample's variance,
+    :func:`acc_deviation`; ``c`` :data:`HOLE_CORRELATION`). Where the old
+    mean is worth less than ``tau_acc`` seconds of new ones,
+    ``t0 = c (m / var − 1)``, the mean starts again with it weighed as
+    ``t0`` seconds (as at a start, which has none). The heading: its mean
+    starts again from the next fields where the hole's σ exceeds
+    :data:`HOLE_RESTART`'s.
+    """
+    s[S_HOLE_VAR] = var
+    s[S_HOLES] += 1.0
+    if var > HOLE_CALIBRATION:
+        calibration_restart(s)
+    t0 = HOLE_CORRELATION * (s[S_ACC_DEV] / var - 1.0)
+    s[S_HOLE_T0] = -1.0
+    if t0 < s[P_TAU_ACC]:
+        t0 = max(t0, 0.0)
+        if s[S_START] >= s[P_TAU_ACC] or t0 < s[S_START]:
+            s[S_HOLE_T0] = t0
+            s[S_START] = t0
+            s[S_START_N] = t0 / s[C_DT]
+            s[S_LP + 3] = 0.0
+            s[S_LP + 4] = 0.0
+            s[S_LP + 5] = 0.0
+    if var > HOLE_RESTART:
+        s[S_MAG_USED] = 0.0
+        forget_wait(s)

@@ -1,0 +1,197 @@
+"""
+Holes in the stream (``hole_kernel``): known answers of its steps, and a burst-hole run.
+
+An interval over ``HOLE_FACTOR`` times the usual one is a hole: bridged
+with the rate the usual steps would have integrated had the lost samples
+lain on the line between the two on both sides, with the usual interval's
+coefficients kept (the low-pass's states belong to them), its variance
+added to the covariance, and the means restarted where it is large. Plain
+kernels: fast; the compiled ones are held equal in test_compiled.py.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from ext_observer.core.ahrs import hole_kernel
+from ext_observer.core.ahrs.ahrs_layout import (C_BW, C_DT, C_K_ACC, S_ACC_DEV, S_GYR_LAST,
+                                                S_HOLE_RUN, S_HOLE_VAR, S_HOLES, S_INIT,
+                                                S_MAG_USED, S_Q, S_START, S_START_N)
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.hole_kernel import (HOLE_CALIBRATION, HOLE_CORRELATION, HOLE_FACTOR,
+                                                HOLE_RATE_CHANGE, HOLE_RATE_WALK,
+                                                HOLE_RESTART, HOLE_RUN_TIME, hole_after,
+                                                hole_rate, hole_starts, hole_variance)
+from ext_observer.recordings.recording import attitude_from_imu
+
+DT = 0.01
+UP = (0.0, 0.0, 9.81)
+STILL = (0.0, 0.0, 0.0)
+
+
+def _started(params=None, use_mag=False):
+    est = AhrsObserver(params or AhrsParams(tau_bias=0.0), use_mag=use_mag, compiled=False)
+    est.update(STILL, UP, None, DT)
+    est.update(STILL, UP, None, DT)
+    return est
+
+
+def test_a_hole_is_an_interval_over_the_factor_and_a_run_of_them_ends():
+    s = [0.0] * len(_started().flat_state)
+    s[C_DT] = DT
+    assert not hole_starts(s, 3.0 * DT)  # no estimate yet: nothing to bridge
+    s[S_INIT] = 1.0
+    assert not hole_starts(s, HOLE_FACTOR * DT)
+    s[S_HOLE_VAR] = 1.0
+    assert hole_starts(s, 1.0001 * HOLE_FACTOR * DT) and s[S_HOLE_RUN] == 1.0001 * HOLE_FACTOR * DT
+    assert s[S_HOLE_VAR] == 1.0  # the bridge sets it
+    assert not hole_starts(s, 1.2 * DT) and s[S_HOLE_RUN] == 0.0 and s[S_HOLE_VAR] == 0.0
+    # Longer intervals in a row than HOLE_RUN_TIME: the rate has changed.
+    count = 0
+    while hole_starts(s, 2.0 * DT):
+        count += 1
+    assert round(HOLE_RUN_TIME / (2.0 * DT)) <= count <= round(HOLE_RUN_TIME / (2.0 * DT)) + 1
+    assert s[S_HOLE_RUN] == 0.0
+
+
+@pytest.mark.parametrize('steps, weight', [(1.0, 1.0), (2.0, 0.75), (4.0, 0.625), (1e6, 0.5000005)])
+def test_the_bridges_rate_is_what_the_usual_steps_would_have_integrated(steps, weight):
+    s = [0.0] * len(_started().flat_state)
+    s[C_DT] = DT
+    s[S_GYR_LAST:S_GYR_LAST + 3] = [1.0, -2.0, 0.5]
+    new = np.array([3.0, 2.0, -1.5])
+    rate = hole_rate(s, *new, steps * DT)
+    np.testing.assert_allclose(rate, (1.0 - weight) * np.array([1.0, -2.0, 0.5]) + weight * new,
+                               rtol=1e-12)
+    # Steps 1..L of a rate linear from the old to the new sample, each the closing sample's.
+    if steps < 10:
+        line = [np.array([1.0, -2.0, 0.5]) + (new - [1.0, -2.0, 0.5]) * k / steps
+                for k in range(1, int(steps) + 1)]
+        np.testing.assert_allclose(np.array(rate) * steps, np.sum(line, axis=0), rtol=1e-12)
+
+
+def test_the_bridges_variance_is_the_rate_change_and_the_walk():
+    v = hole_variance(3.0, 0.0, -4.0, 0.2)
+    assert v == pytest.approx((HOLE_RATE_CHANGE * 5.0 * 0.2) ** 2 + HOLE_RATE_WALK * 0.008 / 12)
+
+
+def test_a_small_hole_keeps_the_means_a_large_one_restarts_them_weighed():
+    est = _started()
+    s = est.flat_state
+    s[S_START], s[S_START_N], s[S_MAG_USED] = 10.0, 0.0, 50.0
+    s[S_ACC_DEV] = 0.01  # a body that moves: its samples show the vertical to 0.1 rad
+    small = 0.5 * HOLE_CALIBRATION
+    hole_after(s, small)
+    assert (s[S_START], s[S_MAG_USED], s[S_HOLE_VAR], s[S_HOLES]) == (10.0, 50.0, small, 1.0)
+    # The old mean is worth t0 = c (m / var − 1) s of new samples.
+    var = 0.005
+    hole_after(s, var)
+    t0 = HOLE_CORRELATION * (0.01 / var - 1.0)
+    assert s[S_START] == pytest.approx(t0) and s[S_START_N] == pytest.approx(t0 / DT)
+    assert s[S_MAG_USED] == 0.0 and var > HOLE_RESTART
+    # Worse than any sample: the mean starts from the next one (as a start).
+    hole_after(s, 1.0)
+    assert s[S_START] == 0.0 and s[S_START_N] == 0.0
+
+
+def test_a_hole_keeps_the_usual_coefficients_and_integrates_its_whole_length():
+    # About the vertical at a rate that changes linearly: the bridge is exact.
+    est = _started()
+    s = est.flat_state
+    coefficients = list(s[C_BW:C_BW + 5]) + [s[C_K_ACC]]
+    rate = lambda t: 0.5 + 2.0 * t  # noqa: E731  rad/s about z
+    t, heading = 0.0, 0.0
+    for k in range(1, 60):
+        dt = DT if k % 10 else 7 * DT  # a hole of six samples now and then
+        t += dt
+        steps = round(dt / DT)
+        heading += sum(rate(t - (steps - 1 - j) * DT) for j in range(steps)) * DT
+        est.update((0.0, 0.0, rate(t)), UP, None, dt)
+        assert s[C_DT] == DT and list(s[C_BW:C_BW + 5]) + [s[C_K_ACC]] == coefficients
+    assert est.holes == 5
+    w, z = s[S_Q], s[S_Q + 3]
+    assert 2.0 * math.atan2(z, w) == pytest.approx(heading, abs=1e-9)
+
+
+def test_a_lasting_slower_rate_becomes_the_usual_one():
+    est = _started()
+    for _ in range(int(HOLE_RUN_TIME / (2 * DT)) + 2):
+        est.update(STILL, UP, None, 2 * DT)
+    assert est.flat_state[C_DT] == 2 * DT and est.hole_variance == 0.0
+
+
+def _turning(rate_hz, seconds, lost=None):
+    """A body turning about a tilted axis at a rate that swings; 6D samples, their times."""
+    t = np.arange(int(seconds * rate_hz)) / rate_hz
+    axis = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    speed = 1.5 * np.sin(2.0 * np.pi * 0.3 * t)
+    gyr = speed[:, None] * axis
+    # The specific force: gravity in the body frame, from the exact turn.
+    angle = 1.5 * (1.0 - np.cos(2.0 * np.pi * 0.3 * t)) / (2.0 * np.pi * 0.3)
+    c, s = np.cos(angle), np.sin(angle)
+    up = np.array([0.0, 0.0, 9.81])
+    # Rodrigues: R(−angle) up, the world's vertical seen from the body.
+    acc = (up * c[:, None] - np.cross(axis, up)[None, :] * s[:, None]
+           + np.outer(1.0 - c, axis * (axis @ up)))
+    keep = np.ones(len(t), dtype=bool) if lost is None else lost(t)
+    return gyr[keep], acc[keep], t[keep], angle[keep], axis
+
+
+def test_a_run_with_bursts_lost_turns_as_the_body_does():
+    # 200 ms lost every 2 s while the body turns up to 1.5 rad/s: the turn
+    # about the axis follows the body's (the rotation in each hole bridged),
+    # and the covariance grows with each hole. Dropping the holes (an
+    # interval over max_dt, what the estimator did before it bridged them)
+    # loses the turn in each.
+    def lost(t):
+        keep = np.mod(t - 0.7, 2.0) >= 0.2
+        keep[:2] = True
+        return keep
+
+    gyr, acc, times, angle, axis = _turning(200.0, 20.0, lost)
+    bridged = attitude_from_imu(gyr, acc, times=times, parameters={'use_mag': False})
+    dropped = attitude_from_imu(gyr, acc, times=times,
+                                parameters={'use_mag': False, 'max_dt': 0.05})
+    assert bridged.drops['dt_too_large'] == 0 and dropped.drops['dt_too_large'] == 10
+
+    def turn_error(rec):
+        q = rec.quaternions[1:]
+        turn = 2.0 * np.arctan2(q[:, 1:] @ axis, q[:, 0])
+        return np.degrees(np.max(np.abs(np.angle(np.exp(1j * (turn - angle[1:]))))))
+
+    assert turn_error(bridged) < 1.0 and turn_error(dropped) > 10.0
+    holes = np.flatnonzero(np.diff(times) > 0.1) + 1
+    assert np.all(bridged.heading_std[holes] > bridged.heading_std[holes - 1])
+
+
+def test_the_general_steps_follow_a_hole_as_the_one_call_sample_does():
+    # The node's one call (sample_step) and the steps one at a time (the
+    # start, or a sample that failed the guard) bridge, grow and restart alike.
+    from ext_observer.pipeline.raw_imu import RawImuPipeline
+    from ext_observer.recordings.recording import node_settings
+
+    def lost(t):
+        keep = np.mod(t - 0.3, 1.0) >= 0.2
+        keep[:2] = True
+        return keep
+
+    gyr, acc, times, _, _ = _turning(200.0, 4.0, lost)
+    runs = []
+    for general in (False, True):
+        pipeline = RawImuPipeline(node_settings({'use_mag': False}), compiled=False)
+        est = pipeline.estimator
+        out = []
+        for g, a, t in zip(gyr.tolist(), acc.tolist(), times):
+            stamp = 1_000_000_000 + round(t * 1e9)
+            if general:
+                for step in pipeline.pairer.add_sample(stamp, g, a)[1]:
+                    state, _ = est._general_step(g, a, (step.end - step.stamp) * 1e-9)
+                    out.append(tuple(state) + tuple(est.uncertainty.covariance))
+            else:
+                estimate = pipeline.imu(stamp, g, a)[1]
+                if estimate is not None:
+                    out.append(tuple(estimate.state) + tuple(estimate.covariance))
+        runs.append(np.array(out))
+    assert est.core.holes >= 3
+    np.testing.assert_allclose(runs[1], runs[0], rtol=1e-12, atol=1e-15)
