@@ -638,3 +638,19 @@ def test_add_sample_is_add_angular_velocity_then_pop_ready(ops, constant_dt, max
             assert fast.restart() == general.restart()
         assert _pairer_state(fast) == _pairer_state(general)
     assert_accounted(fast)
+
+
+def test_arrival_order_steps_with_a_repeated_stamp_are_all_accounted():
+    # Arrival order integrates a repeated stamp; with a timeout its steps
+    # still wait for nothing, so none overwrites another that waits.
+    pairer = StepPairer(timeout=20 * MS, depth=4, backward_jump=1 * S, forward_gap=500 * MS,
+                        max_dt=40 * MS, constant_dt=0.004, max_increment=3.0,
+                        arrival_order=True)
+    released = []
+    for stamp, rate in ((2 * S + 5 * MS, 0.0), (2 * S + 10 * MS, 0.0),
+                        (2 * S + 10 * MS, 1000.0), (2 * S + 15 * MS, 0.0)):
+        pairer.add_angular_velocity(stamp, (rate, 0.0, 0.0), 0, (0.0, 0.0, 9.8))
+        released += pairer.pop_ready(0)
+    assert pairer.received['increment'] == 4
+    assert_accounted(pairer)
+    assert len(released) == 3

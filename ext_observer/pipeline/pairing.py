@@ -62,7 +62,8 @@ Angular velocities (an IMU)
     looked at.
 
     With ``arrival_order`` (and ``constant_dt > 0``; for a caller whose
-    steps wait for nothing, ``timeout`` 0) the samples are taken in the order
+    steps wait for nothing: its steps are ready at once, whatever ``timeout``
+    says, since repeated stamps cannot wait side by side) the samples are taken in the order
     they arrive and every one closes the interval of the one before with
     ``Δt = constant_dt``, as imu_filter_madgwick's ``constant_dt`` does:
     repeated, older and zero stamps are integrated, not dropped (drivers
@@ -298,7 +299,9 @@ class StepPairer:
         reason = check_increment(theta, self.max_increment)
         if reason is not None:
             return self._drop(VALUE_REASONS['increment'][reason])
-        self._increments[start] = (theta, now + self.timeout, stamp)
+        # In arrival order stamps may repeat, so no step waits (its deadline is
+        # now): two waiting with one start stamp would be one key.
+        self._increments[start] = (theta, now if arrival else now + self.timeout, stamp)
         return None
 
     def add_sample(self, stamp, omega, acceleration):
