@@ -230,7 +230,8 @@ def main(argv=None):
         os.makedirs(args.log_dir, exist_ok=True)
     if args.render:
         with open(args.render) as saved:
-            return _write(report.render(json.load(saved)), args)
+            return machine.write_page(report.render(json.load(saved)),
+                                      None if args.no_write else args.output)
     # SIGTERM ends the run through the finally blocks that stop the children.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     start = time.monotonic()
@@ -266,17 +267,7 @@ def main(argv=None):
     if args.json:
         with open(args.json, 'w') as out:
             json.dump(results, out, indent=1)
-    return _write(report.render(results), args)
-
-
-def _write(text, args):
-    print(text)
-    if not args.no_write:
-        os.makedirs(os.path.dirname(os.path.abspath(args.output)), exist_ok=True)
-        with open(args.output, 'w') as out:
-            out.write(text)
-        _log(f'wrote {args.output}')
-    return 0
+    return machine.write_page(report.render(results), None if args.no_write else args.output)
 
 
 if __name__ == '__main__':

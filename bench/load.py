@@ -345,7 +345,7 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     if args.render:
         with open(args.render) as saved:
-            return _write(render(json.load(saved)), args)
+            return machine.write_page(render(json.load(saved)), _page(args))
     # SIGTERM ends the run through the finally blocks that stop the children.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     start = time.monotonic()
@@ -360,18 +360,11 @@ def main(argv=None):
     if args.json:
         with open(args.json, 'w') as out:
             json.dump(results, out, indent=1)
-    return _write(render(results), args)
+    return machine.write_page(render(results), _page(args))
 
 
-def _write(text, args):
-    print(text)
-    if args.docs:
-        os.makedirs(args.docs, exist_ok=True)
-        path = os.path.join(args.docs, 'load.md')
-        with open(path, 'w') as out:
-            out.write(text)
-        _log(f'wrote {os.path.relpath(path, REPO)}')
-    return 0
+def _page(args):
+    return os.path.join(args.docs, 'load.md') if args.docs else None
 
 
 if __name__ == '__main__':

@@ -1,4 +1,4 @@
-"""The machine and software a benchmark ran on."""
+"""The machine and software a benchmark ran on, and where its page goes."""
 
 import datetime
 import os
@@ -73,3 +73,15 @@ def load_range(runs):
         return 'unknown'
     low, high = min(seen), max(seen)
     return f'{low:g}' if low == high else f'{low:g}–{high:g}'
+
+
+def write_page(text, path):
+    """Print a benchmark's page and, unless ``path`` is None, write it there."""
+    import sys
+    print(text)
+    if path is not None:
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        with open(path, 'w') as out:
+            out.write(text)
+        print(f'wrote {os.path.relpath(path, REPO)}', file=sys.stderr)
+    return 0

@@ -519,8 +519,7 @@ def main(argv=None):
     by_name = {d.name: d for d in vehicle_sim.scenarios()}
     results['drives'] = [by_name[n] for n in results['drive_names'] if n in by_name]
     # `python -m bench`'s own writer: print, and write unless --no-write.
-    from bench.__main__ import _write
-    return _write(render(results), args)
+    return machine.write_page(render(results), None if args.no_write else args.output)
 
 
 if __name__ == '__main__':
