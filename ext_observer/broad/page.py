@@ -136,7 +136,7 @@ def _intro(page):
         "Mahony and Fusion (at its README's settings, and at its package defaults) run in "
         'the same command, each at the settings its authors advise, so that its accuracy '
         'can be judged '
-        'against the best open estimators (issue 11). It is generated; do not edit it '
+        'against the best open estimators. It is generated; do not edit it '
         'by hand.',
         '',
         '**Data.** BROAD (Laidig et al. 2021): D. Laidig, M. Caruso, A. Cereatti, T. Seel, '
