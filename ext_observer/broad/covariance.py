@@ -218,7 +218,7 @@ def errors(trial, run):
 
 def calibration_figures(samples):
     """
-    The issue's two figures for pooled samples.
+    The two coverage figures for pooled samples.
 
     Parameters
     ----------
