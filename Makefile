@@ -98,7 +98,7 @@ bench: $(BENCH_STAMP)
 # BROAD), else $EXT_OBSERVER_BROAD_DATA, else data/broad (make broad-data),
 # else ../shared/broad; with none, the command says so in one line.
 # make broad BROAD_ARGS="--stress --json out/robustness.json": the robustness
-# benchmark instead (issue 27: each trial cut, biased, at 50 Hz, clipped),
+# benchmark instead (each trial cut, biased, at 50 Hz, clipped),
 # into docs/robustness.md, docs/figures/robustness.png and out/robustness.json.
 BROAD_DATA ?=
 BROAD_ARGS ?=
@@ -133,7 +133,7 @@ test-hosts:
 hosts-report: $(RUNTIME_STAMP)
 	$(PY) test/hosts_report.py
 
-# Faults that matter (issue 31, docs/tests.md#mutation): `make mutation-list`
+# Faults that matter (docs/tests.md#mutation): `make mutation-list`
 # applies each mutant of mutation/mutants.toml in a copy of the tree and runs
 # its tests (every one must be killed; about 3 minutes; MUTANTS="name ..."
 # runs some). `make mutation` runs mutmut over the raw-IMU kernels, the

@@ -4,7 +4,7 @@
 Sections: batch core (with ``reproduce --seeds 5``), node throughput and
 latency (relay and observer, per executor), accuracy beside the limit, the
 node's profile, and the raw-IMU estimator (``imu_filter_node`` beside a
-relay, its callbacks' parts, the core over BROAD) with issue 11's goals;
+relay, its callbacks' parts, the core over BROAD) with its speed goals;
 ``load`` runs ``python -m bench.load``, which writes its own page,
 ``docs/load.md``, beside the output.
 Progress goes to stderr, the Markdown to stdout and to
@@ -146,7 +146,7 @@ def _raw_imu(quick, log_dir):
 
 
 def _compiled(quick):
-    """Issue 19's figures: ``python -m bench.compiled --json`` (the node's CPU is section 6's)."""
+    """The compiled kernels' figures: ``python -m bench.compiled --json`` (node CPU: section 6's)."""
     args = ['bench.compiled'] + (['--sections', 'steps'] if quick else [])
     _log(f'compiled kernels: python -m {" ".join(args)} ...')
     # Relative to the repository, as the page shows the command (a reader can rerun it).

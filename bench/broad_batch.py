@@ -1,5 +1,5 @@
 """
-The raw-IMU core over every BROAD trial in both modes, batched, against issue 11's goal.
+The raw-IMU core over every BROAD trial in both modes, batched, against its speed goal.
 
 ``python -m bench.broad_batch [--data DIR] [--runs 3] [--workers N]
 [--vectorized] [--json PATH]`` reads the trials (BROAD's HDF5 files, found
@@ -22,7 +22,7 @@ import sys
 from bench.machine import load, load_range
 from bench.raw_imu import verdict
 
-# Issue 11: the core over all 22 trials, both modes, batched, in under this (s).
+# The raw-IMU speed goal: the core over all 22 trials, both modes, batched, in under this (s).
 BATCH_GOAL = 10.0
 
 
@@ -74,7 +74,7 @@ def batch(data=None, runs=3, workers=None, vectorized=False, progress=None):
 
 def goal_line(result):
     """The sentence that states the goal and whether it is met."""
-    return (f'goal (issue 11): the core on all {result["trials"]} trials, both modes, '
+    return (f'goal (raw-IMU node): the core on all {result["trials"]} trials, both modes, '
             f'batched, < {result["goal"]:g} s: {result["median_seconds"]:.1f} s (median of '
             f'{len(result["runs"])}, {result["runs"][0]["workers"]} workers, load average '
             f'{load_range(result["runs"])} on {os.cpu_count()} cores): '

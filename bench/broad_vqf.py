@@ -1,7 +1,7 @@
 """
 VQF doing the BROAD command's work, in one process: ``python -m bench.broad_vqf``.
 
-The yardstick of the BROAD command's whole-process time (issue 29): what
+The yardstick of the BROAD command's whole-process time: what
 ``python -m ext_observer broad --no-anchors`` does for our estimator, done
 for VQF (the ``vqf`` package's C++ core, one process): read the trials with
 the command's own reader, estimate each in 9D and 6D, score each estimate as

@@ -14,7 +14,7 @@ a soft-iron ``S = I + E``, ``E`` symmetric with elements uniform in ±10 %
 - VQF and Madgwick (packages ``vqf`` and ``ahrs``, run as
   ``python -m ext_observer broad`` runs them) on the same distorted samples;
 - the estimator on the undistorted trial, calibration on (the comparison the
-  issue asks for) and off (the estimator before the calibration);
+  goals read) and off (the estimator before the calibration);
 - a yardstick for what the data allow: the best constant calibration (the
   same model, ``S`` symmetric and ``b``) fitted by least squares over the
   whole trial's movement samples with the optical reference's attitude
@@ -239,7 +239,7 @@ def _mean(values):
 
 
 def summary(result, levels):
-    """Means per split and level, with the issue's ratios."""
+    """Means per split and level, with the goals' ratios."""
     names = sorted(result)
     tuning, held = split(names)
     out = {}
@@ -440,7 +440,7 @@ def _heading_deg(rotations, vectors):
 
 def floor_figures(trials, levels=LEVELS, undistorted=1.59, seed=0):
     """
-    What the issue's all-samples figure allows any causal estimator, from the data.
+    What the all-samples goal allows any causal estimator, from the data.
 
     Before the body turns, no offset is observable: at rest the field as
     given is one vector, and any heading has an offset that explains it. The
@@ -514,7 +514,7 @@ def floor_report(f):
     u = f['undistorted']
     lines = [f'{len(f["movement_s"])} trials, {min(f["movement_s"]):.0f} to '
              f'{max(f["movement_s"]):.0f} s of movement each; the undistorted estimator '
-             f'{u:.2f}°, so the issue\'s all-samples goal is {2 * u:.2f}°.', '',
+             f'{u:.2f}°, so the all-samples goal is {2 * u:.2f}°.', '',
              '| hard iron | heading error of the field as given, first second of movement '
              '(RMS) | ' + ' | '.join(f'bound if right after {t:g} s' for t in FLOOR_TIMES)
              + ' | right within this, for 2× |',

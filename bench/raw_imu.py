@@ -1,5 +1,5 @@
 """
-Node CPU per IMU sample of ``imu_filter_node``, beside a bare relay, against issue 11's goal.
+Node CPU per IMU sample of ``imu_filter_node``, beside a bare relay, against its speed goal.
 
 ``python -m bench.raw_imu [--executor events] [--rate 1000] [--mag-rate 100]
 [--seconds 10] [--rounds 3] [--json PATH]`` publishes ``sensor_msgs/Imu`` on
@@ -24,7 +24,7 @@ node's default). The samples are the BROAD excerpt the tests replay
 (``test/data``), looped. It prints one table, CPU µs per IMU sample (median
 and every run), outputs received (the fewest of any run), and the ratio of
 the medians against the goal, ``met`` or ``not met``: within
-:data:`NODE_GOAL` × the relay's (issue 11).
+:data:`NODE_GOAL` × the relay's.
 
 ``python -m bench.raw_imu relay --executor events`` runs the relay alone
 (SIGINT ends it); ``python -m bench.raw_imu step_only`` the floor.
@@ -47,7 +47,7 @@ from bench.procs import Child, REPO, reserved_domain_id, ros_env
 from bench.rosutil import EXECUTORS, make_executor, spin_until_shutdown
 
 DATA = os.path.join(REPO, 'test', 'data')
-# Issue 11: node CPU per IMU sample (1 kHz IMU, 100 Hz field) within this
+# The raw-IMU node's speed goal: CPU per IMU sample (1 kHz IMU, 100 Hz field) within this
 # factor of the bare relay's.
 NODE_GOAL = 1.2
 TARGETS = ('relay', 'imu_filter')
@@ -403,7 +403,7 @@ def goal_line(result):
     """The sentence that states the goal and whether it is met."""
     s = result
     if s['ratio'] is None:
-        return f'goal (issue 11): imu_filter ≤ {s["goal"]:g}× the relay: not measured'
+        return f'goal (raw-IMU node): imu_filter ≤ {s["goal"]:g}× the relay: not measured'
     spread = ''
     if s['round_ratios']:
         low, high = min(s['round_ratios']), max(s['round_ratios'])
@@ -411,7 +411,7 @@ def goal_line(result):
         if low <= s['goal'] < high:
             spread += ' (on both sides of the goal)'
     runs = [run for rows in s['runs'].values() for run in rows]
-    text = (f'goal (issue 11): imu_filter ≤ {s["goal"]:g}× the relay\'s CPU per IMU sample '
+    text = (f'goal (raw-IMU node): imu_filter ≤ {s["goal"]:g}× the relay\'s CPU per IMU sample '
             f'({s["executor"]}): {s["ratio"]:.2f}× (medians of {s["rounds"]}{spread}; load '
             f'average {load_range(runs)} on {os.cpu_count()} cores): {verdict(s["met"])}')
     if short_text(s):

@@ -409,7 +409,7 @@ def profile_section(direct, loops):
 
 
 def targets_section(r):
-    """The targets of issue 6, met or not, from the measured figures."""
+    """The paper observer node's speed targets, met or not, from the measured figures."""
     rows = []
     batch = r.get('batch') or {'observer_rates': [], 'reproduce': []}
     largest = max((x['batch'] for x in batch['observer_rates']), default=None)
@@ -473,7 +473,7 @@ def targets_section(r):
         rows.append(['node hot path: profiled and reported',
                      f'callbacks {_us(direct["observer_callbacks"])} per step '
                      f'(maths {_us(direct["core_step"])})', 'yes (section 5)'])
-    return '\n'.join(['## Targets of issue 6', '',
+    return '\n'.join(['## Targets: the paper observer node\'s speed', '',
                       _table(['target', 'measured', 'met'], rows)])
 
 

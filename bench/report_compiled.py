@@ -1,5 +1,5 @@
 """
-Issue 19's part of docs/performance.md: its goals and section 7.
+The compiled kernels' part of docs/performance.md: their speed goals and section 7.
 
 Rendered from what ``python -m bench`` gathers under ``compiled``
 (``python -m bench.compiled --json``: BROAD, the step per sample, the
@@ -9,11 +9,11 @@ missing or hold an ``error``. Every verdict is computed here from the
 figures, never typed.
 """
 
-from bench.compiled import BEGIN, END, NODE_GOAL_19
+from bench.compiled import BEGIN, END, COMPILED_NODE_GOAL
 from bench.raw_imu import FLOOR, verdict
 
-HEADING = '7. Compiled kernels (issue 19)'
-# Issue 19's goals: BROAD's wall time within this factor of VQF's (aim: 1),
+HEADING = '7. Compiled kernels'
+# The compiled kernels' speed goals: BROAD's wall time within this factor of VQF's (aim: 1),
 # the scores unchanged to this many degrees, the step on floats within this
 # many µs, a node's first start within these seconds (cold, warm).
 BROAD_GOAL = 3.0
@@ -21,7 +21,7 @@ SCORE_TOLERANCE = 1e-9
 STEP_GOAL_US = 2.0
 COLD_GOAL_S = 10.0
 WARM_GOAL_S = 2.0
-# Issue 29: the BROAD command's whole process within this factor of VQF's
+# The BROAD command's whole process within this factor of VQF's
 # doing the same work (aim: the second).
 WHOLE_GOAL = 1.0
 WHOLE_AIM = 0.5
@@ -69,10 +69,11 @@ def _node_row(node):
     if medians.get(FLOOR) and medians.get('relay'):
         measured += (f'; {FLOOR}, the estimate\'s arithmetic alone: '
                      f'{medians[FLOOR] / medians["relay"]:.2f}×')
-    text = verdict(ratio <= NODE_GOAL_19)
-    if ratios and min(ratios) <= NODE_GOAL_19 < max(ratios):
+    text = verdict(ratio <= COMPILED_NODE_GOAL)
+    if ratios and min(ratios) <= COMPILED_NODE_GOAL < max(ratios):
         text += ' (rounds on both sides of the goal)'
-    return (f'raw-IMU node, 1 kHz IMU + 100 Hz field: CPU per sample ≤ {NODE_GOAL_19:g}× a '
+    return (f'raw-IMU node, 1 kHz IMU + 100 Hz field: CPU per sample ≤ '
+            f'{COMPILED_NODE_GOAL:g}× a '
             'bare relay\'s (EventsExecutor)', measured, text)
 
 
@@ -95,7 +96,7 @@ def _start_rows(starts):
 
 
 def targets_section(compiled, raw):
-    """'Targets of issue 19': each goal, what was measured, met or not met; '' without figures."""
+    """The compiled kernels' speed targets: each goal, measured, met or not; '' without figures."""
     rows = []
     if _ok(compiled):
         if compiled.get('broad'):
@@ -111,8 +112,8 @@ def targets_section(compiled, raw):
         rows.append(_whole_row(compiled['whole']))
     if not rows:
         return ''
-    return ('## Targets of issue 19 (compiled kernels)\n\n'
-            f'Figures: [section 7](#7-compiled-kernels-issue-19) and, for the node, '
+    return ('## Targets: the compiled kernels\' speed\n\n'
+            f'Figures: [section 7](#7-compiled-kernels) and, for the node, '
             '[section 6](#6-raw-imu-estimator-imu_filter_node).\n\n' + _table(rows))
 
 
@@ -121,7 +122,7 @@ def _whole_row(whole):
     m = whole_medians(whole)
     ratio = m['ours'] / m['VQF']
     aim = '' if ratio <= WHOLE_AIM else f' (the aim, ≤ {WHOLE_AIM:g}×, not reached)'
-    return (f'issue 29: the BROAD command, 22 trials × 9D and 6D, whole process, warm cache: '
+    return (f'the BROAD command\'s whole-process time, 22 trials × 9D and 6D, warm cache: '
             f'≤ {WHOLE_GOAL:g}× VQF\'s time for the same work (aim ≤ {WHOLE_AIM:g}×)',
             f'{m["ours"]:.2f} s, VQF {m["VQF"]:.2f} s: {ratio:.2f}× (medians of '
             f'{len(whole["VQF"])}, load {whole["load"][0]:.1f}–{whole["load"][1]:.1f}); '

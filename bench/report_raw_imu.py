@@ -1,5 +1,5 @@
 """
-The raw-IMU part of docs/performance.md: issue 11's goals and section 6.
+The raw-IMU part of docs/performance.md: the raw-IMU node's speed goals and section 6.
 
 Rendered from what ``python -m bench`` gathers under ``raw_imu`` (see
 ``bench/__main__.py``): ``node_events`` and ``node_single``
@@ -52,7 +52,7 @@ def _node_verdict(node, where=': see section 6'):
 
 
 def targets_section(raw):
-    """'Targets of issue 11': each goal, what was measured, met or not met."""
+    """The raw-IMU node's speed targets: each goal, what was measured, met or not met."""
     rows = []
     for key in ('node_events', 'node_single'):
         node = raw.get(key)
@@ -78,7 +78,7 @@ def targets_section(raw):
     if not rows:
         return None
     return '\n'.join([
-        '## Targets of issue 11 (raw IMU)', '',
+        '## Targets: the raw-IMU node\'s speed', '',
         f'Figures and commands: [section 6]({_anchor(HEADING)}). The load average is the '
         'machine\'s 1-minute load during the runs; above the number of cores, the other '
         'work shares them and the wall-clock figures stretch.', '',

@@ -235,7 +235,7 @@ def test_report_renders_the_raw_imu_goals_and_section():
            'node_single': {'error': 'ended with exit code 1 and no result'},
            'direct': direct, 'batch': batch}
     text = report.render({'machine': machine, 'command': 'python -m bench', 'raw_imu': raw})
-    assert '## Targets of issue 11 (raw IMU)' in text
+    assert "## Targets: the raw-IMU node's speed" in text
     assert f'## {report_raw_imu.HEADING}' in text
     assert '(#6-raw-imu-estimator-imu_filter_node)' in text
     rows = [line for line in text.splitlines() if line.startswith('| node CPU per IMU')]
@@ -250,7 +250,7 @@ def test_report_renders_the_raw_imu_goals_and_section():
     assert 'not run: no BROAD data | not measured |' in text
 
 
-def test_report_renders_issue_19s_goals_from_the_figures():
+def test_report_renders_the_compiled_kernels_goals_from_the_figures():
     from bench import report_compiled
     from bench.compiled import as_json, markdown
     machine = {'date': 'today', 'commit': 'abc', 'cores': 2, 'cpu': 'x',
@@ -280,8 +280,8 @@ def test_report_renders_issue_19s_goals_from_the_figures():
         (found,) = [line for key, line in rows.items() if key.startswith('| ' + start)]
         return found
 
-    assert '## Targets of issue 19 (compiled kernels)' in text
-    assert f'## {report_compiled.HEADING}' in text and '(#7-compiled-kernels-issue-19)' in text
+    assert "## Targets: the compiled kernels' speed" in text
+    assert f'## {report_compiled.HEADING}' in text and '(#7-compiled-kernels)' in text
     assert row('the 22 dev trials').endswith('1.00 s on 2 processes, 1.20 s on 1, VQF 1.30 s: '
                                              '0.77× | met |')
     assert row('the scores unchanged').endswith('| met |')
@@ -290,8 +290,8 @@ def test_report_renders_issue_19s_goals_from_the_figures():
     assert row('raw-IMU node').endswith('| not met |') and '1.16×' in row('raw-IMU node')
     assert row('imu_filter_node: first start').endswith('| met |')
     assert row('observer_node: first start').endswith('| not met |')
-    # Issue 29: the medians 1.3 and 2.1 s, 0.62x: the goal met, not the aim.
-    assert row('issue 29: the BROAD command').endswith(
+    # The whole process: the medians 1.3 and 2.1 s, 0.62x: the goal met, not the aim.
+    assert row("the BROAD command's whole-process time").endswith(
         '1.30 s, VQF 2.10 s: 0.62× (medians of 3, load 1.0–1.5); to its first estimate '
         '0.80 s | met (the aim, ≤ 0.5×, not reached) |')
     assert '| ours, `--workers 1` | 1.60 | 0.76 |' in text

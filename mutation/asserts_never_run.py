@@ -1,5 +1,5 @@
 """
-Asserts of the test files that the suite never runs (issue 31): from a coverage run of the tests.
+Asserts of the test files that the suite never runs: from a coverage run of the tests.
 
 ``coverage run --branch --include='test/*' -m pytest test bench/test_*.py``
 then ``coverage json -o out/test_coverage.json`` then

@@ -236,7 +236,7 @@ def test_stress_command_end_to_end_on_two_short_trials(tmp_path):
         cwd=REPO, capture_output=True, text=True, timeout=230)
     assert done.returncode == 0, done.stderr
     assert 'ours/VQF' in done.stdout and '(d) (c) at 50 Hz' in done.stdout
-    assert 'The issue asks for ours at most 1× VQF' in (docs / 'robustness.md').read_text()
+    assert 'The goal: ours at most 1× VQF' in (docs / 'robustness.md').read_text()
     figures = json.loads(out.read_text())
     assert set(figures['scores']) == {'b', 'd'}
     assert set(figures['scores']['d']) == {broad.OURS, 'VQF'}

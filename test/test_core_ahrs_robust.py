@@ -1,5 +1,5 @@
 """
-The raw-IMU estimator where the robot starts (issue 27), no ROS.
+The raw-IMU estimator wherever the robot starts, no ROS.
 
 A gyro bias learned in motion without rest, a start in motion, a slow
 constant turn in 6D: synthetic samples with a known truth and a seeded

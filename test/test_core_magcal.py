@@ -135,7 +135,7 @@ def test_a_world_fixed_disturbance_does_not_move_the_calibration():
 
 
 # The raw-IMU estimator with the calibration off, pinned (first at commit
-# f3564d7, before the calibration was added; again with issue 27's changes
+# f3564d7, before the calibration was added; again with the changes for where the robot starts
 # to the estimator, made on purpose), on
 # synthetic(seconds=12, seed=3) in 9D, samples 1, 500 and 2399 as hex, on
 # floats. A batch (that recording and its 6D run) gives them too: each

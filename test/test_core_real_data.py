@@ -85,7 +85,7 @@ def test_estimator_on_two_whole_trials_matches_the_page():
 @pytest.mark.timeout(180)
 def test_the_bag_command_on_a_whole_trial_reproduces_the_page(tmp_path):
     """
-    Issue 20: a bag made of a whole BROAD trial, ``--compare`` with the optical reference.
+    A bag with a reference: a whole BROAD trial, ``--compare`` with the optical reference.
 
     The bag command runs imu_filter_node's pipeline, where a field is its own
     message after its IMU sample (here every sample has one, as the

@@ -1,5 +1,5 @@
 """
-The orientation covariance of imu_filter_node (issue 18).
+The orientation covariance of imu_filter_node and its coverage bounds.
 
 The uncertainty model alone (``core/ahrs/uncertainty.py``): its steady state is
 the closed form of a first-order correction, rest teaches the bias. Through
@@ -30,7 +30,7 @@ from ext_observer.pipeline.raw_imu import RawImuPipeline
 SECOND = 1_000_000_000
 START = 1000 * SECOND
 FIELD = (2e-5, 1e-5, -4e-5)  # T, dip about 60°
-# Issue 17's online magnetometer calibration, where the core has it: off
+# The online magnetometer calibration, where the core has it: off
 # where a test needs fields used at once.
 HAS_CALIBRATION = 'mag_cal' in AhrsParams.DEFAULTS
 
@@ -310,7 +310,7 @@ def test_fixed_mode_reproduces_todays_imu_data_bit_for_bit(ros_context, spinner)
     sent = {stamp: (gyr, acc) for stamp, gyr, acc, _ in data}
     assert len(driver.outputs) == len(expected)
     for stamp, msg in driver.outputs.items():
-        # What imu_filter_node published before issue 18: the sample, its
+        # What imu_filter_node published before it estimated a covariance: the sample, its
         # orientation the normalized estimate, orientation_stddev² on the diagonal.
         w, x, y, z = expected[stamp].state
         n = (w * w + x * x + y * y + z * z) ** 0.5
@@ -436,7 +436,7 @@ def test_the_benchmark_writes_its_page_and_figures(tmp_path, capsys):
                      json_path=str(tmp_path / 'c.json'))
     assert ('9D', 'dev', 'undisturbed', 'heading') in summary
     assert ('6D', 'held-out', 'disturbed', 'inclination') in summary
-    assert 'within issue 18' in capsys.readouterr().out
+    assert 'within the coverage bounds' in capsys.readouterr().out
     page = (tmp_path / 'covariance.md').read_text()
     assert page.startswith('# The orientation covariance')
     for figure in ('covariance_reliability.png', 'covariance_magnet.png'):

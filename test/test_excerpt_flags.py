@@ -169,7 +169,7 @@ def test_the_magnet_is_flagged(disturbed):
 
 @pytest.mark.xfail(strict=True, reason='the field reference starts from the first field '
                                        'sample, 4 % below the rest median, and learns only '
-                                       'from samples within mag_norm_th of it; issue 21')
+                                       'from samples within mag_norm_th of it: a known limit')
 def test_a_still_field_at_rest_is_not_flagged(disturbed):
     # The first 5 s of the disturbed excerpt: still, no magnet yet (the true
     # field's norm within the sensor's noise of its median).

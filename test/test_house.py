@@ -1,4 +1,4 @@
-"""The package's structure (issue 28): layouts declared once."""
+"""The package's structure: layouts declared once."""
 
 import ast
 import pathlib

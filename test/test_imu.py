@@ -118,7 +118,7 @@ def replay(spinner, driver, imu, measurements, nodes):
 
 # quaternion: an AHRS publishing geometry_msgs/QuaternionStamped on
 # attitude/measurement, best effort and with w >= 0 or flipping sign, next
-# to an IMU (issue 11): with the defaults it connects and converges.
+# to an IMU: with the defaults it connects and converges.
 @pytest.mark.parametrize('measurement_source, gain_mode', [
     ('imu', 'constant'), ('pose', 'scheduled'), ('quaternion', 'constant')])
 def test_replay_imu_and_flipping_measurements_converge(ros_context, spinner,

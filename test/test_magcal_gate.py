@@ -1,5 +1,5 @@
 """
-The calibration's gate: an improbable field is not learned (issue 31), no ROS.
+The calibration's gate: an improbable field is not learned (a fault that matters), no ROS.
 
 A magnet passing by adds a field for a moment; the calibration's Kalman
 filter refuses a field whose innovation is improbable (``GATE``), so such a

@@ -1,5 +1,5 @@
 """
-The magnetometer calibration learns the field's lag behind the gyro (issue 31), no ROS.
+The magnetometer calibration learns the field's lag behind the gyro (a fault that matters), no ROS.
 
 Real magnetometers report the field a little late (BROAD's: about 13 ms, as
 the calibration learns it on trial 09); while the body turns fast, a field

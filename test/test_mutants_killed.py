@@ -1,5 +1,5 @@
 """
-Known answers for faults the rest of the suite let through (issue 31), no ROS.
+Known answers for faults the rest of the suite let through (the mutation tests), no ROS.
 
 Each test here was written because a mutant of mutation/mutants.toml
 survived the tests of its module (``make mutation-list`` names them): the

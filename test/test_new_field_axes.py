@@ -1,5 +1,5 @@
 """
-A new field is accepted while the body turns about any axis, in any attitude (issue 31).
+A new field is accepted while the body turns about any axis, in any attitude (a fault that matters).
 
 The field the estimator rejects as disturbed is taken as the new normal
 once it has stayed consistent for ``mag_new_time`` while the body turns
@@ -22,7 +22,7 @@ from test_core_ahrs_params import (angle_deg, DT, FIELD, first_index, qexp, qmul
 # s: from here on the field is 30 % stronger (a new place); later than
 # MAG_NEW_TIME, so that the references have been confirmed for longer than
 # that and the new field waits the whole MAG_NEW_TIME (a new field is never
-# made to wait longer than fields confirmed the references, issue 27).
+# made to wait longer than fields confirmed the references).
 CHANGE = 5.0
 MAG_NEW_TIME = 4.0
 ATTITUDES = {'pitched': qexp((0.0, math.radians(15.0), 0.0)),

@@ -623,7 +623,7 @@ def test_params_file_has_every_parameter_with_a_comment():
         values = sections[f'/**/{name}']['ros__parameters']
         # Every parameter has a value YAML can list (align_sign once had
         # none and was a comment line; the loop that checked such comments
-        # never ran since: issue 31). A new one without: list it here.
+        # never ran since, as the mutation tests found). A new one without: list it here.
         assert not any(map(unset_scalar, specs)), [s.name for s in specs if unset_scalar(s)]
         assert list(values) == [spec.name for spec in specs]
         for spec in specs:

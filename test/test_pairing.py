@@ -458,7 +458,7 @@ imu_operations = st.lists(st.one_of(
 
 # A stream that releases steps, after any operations: good samples a usual
 # interval apart from beyond every stamp drawn so far, each with or without
-# a measurement inside its interval (issue 31: drawn at random alone, the
+# a measurement inside its interval (drawn at random alone, the
 # operations released no step in 400 examples, so the step checks never ran).
 stream_intervals = st.lists(st.tuples(st.integers(1 * MS, 20 * MS), st.booleans()),
                             min_size=3, max_size=12)

@@ -15,7 +15,7 @@ sample), keeps each estimate and its covariance, and compares the claimed
 for each component (inclination; heading in 9D), per group (undisturbed,
 disturbed) and per split: the even-numbered trials chose the defaults of
 :class:`~ext_observer.core.ahrs.uncertainty.UncertaintyParams` (``dev``), the
-odd-numbered ones did not (``held-out``). Issue 18 asks for 90–99 % and
+odd-numbered ones did not (``held-out``). The coverage bounds: 90–99 % and
 0.5–2.
 
 :func:`replay` runs the uncertainty model alone again on what a run logged
@@ -35,7 +35,7 @@ MODES = ('9D', '6D')
 GROUPS = ('undisturbed', 'disturbed')
 SPLITS = ('dev', 'held-out')
 COMPONENTS = ('inclination', 'heading')
-# Issue 18's bounds.
+# The coverage bounds: 90–99 % within 2σ, the mean of e²/σ² within 0.5–2.
 FRACTION_RANGE = (0.90, 0.99)
 MEAN_RANGE = (0.5, 2.0)
 # A σ this large says the heading is unknown (before a field sets it, or while
@@ -218,7 +218,7 @@ def errors(trial, run):
 
 def calibration_figures(samples):
     """
-    The issue's two figures for pooled samples.
+    The two coverage figures for pooled samples.
 
     Parameters
     ----------
@@ -292,7 +292,7 @@ def summarize(trials, runs, groups, variances=None):
 
 
 def verdict(figures):
-    """Whether both figures are within issue 18's bounds."""
+    """Whether both figures are within the coverage bounds."""
     lo, hi = FRACTION_RANGE
     mlo, mhi = MEAN_RANGE
     return lo <= figures['within_2sigma'] <= hi and mlo <= figures['mean_z2'] <= mhi
@@ -376,7 +376,7 @@ def _keep(runs, trials, modes, index, run, i, count, progress):
 
 # --- choosing the defaults -------------------------------------------------
 
-# What the tuning aims at, inside issue 18's bounds: 2σ covering 95 % (for a
+# What the tuning aims at, inside the coverage bounds: 2σ covering 95 % (for a
 # two-dimensional Gaussian error an RMS σ covers 98 %), the mean of e²/σ²
 # near 1.
 TARGET_FRACTION, FRACTION_SCALE = 0.95, 0.025
@@ -403,7 +403,7 @@ def tuning_cost(summary):
 
 def bound_margin(figures):
     """
-    How deep a row's two figures lie inside issue 18's bounds: the smaller of the two.
+    How deep a row's two figures lie inside the coverage bounds: the smaller of the two.
 
     The fraction within 2σ on a linear scale, the mean of ``e² / σ²`` on a
     log scale, each as a share of its range: 0.5 in the middle of both, 0 on

@@ -52,7 +52,7 @@ def report(trials, groups, meta, modes=cv.MODES, workers=1, docs=None, json_path
     print(cv.text_table(summary))
     missed = [key for key, f in summary.items() if key[1] != 'all' and not cv.verdict(f)]
     print(f'{len(summary) - len(missed) - sum(k[1] == "all" for k in summary)} of '
-          f'{sum(k[1] != "all" for k in summary)} rows within issue 18\'s bounds '
+          f'{sum(k[1] != "all" for k in summary)} rows within the coverage bounds '
           f'(90–99 % within 2σ, mean e²/σ² 0.5–2)'
           + ('' if not missed else '; outside: ' + ', '.join(' '.join(k) for k in missed)))
     if json_path:
@@ -204,7 +204,7 @@ def markdown(summary, meta, figures, docs, magnet):
               'compared with the error against the optical reference over the scored '
               '(`movement`) samples. Trials are pooled per group; **dev** are the '
               'even-numbered trials, on which the defaults were chosen, **held-out** the '
-              'odd-numbered ones. Issue 18 asks for 90–99 % within 2σ and a mean '
+              'odd-numbered ones. The coverage bounds: 90–99 % within 2σ and a mean '
               'of e²/σ² between 0.5 and 2. The last three columns: the share of samples whose '
               'σ says the heading is unknown (30° or more: before a field sets it, or while '
               'the magnetometer calibration has learned too little to judge the field; any '
@@ -297,8 +297,8 @@ _INTRO = [
     '- `RawImuPipeline` gives each `Estimate` its `covariance`; '
     '`pipeline.estimator.uncertainty` has `inclination_std` and `heading_std` (rad).',
     '- In 9D the heading is unknown (σ = 104°, that of a uniform angle) until a field '
-    'says more: before the first field, and while the magnetometer calibration (issue '
-    '17) has learned too little to judge the field the heading was taken from (see the '
+    'says more: before the first field, and while the online magnetometer calibration '
+    'has learned too little to judge the field the heading was taken from (see the '
     'model). In 6D the heading is relative to the estimator\'s own start; its σ starts '
     'near 0 and grows without bound.',
     '',
@@ -429,7 +429,7 @@ _MODEL = [
     '- In 9D the heading\'s error is that drift plus the error U of the field the '
     'heading was taken from: unknown at the start (U = (104°)²), 0 once a good field has '
     'corrected it. While the magnetometer calibration learns, the estimator holds the '
-    'heading it took from the field as given (issue 17), and each field tells what the '
+    'heading it took from the field as given, and each field tells what the '
     'calibration learned so far makes of it: U = turn² + quality² + `heading_floor`², '
     'at most (104°)², with turn the angle by which that calibration turns the field\'s '
     'heading and quality its own heading σ (infinite before it has learned anything). '
@@ -481,7 +481,7 @@ _CHOICE = [
     '',
     'Then `heading_floor` was chosen again, on the dev trials alone, by another '
     'criterion: the value among 0.018 to 0.024 rad (steps of 0.0005) whose dev heading '
-    'rows lie deepest inside the issue\'s bounds (`covariance.choose_heading_floor`: the '
+    'rows lie deepest inside the coverage bounds (`covariance.choose_heading_floor`: the '
     'largest of the smallest `covariance.bound_margin`, each figure\'s distance to its '
     'nearer bound as a share of its range, the mean on a log scale). The first tuning '
     'had left the dev disturbed heading at 0.60, near the lower bound of the mean, and '

@@ -136,7 +136,7 @@ def _intro(page):
         "Mahony and Fusion (at its README's settings, and at its package defaults) run in "
         'the same command, each at the settings its authors advise, so that its accuracy '
         'can be judged '
-        'against the best open estimators (issue 11). It is generated; do not edit it '
+        'against the best open estimators. It is generated; do not edit it '
         'by hand.',
         '',
         '**Data.** BROAD (Laidig et al. 2021): D. Laidig, M. Caruso, A. Cereatti, T. Seel, '
@@ -215,7 +215,7 @@ def _summary(page):
         rows.append(row)
     lines = ['## Summary', '',
              'Mean RMSE over the trials of each group, in degrees; in parentheses the '
-             'ratio to VQF. The issue asks for ours below BasicVQF, Madgwick, Mahony '
+             'ratio to VQF. The done-criteria: ours below BasicVQF, Madgwick, Mahony '
              'and Fusion on the undisturbed and on the disturbed 9D averages, at most '
              '1.1× VQF (goal), and at most 1.1× VQF in 6D inclination.', '']
     lines += _table(['algorithm'] + [c[3] for c in columns], rows) + ['']

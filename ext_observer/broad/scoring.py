@@ -6,7 +6,7 @@ frame), total angle ``2 acos(min(|e_w|, 1))``, heading
 ``2 atan(|e_z / e_w|)`` (about the world vertical), inclination
 ``2 acos(min(√(e_w² + e_z²), 1))``; the RMSE of each over the ``movement``
 samples, NaN reference samples skipped, in degrees; trials are averaged per
-group. Then the averages the issue's done-criteria read
+group. Then the averages the done-criteria read
 (:func:`summary`, :func:`criteria`).
 
 Quaternions scalar first ``(w, x, y, z)``, sensor → world.
@@ -20,7 +20,7 @@ from ext_observer.broad.names import algorithms_in, OURS
 from ext_observer.core.quaternion import conjugate, multiply
 
 KEYS = ('total_rmse_deg', 'heading_rmse_deg', 'inclination_rmse_deg')
-# The issue's goal: ours at most this times VQF's average.
+# The goal: ours at most this times VQF's average.
 VQF_RATIO_GOAL = 1.1
 # The others ours should be below on the 9D averages.
 OTHERS = ('BasicVQF', 'Madgwick', 'Mahony', 'Fusion')
@@ -133,7 +133,7 @@ def group_means(scores, groups, key):
 
 def summary(result, groups):
     """
-    Return the averages the issue's done-criteria use.
+    Return the averages the done-criteria use.
 
     ``{algorithm: {mode: {group: {total_rmse_deg, heading_rmse_deg,
     inclination_rmse_deg}}}}`` for the groups ``all_trials``,
@@ -154,7 +154,7 @@ def summary(result, groups):
 
 def criteria(summ):
     """
-    Return the issue's done-criteria, read off :func:`summary`'s averages.
+    Return the done-criteria, read off :func:`summary`'s averages.
 
     Returns
     -------

@@ -1,5 +1,5 @@
 """
-BROAD's trials made harder: the variants of the robustness benchmark (issue 27).
+BROAD's trials made harder: the variants of the robustness benchmark.
 
 Each BROAD trial (:class:`~ext_observer.broad.data.Trial`) is turned into the
 recordings a robot's IMU gives more often than BROAD does:
@@ -50,7 +50,7 @@ LABELS = {
     'd': '(d) (c) at 50 Hz',
     'e': '(e) gyro clipped ±250 °/s',
 }
-# The issue's done-criterion on (b)–(e): ours at most this times VQF, in 6D
+# The done-criterion on (b)–(e): ours at most this times VQF, in 6D
 # inclination and 9D total RMSE (goal: 0.9).
 RATIO_DONE = 1.0
 RATIO_GOAL = 0.9

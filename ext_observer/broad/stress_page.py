@@ -64,7 +64,7 @@ def stress_markdown(out, meta, figure=None, docs_dir='.'):
         "BROAD's trials start with seconds of rest, from a calibrated sensor at 286 Hz whose "
         "gyro never leaves its range. A robot's IMU is often none of that. This page runs "
         'the raw-IMU estimator (ours) and the anchors on variants of '
-        'each trial that break one of those habits at a time (issue 27), and scores them '
+        'each trial that break one of those habits at a time, and scores them '
         'as [broad.md](broad.md) does. It is generated; do not edit it by hand.',
         '',
         '**Data.** BROAD (Laidig et al. 2021): D. Laidig, M. Caruso, A. Cereatti, T. Seel, '
@@ -166,7 +166,7 @@ def _scoring(meta):
 
 
 def _ratio_lines(summ, keys):
-    """The ratios ours / VQF, all trials and per half, and the issue's criterion."""
+    """The ratios ours / VQF, all trials and per half, and the criterion."""
     modes = modes_of(summ)
     if OURS not in algorithms_of(summ) or 'VQF' not in algorithms_of(summ):
         return []
@@ -183,7 +183,7 @@ def _ratio_lines(summ, keys):
     if judged:
         met = [f'({k}) {m}' for k, m, r in judged if r <= RATIO_DONE]
         goal = [f'({k}) {m}' for k, m, r in judged if r <= RATIO_GOAL]
-        lines += ['', f'The issue asks for ours at most {RATIO_DONE:g}× VQF on (b)–(e), in 6D '
+        lines += ['', f'The goal: ours at most {RATIO_DONE:g}× VQF on (b)–(e), in 6D '
                   f'and in 9D, over all trials (goal: {RATIO_GOAL:g}×). At this run: '
                   f'{len(met)} of {len(judged)} met'
                   + (f' ({", ".join(met)})' if met else '')

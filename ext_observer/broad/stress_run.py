@@ -125,7 +125,7 @@ def algorithms_of(summ):
 
 
 def modes_of(summ):
-    """The modes of a summary, in the order 6D, 9D (the issue's table)."""
+    """The modes of a summary, in the order 6D, 9D (the page's table)."""
     found = {m for per_algorithm in summ.values() for per_mode in per_algorithm.values()
              for m in per_mode}
     return [m for m in ('6D', '9D') if m in found]
