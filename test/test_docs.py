@@ -46,17 +46,6 @@ ISSUE_NUMBER = re.compile(r'\bissues?\s*#?\s*\d+\b|(?:(?<=\s)|(?<=\())#\d+(?![\w
 # `dlaidig/vqf #25`, `imu_tools #3`, `vqf issue 25`).
 OTHER_PROJECT = re.compile(r'(?:[\w.-]+/[\w.-]+|\bimu_tools|\bvqf|\bFusion|\bimu_filter_madgwick'
                            r'|\brobot_localization|\brclpy|\bnumba|\bnumpy)`?\s*$', re.I)
-# Files still naming an issue by number, each edited at once by another
-# change: the coordinator rewrites them and then empties this list.
-ISSUE_NUMBER_PENDING = (
-    'ext_observer/pipeline/raw_imu.py', 'ext_observer/core/ahrs/ahrs_layout.py',
-    'ext_observer/core/ahrs/ahrs_params.py', 'ext_observer/core/ahrs/uncertainty_kernel.py',
-    'docs/raw_imu.md', 'docs/covariance.md')
-# A link into a heading renamed from its issue to its goal, in a file of that
-# list: the coordinator mends it with them and empties this too.
-LINKS_PENDING = ('performance.md#targets-of-issue-11-raw-imu',)
-
-
 def issue_numbers(text):
     """Return (line, mention) of each issue by number not led by another project's name."""
     return [(text[:m.start()].count('\n') + 1, m.group())
@@ -174,7 +163,7 @@ def test_relative_links_resolve_to_files_and_headings():
     for page in _pages():
         text = _read(page)
         for number, target in links(text):
-            if not target or _is_external(target) or target in LINKS_PENDING:
+            if not target or _is_external(target):
                 continue
             path, _, anchor = target.partition('#')
             resolved = os.path.normpath(os.path.join(os.path.dirname(page), path)) \
@@ -330,8 +319,7 @@ def test_no_issue_of_this_project_is_named_by_number():
         for root, _, files in os.walk(os.path.join(REPO, folder)):
             for file in files:
                 path = os.path.join(root, file)
-                if (not file.endswith(('.py', '.md', '.yaml', '.toml', '.txt'))
-                        or _name(path) in ISSUE_NUMBER_PENDING):
+                if not file.endswith(('.py', '.md', '.yaml', '.toml', '.txt')):
                     continue
                 found += [f'{_name(path)}:{line}: {mention}'
                           for line, mention in issue_numbers(_read(path))]

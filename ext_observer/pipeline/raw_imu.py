@@ -211,7 +211,7 @@ class RawImuEstimator:
     def _track_field(self, dt, field):
         """Tell the uncertainty what the core's last field did to the heading."""
         core = self.core
-        # Issue 17's calibrator, where the core has one: until it is ready the
+        # The online magnetometer calibration, where the core has one: until it is ready the
         # heading does not follow the field, and once ready the next used
         # field sets it again (a running mean from 1).
         calibration = getattr(core, 'calibration', None)

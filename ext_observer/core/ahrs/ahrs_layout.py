@@ -65,7 +65,7 @@ S_CAL_WAIT = AHRS.field('cal_wait')
 S_CAL_MOVED = AHRS.field('cal_moved')
 S_CAL_SINCE = AHRS.field('cal_since')
 S_CAL_LOADED = AHRS.field('cal_loaded')
-# --- issue 27: the bias in motion, the start, a clipped gyro -----------------------
+# --- where the robot starts: the bias in motion, the start, a clipped gyro ---------
 P_BIAS_SIGMA_INIT = AHRS.parameter('bias_sigma_init')  # rad/s: σ of the bias at first
 P_BIAS_SIGMA_MOTION = AHRS.parameter('bias_sigma_motion')  # rad/s: in steady motion
 P_GYRO_RANGE = AHRS.parameter('gyro_range')  # rad/s: the gyro's range (0: unknown)

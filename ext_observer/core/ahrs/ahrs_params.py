@@ -88,7 +88,7 @@ AHRS_TABLE = (
     _T('mag_cal_rate', 100.0, 'Hz', 0.0, 1e5,
        'most fields per second the calibration learns from (one value for a batch; every '
        'field is calibrated)'),
-    # Issue 27: the bias in motion and a clipped gyro.
+    # Where the robot starts: the bias in motion and a clipped gyro.
     _T('bias_sigma_init', math.radians(0.5), 'rad/s', 0.0, 10.0,
        'σ of the gyro bias per axis before anything is learned (the most its uncertainty '
        'grows to)'),

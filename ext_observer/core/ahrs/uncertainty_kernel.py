@@ -68,7 +68,7 @@ U_CALIBRATION = UNCERTAINTY.field('calibration')
 U_HEADING_SET = UNCERTAINTY.field('heading_set')
 U_WZ2 = UNCERTAINTY.field('wz2')
 U_WH2 = UNCERTAINTY.field('wh2')
-# The start (issue 27): s since it, samples and the mean of ((|f| − g)/g)² seen
+# The start (wherever the robot starts): s since it, samples and the mean of ((|f| − g)/g)² seen
 # since, and the variance per horizontal axis the running mean of the
 # specific force still owes to the motion (rad²).
 U_START_T = UNCERTAINTY.field('start_t')
