@@ -250,6 +250,10 @@ class RawImuEstimator:
         self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma,
                                math.nan, dip)
 
+    def velocity(self, velocity, dt=None):
+        """The body's velocity (m/s, IMU frame), ``dt`` s after the previous one (the velocity aid)."""
+        self.core.velocity(velocity, dt)
+
     def use_kernels(self, kernels):
         """Go on with other kernels (plain or compiled): the core's and the covariance's."""
         self.core.use_kernels(kernels)
@@ -481,6 +485,7 @@ class RawImuPipeline:
         self.reinitializations = dict.fromkeys(GUARD_REASONS, 0)
         self._constant_dt = settings['constant_dt']
         self._gap_resets = settings['forward_gap_action'] == 'reset'
+        self._velocity_stamp = None
 
     def configure(self, settings):
         """Take the settings that may change at runtime."""
@@ -552,6 +557,26 @@ class RawImuPipeline:
                                 self.estimator.uncertainty.covariance if covariance is None
                                 else covariance)
         return outcome, estimate
+
+    def velocity(self, stamp, velocity):
+        """
+        Take the body's velocity (ns, m/s in the IMU's frame): the next steps remove its acceleration.
+
+        Returns
+        -------
+        outcome : str or None
+            None when taken; ``'not_finite'`` or ``'out_of_order'`` (dropped).
+
+        """
+        v = tuple(float(c) for c in velocity)
+        if len(v) != 3 or not all(math.isfinite(c) for c in v):
+            return 'not_finite'
+        previous = self._velocity_stamp
+        if previous is not None and stamp <= previous:
+            return 'out_of_order'
+        self._velocity_stamp = stamp
+        self.estimator.velocity(v, None if previous is None else (stamp - previous) * 1e-9)
+        return None
 
     def field(self, stamp, field):
         """

@@ -330,6 +330,10 @@ class PipelineRun:
             self._calibrations.append(self._calibration)
         return estimate
 
+    def velocity(self, stamp, velocity):
+        """Take the body's velocity (ns, m/s, IMU frame); return the pipeline's outcome."""
+        return self.pipeline.velocity(stamp, velocity)
+
     def field(self, stamp, field):
         """Take one field (ns, T); return the pipeline's outcome."""
         outcome = self.pipeline.field(stamp, field)
@@ -388,7 +392,7 @@ class PipelineRun:
 
 
 def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=None,
-                      parameters=None, check_units=True):
+                      parameters=None, check_units=True, velocity=None, velocity_times=None):
     """
     Estimate the attitude of one recording as ``imu_filter_node`` does.
 
@@ -409,6 +413,14 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
         repeated times are dropped and counted as the node does.
     mag_times : array_like, shape (M,), optional
         Time of each field, s, on the same clock as ``times`` (or the rate's).
+    velocity : array_like, shape (V, 3), optional
+        The body's velocity at the IMU, m/s, in the IMU's frame (e.g. wheel
+        odometry): each step with one at most ``VELOCITY_TIMEOUT`` old removes
+        the body's acceleration from the specific force (the velocity aid).
+        With ``velocity_times``, at its own times; without, row ``k`` is the
+        velocity at IMU sample ``k`` (V = N).
+    velocity_times : array_like, shape (V,), optional
+        Time of each velocity, s, on the IMU's clock.
     parameters : dict, optional
         ``imu_filter_node`` parameter values (``use_mag``, ``world_frame``,
         ``ahrs.tau_mag``, ...: ``config/imu_filter.yaml``).
@@ -475,14 +487,45 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
         events = ((kind, i) for _, kind, i in heapq.merge(
             zip(stamps, itertools.repeat(0), range(count)),
             zip(field_stamps, itertools.repeat(1), range(len(fields)))))
+    velocity, velocity_stamps = _velocity_input(velocity, velocity_times, count, stamps, clock)
+    if velocity is not None:
+        events = _with_velocity(events, stamps, velocity_stamps)
     run = PipelineRun(settings)
-    imu, field = run.imu, run.field
+    imu, field, aid = run.imu, run.field, run.velocity
     for kind, i in events:
-        if kind:
+        if kind == 1:
             field(field_stamps[i], fields[i])
+        elif kind == 2:
+            aid(velocity_stamps[i], velocity[i])
         else:
             imu(stamps[i], gyr[i], acc[i])
     return run.recording(times)
+
+
+def _velocity_input(velocity, velocity_times, count, stamps, clock):
+    """The velocities as lists and their stamps (ns), checked; (None, None) without."""
+    if velocity is None:
+        if velocity_times is not None:
+            raise ValueError('velocity_times given without velocity')
+        return None, None
+    velocity = _vectors(velocity, 'velocity')
+    if velocity_times is None:
+        if len(velocity) != count:
+            raise ValueError(f'velocity has {len(velocity)} rows and gyr {count}: without '
+                             'velocity_times row k of velocity is the velocity at IMU sample k')
+        return velocity.tolist(), list(stamps)
+    return velocity.tolist(), clock(_times(velocity_times, len(velocity), 'velocity_times'))
+
+
+def _with_velocity(events, stamps, velocity_stamps):
+    """The events with (2, j) for velocity j before the first IMU sample not earlier than it."""
+    j, n = 0, len(velocity_stamps)
+    for kind, i in events:
+        if kind == 0:
+            while j < n and velocity_stamps[j] <= stamps[i]:
+                yield 2, j
+                j += 1
+        yield kind, i
 
 
 def _after_their_samples(count, rows):
