@@ -19,6 +19,7 @@ from .ahrs_math import check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
 from .ahrs_params import AhrsParams
 from .compiled import kernels
 from .magcal import MagCalibrator
+from .ahrs_layout import P_VEL_TIMEOUT, S_VEL_USED
 from .velocity_kernel import VELOCITY_TIMEOUT
 
 __all__ = [
@@ -117,7 +118,7 @@ class AhrsObserver:
             s[k.P_MOTION_BIAS] = 1.0 if each('tau_bias', i) > 0.0 else 0.0
             s[k.C_DT] = s[k.C_MAG_DT] = math.nan
             s[k.S_ACC_STILL] = 1.0
-            s[k.P_VEL_TIMEOUT] = VELOCITY_TIMEOUT
+            s[P_VEL_TIMEOUT] = VELOCITY_TIMEOUT
             self._states.append(s)
         self._dt = None
         self._mag_dt = None
@@ -352,7 +353,7 @@ class AhrsObserver:
     @property
     def velocity_used(self):
         """Whether the last step removed the body's acceleration (a fresh velocity given)."""
-        return self._flag(self._kernels.ahrs.S_VEL_USED)
+        return self._flag(S_VEL_USED)
 
     def velocity(self, v, dt=None):
         """
