@@ -10,6 +10,7 @@ to the bit), and the batch API (``attitude_from_imu``'s ``velocity`` and
 """
 
 import copy
+import math
 
 import numpy as np
 import pytest
@@ -148,3 +149,30 @@ def test_attitude_from_imu_refuses_a_velocity_it_cannot_place():
         attitude_from_imu(gyr, acc, rate=RATE, velocity=velocity[:-1])
     with pytest.raises(ValueError, match='without velocity'):
         attitude_from_imu(gyr, acc, rate=RATE, velocity_times=np.arange(3.0))
+
+
+def test_a_velocity_in_the_vehicles_frame_with_the_imus_mounting_and_lever_arm():
+    # The IMU turned 90° about the vehicle's z and 1.5 m ahead, 0.5 m left of
+    # its reference point: in a turn it feels ω × v and ω × (ω × r), in its axes.
+    t, _, _, velocity = _turn(seconds=20.0)
+    arm = np.array((1.5, 0.5, 0.0))
+    ramp = 2.0  # s into the turn: ω̇ × r finite
+    gyr_v = np.zeros((len(t), 3))
+    gyr_v[:, 2] = YAW_RATE * np.clip((t - 10.0) / ramp, 0.0, 1.0)
+    w, w_dot = gyr_v, np.gradient(gyr_v, axis=0) * RATE
+    acc_v = (np.cross(w, velocity) + np.cross(w_dot, arm) + np.cross(w, np.cross(w, arm))
+             + (0.0, 0.0, G))
+    half = math.radians(90.0) / 2.0
+    mounting = [math.cos(half), 0.0, 0.0, math.sin(half)]
+    to_imu = np.array(((0.0, 1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0)))  # R^T
+    gyr, acc = gyr_v @ to_imu.T, acc_v @ to_imu.T
+    frame = {'use_mag': False, 'velocity_mounting': mounting,
+             'velocity_lever_arm': arm.tolist()}
+    aided = attitude_from_imu(gyr, acc, rate=RATE, parameters=frame, velocity=velocity)
+    assert _tilt_deg(aided.quaternions).max() < 0.1
+    wrong = attitude_from_imu(gyr, acc, rate=RATE, parameters={'use_mag': False},
+                              velocity=velocity)
+    assert _tilt_deg(wrong.quaternions)[-500:].mean() > 10.0
+    with pytest.raises(ValueError, match='velocity_mounting'):
+        attitude_from_imu(gyr, acc, rate=RATE, velocity=velocity,
+                          parameters={'velocity_mounting': [1.0, 1.0, 0.0, 0.0]})

@@ -33,6 +33,7 @@ from ext_observer.pipeline.guard import GUARD_REASONS
 from ext_observer.pipeline.imu_filter_parameters import ahrs_params, uncertainty_params
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
+from ext_observer.pipeline.velocity_aid import VelocityInput
 
 __all__ = ['Estimate', 'RESET_CAUSES', 'RawImuEstimator', 'RawImuPipeline', 'heading_factor',
            'pairing_settings']
@@ -485,7 +486,7 @@ class RawImuPipeline:
         self.reinitializations = dict.fromkeys(GUARD_REASONS, 0)
         self._constant_dt = settings['constant_dt']
         self._gap_resets = settings['forward_gap_action'] == 'reset'
-        self._velocity_stamp = None
+        self._velocity = VelocityInput(self.estimator, settings)
 
     def configure(self, settings):
         """Take the settings that may change at runtime."""
@@ -493,6 +494,7 @@ class RawImuPipeline:
         self.pairer.configure(**pairing_settings(settings))
         self._constant_dt = settings['constant_dt']
         self._gap_resets = settings['forward_gap_action'] == 'reset'
+        self._velocity.configure(settings)
 
     def reset(self, cause):
         """Restart the estimator (the next sample initializes it), counted as ``cause``."""
@@ -559,24 +561,8 @@ class RawImuPipeline:
         return outcome, estimate
 
     def velocity(self, stamp, velocity):
-        """
-        Take the body's velocity (ns, m/s in the IMU's frame): the next steps remove its acceleration.
-
-        Returns
-        -------
-        outcome : str or None
-            None when taken; ``'not_finite'`` or ``'out_of_order'`` (dropped).
-
-        """
-        v = tuple(float(c) for c in velocity)
-        if len(v) != 3 or not all(math.isfinite(c) for c in v):
-            return 'not_finite'
-        previous = self._velocity_stamp
-        if previous is not None and stamp <= previous:
-            return 'out_of_order'
-        self._velocity_stamp = stamp
-        self.estimator.velocity(v, None if previous is None else (stamp - previous) * 1e-9)
-        return None
+        """The body's velocity (ns, m/s; :class:`~ext_observer.pipeline.velocity_aid.VelocityInput`)."""
+        return self._velocity.take(stamp, velocity)
 
     def field(self, stamp, field):
         """

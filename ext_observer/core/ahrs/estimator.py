@@ -355,6 +355,17 @@ class AhrsObserver:
         """Whether the last step removed the body's acceleration (a fresh velocity given)."""
         return self._flag(S_VEL_USED)
 
+    @property
+    def velocity_timeout(self):
+        """s: an older velocity is not used (``VELOCITY_TIMEOUT`` unless set)."""
+        return float(self._states[0][P_VEL_TIMEOUT])
+
+    @velocity_timeout.setter
+    def velocity_timeout(self, value):
+        check_dt(value)
+        for s in self._states:
+            s[P_VEL_TIMEOUT] = float(value)
+
     def velocity(self, v, dt=None):
         """
         Take the body's velocity (m/s, IMU frame), ``dt`` s after the previous one.
