@@ -52,6 +52,8 @@ def velocity_step(s, gx, gy, gz, dt):
     ``S_VEL_ACC`` for the accelerometer step (:func:`velocity_removed`). A
     body that moves is not at rest: its bias is not learned from its rate.
     """
+    if s[S_VEL_N] == 0.0:
+        return 0.0  # never a velocity: the state as without the aid
     s[S_VEL_AGE] += dt
     if s[S_VEL_N] < 2.0 or not s[S_VEL_AGE] <= s[P_VEL_TIMEOUT]:
         s[S_VEL_USED] = 0.0
