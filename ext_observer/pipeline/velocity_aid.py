@@ -16,7 +16,7 @@ import math
 from ext_observer.core.ahrs.ahrs_layout import S_BIAS, S_GYR_LAST
 from ext_observer.pipeline.imu_filter_parameters import velocity_frame
 
-__all__ = ['VelocityInput']
+__all__ = ['VelocityInput', 'with_velocity']
 
 
 class VelocityInput:
@@ -63,3 +63,18 @@ class VelocityInput:
         return (rt[0] * v[0] + rt[1] * v[1] + rt[2] * v[2] + wy * az - wz * ay,
                 rt[3] * v[0] + rt[4] * v[1] + rt[5] * v[2] + wz * ax - wx * az,
                 rt[6] * v[0] + rt[7] * v[1] + rt[8] * v[2] + wx * ay - wy * ax)
+
+
+def with_velocity(events, stamps, velocity_stamps):
+    """
+    Batch events ``(kind, index)`` with ``(2, j)`` for velocity ``j`` before the first IMU sample at or after it.
+
+    IMU samples are kind 0 at ``stamps[index]``; ``velocity_stamps`` ascending.
+    """
+    j, n = 0, len(velocity_stamps)
+    for kind, i in events:
+        if kind == 0:
+            while j < n and velocity_stamps[j] <= stamps[i]:
+                yield 2, j
+                j += 1
+        yield kind, i

@@ -44,6 +44,7 @@ from ext_observer.pipeline.batch import hold_finite
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
+from ext_observer.pipeline.velocity_aid import with_velocity
 
 __all__ = ['PipelineRun', 'Recording', 'add_parameter_options', 'attitude_from_imu',
            'node_settings', 'parameters_from_options', 'parameters_from_yaml', 'roll_pitch_yaw']
@@ -330,10 +331,6 @@ class PipelineRun:
             self._calibrations.append(self._calibration)
         return estimate
 
-    def velocity(self, stamp, velocity):
-        """Take the body's velocity (ns, m/s, IMU frame); return the pipeline's outcome."""
-        return self.pipeline.velocity(stamp, velocity)
-
     def field(self, stamp, field):
         """Take one field (ns, T); return the pipeline's outcome."""
         outcome = self.pipeline.field(stamp, field)
@@ -414,11 +411,9 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
     mag_times : array_like, shape (M,), optional
         Time of each field, s, on the same clock as ``times`` (or the rate's).
     velocity : array_like, shape (V, 3), optional
-        The body's velocity at the IMU, m/s, in the IMU's frame (e.g. wheel
-        odometry): each step with one at most ``VELOCITY_TIMEOUT`` old removes
-        the body's acceleration from the specific force (the velocity aid).
-        With ``velocity_times``, at its own times; without, row ``k`` is the
-        velocity at IMU sample ``k`` (V = N).
+        The body's velocity, m/s (e.g. wheel odometry; ``velocity_*`` settings: its
+        frame, timeout): the velocity aid (docs/raw_imu.md). With ``velocity_times``,
+        at its own times; without, row ``k`` is at IMU sample ``k`` (V = N).
     velocity_times : array_like, shape (V,), optional
         Time of each velocity, s, on the IMU's clock.
     parameters : dict, optional
@@ -448,50 +443,21 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
         raise ValueError(f'at least 2 IMU samples are needed (the first only sets t_0), '
                          f'got {count}')
     settings = node_settings(parameters)
-    if mag is not None:
-        mag = _vectors(mag, 'mag')
-        if mag_times is None and len(mag) != count:
-            raise ValueError(f'mag has {len(mag)} rows and gyr {count}: without mag_times '
-                             'row k of mag is the field at IMU sample k (NaN: none)')
-    elif mag_times is not None:
-        raise ValueError('mag_times given without mag')
+    mag = _field_rows(mag, mag_times, count)
     if check_units:
         _check_units(gyr, acc, mag)
     if (rate is None) == (times is None):
         raise ValueError('give the IMU rate (Hz) or its times (s), one of them')
     if mag_times is not None:
         mag_times = _times(mag_times, len(mag), 'mag_times')
-    if rate is not None:
-        rate = float(rate)
-        if not (math.isfinite(rate) and rate > 0.0):
-            raise ValueError(f'rate must be positive (Hz), got {rate}')
-        times = np.arange(count) / rate
-        # As test/broad_replay.py stamps its samples, so that dt is the same.
-        stamps = [START + round(k * SECOND / rate) for k in range(count)]
-        clock = _Clock(0.0)
-    else:
-        times = _times(times, count, 'times')
-        clock = _Clock(float(np.min(times)) if mag_times is None
-                       else min(float(np.min(times)), float(np.min(mag_times))))
-        stamps = clock(times)
+    times, stamps, clock = _imu_stamps(rate, times, count, mag_times)
     gyr, acc = gyr.tolist(), acc.tolist()
-    if mag is None or not settings['use_mag']:
-        field_stamps, fields, events = [], [], ((0, k) for k in range(count))
-    elif mag_times is None:
-        rows = np.flatnonzero(~np.isnan(mag).all(axis=1))
-        field_stamps, fields = [stamps[k] for k in rows], mag[rows].tolist()
-        events = _after_their_samples(count, rows.tolist())
-    else:
-        field_stamps, fields = clock(mag_times), mag.tolist()
-        # (stamp, kind, index): on a tie the IMU sample (kind 0) first.
-        events = ((kind, i) for _, kind, i in heapq.merge(
-            zip(stamps, itertools.repeat(0), range(count)),
-            zip(field_stamps, itertools.repeat(1), range(len(fields)))))
-    velocity, velocity_stamps = _velocity_input(velocity, velocity_times, count, stamps, clock)
-    if velocity is not None:
-        events = _with_velocity(events, stamps, velocity_stamps)
+    field_stamps, fields, events = _field_events(mag if settings['use_mag'] else None,
+                                                 mag_times, count, stamps, clock)
+    velocity, velocity_stamps, events = _velocity_input(velocity, velocity_times, count, stamps,
+                                                        clock, events)
     run = PipelineRun(settings)
-    imu, field, aid = run.imu, run.field, run.velocity
+    imu, field, aid = run.imu, run.field, run.pipeline.velocity
     for kind, i in events:
         if kind == 1:
             field(field_stamps[i], fields[i])
@@ -502,30 +468,64 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
     return run.recording(times)
 
 
-def _velocity_input(velocity, velocity_times, count, stamps, clock):
-    """The velocities as lists and their stamps (ns), checked; (None, None) without."""
+def _field_rows(mag, mag_times, count):
+    """The fields as an (M, 3) array, checked against the IMU's ``count``; None without."""
+    if mag is None:
+        if mag_times is not None:
+            raise ValueError('mag_times given without mag')
+        return None
+    mag = _vectors(mag, 'mag')
+    if mag_times is None and len(mag) != count:
+        raise ValueError(f'mag has {len(mag)} rows and gyr {count}: without mag_times '
+                         'row k of mag is the field at IMU sample k (NaN: none)')
+    return mag
+
+
+def _velocity_input(velocity, velocity_times, count, stamps, clock, events):
+    """The velocities as lists, their stamps (ns) and the events with them; checked."""
     if velocity is None:
         if velocity_times is not None:
             raise ValueError('velocity_times given without velocity')
-        return None, None
+        return None, None, events
     velocity = _vectors(velocity, 'velocity')
     if velocity_times is None:
         if len(velocity) != count:
             raise ValueError(f'velocity has {len(velocity)} rows and gyr {count}: without '
                              'velocity_times row k of velocity is the velocity at IMU sample k')
-        return velocity.tolist(), list(stamps)
-    return velocity.tolist(), clock(_times(velocity_times, len(velocity), 'velocity_times'))
+        velocity_stamps = list(stamps)
+    else:
+        velocity_stamps = clock(_times(velocity_times, len(velocity), 'velocity_times'))
+    return velocity.tolist(), velocity_stamps, with_velocity(events, stamps, velocity_stamps)
 
 
-def _with_velocity(events, stamps, velocity_stamps):
-    """The events with (2, j) for velocity j before the first IMU sample not earlier than it."""
-    j, n = 0, len(velocity_stamps)
-    for kind, i in events:
-        if kind == 0:
-            while j < n and velocity_stamps[j] <= stamps[i]:
-                yield 2, j
-                j += 1
-        yield kind, i
+def _imu_stamps(rate, times, count, mag_times):
+    """The IMU's times (s), its stamps (ns) and the clock from one to the other."""
+    if rate is not None:
+        rate = float(rate)
+        if not (math.isfinite(rate) and rate > 0.0):
+            raise ValueError(f'rate must be positive (Hz), got {rate}')
+        # As test/broad_replay.py stamps its samples, so that dt is the same.
+        return (np.arange(count) / rate, [START + round(k * SECOND / rate) for k in range(count)],
+                _Clock(0.0))
+    times = _times(times, count, 'times')
+    clock = _Clock(float(np.min(times)) if mag_times is None
+                   else min(float(np.min(times)), float(np.min(mag_times))))
+    return times, clock(times), clock
+
+
+def _field_events(mag, mag_times, count, stamps, clock):
+    """The fields' stamps and rows, and the events (kind, index) in the order they are taken."""
+    if mag is None:
+        return [], [], ((0, k) for k in range(count))
+    if mag_times is None:
+        rows = np.flatnonzero(~np.isnan(mag).all(axis=1))
+        return ([stamps[k] for k in rows], mag[rows].tolist(),
+                _after_their_samples(count, rows.tolist()))
+    field_stamps, fields = clock(mag_times), mag.tolist()
+    # (stamp, kind, index): on a tie the IMU sample (kind 0) first.
+    return field_stamps, fields, ((kind, i) for _, kind, i in heapq.merge(
+        zip(stamps, itertools.repeat(0), range(count)),
+        zip(field_stamps, itertools.repeat(1), range(len(fields)))))
 
 
 def _after_their_samples(count, rows):
