@@ -393,8 +393,11 @@ def _method_parts(results):
         f'{s.VIBRATION_FULL_SPEED:g} m/s) to the specific force; the stored velocity is the '
         f'wheels\', without it. Seeds 0–{seeds - 1}: each figure is the mean over the seeds.',
         '**Estimators**, each on the same samples: ours (`ext_observer.attitude_from_imu`, '
-        'the node\'s defaults, field in T); ours with the vehicle\'s body velocity (shown '
-        f'as "{NOT_YET}" until `attitude_from_imu` takes a `velocity`); VQF (`vqf`, '
+        'the node\'s defaults, field in T); ours with the vehicle\'s body velocity '
+        + (f'(shown as "{NOT_YET}" until `attitude_from_imu` takes a `velocity`)'
+           if not velocity_parameters() else
+           '(the velocity aid, [raw_imu.md](raw_imu.md#a-velocity-aid-vehicles))')
+        + '; VQF (`vqf`, '
         'defaults) and Madgwick (`ahrs`, β = 0.12, BROAD\'s trial-agnostic best) as the '
         'BROAD benchmark runs them ([broad.md](broad.md)); Fusion (`imufusion`, '
         'x-io Technologies) at the settings its README recommends: gain '
@@ -449,8 +452,8 @@ def _result_parts(results):
         'has a `velocity` parameter (found by its signature): `velocity`, shape (M, 3), m/s, '
         'the body\'s velocity in the IMU\'s frame (here the body frame: no mounting rotation, '
         'no lever arm), and `velocity_times`, shape (M,), s, on the IMU\'s clock, where the '
-        'signature has it (here M = N, the IMU\'s times). The estimator is expected to '
-        'remove `dv/dt + ω × v` from the specific force.',
+        'signature has it (here M = N, the IMU\'s times). The estimator removes '
+        '`dv/dt + ω × v` from the specific force before taking it for gravity.',
         '## Runtime',
         _runtime(results['rows']),
     ]

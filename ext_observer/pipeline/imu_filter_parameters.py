@@ -17,18 +17,23 @@ ones: each a row of the core's table
 all. Plain data, no ROS: :mod:`ext_observer.nodes.imu_filter_node` declares them.
 """
 
+import math
+
 from ext_observer.core.ahrs.ahrs_params import AHRS_TABLE, AhrsParams
 from ext_observer.core.ahrs.estimator import WORLD_FRAMES
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.ahrs.uncertainty import UNCERTAINTY_TABLE, UncertaintyParams
+from ext_observer.core.ahrs.velocity_kernel import VELOCITY_TIMEOUT
 from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_settings,
                                                    ParameterSpec, spec_from_tunable)
 
 __all__ = ['AHRS_PREFIX', 'COMPLEMENTARY_UNUSED', 'COVARIANCE_MODES', 'COVARIANCE_PREFIX',
            'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'IMU_TOOLS_OPTIONS', 'IMU_TOOLS_UNUSED',
            'MADGWICK_UNUSED', 'REPLACED_BY', 'ahrs_params', 'covariance_estimated',
-           'covariance_text', 'imu_filter_settings', 'uncertainty_params', 'unused_text']
+           'covariance_text', 'imu_filter_settings', 'uncertainty_params', 'unused_text', 'velocity_frame']
 
+# A velocity_mounting's norm may differ from 1 by this much (rounded input).
+_UNIT_TOLERANCE = 1e-6
 # The core's parameters are the node's parameters ahrs.<name>.
 AHRS_PREFIX = 'ahrs.'
 # The uncertainty model's are covariance.<name>.
@@ -236,6 +241,20 @@ IMU_FILTER_OWN = (
                   (0.0001, 10.0)),
     ParameterSpec('frame_id', 'world', 'frame_id of attitude_estimate (imu/data keeps the '
                   "sample's frame_id)."),
+    # The velocity aid (docs/raw_imu.md#a-velocity-aid-vehicles): the batch API's
+    # velocity input; the node takes none yet.
+    ParameterSpec('velocity_timeout', VELOCITY_TIMEOUT,
+                  "Velocity aid (attitude_from_imu's velocity): a body velocity older than "
+                  'this, s, is not used, and the specific force is taken as it is measured.',
+                  (0.001, 10.0)),
+    ParameterSpec('velocity_mounting', [1.0, 0.0, 0.0, 0.0],
+                  "Velocity aid: the IMU's orientation in the velocity's frame (e.g. the "
+                  "odometry's child frame), a unit quaternion w, x, y, z: v_imu = R^T v.",
+                  read_only=True, constraints='4 finite numbers of norm 1 (within 1e-6).'),
+    ParameterSpec('velocity_lever_arm', [0.0, 0.0, 0.0],
+                  "Velocity aid: the IMU's position in the velocity's frame, m: the IMU's "
+                  'own velocity is v + ω × r (its acceleration gains ω̇ × r + ω × (ω × r)).',
+                  read_only=True, constraints='3 finite numbers.'),
 ) + COMMON_PARAMETERS + (
     ParameterSpec('divergence_max_residual', 15.0,
                   'Divergence guard: reinitialize from the sample at hand when the '
@@ -291,6 +310,7 @@ def imu_filter_settings(values):
     if values['orientation_covariance_mode'] not in COVARIANCE_MODES:
         raise ValueError(f'orientation_covariance_mode must be one of {COVARIANCE_MODES}, '
                          f'got {values["orientation_covariance_mode"]!r}')
+    velocity_frame(values)
     params = ahrs_params(values)
     for axis in 'xyz':
         if abs(values[f'gyro_bias_{axis}']) > params.bias_max:
@@ -300,6 +320,34 @@ def imu_filter_settings(values):
     settings = dict(values)
     settings['covariance_estimated'] = covariance_estimated(values)
     return settings
+
+
+def velocity_frame(values):
+    """
+    The velocity aid's frame: ``R^T`` (9 floats, row-major) and ``R^T r``, or None for the IMU's.
+
+    Raises
+    ------
+    ValueError
+        For a mounting that is not a finite unit quaternion, a lever arm not 3 finite numbers.
+    """
+    q = [float(c) for c in values['velocity_mounting']]
+    r = [float(c) for c in values['velocity_lever_arm']]
+    if len(q) != 4 or not all(math.isfinite(c) for c in q) or abs(
+            sum(c * c for c in q) - 1.0) > _UNIT_TOLERANCE:
+        raise ValueError(f'velocity_mounting must be a unit quaternion w, x, y, z, got {q}')
+    if len(r) != 3 or not all(math.isfinite(c) for c in r):
+        raise ValueError(f'velocity_lever_arm must be 3 finite numbers (m), got {r}')
+    if q == [1.0, 0.0, 0.0, 0.0] and r == [0.0, 0.0, 0.0]:
+        return None
+    w, x, y, z = q
+    # R (IMU → velocity frame) transposed: rows are R's columns.
+    rt = (1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y),
+          2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x),
+          2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))
+    arm = tuple(rt[3 * i] * r[0] + rt[3 * i + 1] * r[1] + rt[3 * i + 2] * r[2]
+                for i in range(3))
+    return rt, arm
 
 
 def covariance_estimated(values):

@@ -33,6 +33,7 @@ from ext_observer.pipeline.guard import GUARD_REASONS
 from ext_observer.pipeline.imu_filter_parameters import ahrs_params, uncertainty_params
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
+from ext_observer.pipeline.velocity_aid import VelocityInput
 
 __all__ = ['Estimate', 'RESET_CAUSES', 'RawImuEstimator', 'RawImuPipeline', 'heading_factor',
            'pairing_settings']
@@ -249,6 +250,10 @@ class RawImuEstimator:
         self._fields_used += 1
         self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma,
                                math.nan, dip)
+
+    def velocity(self, velocity, dt=None):
+        """The body's velocity (m/s, IMU frame), ``dt`` s after the previous one (the velocity aid)."""
+        self.core.velocity(velocity, dt)
 
     def use_kernels(self, kernels):
         """Go on with other kernels (plain or compiled): the core's and the covariance's."""
@@ -481,6 +486,7 @@ class RawImuPipeline:
         self.reinitializations = dict.fromkeys(GUARD_REASONS, 0)
         self._constant_dt = settings['constant_dt']
         self._gap_resets = settings['forward_gap_action'] == 'reset'
+        self._velocity = VelocityInput(self.estimator, settings)
 
     def configure(self, settings):
         """Take the settings that may change at runtime."""
@@ -488,6 +494,7 @@ class RawImuPipeline:
         self.pairer.configure(**pairing_settings(settings))
         self._constant_dt = settings['constant_dt']
         self._gap_resets = settings['forward_gap_action'] == 'reset'
+        self._velocity.configure(settings)
 
     def reset(self, cause):
         """Restart the estimator (the next sample initializes it), counted as ``cause``."""
@@ -552,6 +559,10 @@ class RawImuPipeline:
                                 self.estimator.uncertainty.covariance if covariance is None
                                 else covariance)
         return outcome, estimate
+
+    def velocity(self, stamp, velocity):
+        """The body's velocity (ns, m/s; :class:`~ext_observer.pipeline.velocity_aid.VelocityInput`)."""
+        return self._velocity.take(stamp, velocity)
 
     def field(self, stamp, field):
         """

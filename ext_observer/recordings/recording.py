@@ -44,6 +44,7 @@ from ext_observer.pipeline.batch import hold_finite
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
+from ext_observer.pipeline.velocity_aid import with_velocity
 
 __all__ = ['PipelineRun', 'Recording', 'add_parameter_options', 'attitude_from_imu',
            'node_settings', 'parameters_from_options', 'parameters_from_yaml', 'roll_pitch_yaw']
@@ -388,7 +389,7 @@ class PipelineRun:
 
 
 def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=None,
-                      parameters=None, check_units=True):
+                      parameters=None, check_units=True, velocity=None, velocity_times=None):
     """
     Estimate the attitude of one recording as ``imu_filter_node`` does.
 
@@ -409,6 +410,12 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
         repeated times are dropped and counted as the node does.
     mag_times : array_like, shape (M,), optional
         Time of each field, s, on the same clock as ``times`` (or the rate's).
+    velocity : array_like, shape (V, 3), optional
+        The body's velocity, m/s (e.g. wheel odometry; ``velocity_*`` settings: its
+        frame, timeout): the velocity aid (docs/raw_imu.md). With ``velocity_times``,
+        at its own times; without, row ``k`` is at IMU sample ``k`` (V = N).
+    velocity_times : array_like, shape (V,), optional
+        Time of each velocity, s, on the IMU's clock.
     parameters : dict, optional
         ``imu_filter_node`` parameter values (``use_mag``, ``world_frame``,
         ``ahrs.tau_mag``, ...: ``config/imu_filter.yaml``).
@@ -436,53 +443,89 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
         raise ValueError(f'at least 2 IMU samples are needed (the first only sets t_0), '
                          f'got {count}')
     settings = node_settings(parameters)
-    if mag is not None:
-        mag = _vectors(mag, 'mag')
-        if mag_times is None and len(mag) != count:
-            raise ValueError(f'mag has {len(mag)} rows and gyr {count}: without mag_times '
-                             'row k of mag is the field at IMU sample k (NaN: none)')
-    elif mag_times is not None:
-        raise ValueError('mag_times given without mag')
+    mag = _field_rows(mag, mag_times, count)
     if check_units:
         _check_units(gyr, acc, mag)
     if (rate is None) == (times is None):
         raise ValueError('give the IMU rate (Hz) or its times (s), one of them')
     if mag_times is not None:
         mag_times = _times(mag_times, len(mag), 'mag_times')
+    times, stamps, clock = _imu_stamps(rate, times, count, mag_times)
+    gyr, acc = gyr.tolist(), acc.tolist()
+    field_stamps, fields, events = _field_events(mag if settings['use_mag'] else None,
+                                                 mag_times, count, stamps, clock)
+    velocity, velocity_stamps, events = _velocity_input(velocity, velocity_times, count, stamps,
+                                                        clock, events)
+    run = PipelineRun(settings)
+    imu, field, aid = run.imu, run.field, run.pipeline.velocity
+    for kind, i in events:
+        if kind == 1:
+            field(field_stamps[i], fields[i])
+        elif kind == 2:
+            aid(velocity_stamps[i], velocity[i])
+        else:
+            imu(stamps[i], gyr[i], acc[i])
+    return run.recording(times)
+
+
+def _field_rows(mag, mag_times, count):
+    """The fields as an (M, 3) array, checked against the IMU's ``count``; None without."""
+    if mag is None:
+        if mag_times is not None:
+            raise ValueError('mag_times given without mag')
+        return None
+    mag = _vectors(mag, 'mag')
+    if mag_times is None and len(mag) != count:
+        raise ValueError(f'mag has {len(mag)} rows and gyr {count}: without mag_times '
+                         'row k of mag is the field at IMU sample k (NaN: none)')
+    return mag
+
+
+def _velocity_input(velocity, velocity_times, count, stamps, clock, events):
+    """The velocities as lists, their stamps (ns) and the events with them; checked."""
+    if velocity is None:
+        if velocity_times is not None:
+            raise ValueError('velocity_times given without velocity')
+        return None, None, events
+    velocity = _vectors(velocity, 'velocity')
+    if velocity_times is None:
+        if len(velocity) != count:
+            raise ValueError(f'velocity has {len(velocity)} rows and gyr {count}: without '
+                             'velocity_times row k of velocity is the velocity at IMU sample k')
+        velocity_stamps = list(stamps)
+    else:
+        velocity_stamps = clock(_times(velocity_times, len(velocity), 'velocity_times'))
+    return velocity.tolist(), velocity_stamps, with_velocity(events, stamps, velocity_stamps)
+
+
+def _imu_stamps(rate, times, count, mag_times):
+    """The IMU's times (s), its stamps (ns) and the clock from one to the other."""
     if rate is not None:
         rate = float(rate)
         if not (math.isfinite(rate) and rate > 0.0):
             raise ValueError(f'rate must be positive (Hz), got {rate}')
-        times = np.arange(count) / rate
         # As test/broad_replay.py stamps its samples, so that dt is the same.
-        stamps = [START + round(k * SECOND / rate) for k in range(count)]
-        clock = _Clock(0.0)
-    else:
-        times = _times(times, count, 'times')
-        clock = _Clock(float(np.min(times)) if mag_times is None
-                       else min(float(np.min(times)), float(np.min(mag_times))))
-        stamps = clock(times)
-    gyr, acc = gyr.tolist(), acc.tolist()
-    if mag is None or not settings['use_mag']:
-        field_stamps, fields, events = [], [], ((0, k) for k in range(count))
-    elif mag_times is None:
+        return (np.arange(count) / rate, [START + round(k * SECOND / rate) for k in range(count)],
+                _Clock(0.0))
+    times = _times(times, count, 'times')
+    clock = _Clock(float(np.min(times)) if mag_times is None
+                   else min(float(np.min(times)), float(np.min(mag_times))))
+    return times, clock(times), clock
+
+
+def _field_events(mag, mag_times, count, stamps, clock):
+    """The fields' stamps and rows, and the events (kind, index) in the order they are taken."""
+    if mag is None:
+        return [], [], ((0, k) for k in range(count))
+    if mag_times is None:
         rows = np.flatnonzero(~np.isnan(mag).all(axis=1))
-        field_stamps, fields = [stamps[k] for k in rows], mag[rows].tolist()
-        events = _after_their_samples(count, rows.tolist())
-    else:
-        field_stamps, fields = clock(mag_times), mag.tolist()
-        # (stamp, kind, index): on a tie the IMU sample (kind 0) first.
-        events = ((kind, i) for _, kind, i in heapq.merge(
-            zip(stamps, itertools.repeat(0), range(count)),
-            zip(field_stamps, itertools.repeat(1), range(len(fields)))))
-    run = PipelineRun(settings)
-    imu, field = run.imu, run.field
-    for kind, i in events:
-        if kind:
-            field(field_stamps[i], fields[i])
-        else:
-            imu(stamps[i], gyr[i], acc[i])
-    return run.recording(times)
+        return ([stamps[k] for k in rows], mag[rows].tolist(),
+                _after_their_samples(count, rows.tolist()))
+    field_stamps, fields = clock(mag_times), mag.tolist()
+    # (stamp, kind, index): on a tie the IMU sample (kind 0) first.
+    return field_stamps, fields, ((kind, i) for _, kind, i in heapq.merge(
+        zip(stamps, itertools.repeat(0), range(count)),
+        zip(field_stamps, itertools.repeat(1), range(len(fields)))))
 
 
 def _after_their_samples(count, rows):

@@ -49,6 +49,7 @@ from .hole_kernel import (acc_deviation, calibration_restart, forget_wait, hole_
 from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F401
                           learn_bias, rlp_steady)
 from .magcal_kernel import MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn
+from .velocity_kernel import velocity_removed, velocity_sample, velocity_step  # noqa: F401
 
 
 _TINY = 1e-300
@@ -60,9 +61,6 @@ _SQRT2 = math.sqrt(2.0)
 # s: a field rejected as disturbed for longer than this is the field (VQF's
 # maximum rejection time, Laidig & Seel 2023): the references follow it.
 _MAX_REJECTION = 60.0
-
-
-# --- arithmetic ------------------------------------------------------------------
 
 
 # --- state -----------------------------------------------------------------------
@@ -142,6 +140,7 @@ def ahrs_update(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
             ahrs_coefficients(s, dt)
     elif s[S_HOLE_RUN] != 0.0:
         hole_ends(s)
+    velocity_step(s, gx, gy, gz, dt)  # the velocity aid, where a fresh velocity is given
     if s[S_INIT] == 0.0:
         fx, fy, fz = mx, my, mz
         if has_mag and s[P_HAS_CAL] != 0.0:
@@ -278,6 +277,8 @@ def ahrs_update_acc(s, ax, ay, az):
     s[S_REST_ACC + 2] = rz
     ex, ey, ez = ax - rx, ay - ry, az - rz
     s[S_ACC_STILL] = 1.0 if (ex * ex + ey * ey + ez * ez) < s[P_REST_ACC] * s[P_REST_ACC] else 0.0
+    # Gravity from the specific force less the body's own acceleration (rest sees it all).
+    ax, ay, az = velocity_removed(s, ax, ay, az)
 
     w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
     vx, vy, vz = rotate(w, x, y, z, ax, ay, az)

@@ -94,6 +94,15 @@ S_HOLE_VAR = AHRS.field('hole_var')  # rad² per axis the last step's hole adds 
 S_HOLES = AHRS.field('holes')  # holes bridged
 S_HOLE_T0 = AHRS.field('hole_t0')  # s the inclination's restarted mean weighs the old as (−1: kept)
 S_ACC_DEV = AHRS.field('acc_dev')  # the specific force's recent deviation from gravity, (1/g)²
+
+# The velocity aid (velocity_kernel): the body's velocity at the IMU, IMU frame.
+P_VEL_TIMEOUT = AHRS.field('velocity_timeout')  # s: an older velocity is not used
+S_VEL = AHRS.field('vel', 3)  # m/s: the latest velocity
+S_VEL_DV = AHRS.field('vel_dv', 3)  # m/s²: its derivative over the latest interval
+S_VEL_N = AHRS.field('vel_n')  # velocities taken since the last gap (2: a derivative)
+S_VEL_AGE = AHRS.field('vel_age')  # s of IMU steps since the latest velocity
+S_VEL_ACC = AHRS.field('vel_acc', 3)  # m/s²: the kinematic acceleration of this step
+S_VEL_USED = AHRS.field('vel_used')  # 1: this step's specific force had it removed
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 

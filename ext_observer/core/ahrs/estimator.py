@@ -19,6 +19,8 @@ from .ahrs_math import check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
 from .ahrs_params import AhrsParams
 from .compiled import kernels
 from .magcal import MagCalibrator
+from .ahrs_layout import P_VEL_TIMEOUT, S_VEL_USED
+from .velocity_kernel import VELOCITY_TIMEOUT
 
 __all__ = [
     'AhrsObserver',
@@ -116,6 +118,7 @@ class AhrsObserver:
             s[k.P_MOTION_BIAS] = 1.0 if each('tau_bias', i) > 0.0 else 0.0
             s[k.C_DT] = s[k.C_MAG_DT] = math.nan
             s[k.S_ACC_STILL] = 1.0
+            s[P_VEL_TIMEOUT] = VELOCITY_TIMEOUT
             self._states.append(s)
         self._dt = None
         self._mag_dt = None
@@ -346,6 +349,32 @@ class AhrsObserver:
     def mag_disturbed(self):
         """Whether the last magnetometer sample was rejected."""
         return self._flag(self._kernels.ahrs.S_MAG_DIST)
+
+    @property
+    def velocity_used(self):
+        """Whether the last step removed the body's acceleration (a fresh velocity given)."""
+        return self._flag(S_VEL_USED)
+
+    @property
+    def velocity_timeout(self):
+        """s: an older velocity is not used (``VELOCITY_TIMEOUT`` unless set)."""
+        return float(self._states[0][P_VEL_TIMEOUT])
+
+    @velocity_timeout.setter
+    def velocity_timeout(self, value):
+        check_dt(value)
+        for s in self._states:
+            s[P_VEL_TIMEOUT] = float(value)
+
+    def velocity(self, v, dt=None):
+        """
+        Take the body's velocity (m/s, IMU frame), ``dt`` s after the previous one.
+
+        The steps that follow, until it is older than ``VELOCITY_TIMEOUT``,
+        remove ``dv/dt + ω × v`` from the specific force (the velocity aid,
+        :mod:`~ext_observer.core.ahrs.velocity_kernel`); ``dt`` None: the first.
+        """
+        self._each(self._kernels.ahrs.velocity_sample, v, -1.0 if dt is None else float(dt))
 
     @property
     def calibration_state(self):

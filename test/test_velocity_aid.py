@@ -1,0 +1,178 @@
+"""
+The velocity aid: the body's own acceleration removed from the specific force.
+
+A known answer for the kernel's step (a constant turn: with the velocity the
+corrected specific force is gravity; a stale velocity leaves it as measured),
+the core on a simulated turn (level with the velocity, tilted without; a
+velocity given long ago is bit for bit no velocity; plain and compiled agree
+to the bit), and the batch API (``attitude_from_imu``'s ``velocity`` and
+``velocity_times``). No ROS.
+"""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from ext_observer import attitude_from_imu
+from ext_observer.core.ahrs import compiled as compiled_module
+from ext_observer.core.ahrs import velocity_kernel as vk
+from ext_observer.core.ahrs.ahrs_layout import S_VEL_N, S_VEL_USED
+from ext_observer.core.ahrs.estimator import AhrsObserver
+
+G = 9.81
+RATE = 100.0
+SPEED = 15.0  # m/s
+YAW_RATE = 0.3  # rad/s: 0.46 g centripetal at SPEED
+
+needs_numba = pytest.mark.skipif(not compiled_module.compiled_available(),
+                                 reason='numba is not installed')
+
+
+def _turn(seconds=40.0, straight=10.0):
+    """A level vehicle at SPEED: straight, then a constant turn; body x forward, z up."""
+    n = int((straight + seconds) * RATE)
+    t = np.arange(n) / RATE
+    rate = np.where(t >= straight, YAW_RATE, 0.0)
+    gyr = np.zeros((n, 3))
+    gyr[:, 2] = rate
+    acc = np.zeros((n, 3))
+    acc[:, 1] = rate * SPEED  # ω × v
+    acc[:, 2] = G
+    velocity = np.tile((SPEED, 0.0, 0.0), (n, 1))
+    return t, gyr, acc, velocity
+
+
+def _tilt_deg(q):
+    """Inclination of each estimate (the body's z from the vertical), degrees."""
+    w, x, y, z = np.asarray(q).T
+    return np.degrees(np.arccos(np.clip(w * w - x * x - y * y + z * z, -1.0, 1.0)))
+
+
+def test_in_a_constant_turn_the_corrected_specific_force_is_gravity_and_stale_is_as_measured():
+    s = AhrsObserver(use_mag=False, compiled=False).flat_state
+    dt = 1.0 / RATE
+    vk.velocity_sample(s, SPEED, 0.0, 0.0, -1.0)
+    assert vk.velocity_step(s, 0.0, 0.0, YAW_RATE, dt) == 0.0  # no derivative yet
+    vk.velocity_sample(s, SPEED, 0.0, 0.0, dt)
+    assert vk.velocity_step(s, 0.0, 0.0, YAW_RATE, dt) == 1.0
+    assert vk.velocity_removed(s, 0.0, YAW_RATE * SPEED, G) == (0.0, 0.0, G)
+    # Accelerating at 2 m/s² along x: dv/dt joins ω × v.
+    vk.velocity_sample(s, SPEED + 2.0 * dt, 0.0, 0.0, dt)
+    vk.velocity_step(s, 0.0, 0.0, YAW_RATE, dt)
+    fx, fy, fz = vk.velocity_removed(s, 2.0, YAW_RATE * (SPEED + 2.0 * dt), G)
+    assert fx == pytest.approx(0.0, abs=1e-9) and fy == pytest.approx(0.0, abs=1e-12)
+    assert fz == G
+    # Older than the timeout: the specific force as measured, not in use.
+    for _ in range(int(vk.VELOCITY_TIMEOUT / dt) + 1):
+        vk.velocity_step(s, 0.0, 0.0, YAW_RATE, dt)
+    assert s[S_VEL_USED] == 0.0
+    assert vk.velocity_removed(s, 0.0, YAW_RATE * SPEED, G) == (0.0, YAW_RATE * SPEED, G)
+
+
+def _run(gyr, acc, velocity=None, compiled=False, given=None):
+    """The core per sample; ``velocity`` at the samples ``given`` (default: every one)."""
+    core = AhrsObserver(use_mag=False, compiled=compiled)
+    dt = 1.0 / RATE
+    out, last = [], None
+    for k in range(len(gyr)):
+        if velocity is not None and (given is None or k in given):
+            core.velocity(velocity[k], None if last is None else (k - last) * dt)
+            last = k
+        out.append(core.update(gyr[k], acc[k], None, dt))
+    return np.array(out)
+
+
+def test_the_core_stays_level_in_a_long_turn_with_the_velocity_and_tilts_without():
+    _, gyr, acc, velocity = _turn()
+    aided = _tilt_deg(_run(gyr, acc, velocity))
+    plain = _tilt_deg(_run(gyr, acc))
+    assert aided.max() < 0.01
+    assert plain[-1000:].mean() > 10.0
+
+
+def test_a_stale_velocity_steps_as_no_velocity_to_the_bit():
+    _, gyr, acc, velocity = _turn(seconds=5.0, straight=0.0)
+    dt = 1.0 / RATE
+    core = AhrsObserver(use_mag=False, compiled=False)
+    none = AhrsObserver(use_mag=False, compiled=False)
+    core.velocity(velocity[0])
+    core.velocity(velocity[1], dt)
+    fresh = int(vk.VELOCITY_TIMEOUT * RATE) - 1  # the timeout's last step: rounding's
+    for k in range(fresh):
+        aided = core.update(gyr[k], acc[k], None, dt)
+        assert core.velocity_used
+        assert aided != none.update(gyr[k], acc[k], None, dt)
+    # Once stale: each step is the one a core that never had a velocity takes.
+    core.update(gyr[fresh], acc[fresh], None, dt)
+    fresh += 1
+    core.update(gyr[fresh], acc[fresh], None, dt)
+    assert not core.velocity_used
+    twin = copy.deepcopy(core)
+    twin.flat_state[S_VEL_N] = 0.0  # no velocity ever
+    for k in range(fresh + 1, len(gyr)):
+        assert core.update(gyr[k], acc[k], None, dt) == twin.update(gyr[k], acc[k], None, dt)
+    # A single velocity has no derivative: not used, the estimate as without one.
+    once = AhrsObserver(use_mag=False, compiled=False)
+    once.velocity(velocity[0])
+    base = AhrsObserver(use_mag=False, compiled=False)
+    for k in range(200):
+        assert once.update(gyr[k], acc[k], None, dt) == base.update(gyr[k], acc[k], None, dt)
+
+
+@needs_numba
+def test_plain_and_compiled_agree_to_the_bit_with_the_velocity():
+    _, gyr, acc, velocity = _turn(seconds=10.0, straight=2.0)
+    given = set(range(0, len(gyr), 5)) - set(range(300, 500))  # 20 Hz, with a 2 s gap
+    plain = _run(gyr, acc, velocity, compiled=False, given=given)
+    compiled = _run(gyr, acc, velocity, compiled=True, given=given)
+    assert np.array_equal(plain, compiled)
+
+
+@pytest.mark.parametrize('at_own_times', [False, True])
+def test_attitude_from_imu_takes_a_velocity_per_sample_or_at_its_own_times(at_own_times):
+    t, gyr, acc, velocity = _turn(seconds=20.0)
+    without = attitude_from_imu(gyr, acc, rate=RATE, parameters={'use_mag': False})
+    if at_own_times:  # odometry at 20 Hz, on the IMU's clock
+        extra = {'velocity': velocity[::5], 'velocity_times': t[::5]}
+    else:
+        extra = {'velocity': velocity}
+    aided = attitude_from_imu(gyr, acc, rate=RATE, parameters={'use_mag': False}, **extra)
+    assert _tilt_deg(aided.quaternions).max() < 0.05
+    assert _tilt_deg(without.quaternions)[-500:].mean() > 10.0
+
+
+def test_attitude_from_imu_refuses_a_velocity_it_cannot_place():
+    _, gyr, acc, velocity = _turn(seconds=1.0, straight=1.0)
+    with pytest.raises(ValueError, match='velocity_times'):
+        attitude_from_imu(gyr, acc, rate=RATE, velocity=velocity[:-1])
+    with pytest.raises(ValueError, match='without velocity'):
+        attitude_from_imu(gyr, acc, rate=RATE, velocity_times=np.arange(3.0))
+
+
+def test_a_velocity_in_the_vehicles_frame_with_the_imus_mounting_and_lever_arm():
+    # The IMU turned 90° about the vehicle's z and 1.5 m ahead, 0.5 m left of
+    # its reference point: in a turn it feels ω × v and ω × (ω × r), in its axes.
+    t, _, _, velocity = _turn(seconds=20.0)
+    arm = np.array((1.5, 0.5, 0.0))
+    ramp = 2.0  # s into the turn: ω̇ × r finite
+    gyr_v = np.zeros((len(t), 3))
+    gyr_v[:, 2] = YAW_RATE * np.clip((t - 10.0) / ramp, 0.0, 1.0)
+    w, w_dot = gyr_v, np.gradient(gyr_v, axis=0) * RATE
+    acc_v = (np.cross(w, velocity) + np.cross(w_dot, arm) + np.cross(w, np.cross(w, arm))
+             + (0.0, 0.0, G))
+    half = math.radians(90.0) / 2.0
+    mounting = [math.cos(half), 0.0, 0.0, math.sin(half)]
+    to_imu = np.array(((0.0, 1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0)))  # R^T
+    gyr, acc = gyr_v @ to_imu.T, acc_v @ to_imu.T
+    frame = {'use_mag': False, 'velocity_mounting': mounting,
+             'velocity_lever_arm': arm.tolist()}
+    aided = attitude_from_imu(gyr, acc, rate=RATE, parameters=frame, velocity=velocity)
+    assert _tilt_deg(aided.quaternions).max() < 0.1
+    wrong = attitude_from_imu(gyr, acc, rate=RATE, parameters={'use_mag': False},
+                              velocity=velocity)
+    assert _tilt_deg(wrong.quaternions)[-500:].mean() > 10.0
+    with pytest.raises(ValueError, match='velocity_mounting'):
+        attitude_from_imu(gyr, acc, rate=RATE, velocity=velocity,
+                          parameters={'velocity_mounting': [1.0, 1.0, 0.0, 0.0]})
