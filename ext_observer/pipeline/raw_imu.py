@@ -94,6 +94,24 @@ def pairing_settings(settings):
 _SAMPLE_REASONS = {SAMPLE_NON_FINITE: 'state_non_finite', SAMPLE_RESIDUAL: 'residual_too_large'}
 
 
+def mounting_matrix(rpy):
+    """
+    Return R = R_z(yaw) R_y(pitch) R_x(roll) (9 floats, row-major), or None for (0, 0, 0).
+
+    ``m_imu = R m_mag`` for a magnetometer frame at ``rpy`` (rad, fixed axes)
+    in the IMU's, as tf2's ``setRPY`` and static_transform_publisher give it.
+    """
+    roll, pitch, yaw = (float(v) for v in rpy)
+    if roll == pitch == yaw == 0.0:
+        return None
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+            sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
+            -sp, cp * sr, cp * cr)
+
+
 class RawImuEstimator:
     """
     The core's raw-IMU estimator with the node's frames: one call per sample or field.
@@ -128,6 +146,7 @@ class RawImuEstimator:
         self._covariance = np.zeros(9)
         self.world_frame = settings['world_frame']
         self.latest_field = None
+        self._field_dt = None  # the last regular interval between fields, s
         self._fields_used = 0
         self._calibrated = True
         self._gyro_bias = None
@@ -168,6 +187,8 @@ class RawImuEstimator:
                             else tuple(np.linalg.inv(soft_iron).ravel().tolist()))
         self._frame = heading_factor(self.world_frame, settings['declination'],
                                      settings['yaw_offset'])
+        self._mounting = mounting_matrix(settings.get('mag_frame_rpy', (0.0, 0.0, 0.0)))
+        self._mag_timeout = float(settings.get('mag_timeout', 0.0))
         # The gyro bias given (gyro_bias_*, rad/s): the estimate starts from
         # it, now and after each reset; gyro_bias_learning false holds the
         # bias where it is.
@@ -196,6 +217,17 @@ class RawImuEstimator:
             line): the IMU's interval.
 
         """
+        if self._mounting is not None:
+            r = self._mounting
+            field = (r[0] * field[0] + r[1] * field[1] + r[2] * field[2],
+                     r[3] * field[0] + r[4] * field[1] + r[5] * field[2],
+                     r[6] * field[0] + r[7] * field[1] + r[8] * field[2])
+        if dt is not None and 0.0 < self._mag_timeout < dt:
+            # A field back after a loss: its gain is that of a regular
+            # interval, so that the heading returns at tau_mag's rate, not in one step.
+            dt = self._field_dt
+        elif dt is not None:
+            self._field_dt = dt
         bx, by, bz = self._mag_bias
         field = (field[0] - bx, field[1] - by, field[2] - bz)
         if self._unskew is not None:
