@@ -585,6 +585,13 @@ class RawImuPipeline:
                                 else covariance)
         return outcome, estimate
 
+    def field_silence(self):
+        """How long the IMU's stamps have gone on since the last field, s (None: no field yet)."""
+        last, field = self.pairer.last_stamp, self.pairer.field_stamp
+        if last is None or field is None:
+            return None
+        return max(last - field, 0) * 1e-9
+
     def field(self, stamp, field):
         """
         Take one magnetometer sample (T) and correct the heading with it at once.
