@@ -138,3 +138,40 @@ def test_the_node_warns_of_a_lost_field_and_of_a_field_in_another_frame(ros_cont
     spinner.spin_until(lambda: len(driver.outputs) >= 100, 5.0, 'the last estimate')
     values = values_of(observer.status())
     assert values['field_lost'] == 'false' and values['field_frame_mismatch'] == 'false'
+
+
+def gap_figures(path, start, gap, parameters=None):
+    """
+    A BROAD trial's field removed from ``start`` for ``gap`` s (None: for good).
+
+    Returns the share of moving samples from ``start`` on whose heading error
+    is within 2σ, and (with a return) the largest heading change between
+    two samples in the second after it, in degrees and in σ at the return.
+    """
+    from ext_observer.broad.data import load_trial
+    trial = load_trial(path)
+    mag = trial.mag * 1e-6
+    k0 = int(start * trial.rate)
+    k1 = len(mag) if gap is None else min(k0 + int(gap * trial.rate), len(mag))
+    mag[k0:k1] = np.nan
+    run = attitude_from_imu(trial.gyr, trial.acc, mag, rate=trial.rate, parameters=parameters)
+    heading, sigma = signed_heading(run.quaternions, trial.quat), run.heading_std
+    after = np.arange(k0, len(mag))
+    scored = after[np.isfinite(heading[after]) & trial.movement[after]]
+    covered = float(np.mean(np.abs(heading[scored]) <= 2.0 * sigma[scored]))
+    if k1 >= len(mag) - 1:
+        return covered, math.nan, math.nan
+    step = np.nanmax(np.abs(np.diff(heading[k1 - 1:k1 + int(trial.rate)])))
+    return covered, math.degrees(step), step / sigma[k1 - 1]
+
+
+if __name__ == '__main__':
+    # python test/test_field_frame_and_timeout.py TRIAL.hdf5 [START]: the figures of
+    # docs/raw_imu.md, with mag_timeout at its default and at 0 (the gap's own gain).
+    import sys
+    where, begin = sys.argv[1], float(sys.argv[2]) if len(sys.argv) > 2 else 60.0
+    for length in (5.0, 60.0, None):
+        for timeout in (1.0, 0.0):
+            share, deg, sigmas = gap_figures(where, begin, length, {'mag_timeout': timeout})
+            print(f'gap {length} s, mag_timeout {timeout:g}: within 2σ {share:.3f}, '
+                  f'largest step {deg:.3f}° = {sigmas:.3f} σ')
