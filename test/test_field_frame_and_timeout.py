@@ -170,6 +170,8 @@ if __name__ == '__main__':
     # docs/raw_imu.md, with mag_timeout at its default and at 0 (the gap's own gain).
     import sys
     where, begin = sys.argv[1], float(sys.argv[2]) if len(sys.argv) > 2 else 60.0
+    share = gap_figures(where, begin, 0.0)[0]
+    print(f'no gap: within 2σ {share:.3f} from {begin:g} s on')
     for length in (5.0, 60.0, None):
         for timeout in (1.0, 0.0):
             share, deg, sigmas = gap_figures(where, begin, length, {'mag_timeout': timeout})
