@@ -15,8 +15,8 @@ import math
 from ext_observer.core.ahrs.ahrs_math import initial_attitude
 from ext_observer.core.quaternion import multiply_floats
 
-__all__ = ['STANDARD_GRAVITY', 'gravity_in_sensor', 'raw_attitude', 'rpy_from_quaternion',
-           'transform_from_estimate', 'without_gravity']
+__all__ = ['STANDARD_GRAVITY', 'gravity_in_sensor', 'mounting_matrix', 'raw_attitude',
+           'rpy_from_quaternion', 'transform_from_estimate', 'without_gravity']
 
 # imu_filter_madgwick's gravity (its getGravity's default), m/s².
 STANDARD_GRAVITY = 9.80665
@@ -137,3 +137,21 @@ def transform_from_estimate(q, fixed_frame, imu_frame, reverse=False):
     if reverse:
         return imu_frame, fixed_frame, (w, -x, -y, -z)
     return fixed_frame, imu_frame, (w, x, y, z)
+
+
+def mounting_matrix(rpy):
+    """
+    Return R = R_z(yaw) R_y(pitch) R_x(roll) (9 floats, row-major), or None for (0, 0, 0).
+
+    ``m_imu = R m_mag`` for a magnetometer frame at ``rpy`` (rad, fixed axes)
+    in the IMU's, as tf2's ``setRPY`` and static_transform_publisher give it.
+    """
+    roll, pitch, yaw = (float(v) for v in rpy)
+    if roll == pitch == yaw == 0.0:
+        return None
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+            sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
+            -sp, cp * sr, cp * cr)

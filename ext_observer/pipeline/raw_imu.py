@@ -31,6 +31,7 @@ from ext_observer.core.ahrs.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_
 from ext_observer.core.validation import check_state
 from ext_observer.pipeline.guard import GUARD_REASONS
 from ext_observer.pipeline.imu_filter_parameters import ahrs_params, uncertainty_params
+from ext_observer.pipeline.imu_tools import mounting_matrix
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
 
@@ -92,24 +93,6 @@ def pairing_settings(settings):
 
 # sample_step's outcomes as check_state's reasons (a step that raised: step_failed).
 _SAMPLE_REASONS = {SAMPLE_NON_FINITE: 'state_non_finite', SAMPLE_RESIDUAL: 'residual_too_large'}
-
-
-def mounting_matrix(rpy):
-    """
-    Return R = R_z(yaw) R_y(pitch) R_x(roll) (9 floats, row-major), or None for (0, 0, 0).
-
-    ``m_imu = R m_mag`` for a magnetometer frame at ``rpy`` (rad, fixed axes)
-    in the IMU's, as tf2's ``setRPY`` and static_transform_publisher give it.
-    """
-    roll, pitch, yaw = (float(v) for v in rpy)
-    if roll == pitch == yaw == 0.0:
-        return None
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
-            sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
-            -sp, cp * sr, cp * cr)
 
 
 class RawImuEstimator:
