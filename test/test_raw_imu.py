@@ -108,10 +108,10 @@ class Driver(Node):
         msg.orientation_covariance[0] = -1.0
         self.imu_publisher.publish(msg)
 
-    def send_field(self, stamp, field):
+    def send_field(self, stamp, field, frame_id='imu_link'):
         msg = MagneticField()
         msg.header.stamp = stamp_from_nanoseconds(stamp)
-        msg.header.frame_id = 'imu_link'
+        msg.header.frame_id = frame_id
         f = msg.magnetic_field
         f.x, f.y, f.z = (float(b) for b in field)
         self.mag_publisher.publish(msg)

@@ -30,6 +30,7 @@ imu_tools' two filters' among them (``docs/raw_imu.md``).
 """
 
 import gc
+import math
 import os
 
 import numpy as np
@@ -133,6 +134,9 @@ class ImuFilterNode(EstimatorNode):
         self._estimate_msg = QuaternionStamped()
         self._status_steps = self._status_fields = 0
         self._said = set()
+        self._field_lost = False
+        # The frame_id of the first IMU sample and field, for the mounting check.
+        self._frames = {'imu': None, 'mag': None}
         self._unit_counts = dict(self.pipeline.units.counts)
         self._status_clipped = 0
         self._calibration_state = None  # as last reported
@@ -208,6 +212,8 @@ class ImuFilterNode(EstimatorNode):
         # for every sample (the fields of a message are Python ints and floats).
         header_stamp = msg.header.stamp
         stamp = header_stamp.sec * 1_000_000_000 + header_stamp.nanosec
+        if self._frames['imu'] is None:
+            self._frames['imu'] = msg.header.frame_id
         v, a = msg.angular_velocity, msg.linear_acceleration
         # The estimated covariance is written straight into the message that
         # goes out (its own float64 array): no copy.
@@ -268,6 +274,8 @@ class ImuFilterNode(EstimatorNode):
         except Undecodable as error:
             self._undecodable('increment', error)
             return
+        if self._frames['imu'] is None:
+            self._frames['imu'] = frame_id(raw)
         covariance = self._covariance_out if self._covariance_estimated else None
         state = self._run(stamp, gyr, acc, covariance)
         if state is None:
@@ -297,6 +305,8 @@ class ImuFilterNode(EstimatorNode):
         except Undecodable as error:
             self._undecodable('measurement', error)
             return
+        if self._frames['mag'] is None:
+            self._frames['mag'] = frame_id(raw)
         self.pipeline.field(stamp, field)
 
     def _undecodable(self, kind, error):
@@ -341,6 +351,8 @@ class ImuFilterNode(EstimatorNode):
 
     def imu_mag_callback(self, msg):
         """Take a magnetic field (T) and correct the heading with it at once."""
+        if self._frames['mag'] is None:
+            self._frames['mag'] = msg.header.frame_id
         self.pipeline.field(nanoseconds_from_stamp(msg.header.stamp),
                             vector_from_msg(msg.magnetic_field))
 
@@ -406,8 +418,12 @@ class ImuFilterNode(EstimatorNode):
         if self.compiler is not None:
             now = 'plain (compiling)' if self.compiler.compiling else 'plain (loading)'
             values = [(key, now if key == 'kernels' else value) for key, value in values]
+        silence = self.pipeline.field_silence()
         return (values + [(f'implausible_{kind}', count) for kind, count in units.items()]
-                + self.stream.key_values())
+                + self.stream.key_values()
+                + [('field_lost', self._field_lost),
+                   ('field_silent_s', math.nan if silence is None else silence),
+                   ('field_frame_mismatch', self._frame_mismatch() is not None)])
 
     def faults(self):
         """The fault counters (EstimatorNode's), and the inputs that did not decode."""
@@ -430,6 +446,7 @@ class ImuFilterNode(EstimatorNode):
                 self.get_logger().warning(text + ' (use_mag true: is the magnetometer '
                                           'publishing there?)')
         self._status_steps, self._status_fields = steps, fields
+        parts.extend(self._field_problems())
         units = self.pipeline.units
         topics = {'field': MAG_TOPIC, 'acceleration': IMU_TOPIC,
                   'angular_velocity': IMU_TOPIC}
@@ -448,6 +465,46 @@ class ImuFilterNode(EstimatorNode):
         parts.extend(self._calibration_problems())
         parts.extend(self.stream.problems(self._clock.now().nanoseconds))
         return parts
+
+    def _field_problems(self):
+        # A field lost (none for mag_timeout on the IMU's stamps): WARN while
+        # it lasts, the log once per episode; and a field in another frame.
+        parts = []
+        silence = self.pipeline.field_silence()
+        timeout = self.parameters.settings['mag_timeout']
+        lost = (self.measurement_subscription is not None and silence is not None
+                and 0.0 < timeout <= silence)
+        logger = self.get_logger()
+        if lost:
+            text = (f'field lost: no magnetic field on {self.measurement_subscription.topic_name}'
+                    f' for {silence:.1f} s (mag_timeout {timeout:g} s): running 6D, the '
+                    'heading held on the gyro, its variance growing')
+            parts.append(text)
+            if not self._field_lost:
+                logger.warning(text)
+        elif self._field_lost:
+            logger.info('magnetic field back: the heading returns to it at the rate of '
+                        'ahrs.tau_mag')
+        self._field_lost = lost
+        text = self._frame_mismatch()
+        if text is not None:
+            parts.append(text)
+            if 'frame_mismatch' not in self._said:
+                self._said.add('frame_mismatch')
+                logger.warning(text)
+        return parts
+
+    def _frame_mismatch(self):
+        """The text for a field in another frame than the IMU's with no mounting set, or None."""
+        imu, mag = self._frames['imu'], self._frames['mag']
+        if imu is None or mag is None or imu == mag:
+            return None
+        if any(float(v) != 0.0 for v in self.parameters.settings['mag_frame_rpy']):
+            return None
+        return (f"magnetic field in frame '{mag}', IMU samples in '{imu}', and mag_frame_rpy "
+                'is zero: the field is used as if in the IMU frame. Set mag_frame_rpy to the '
+                "mounting (the node cannot look it up on /tf: tf2 is not on PyPI), or give "
+                'both the same frame_id')
 
     def _clipping_problems(self):
         # A gyro at its range (ahrs.gyro_range, or a rate stuck at its peak):

@@ -196,6 +196,22 @@ IMU_FILTER_OWN = (
                   'mag_bias_*. python -m ext_observer calibrate and the ~/save_calibration '
                   'service write both.',
                   constraints='9 finite numbers: symmetric, positive definite.'),
+    ParameterSpec('mag_frame_rpy', [0.0, 0.0, 0.0],
+                  "The magnetometer's mounting: roll, pitch, yaw (rad, about the fixed x, y, "
+                  "z axes, as static_transform_publisher's and tf2's setRPY) of the field's "
+                  "frame (imu/mag's frame_id) in the IMU's (imu/data_raw's): the field is "
+                  'turned into the IMU frame before mag_bias_* and mag_soft_iron, which are '
+                  "then the IMU frame's. The node cannot look the transform up on /tf (tf2 "
+                  'is not on PyPI): it warns once when the two frame_ids differ and this '
+                  'is zero.',
+                  constraints='3 finite numbers.'),
+    ParameterSpec('mag_timeout', 1.0,
+                  'A field lost: after this long without one (s, on the IMU\'s stamps) the '
+                  'node warns (/diagnostics and the log, once per episode) and runs 6D, '
+                  "the gyro holding the heading, its variance growing; the field's return "
+                  'brings the heading back at the rate of tau_mag, without a step '
+                  '(docs/raw_imu.md#the-magnetometers-frame-and-a-lost-field). 0 = never warn.',
+                  (0.0, 3600.0)),
     ParameterSpec('calibration_file', 'mag_calibration.yaml',
                   'Where ~/save_calibration writes the learned calibration (a params '
                   'file for this node: mag_bias_*, mag_soft_iron once the magnetometer '
@@ -304,6 +320,10 @@ def imu_filter_settings(values):
     except ValueError as error:
         raise ValueError(f'mag_bias_*, mag_soft_iron (the saved magnetometer calibration): '
                          f'{error}') from None
+    rpy = values['mag_frame_rpy']
+    if len(rpy) != 3 or not all(math.isfinite(float(v)) for v in rpy):
+        raise ValueError(f'mag_frame_rpy must be 3 finite numbers (roll, pitch, yaw, rad), '
+                         f'got {list(rpy)}')
     if values['world_frame'] not in WORLD_FRAMES:
         raise ValueError(f'world_frame must be one of {tuple(WORLD_FRAMES)}, got '
                          f'{values["world_frame"]!r}')

@@ -13,10 +13,11 @@ only puts the numbers into messages. Quaternions scalar first
 import math
 
 from ext_observer.core.ahrs.ahrs_math import initial_attitude
+from ext_observer.core.ahrs.estimator import WORLD_FRAMES
 from ext_observer.core.quaternion import multiply_floats
 
-__all__ = ['STANDARD_GRAVITY', 'gravity_in_sensor', 'raw_attitude', 'rpy_from_quaternion',
-           'transform_from_estimate', 'without_gravity']
+__all__ = ['STANDARD_GRAVITY', 'gravity_in_sensor', 'heading_factor', 'mounting_matrix', 'raw_attitude',
+           'rpy_from_quaternion', 'transform_from_estimate', 'without_gravity']
 
 # imu_filter_madgwick's gravity (its getGravity's default), m/s².
 STANDARD_GRAVITY = 9.80665
@@ -95,7 +96,7 @@ def raw_attitude(acc, field=None, frame=None):
         Magnetic field (any unit), sensor frame.
     frame : sequence of 4 float, optional
         Left factor from ENU to the published world frame
-        (:func:`~ext_observer.pipeline.raw_imu.heading_factor`); None: ENU.
+        (:func:`heading_factor`); None: ENU.
 
     Returns
     -------
@@ -137,3 +138,44 @@ def transform_from_estimate(q, fixed_frame, imu_frame, reverse=False):
     if reverse:
         return imu_frame, fixed_frame, (w, -x, -y, -z)
     return fixed_frame, imu_frame, (w, x, y, z)
+
+
+def mounting_matrix(rpy):
+    """
+    Return R = R_z(yaw) R_y(pitch) R_x(roll) (9 floats, row-major), or None for (0, 0, 0).
+
+    ``m_imu = R m_mag`` for a magnetometer frame at ``rpy`` (rad, fixed axes)
+    in the IMU's, as tf2's ``setRPY`` and static_transform_publisher give it.
+    """
+    roll, pitch, yaw = (float(v) for v in rpy)
+    if roll == pitch == yaw == 0.0:
+        return None
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+            sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
+            -sp, cp * sr, cp * cr)
+
+
+def _about_z(angle):
+    return (math.cos(0.5 * angle), 0.0, 0.0, math.sin(0.5 * angle))
+
+
+def heading_factor(world_frame, declination=0.0, yaw_offset=0.0):
+    """
+    Return the left factor from the core's ENU estimate to the published one.
+
+    ``R_z(yaw_offset) ⊗ C ⊗ R_up(−declination)``, with ``C`` the frame's
+    factor of :data:`~ext_observer.core.ahrs.estimator.WORLD_FRAMES`.
+
+    Returns
+    -------
+    factor : tuple of 4 float or None
+        None when it is the identity (ENU, no offsets): nothing to multiply.
+
+    """
+    if world_frame == 'enu' and declination == 0.0 and yaw_offset == 0.0:
+        return None
+    factor = multiply_floats(WORLD_FRAMES[world_frame], _about_z(-declination))
+    return multiply_floats(_about_z(yaw_offset), factor)

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from ext_observer.core.ahrs.ahrs_layout import S_HOLE_VAR
-from ext_observer.core.ahrs.estimator import AhrsObserver, WORLD_FRAMES
+from ext_observer.core.ahrs.estimator import AhrsObserver
 from ext_observer.core.ahrs.hole_kernel import HOLE_RESTART
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
@@ -31,6 +31,7 @@ from ext_observer.core.ahrs.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_
 from ext_observer.core.validation import check_state
 from ext_observer.pipeline.guard import GUARD_REASONS
 from ext_observer.pipeline.imu_filter_parameters import ahrs_params, uncertainty_params
+from ext_observer.pipeline.imu_tools import heading_factor, mounting_matrix
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
 from ext_observer.pipeline.velocity_aid import VelocityInput
@@ -53,29 +54,6 @@ MAX_INCREMENT = 20.0
 # and the covariance of the orientation (9 floats, row-major, rad², about
 # world_frame's x, y, z axes).
 Estimate = namedtuple('Estimate', 'stamp state reason step covariance')
-
-
-def _about_z(angle):
-    return (math.cos(0.5 * angle), 0.0, 0.0, math.sin(0.5 * angle))
-
-
-def heading_factor(world_frame, declination=0.0, yaw_offset=0.0):
-    """
-    Return the left factor from the core's ENU estimate to the published one.
-
-    ``R_z(yaw_offset) ⊗ C ⊗ R_up(−declination)``, with ``C`` the frame's
-    factor of :data:`~ext_observer.core.ahrs.estimator.WORLD_FRAMES`.
-
-    Returns
-    -------
-    factor : tuple of 4 float or None
-        None when it is the identity (ENU, no offsets): nothing to multiply.
-
-    """
-    if world_frame == 'enu' and declination == 0.0 and yaw_offset == 0.0:
-        return None
-    factor = multiply_floats(WORLD_FRAMES[world_frame], _about_z(-declination))
-    return multiply_floats(_about_z(yaw_offset), factor)
 
 
 def pairing_settings(settings):
@@ -129,6 +107,7 @@ class RawImuEstimator:
         self._covariance = np.zeros(9)
         self.world_frame = settings['world_frame']
         self.latest_field = None
+        self._field_dt = None  # the last regular interval between fields, s
         self._fields_used = 0
         self._calibrated = True
         self._gyro_bias = None
@@ -169,6 +148,8 @@ class RawImuEstimator:
                             else tuple(np.linalg.inv(soft_iron).ravel().tolist()))
         self._frame = heading_factor(self.world_frame, settings['declination'],
                                      settings['yaw_offset'])
+        self._mounting = mounting_matrix(settings.get('mag_frame_rpy', (0.0, 0.0, 0.0)))
+        self._mag_timeout = float(settings.get('mag_timeout', 0.0))
         # The gyro bias given (gyro_bias_*, rad/s): the estimate starts from
         # it, now and after each reset; gyro_bias_learning false holds the
         # bias where it is.
@@ -197,6 +178,17 @@ class RawImuEstimator:
             line): the IMU's interval.
 
         """
+        if self._mounting is not None:
+            r = self._mounting
+            field = (r[0] * field[0] + r[1] * field[1] + r[2] * field[2],
+                     r[3] * field[0] + r[4] * field[1] + r[5] * field[2],
+                     r[6] * field[0] + r[7] * field[1] + r[8] * field[2])
+        if dt is not None and 0.0 < self._mag_timeout < dt:
+            # A field back after a loss: its gain is that of a regular
+            # interval, so that the heading returns at tau_mag's rate, not in one step.
+            dt = self._field_dt
+        elif dt is not None:
+            self._field_dt = dt
         bx, by, bz = self._mag_bias
         field = (field[0] - bx, field[1] - by, field[2] - bz)
         if self._unskew is not None:
@@ -563,6 +555,13 @@ class RawImuPipeline:
     def velocity(self, stamp, velocity):
         """The body's velocity (ns, m/s; :class:`~ext_observer.pipeline.velocity_aid.VelocityInput`)."""
         return self._velocity.take(stamp, velocity)
+
+    def field_silence(self):
+        """How long the IMU's stamps have gone on since the last field, s (None: no field yet)."""
+        last, field = self.pairer.last_stamp, self.pairer.field_stamp
+        if last is None or field is None:
+            return None
+        return max(last - field, 0) * 1e-9
 
     def field(self, stamp, field):
         """
