@@ -91,7 +91,7 @@ class VelocityTopic:
         return {f'dropped_velocity_{reason}': count for reason, count in self.drops.items()}
 
     def key_values(self):
-        """``velocity_source``, ``velocity_used``, ``velocity_age_s``, ``velocities_received``, ``velocities_used``."""
+        """The diagnostic pairs: the source, whether the aid is in use, the age, the counts."""
         core = self.node.observer
         s = core.flat_state
         age = float(s[S_VEL_AGE]) if s[S_VEL_N] > 0.0 else math.nan

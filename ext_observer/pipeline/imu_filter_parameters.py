@@ -30,8 +30,8 @@ from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_set
 __all__ = ['AHRS_PREFIX', 'COMPLEMENTARY_UNUSED', 'COVARIANCE_MODES', 'COVARIANCE_PREFIX',
            'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'IMU_TOOLS_OPTIONS', 'IMU_TOOLS_UNUSED',
            'MADGWICK_UNUSED', 'REPLACED_BY', 'ahrs_params', 'covariance_estimated',
-           'covariance_text', 'imu_filter_settings', 'uncertainty_params', 'unused_text', 'velocity_frame',
-           'VELOCITY_SOURCES']
+           'covariance_text', 'imu_filter_settings', 'uncertainty_params', 'unused_text',
+           'velocity_frame', 'VELOCITY_SOURCES']
 
 # Where the velocity aid's velocity comes from (velocity_source).
 VELOCITY_SOURCES = ('none', 'odom', 'twist')
