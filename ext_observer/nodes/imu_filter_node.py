@@ -4,8 +4,11 @@ The ``imu_filter`` node: attitude from a raw IMU, the drop-in for imu_filter_mad
 Inputs: ``imu/data_raw`` (``sensor_msgs/Imu``: angular velocity, rad/s, and
 linear acceleration, m/s²; the orientation is ignored) and, with
 ``use_mag``, ``imu/mag`` (``sensor_msgs/MagneticField``, T) at its own rate;
-both subscribed with the sensor-data QoS (best effort, volatile: reliable
-and best-effort drivers both connect), overridable with ``qos_overrides``.
+with ``velocity_source``, the body's velocity on ``odom``
+(``nav_msgs/Odometry``) or ``velocity`` (``geometry_msgs/TwistStamped``)
+(:mod:`~ext_observer.nodes.velocity_topic`); all subscribed with the
+sensor-data QoS (best effort, volatile: reliable and best-effort drivers
+both connect), overridable with ``qos_overrides``.
 Outputs, one per IMU sample and stamped with it: ``imu/data``
 (``sensor_msgs/Imu``: the sample with its orientation filled in, normalized,
 and ``orientation_covariance`` the estimate's own, row-major about the world
@@ -49,8 +52,9 @@ from ext_observer.pipeline.kernel_cache import BackgroundCompile, start_plan
 from ext_observer.nodes.estimator_node import EstimatorNode, LOG_THROTTLE
 from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
                                                          imu_filter_settings, unused_text)
-from ext_observer.nodes.node_common import run_node
+from ext_observer.nodes.node_common import NO_TF2, run_node, transform_broadcaster
 from ext_observer.nodes.stream_watch import StreamWatch
+from ext_observer.nodes.velocity_topic import VelocityTopic
 from ext_observer.pipeline.imu_tools import (raw_attitude, rpy_from_quaternion,
                                              transform_from_estimate, without_gravity)
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, KINDS
@@ -60,22 +64,6 @@ __all__ = ['IMU_FILTER_PARAMETERS', 'ImuFilterNode', 'IMU_TOPIC', 'MAG_TOPIC', '
 
 IMU_TOPIC = 'imu/data_raw'
 MAG_TOPIC = 'imu/mag'
-
-# What publish_tf needs and the pip wheels do not have (tf2 is not on PyPI).
-NO_TF2 = ('publish_tf is true but tf2_ros does not import here ({error}): no TF is '
-          'broadcast, the orientation is on imu/data. For the transform run the node in a '
-          'ROS 2 installation (source /opt/ros/jazzy/setup.bash, colcon), or set publish_tf '
-          'false to silence this')
-
-
-def transform_broadcaster(node):
-    """Return a tf2_ros TransformBroadcaster of ``node``, or the ImportError's text."""
-    try:
-        from tf2_ros import TransformBroadcaster
-    except ImportError as error:
-        return None, str(error)
-    return TransformBroadcaster(node), None
-
 
 class ImuFilterNode(EstimatorNode):
     """
@@ -131,6 +119,8 @@ class ImuFilterNode(EstimatorNode):
             self._subscribe(MagneticField, MAG_TOPIC, self.imu_mag_serialized_callback
                             if serialized else self.imu_mag_callback, raw=serialized)
             if settings['use_mag'] else None)
+        # The velocity aid's odom or velocity topic (velocity_source).
+        self.velocity_input = VelocityTopic(self, settings)
         self._estimate_msg = QuaternionStamped()
         self._status_steps = self._status_fields = 0
         self._said = set()
@@ -164,6 +154,8 @@ class ImuFilterNode(EstimatorNode):
             f'raw IMU on {self.increment_subscription.topic_name}'
             + (f' and {self.measurement_subscription.topic_name}' if settings['use_mag']
                else ' (use_mag false: heading free)')
+            + (f', velocity on {self.velocity_input.subscription.topic_name}'
+               if self.velocity_input.subscription is not None else '')
             + f', world frame {settings["world_frame"]}, '
             f'{self.pipeline.estimator.core.params}'
             + ('' if serialized else '; serialized_io false: messages deserialized'))
@@ -420,7 +412,7 @@ class ImuFilterNode(EstimatorNode):
             values = [(key, now if key == 'kernels' else value) for key, value in values]
         silence = self.pipeline.field_silence()
         return (values + [(f'implausible_{kind}', count) for kind, count in units.items()]
-                + self.stream.key_values()
+                + self.stream.key_values() + self.velocity_input.key_values()
                 + [('field_lost', self._field_lost),
                    ('field_silent_s', math.nan if silence is None else silence),
                    ('field_frame_mismatch', self._frame_mismatch() is not None)])
@@ -430,6 +422,7 @@ class ImuFilterNode(EstimatorNode):
         counters = super().faults()
         counters.update((f'undecodable_{kind}', count)
                         for kind, count in self.undecodable.items())
+        counters.update(self.velocity_input.faults())
         return counters
 
     def _problems(self, steps):
@@ -463,6 +456,7 @@ class ImuFilterNode(EstimatorNode):
         self._unit_counts = dict(units.counts)
         parts.extend(self._clipping_problems())
         parts.extend(self._calibration_problems())
+        parts.extend(self.velocity_input.problems(steps))
         parts.extend(self.stream.problems(self._clock.now().nanoseconds))
         return parts
 

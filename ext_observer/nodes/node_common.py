@@ -25,6 +25,7 @@ from ext_observer.pipeline.parameter_specs import ParameterSpec
 __all__ = [
     'EXECUTORS',
     'LEVEL_NAMES',
+    'NO_TF2',
     'CounterDeltas',
     'ParameterError',
     'ParameterSpec',
@@ -34,6 +35,7 @@ __all__ = [
     'executor_from_args',
     'key_values',
     'run_node',
+    'transform_broadcaster',
 ]
 
 
@@ -388,3 +390,19 @@ def run_node(node_class, args=None):
             node.destroy_node()
         rclpy.try_shutdown()
     return exit_code
+
+
+# What publish_tf needs and the pip wheels do not have (tf2 is not on PyPI).
+NO_TF2 = ('publish_tf is true but tf2_ros does not import here ({error}): no TF is '
+          'broadcast, the orientation is on imu/data. For the transform run the node in a '
+          'ROS 2 installation (source /opt/ros/jazzy/setup.bash, colcon), or set publish_tf '
+          'false to silence this')
+
+
+def transform_broadcaster(node):
+    """Return a tf2_ros TransformBroadcaster of ``node``, or the ImportError's text."""
+    try:
+        from tf2_ros import TransformBroadcaster
+    except ImportError as error:
+        return None, str(error)
+    return TransformBroadcaster(node), None

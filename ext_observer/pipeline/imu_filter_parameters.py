@@ -30,8 +30,11 @@ from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_set
 __all__ = ['AHRS_PREFIX', 'COMPLEMENTARY_UNUSED', 'COVARIANCE_MODES', 'COVARIANCE_PREFIX',
            'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'IMU_TOOLS_OPTIONS', 'IMU_TOOLS_UNUSED',
            'MADGWICK_UNUSED', 'REPLACED_BY', 'ahrs_params', 'covariance_estimated',
-           'covariance_text', 'imu_filter_settings', 'uncertainty_params', 'unused_text', 'velocity_frame']
+           'covariance_text', 'imu_filter_settings', 'uncertainty_params', 'unused_text',
+           'velocity_frame', 'VELOCITY_SOURCES']
 
+# Where the velocity aid's velocity comes from (velocity_source).
+VELOCITY_SOURCES = ('none', 'odom', 'twist')
 # A velocity_mounting's norm may differ from 1 by this much (rounded input).
 _UNIT_TOLERANCE = 1e-6
 # The core's parameters are the node's parameters ahrs.<name>.
@@ -257,11 +260,19 @@ IMU_FILTER_OWN = (
                   (0.0001, 10.0)),
     ParameterSpec('frame_id', 'world', 'frame_id of attitude_estimate (imu/data keeps the '
                   "sample's frame_id)."),
-    # The velocity aid (docs/raw_imu.md#a-velocity-aid-vehicles): the batch API's
-    # velocity input; the node takes none yet.
+    # The velocity aid (docs/raw_imu.md#a-velocity-aid-vehicles): the node's
+    # velocity topic, the batch API's velocity array.
+    ParameterSpec('velocity_source', 'none',
+                  "Velocity aid: the body's velocity from 'odom' (nav_msgs/Odometry, its "
+                  "twist.twist.linear in child_frame_id), 'twist' (geometry_msgs/"
+                  "TwistStamped on velocity, its linear part) or 'none'. The acceleration "
+                  'it implies is removed from the specific force (vehicles in turns).',
+                  read_only=True, constraints="'none', 'odom' or 'twist'."),
     ParameterSpec('velocity_timeout', VELOCITY_TIMEOUT,
-                  "Velocity aid (attitude_from_imu's velocity): a body velocity older than "
-                  'this, s, is not used, and the specific force is taken as it is measured.',
+                  "Velocity aid (velocity_source, attitude_from_imu's velocity): a body "
+                  'velocity older than this, s, is not used, and the specific force is taken '
+                  'as it is measured; the node drops one stamped this much before the latest '
+                  'IMU sample (stale).',
                   (0.001, 10.0)),
     ParameterSpec('velocity_mounting', [1.0, 0.0, 0.0, 0.0],
                   "Velocity aid: the IMU's orientation in the velocity's frame (e.g. the "
@@ -330,6 +341,9 @@ def imu_filter_settings(values):
     if values['orientation_covariance_mode'] not in COVARIANCE_MODES:
         raise ValueError(f'orientation_covariance_mode must be one of {COVARIANCE_MODES}, '
                          f'got {values["orientation_covariance_mode"]!r}')
+    if values['velocity_source'] not in VELOCITY_SOURCES:
+        raise ValueError(f'velocity_source must be one of {VELOCITY_SOURCES}, got '
+                         f'{values["velocity_source"]!r}')
     velocity_frame(values)
     params = ahrs_params(values)
     for axis in 'xyz':

@@ -491,6 +491,8 @@ class RawImuPipeline:
     def reset(self, cause):
         """Restart the estimator (the next sample initializes it), counted as ``cause``."""
         self.estimator.reset()
+        # The core forgot the velocity: the next one is a first (a new time line may be earlier).
+        self._velocity.stamp = None
         self.resets[cause] += 1
 
     def restart(self, cause):
