@@ -55,6 +55,7 @@ from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FI
 from ext_observer.nodes.node_common import NO_TF2, run_node, transform_broadcaster
 from ext_observer.nodes.stream_watch import StreamWatch
 from ext_observer.nodes.velocity_topic import VelocityTopic
+from ext_observer.pipeline.health import health_text, HealthWatch
 from ext_observer.pipeline.imu_tools import (raw_attitude, rpy_from_quaternion,
                                              transform_from_estimate, without_gravity)
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, KINDS
@@ -125,6 +126,7 @@ class ImuFilterNode(EstimatorNode):
         self._status_steps = self._status_fields = 0
         self._said = set()
         self._field_lost = False
+        self._health = HealthWatch()
         # The frame_id of the first IMU sample and field, for the mounting check.
         self._frames = {'imu': None, 'mag': None}
         self._unit_counts = dict(self.pipeline.units.counts)
@@ -413,7 +415,8 @@ class ImuFilterNode(EstimatorNode):
         silence = self.pipeline.field_silence()
         return (values + [(f'implausible_{kind}', count) for kind, count in units.items()]
                 + self.stream.key_values() + self.velocity_input.key_values()
-                + [('field_lost', self._field_lost),
+                + [('health', health_text(self._health(self.pipeline))),
+                   ('field_lost', self._field_lost),
                    ('field_silent_s', math.nan if silence is None else silence),
                    ('field_frame_mismatch', self._frame_mismatch() is not None)])
 

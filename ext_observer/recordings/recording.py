@@ -43,8 +43,9 @@ import numpy as np
 from ext_observer.pipeline.batch import hold_finite
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import RawImuPipeline
-from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
+from ext_observer.pipeline.health import HEALTH_STATES, HealthWatch
 from ext_observer.pipeline.velocity_aid import with_velocity
+from ext_observer.recordings.input_units import check_units as refuse_wrong_units
 
 __all__ = ['PipelineRun', 'Recording', 'add_parameter_options', 'attitude_from_imu',
            'node_settings', 'parameters_from_options', 'parameters_from_yaml', 'roll_pitch_yaw']
@@ -53,14 +54,13 @@ SECOND = 1_000_000_000
 # Stamp of the earliest sample of a recording given by times or a rate, ns:
 # the node drops a stamp of zero, and only differences matter.
 START = 1000 * SECOND
-# Percentile of the per-sample largest |angular rate| that the unit check
-# looks at: a few fast samples are motion, most of them a unit.
-GYRO_PERCENTILE = 99.0
 
 _SPECS = {spec.name: spec for spec in IMU_FILTER_PARAMETERS}
 # The record of a sample without an estimate.
 _NONE = (math.nan,) * 4
 _NO_VARIANCE = (math.nan, math.nan)
+_REST = 1 << HEALTH_STATES.index('at_rest')
+_REJECTED = 1 << HEALTH_STATES.index('field_rejected')
 # rclpy's own parameters, in a params file beside the node's.
 _ROS_OWN = ('use_sim_time', 'qos_overrides.')
 
@@ -210,10 +210,15 @@ class Recording:
         ``|q̂̄q̂ − 1|`` is what the extension term holds small), held alike.
     estimated : ndarray of bool, shape (N,)
         The node published an estimate for this sample.
+    health : ndarray of uint8, shape (N,)
+        The estimator's health after this sample, as bits: bit ``i`` set when
+        state :data:`~ext_observer.pipeline.health.HEALTH_STATES` ``[i]`` is
+        active (docs/diagnostics.md); :meth:`in_state` reads one state.
     rest : ndarray of bool, shape (N,)
-        Rest detected after this sample (the gyro bias is learned then).
+        Rest detected after this sample (the gyro bias is learned then):
+        ``in_state('at_rest')``.
     mag_disturbed : ndarray of bool, shape (N,)
-        The latest field was rejected as disturbed.
+        The latest field was rejected as disturbed: ``in_state('field_rejected')``.
     inclination_std, heading_std : ndarray, shape (N,)
         rad: the uncertainty the node publishes with this sample's estimate
         (``imu/data``'s ``orientation_covariance``, docs/covariance.md), as
@@ -244,6 +249,16 @@ class Recording:
 
     def __init__(self, **fields):
         self.__dict__.update(fields)
+
+    def in_state(self, name):
+        """Return where the health state ``name`` was active, bool (N,) (:attr:`health`)."""
+        if name not in HEALTH_STATES:
+            raise ValueError(f'unknown health state {name!r} (one of {", ".join(HEALTH_STATES)})')
+        return (self.health & (1 << HEALTH_STATES.index(name))) != 0
+
+    def health_states(self, k):
+        """Return the names of the states active after sample ``k``, a tuple."""
+        return tuple(name for i, name in enumerate(HEALTH_STATES) if self.health[k] >> i & 1)
 
     def roll_pitch_yaw(self):
         """Return roll, pitch, yaw (rad) of :attr:`quaternions`, shape (N, 3)."""
@@ -300,14 +315,15 @@ class PipelineRun:
         self.settings = settings
         self.pipeline = RawImuPipeline(settings, depth=settings['queue_depth'])
         self._core = self.pipeline.estimator.core
-        # Per IMU sample: its stamp, its estimate (NaN: none), rest | 2 ·
-        # mag_disturbed, the calibration's state. Flat arrays of numbers, not
+        # Per IMU sample: its stamp, its estimate (NaN: none), its health's
+        # bits, the calibration's state. Flat arrays of numbers, not
         # a tuple per sample: hundreds of thousands of live tuples would make
         # Python's garbage collector the largest cost of a long recording.
         self._stamps = array.array('q')
         self._states = array.array('d')
         self._variances = array.array('d')
         self._flags = bytearray()
+        self._health = HealthWatch()
         self._calibrations = []
         self._take = self.pipeline.imu
         # The magnetometer calibration's state, where the core has one: it
@@ -317,7 +333,6 @@ class PipelineRun:
     def imu(self, stamp, gyr, acc):
         """Take one IMU sample (ns, rad/s, m/s²); return its Estimate or None."""
         estimate = self._take(stamp, gyr, acc)[1]
-        core = self._core
         self._stamps.append(stamp)
         if estimate is None:
             self._states.extend(_NONE)
@@ -326,7 +341,7 @@ class PipelineRun:
             self._states.extend(estimate.state)
             covariance = estimate.covariance
             self._variances.extend((covariance[0], covariance[8]))
-        self._flags.append(core.rest + 2 * core.mag_disturbed)
+        self._flags.append(self._health.mask(self.pipeline))
         if self._calibration is not None:
             self._calibrations.append(self._calibration)
         return estimate
@@ -374,7 +389,7 @@ class PipelineRun:
             quaternions=ambient / np.linalg.norm(ambient, axis=1, keepdims=True),
             ambient=ambient, estimated=estimated,
             inclination_std=np.sqrt(2.0 * variances[:, 0]), heading_std=np.sqrt(variances[:, 1]),
-            rest=(flags & 1).astype(bool), mag_disturbed=(flags & 2).astype(bool),
+            health=flags.copy(), rest=(flags & _REST) != 0, mag_disturbed=(flags & _REJECTED) != 0,
             calibration=(None if self._calibration is None
                          else np.array(self._calibrations, dtype=object)),
             calibrator=getattr(self._core, 'calibration', None),
@@ -445,7 +460,7 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
     settings = node_settings(parameters)
     mag = _field_rows(mag, mag_times, count)
     if check_units:
-        _check_units(gyr, acc, mag)
+        refuse_wrong_units(gyr, acc, mag)
     if (rate is None) == (times is None):
         raise ValueError('give the IMU rate (Hz) or its times (s), one of them')
     if mag_times is not None:
@@ -566,35 +581,3 @@ def _times(values, count, name):
     if bad.size:
         raise ValueError(f'{name}[{bad[0]}] is {array[bad[0]]}: times must be finite (s)')
     return array
-
-
-def _typical(rows, norms, quantile):
-    finite = np.isfinite(norms)
-    if not finite.any():
-        return None
-    order = np.argsort(np.where(finite, norms, np.inf))[:int(finite.sum())]
-    return tuple(rows[order[int(quantile * (len(order) - 1))]])
-
-
-def _check_units(gyr, acc, mag):
-    """
-    Refuse the units the node would warn of, judged on typical samples.
-
-    The node's own check (:class:`~ext_observer.pipeline.units.UnitCheck`) sees the
-    median specific force (as a window of samples), the sample whose largest
-    rate is at :data:`GYRO_PERCENTILE`, and the median field.
-    """
-    check = UnitCheck()
-    acc_row = _typical(acc, np.linalg.norm(acc, axis=1), 0.5)
-    gyr_row = _typical(gyr, np.abs(gyr).max(axis=1), GYRO_PERCENTILE / 100.0)
-    if acc_row is not None and gyr_row is not None:
-        for _ in range(ACC_WINDOW):
-            check.imu(gyr_row, acc_row)
-    if mag is not None:
-        mag_row = _typical(mag, np.linalg.norm(mag, axis=1), 0.5)
-        if mag_row is not None:
-            check.field(mag_row)
-    names = {'angular_velocity': 'gyr', 'acceleration': 'acc', 'field': 'mag'}
-    found = [f'{names[kind]}: {text}' for kind, text in check.findings.items()]
-    if found:
-        raise ValueError('; '.join(found) + ' (check_units=False runs it as it is)')
