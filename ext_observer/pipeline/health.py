@@ -11,6 +11,9 @@ A state more is one entry in :data:`HEALTH_STATES` and one line in
 :meth:`HealthWatch.__call__`'s table; the Recording's bits follow the tuple.
 """
 
+from ext_observer.core.ahrs.ahrs_layout import (P_TAU_ACC, S_CLIPPED, S_CLIPS, S_INIT,
+                                                 S_MAG_DIST, S_REST, S_START, S_VEL_USED)
+
 __all__ = ['HEALTH_STATES', 'HealthWatch', 'NO_STATE', 'health_text']
 
 # The states, in the order of their bits in ``Recording.health`` (bit i: HEALTH_STATES[i]).
@@ -52,16 +55,17 @@ class HealthWatch:
 
     def __call__(self, pipeline):
         """Return the active states, a tuple in :data:`HEALTH_STATES`' order."""
-        core = pipeline.estimator.core
+        # The flat state's slots, read directly: asked at every sample of a recording.
+        s = pipeline.estimator.core.flat_state
         # First: it also updates the clipped gyro's recovery.
-        initializing = self._initializing(core)
+        initializing = self._initializing(s)
         active = {
             'initializing': initializing,
-            'at_rest': core.rest,
-            'field_rejected': core.mag_disturbed,
+            'at_rest': s[S_REST] != 0.0,
+            'field_rejected': s[S_MAG_DIST] != 0.0,
             'gyro_clipped': self._recovering,
             'field_lost': field_lost(pipeline),
-            'velocity_aided': core.velocity_used,
+            'velocity_aided': s[S_VEL_USED] != 0.0,
         }
         return tuple(name for name in HEALTH_STATES if active[name])
 
@@ -69,23 +73,21 @@ class HealthWatch:
         """The active states as bits: bit i set for ``HEALTH_STATES[i]``."""
         return sum(_BITS[name] for name in self(pipeline))
 
-    def _initializing(self, core):
-        clips = core.clipped
-        clipped = clips != self._clips or core.clip_variance != 0.0
+    def _initializing(self, s):
+        clips = s[S_CLIPS]
+        clipped = clips != self._clips or s[S_CLIPPED] != 0.0
         self._clips = clips
-        if not core.initialized:
+        if s[S_INIT] == 0.0:
             self._handed_over = self._recovering = False
             self._start = 0.0
             return True
-        s = core.flat_state
-        k = core.kernels.ahrs
-        start, tau = s[k.S_START], s[k.P_TAU_ACC]
+        start = s[S_START]
         if start < self._start and not clipped:
             # The mean restarted without a clip: the estimator restarted
             # (a reset between two calls, a hole in the stream).
             self._handed_over = False
         self._start = start
-        starting = start < tau
+        starting = start < s[P_TAU_ACC]
         self._recovering = starting and (clipped or self._recovering)
         if not starting:
             self._handed_over = True
@@ -94,7 +96,8 @@ class HealthWatch:
 
 def field_lost(pipeline):
     """No field for ``mag_timeout`` s of the IMU's stamps (9D, a field seen before, timeout > 0)."""
-    silence = pipeline.field_silence()
     timeout = pipeline.estimator._mag_timeout
-    return (bool(pipeline.estimator.core.use_mag) and silence is not None
-            and 0.0 < timeout <= silence)
+    if timeout <= 0.0 or not pipeline.estimator.core.use_mag:
+        return False
+    silence = pipeline.field_silence()
+    return silence is not None and timeout <= silence
