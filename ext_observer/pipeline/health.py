@@ -7,8 +7,8 @@ The estimator's health: which of a few named states it is in, without ROS.
 when each starts and ends. It only reads the estimator: the estimates are
 the same with or without it.
 
-A state more is one entry in :data:`HEALTH_STATES` and one line in
-:meth:`HealthWatch.__call__`'s table; the Recording's bits follow the tuple.
+A state more is one line in ``_STATES`` (its name and whether it is
+active); :data:`HEALTH_STATES` and the Recording's bits follow the table.
 """
 
 from ext_observer.core.ahrs.ahrs_layout import (P_TAU_ACC, S_CLIPPED, S_CLIPS, S_INIT,
@@ -16,15 +16,18 @@ from ext_observer.core.ahrs.ahrs_layout import (P_TAU_ACC, S_CLIPPED, S_CLIPS, S
 
 __all__ = ['HEALTH_STATES', 'HealthWatch', 'NO_STATE', 'health_text']
 
-# The states, in the order of their bits in ``Recording.health`` (bit i: HEALTH_STATES[i]).
-HEALTH_STATES = (
-    'initializing',    # no estimate yet, or the start's running mean of the vertical
-    'at_rest',         # rest detected: the gyro bias is learned
-    'field_rejected',  # the latest field disagrees with the reference: heading on the gyro
-    'gyro_clipped',    # a sample at the gyro's range, or the inclination coming back from one
-    'field_lost',      # no field for mag_timeout: running 6D, the heading held on the gyro
-    'velocity_aided',  # a fresh velocity: the body's acceleration removed from the specific force
+# Each state: its name, and whether it is active, from the HealthWatch ``w``,
+# the estimator's flat state ``s`` and the pipeline ``p``. Meanings: docs/diagnostics.md.
+_STATES = (
+    ('initializing', lambda w, s, p: w.initializing),
+    ('at_rest', lambda w, s, p: s[S_REST] != 0.0),
+    ('field_rejected', lambda w, s, p: s[S_MAG_DIST] != 0.0),
+    ('gyro_clipped', lambda w, s, p: w.recovering),
+    ('field_lost', lambda w, s, p: field_lost(p)),
+    ('velocity_aided', lambda w, s, p: s[S_VEL_USED] != 0.0),
 )
+# The names, in the order of their bits in ``Recording.health`` (bit i: HEALTH_STATES[i]).
+HEALTH_STATES = tuple(name for name, _ in _STATES)
 _BITS = {name: 1 << i for i, name in enumerate(HEALTH_STATES)}
 # The health text when no state is active: the estimate is tracking normally.
 NO_STATE = 'tracking'
@@ -48,8 +51,9 @@ class HealthWatch:
     """
 
     def __init__(self):
+        self.initializing = True   # the start's running mean has not handed over yet
+        self.recovering = False    # a clip's restarted running mean has not handed over yet
         self._handed_over = False
-        self._recovering = False
         self._clips = 0
         self._start = 0.0
 
@@ -57,30 +61,23 @@ class HealthWatch:
         """Return the active states, a tuple in :data:`HEALTH_STATES`' order."""
         # The flat state's slots, read directly: asked at every sample of a recording.
         s = pipeline.estimator.core.flat_state
-        # First: it also updates the clipped gyro's recovery.
-        initializing = self._initializing(s)
-        active = {
-            'initializing': initializing,
-            'at_rest': s[S_REST] != 0.0,
-            'field_rejected': s[S_MAG_DIST] != 0.0,
-            'gyro_clipped': self._recovering,
-            'field_lost': field_lost(pipeline),
-            'velocity_aided': s[S_VEL_USED] != 0.0,
-        }
-        return tuple(name for name in HEALTH_STATES if active[name])
+        self._follow(s)
+        return tuple(name for name, active in _STATES if active(self, s, pipeline))
 
     def mask(self, pipeline):
         """The active states as bits: bit i set for ``HEALTH_STATES[i]``."""
         return sum(_BITS[name] for name in self(pipeline))
 
-    def _initializing(self, s):
+    def _follow(self, s):
+        """Update :attr:`initializing` and :attr:`recovering` from the flat state."""
         clips = s[S_CLIPS]
         clipped = clips != self._clips or s[S_CLIPPED] != 0.0
         self._clips = clips
         if s[S_INIT] == 0.0:
-            self._handed_over = self._recovering = False
+            self.initializing, self.recovering = True, False
+            self._handed_over = False
             self._start = 0.0
-            return True
+            return
         start = s[S_START]
         if start < self._start and not clipped:
             # The mean restarted without a clip: the estimator restarted
@@ -88,10 +85,10 @@ class HealthWatch:
             self._handed_over = False
         self._start = start
         starting = start < s[P_TAU_ACC]
-        self._recovering = starting and (clipped or self._recovering)
+        self.recovering = starting and (clipped or self.recovering)
         if not starting:
             self._handed_over = True
-        return not self._handed_over
+        self.initializing = not self._handed_over
 
 
 def field_lost(pipeline):
