@@ -20,7 +20,7 @@ constants. Plain Python that numba compiles, as
 import math
 
 from .ahrs_layout import (C_DT, MC0, P_HAS_CAL, P_TAU_ACC, S_ACC_DEV, S_CAL_TURN, S_CAL_WAIT,
-                          S_GYR_LAST, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR, S_HOLES, S_INIT, S_LP, S_MAG_USED,
+                          S_GYR_LAST, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR, S_HOLES, S_INIT, S_LP,
                           S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
 from .magcal_kernel import mc_restart
 
@@ -38,10 +38,8 @@ HOLE_RUN_TIME = 0.5
 # (docs/raw_imu.md#holes-in-the-stream).
 HOLE_RATE_CHANGE = 0.26
 HOLE_RATE_WALK = 1.0
-# rad²: a hole whose variance exceeds this starts the inclination's and the
-# heading's means again; above HOLE_CALIBRATION the magnetometer
-# calibration follows the field afresh (learns nothing across the hole).
-HOLE_RESTART = math.radians(2.0) ** 2
+# rad²: above this hole variance the magnetometer calibration follows the
+# field afresh (learns nothing across the hole).
 HOLE_CALIBRATION = math.radians(0.5) ** 2
 # s: how long a moving body's translational acceleration keeps its direction
 # after a hole (shorter than a start's START_CORRELATION: on the even trials
@@ -148,9 +146,9 @@ def hole_after(s, var):
     :func:`acc_deviation`; ``c`` :data:`HOLE_CORRELATION`). Where the old
     mean is worth less than ``tau_acc`` seconds of new ones,
     ``t0 = c (m / var − 1)``, the mean starts again with it weighed as
-    ``t0`` seconds (as at a start, which has none). The heading: its mean
-    starts again from the next fields where the hole's σ exceeds
-    :data:`HOLE_RESTART`'s.
+    ``t0`` seconds (as at a start, which has none). The heading keeps its
+    mean of the fields, gyro-held across the hole: the first fields after it
+    would bring the inclination's error there times ``tan(dip)``.
     """
     s[S_HOLE_VAR] = var
     s[S_HOLES] += 1.0
@@ -167,6 +165,3 @@ def hole_after(s, var):
             s[S_LP + 3] = 0.0
             s[S_LP + 4] = 0.0
             s[S_LP + 5] = 0.0
-    if var > HOLE_RESTART:
-        s[S_MAG_USED] = 0.0
-        forget_wait(s)
