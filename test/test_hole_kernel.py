@@ -16,13 +16,15 @@ import pytest
 
 from ext_observer.core.ahrs import hole_kernel
 from ext_observer.core.ahrs.ahrs_layout import (C_BW, C_DT, C_K_ACC, S_ACC_DEV, S_GYR_LAST,
-                                                S_HOLE_RUN, S_HOLE_VAR, S_HOLES, S_INIT,
+                                                S_GYR_PREV, S_HOLE_END, S_HOLE_RUN, S_HOLE_VAR,
+                                                S_HOLES, S_INIT,
                                                 S_MAG_USED, S_Q, S_START, S_START_N)
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.hole_kernel import (HOLE_CALIBRATION, HOLE_CORRELATION, HOLE_FACTOR,
                                                 HOLE_RATE_CHANGE, HOLE_RATE_WALK,
-                                                HOLE_RUN_TIME, hole_after,
-                                                hole_rate, hole_starts, hole_variance)
+                                                HOLE_END_TIME, HOLE_RUN_TIME, hole_after,
+                                                hole_end_fix, hole_rate, hole_slope, hole_starts,
+                                                hole_variance)
 from ext_observer.recordings.recording import attitude_from_imu
 
 DT = 0.01
@@ -74,6 +76,24 @@ def test_the_bridges_rate_is_what_the_usual_steps_would_have_integrated(steps, w
 def test_the_bridges_variance_is_the_rate_change_and_the_walk():
     v = hole_variance(3.0, 0.0, -4.0, 0.2)
     assert v == pytest.approx((HOLE_RATE_CHANGE * 5.0 * 0.2) ** 2 + HOLE_RATE_WALK * 0.008 / 12)
+
+
+@pytest.mark.parametrize('length', [0.05, HOLE_END_TIME, 0.2])
+def test_the_end_correction_turns_by_the_slopes_at_both_ends(length):
+    # About the vertical: T² (m₀ − m₁) / 12 with the slopes from the samples
+    # beside the hole; a hole in a row, or longer than HOLE_END_TIME, none.
+    s = [0.0] * len(_started().flat_state)
+    s[C_DT], s[S_Q], s[S_HOLE_RUN] = DT, 1.0, length
+    s[S_GYR_PREV + 2], s[S_GYR_LAST + 2] = 1.0, 1.2  # m₀ = 20 rad/s²
+    hole_slope(s, length)
+    s[S_GYR_LAST + 2] = 2.0  # the sample that closes the hole
+    hole_end_fix(s, 0.0, 0.0, 1.7)  # m₁ = −30 rad/s²
+    turn = 2.0 * math.atan2(s[S_Q + 3], s[S_Q])
+    want = length * length * 50.0 / 12.0 if length <= HOLE_END_TIME else 0.0
+    assert turn == pytest.approx(want, rel=1e-12, abs=1e-15) and s[S_HOLE_END] == 0.0
+    s[S_HOLE_RUN] = 2.0 * length
+    hole_slope(s, length)
+    assert s[S_HOLE_END] == 0.0
 
 
 def test_a_small_hole_keeps_the_means_a_large_one_restarts_the_inclinations_weighed():
