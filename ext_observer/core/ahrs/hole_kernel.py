@@ -8,10 +8,14 @@ sides (as the usual steps would have, had the rate changed linearly
 across the hole), keeps the coefficients of the usual interval (a one-off long
 ``dt`` would upset the Butterworth low-pass, whose states belong to its
 coefficients), says how unsure the bridge is (:func:`hole_variance`, which
-the covariance adds), and where that is large starts its means again, as
-after a start or a clipped gyro: the inclination from the running mean of
-the next specific forces, the heading from that of the next fields. The
-magnetometer calibration learns nothing across a hole it cannot trust.
+the covariance adds), corrects the bridge on the next sample from the
+rate's slopes beside a short hole (:func:`hole_end_fix`), and where the
+hole's variance is large starts the inclination's mean again, as after a
+start or a clipped gyro, from the running mean of the next specific forces.
+The heading keeps its mean of the fields, gyro-held across the hole (the
+first fields after it would bring the inclination's error there, times
+``tan(dip)``). The magnetometer calibration learns nothing across a hole it
+cannot trust.
 docs/raw_imu.md ("Holes in the stream") has the figures that chose the
 constants. Plain Python that numba compiles, as
 :mod:`~ext_observer.core.ahrs.ahrs_kernel`.
