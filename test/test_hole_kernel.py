@@ -22,7 +22,8 @@ from ext_observer.core.ahrs.ahrs_layout import (C_BW, C_DT, C_K_ACC, S_ACC_DEV, 
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.hole_kernel import (HOLE_CALIBRATION, HOLE_CORRELATION, HOLE_FACTOR,
                                                 HOLE_RATE_CHANGE, HOLE_RATE_WALK,
-                                                HOLE_END_TIME, HOLE_RUN_TIME, hole_after,
+                                                HOLE_END_SHARE, HOLE_END_TIME, HOLE_RUN_TIME,
+                                                hole_after,
                                                 hole_end_fix, hole_rate, hole_slope, hole_starts,
                                                 hole_variance)
 from ext_observer.recordings.recording import attitude_from_imu
@@ -113,6 +114,10 @@ def test_a_small_hole_keeps_the_means_a_large_one_restarts_the_inclinations_weig
     # Worse than any sample: the mean starts from the next one (as a start).
     hole_after(s, 1.0)
     assert s[S_START] == 0.0 and s[S_START_N] == 0.0
+    # A hole whose end correction waits: the share of the linear bridge's σ left.
+    s[S_HOLE_END] = 1.0
+    hole_after(s, 1.0)
+    assert s[S_HOLE_VAR] == HOLE_END_SHARE * HOLE_END_SHARE
 
 
 def test_a_hole_keeps_the_usual_coefficients_and_integrates_its_whole_length():

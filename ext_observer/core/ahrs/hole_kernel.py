@@ -56,6 +56,8 @@ HOLE_DEVIATION_TIME = 1.0
 # s: the longest hole whose bridge takes the end correction (hole_end_fix):
 # on the even trials it cuts the error of 50 ms bursts and adds to 200 ms ones.
 HOLE_END_TIME = 0.1
+# The share of the linear bridge's error σ left after the end correction.
+HOLE_END_SHARE = 0.5
 # Standard gravity, m/s².
 GRAVITY = 9.80665
 
@@ -158,6 +160,8 @@ def hole_after(s, var):
     mean of the fields, gyro-held across the hole: the first fields after it
     would bring the inclination's error there times ``tan(dip)``.
     """
+    if s[S_HOLE_END] != 0.0:
+        var *= HOLE_END_SHARE * HOLE_END_SHARE
     s[S_HOLE_VAR] = var
     s[S_HOLES] += 1.0
     if var > HOLE_CALIBRATION:
