@@ -16,13 +16,16 @@ import pytest
 
 from ext_observer.core.ahrs import hole_kernel
 from ext_observer.core.ahrs.ahrs_layout import (C_BW, C_DT, C_K_ACC, S_ACC_DEV, S_GYR_LAST,
-                                                S_HOLE_RUN, S_HOLE_VAR, S_HOLES, S_INIT,
+                                                S_GYR_PREV, S_HOLE_END, S_HOLE_RUN, S_HOLE_VAR,
+                                                S_HOLES, S_INIT,
                                                 S_MAG_USED, S_Q, S_START, S_START_N)
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.hole_kernel import (HOLE_CALIBRATION, HOLE_CORRELATION, HOLE_FACTOR,
                                                 HOLE_RATE_CHANGE, HOLE_RATE_WALK,
-                                                HOLE_RESTART, HOLE_RUN_TIME, hole_after,
-                                                hole_rate, hole_starts, hole_variance)
+                                                HOLE_END_SHARE, HOLE_END_TIME, HOLE_RUN_TIME,
+                                                hole_after,
+                                                hole_end_fix, hole_rate, hole_slope, hole_starts,
+                                                hole_variance)
 from ext_observer.recordings.recording import attitude_from_imu
 
 DT = 0.01
@@ -76,7 +79,25 @@ def test_the_bridges_variance_is_the_rate_change_and_the_walk():
     assert v == pytest.approx((HOLE_RATE_CHANGE * 5.0 * 0.2) ** 2 + HOLE_RATE_WALK * 0.008 / 12)
 
 
-def test_a_small_hole_keeps_the_means_a_large_one_restarts_them_weighed():
+@pytest.mark.parametrize('length', [0.05, HOLE_END_TIME, 0.2])
+def test_the_end_correction_turns_by_the_slopes_at_both_ends(length):
+    # About the vertical: T² (m₀ − m₁) / 12 with the slopes from the samples
+    # beside the hole; a hole in a row, or longer than HOLE_END_TIME, none.
+    s = [0.0] * len(_started().flat_state)
+    s[C_DT], s[S_Q], s[S_HOLE_RUN] = DT, 1.0, length
+    s[S_GYR_PREV + 2], s[S_GYR_LAST + 2] = 1.0, 1.2  # m₀ = 20 rad/s²
+    hole_slope(s, length)
+    s[S_GYR_LAST + 2] = 2.0  # the sample that closes the hole
+    hole_end_fix(s, 0.0, 0.0, 1.7)  # m₁ = −30 rad/s²
+    turn = 2.0 * math.atan2(s[S_Q + 3], s[S_Q])
+    want = length * length * 50.0 / 12.0 if length <= HOLE_END_TIME else 0.0
+    assert turn == pytest.approx(want, rel=1e-12, abs=1e-15) and s[S_HOLE_END] == 0.0
+    s[S_HOLE_RUN] = 2.0 * length
+    hole_slope(s, length)
+    assert s[S_HOLE_END] == 0.0
+
+
+def test_a_small_hole_keeps_the_means_a_large_one_restarts_the_inclinations_weighed():
     est = _started()
     s = est.flat_state
     s[S_START], s[S_START_N], s[S_MAG_USED] = 10.0, 0.0, 50.0
@@ -89,10 +110,14 @@ def test_a_small_hole_keeps_the_means_a_large_one_restarts_them_weighed():
     hole_after(s, var)
     t0 = HOLE_CORRELATION * (0.01 / var - 1.0)
     assert s[S_START] == pytest.approx(t0) and s[S_START_N] == pytest.approx(t0 / DT)
-    assert s[S_MAG_USED] == 0.0 and var > HOLE_RESTART
+    assert s[S_MAG_USED] == 50.0  # the heading keeps its mean, gyro-held
     # Worse than any sample: the mean starts from the next one (as a start).
     hole_after(s, 1.0)
     assert s[S_START] == 0.0 and s[S_START_N] == 0.0
+    # A hole whose end correction waits: the share of the linear bridge's σ left.
+    s[S_HOLE_END] = 1.0
+    hole_after(s, 1.0)
+    assert s[S_HOLE_VAR] == HOLE_END_SHARE * HOLE_END_SHARE
 
 
 def test_a_hole_keeps_the_usual_coefficients_and_integrates_its_whole_length():
@@ -194,4 +219,5 @@ def test_the_general_steps_follow_a_hole_as_the_one_call_sample_does():
                     out.append(tuple(estimate.state) + tuple(estimate.covariance))
         runs.append(np.array(out))
     assert est.core.holes >= 3
+    assert dict(est.key_values())['holes_bridged'] == est.core.holes  # in /diagnostics
     np.testing.assert_allclose(runs[1], runs[0], rtol=1e-12, atol=1e-15)

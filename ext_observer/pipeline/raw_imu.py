@@ -21,9 +21,7 @@ import math
 
 import numpy as np
 
-from ext_observer.core.ahrs.ahrs_layout import S_HOLE_VAR
 from ext_observer.core.ahrs.estimator import AhrsObserver
-from ext_observer.core.ahrs.hole_kernel import HOLE_RESTART
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, covariance_out
@@ -288,8 +286,6 @@ class RawImuEstimator:
         except (ValueError, OverflowError, ZeroDivisionError):
             outcome = None
         if outcome == SAMPLE_OK:
-            if core.flat_state[S_HOLE_VAR] > HOLE_RESTART:
-                self._fields_used = 0  # the heading's mean starts again (hole_kernel)
             if self._held_bias is not None:
                 core.bias = self._held_bias
             return ((w, x, y, z) if self._frame is None
@@ -322,8 +318,6 @@ class RawImuEstimator:
             self._start(dt, acc)
         else:
             hole, step_dt = core.hole_variance, core.step_interval
-            if hole > HOLE_RESTART:
-                self._fields_used = 0
             self.uncertainty.step(step_dt, gyr, q, core.rest, core.bias_variance,
                                   core.clip_variance, acc,
                                   (dt - step_dt, hole, core.hole_restart) if hole != 0.0
@@ -379,7 +373,8 @@ class RawImuEstimator:
         ``world_frame``, ``use_mag``, ``initialized``, ``bias_x``, ``bias_y``,
         ``bias_z`` (rad/s), ``bias_std_x``, ``bias_std_y``, ``bias_std_z``
         (its σ, rad/s), ``gyro_clipped`` (samples at the gyro's range so
-        far), ``rest``, ``mag_disturbed``, ``residual``
+        far), ``holes_bridged`` (intervals much longer than the usual one
+        integrated across so far), ``rest``, ``mag_disturbed``, ``residual``
         (``|q̂̄q̂ − 1|``), ``inclination_std_deg`` and ``heading_std_deg``
         (the σ of the published covariance, degrees); NaN before the first
         step.
@@ -398,6 +393,7 @@ class RawImuEstimator:
                 ('bias_y', float(by)), ('bias_z', float(bz)), ('bias_std_x', float(sx)),
                 ('bias_std_y', float(sy)), ('bias_std_z', float(sz)), ('rest', bool(core.rest)),
                 ('bias_learning', self._held_bias is None), ('gyro_clipped', clipped),
+                ('holes_bridged', core.holes),
                 ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
                 ('inclination_std_deg',
                  math.degrees(tracker.inclination_std) if started else math.nan),

@@ -38,14 +38,14 @@ from .ahrs_layout import (  # noqa: F401
                           P_USE_MAG, S_ACC_STILL, S_BIAS, S_BIAS_P, S_CAL_LOADED, S_CAL_MOVED,
                           S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN, S_CAL_WAIT, S_CAND, S_CAND_TIME,
                           S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_HAS_REF, S_INIT, S_LP,
-                          S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REJECTED, S_REST,
-                          S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N, S_STUCK,
+                          S_HOLE_END, S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REJECTED,
+                          S_REST, S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N,
                           S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR, S_HOLES,
-                          S_WAIT_N,
-                          S_WAIT_TURN)
+                          S_STUCK, S_WAIT_N, S_WAIT_TURN)
 from .gyro_watch import clipped_variance, detect_rest
-from .hole_kernel import (acc_deviation, calibration_restart, forget_wait, hole_after, hole_ends,
-                          hole_rate, hole_starts, hole_variance, restart_mean)
+from .hole_kernel import (acc_deviation, calibration_restart, forget_wait, hole_after,
+                          hole_end_fix, hole_ends, hole_rate, hole_slope, hole_starts,
+                          hole_variance, restart_mean)
 from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F401
                           learn_bias, rlp_steady)
 from .magcal_kernel import MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn
@@ -158,6 +158,8 @@ def ahrs_update(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
     elif hole:
         ahrs_bridge(s, gx, gy, gz, dt)
     else:
+        if s[S_HOLE_END] != 0.0:
+            hole_end_fix(s, gx, gy, gz)
         ahrs_update_gyr(s, gx, gy, gz)
     ahrs_update_acc(s, ax, ay, az)
     if has_mag and s[P_USE_MAG] != 0.0:
@@ -219,6 +221,7 @@ def ahrs_bridge(s, gx, gy, gz, dt):
     sample's own rate for the rest (clipping, rest detection, the
     calibration), with the usual interval's coefficients.
     """
+    hole_slope(s, dt)
     rx, ry, rz = hole_rate(s, gx, gy, gz, dt)
     var = hole_variance(gx - s[S_GYR_LAST], gy - s[S_GYR_LAST + 1], gz - s[S_GYR_LAST + 2], dt)
     _watch_clipping(s, gx, gy, gz)

@@ -94,6 +94,10 @@ S_HOLE_VAR = AHRS.field('hole_var')  # rad² per axis the last step's hole adds 
 S_HOLES = AHRS.field('holes')  # holes bridged
 S_HOLE_T0 = AHRS.field('hole_t0')  # s the inclination's restarted mean weighs the old as (−1: kept)
 S_ACC_DEV = AHRS.field('acc_dev')  # the specific force's recent deviation from gravity, (1/g)²
+S_GYR_PREV = AHRS.field('gyr_prev', 3)  # the rate of the sample before S_GYR_LAST
+# The end correction a hole leaves for the next usual sample: T²/12 over the
+# usual interval (0: none), and the rate's change into the hole.
+S_HOLE_END = AHRS.field('hole_end', 4)
 
 # The velocity aid (velocity_kernel): the body's velocity at the IMU, IMU frame.
 P_VEL_TIMEOUT = AHRS.field('velocity_timeout')  # s: an older velocity is not used

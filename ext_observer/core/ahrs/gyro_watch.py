@@ -14,7 +14,7 @@ import math
 
 from .ahrs_filters import clip
 from .ahrs_layout import (C_DT, C_K_REST, P_BIAS_MAX, P_GYRO_RANGE, P_REST_GYR, P_REST_TIME,
-                          S_ACC_STILL, S_BIAS, S_BIAS_P, S_CLIPPED, S_CLIPS, S_GYR_LAST,
+                          S_ACC_STILL, S_BIAS, S_BIAS_P, S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PREV,
                           S_GYR_PEAK, S_REST, S_REST_GYR, S_REST_TIME, S_STUCK)
 
 # σ of the bias learned at rest (rad/s), VQF's value: the low-passed rate of
@@ -42,6 +42,7 @@ def _at_range(s, i, g):
         same = a >= _CLIP_FLOOR and a == abs(s[S_GYR_LAST + i]) and a >= s[S_GYR_PEAK]
         s[S_STUCK + i] = s[S_STUCK + i] + 1.0 if same else 0.0
         at = s[S_STUCK + i] >= _STUCK
+    s[S_GYR_PREV + i] = s[S_GYR_LAST + i]  # a hole's end correction takes the slope
     s[S_GYR_LAST + i] = g
     return at
 

@@ -8,10 +8,14 @@ sides (as the usual steps would have, had the rate changed linearly
 across the hole), keeps the coefficients of the usual interval (a one-off long
 ``dt`` would upset the Butterworth low-pass, whose states belong to its
 coefficients), says how unsure the bridge is (:func:`hole_variance`, which
-the covariance adds), and where that is large starts its means again, as
-after a start or a clipped gyro: the inclination from the running mean of
-the next specific forces, the heading from that of the next fields. The
-magnetometer calibration learns nothing across a hole it cannot trust.
+the covariance adds), corrects the bridge on the next sample from the
+rate's slopes beside a short hole (:func:`hole_end_fix`), and where the
+hole's variance is large starts the inclination's mean again, as after a
+start or a clipped gyro, from the running mean of the next specific forces.
+The heading keeps its mean of the fields, gyro-held across the hole (the
+first fields after it would bring the inclination's error there, times
+``tan(dip)``). The magnetometer calibration learns nothing across a hole it
+cannot trust.
 docs/raw_imu.md ("Holes in the stream") has the figures that chose the
 constants. Plain Python that numba compiles, as
 :mod:`~ext_observer.core.ahrs.ahrs_kernel`.
@@ -20,8 +24,9 @@ constants. Plain Python that numba compiles, as
 import math
 
 from .ahrs_layout import (C_DT, MC0, P_HAS_CAL, P_TAU_ACC, S_ACC_DEV, S_CAL_TURN, S_CAL_WAIT,
-                          S_GYR_LAST, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR, S_HOLES, S_INIT, S_LP, S_MAG_USED,
-                          S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
+                          S_GYR_LAST, S_GYR_PREV, S_HOLE_END, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR,
+                          S_HOLES, S_INIT, S_LP,
+                          S_Q, S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
 from .magcal_kernel import mc_restart
 
 # An interval longer than this many times the usual one is a hole (one
@@ -38,10 +43,8 @@ HOLE_RUN_TIME = 0.5
 # (docs/raw_imu.md#holes-in-the-stream).
 HOLE_RATE_CHANGE = 0.26
 HOLE_RATE_WALK = 1.0
-# rad²: a hole whose variance exceeds this starts the inclination's and the
-# heading's means again; above HOLE_CALIBRATION the magnetometer
-# calibration follows the field afresh (learns nothing across the hole).
-HOLE_RESTART = math.radians(2.0) ** 2
+# rad²: above this hole variance the magnetometer calibration follows the
+# field afresh (learns nothing across the hole).
 HOLE_CALIBRATION = math.radians(0.5) ** 2
 # s: how long a moving body's translational acceleration keeps its direction
 # after a hole (shorter than a start's START_CORRELATION: on the even trials
@@ -50,6 +53,11 @@ HOLE_CALIBRATION = math.radians(0.5) ** 2
 # size (acc_deviation).
 HOLE_CORRELATION = 0.3
 HOLE_DEVIATION_TIME = 1.0
+# s: the longest hole whose bridge takes the end correction (hole_end_fix):
+# on the even trials it cuts the error of 50 ms bursts and adds to 200 ms ones.
+HOLE_END_TIME = 0.1
+# The share of the linear bridge's error σ left after the end correction.
+HOLE_END_SHARE = 0.5
 # Standard gravity, m/s².
 GRAVITY = 9.80665
 
@@ -148,10 +156,12 @@ def hole_after(s, var):
     :func:`acc_deviation`; ``c`` :data:`HOLE_CORRELATION`). Where the old
     mean is worth less than ``tau_acc`` seconds of new ones,
     ``t0 = c (m / var − 1)``, the mean starts again with it weighed as
-    ``t0`` seconds (as at a start, which has none). The heading: its mean
-    starts again from the next fields where the hole's σ exceeds
-    :data:`HOLE_RESTART`'s.
+    ``t0`` seconds (as at a start, which has none). The heading keeps its
+    mean of the fields, gyro-held across the hole: the first fields after it
+    would bring the inclination's error there times ``tan(dip)``.
     """
+    if s[S_HOLE_END] != 0.0:
+        var *= HOLE_END_SHARE * HOLE_END_SHARE
     s[S_HOLE_VAR] = var
     s[S_HOLES] += 1.0
     if var > HOLE_CALIBRATION:
@@ -167,6 +177,47 @@ def hole_after(s, var):
             s[S_LP + 3] = 0.0
             s[S_LP + 4] = 0.0
             s[S_LP + 5] = 0.0
-    if var > HOLE_RESTART:
-        s[S_MAG_USED] = 0.0
-        forget_wait(s)
+
+
+def hole_slope(s, dt):
+    """
+    Before the bridge of a hole of ``dt`` s: keep what its end correction needs.
+
+    The rate's change into the hole (the last two samples before it), when
+    the step before was a usual one; the correction
+    (:func:`hole_end_fix`) waits for the rate's slope after it.
+    """
+    f = 0.0
+    if s[S_HOLE_RUN] == dt and dt <= HOLE_END_TIME:
+        f = dt * dt / (12.0 * s[C_DT])
+        for i in range(3):
+            s[S_HOLE_END + 1 + i] = s[S_GYR_LAST + i] - s[S_GYR_PREV + i]
+    s[S_HOLE_END] = f
+
+
+def hole_end_fix(s, gx, gy, gz):
+    """
+    The first usual sample after a hole: the bridge's end correction, a body-frame turn.
+
+    The straight line between the samples on both sides misses
+    ``T² (m₀ − m₁) / 12`` of the rotation of a rate whose slopes at the two
+    ends are ``m₀`` and ``m₁`` (the cubic through both samples with those
+    slopes, a Hermite interpolation); the slopes are the differences of the
+    samples next to the hole, known once the one after it is here.
+    """
+    f = s[S_HOLE_END]
+    s[S_HOLE_END] = 0.0
+    cx = f * (s[S_HOLE_END + 1] - (gx - s[S_GYR_LAST]))
+    cy = f * (s[S_HOLE_END + 2] - (gy - s[S_GYR_LAST + 1]))
+    cz = f * (s[S_HOLE_END + 3] - (gz - s[S_GYR_LAST + 2]))
+    n = math.sqrt(cx * cx + cy * cy + cz * cz)
+    if n == 0.0:
+        return
+    c = math.cos(0.5 * n)
+    k = math.sin(0.5 * n) / n
+    bx, by, bz = k * cx, k * cy, k * cz
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    s[S_Q] = w * c - x * bx - y * by - z * bz
+    s[S_Q + 1] = w * bx + x * c + y * bz - z * by
+    s[S_Q + 2] = w * by - x * bz + y * c + z * bx
+    s[S_Q + 3] = w * bz + x * by - y * bx + z * c
