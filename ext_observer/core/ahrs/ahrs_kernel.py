@@ -37,11 +37,11 @@ from .ahrs_layout import (  # noqa: F401
                           P_TAU_ACC_GAIN, P_TAU_BIAS, P_TAU_MAG, P_TAU_MAG_REF, P_TAU_REST,
                           P_USE_MAG, S_ACC_STILL, S_BIAS, S_BIAS_P, S_CAL_LOADED, S_CAL_MOVED,
                           S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN, S_CAL_WAIT, S_CAND, S_CAND_TIME,
-                          S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_HAS_REF, S_INIT, S_LP,
-                          S_HOLE_END, S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REJECTED,
-                          S_REST, S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START, S_START_N,
-                          S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR, S_HOLES,
-                          S_STUCK, S_WAIT_N, S_WAIT_TURN)
+                          S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_GYR_PREV, S_HAS_REF,
+                          S_INIT, S_LP, S_HOLE_END, S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE,
+                          S_REJECTED, S_REST, S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START,
+                          S_START_N, S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR,
+                          S_HOLES, S_STUCK, S_WAIT_N, S_WAIT_TURN)
 from .gyro_watch import clipped_variance, detect_rest
 from .hole_kernel import (acc_deviation, calibration_restart, forget_wait, hole_after,
                           hole_end_fix, hole_ends, hole_rate, hole_slope, hole_starts,
@@ -176,13 +176,13 @@ def _init_filters(s, gx, gy, gz, ax, ay, az):
     r = rotation_matrix(s)
     for j in range(3):
         s[S_RZLP + j] = r[6 + j]
-    s[S_GYR_LAST] = gx
-    s[S_GYR_LAST + 1] = gy
-    s[S_GYR_LAST + 2] = gz
+    # The last rate, the one before it (none yet: the same) and rest's mean.
+    for i in range(3):
+        g = gx if i == 0 else (gy if i == 1 else gz)
+        s[S_GYR_LAST + i] = g
+        s[S_GYR_PREV + i] = g
+        s[S_REST_GYR + i] = g
     s[S_GYR_PEAK] = max(abs(gx), max(abs(gy), abs(gz)))
-    s[S_REST_GYR] = gx
-    s[S_REST_GYR + 1] = gy
-    s[S_REST_GYR + 2] = gz
     s[S_REST_ACC] = ax
     s[S_REST_ACC + 1] = ay
     s[S_REST_ACC + 2] = az
