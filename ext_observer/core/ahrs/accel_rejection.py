@@ -22,11 +22,14 @@ Written in the part of Python that numba compiles, as
 import math
 
 from .ahrs_filters import rotate
-from .ahrs_layout import C_K_ACC, P_ACC_REJECT, P_ACC_REJECT_TIME, S_ACC_CARRIED, S_ACC_REJ
+from .ahrs_layout import (C_K_ACC, P_ACC_REJECT, P_ACC_REJECT_TIME, S_ACC_CARRIED, S_ACC_REJ, S_BIAS,
+                          S_Q, S_REST, S_REST_GYR)
 
 # s: how slowly the carried vertical follows the inclination's corrections
 # (BROAD's motions average out in the low-pass within a few seconds).
 _TAU_CARRIED = 10.0
+# rad: and per this angle of tilting rotation.
+_TILT_CARRIED = 1.0
 # The force is taken back below this share of the rejection angle.
 _RELEASE = 0.5
 _TINY = 1e-300
@@ -52,6 +55,11 @@ def acc_rotation(s, fx, fy, fz, dt, starting):
         # From the start (or a clipped gyro), and when off: the force as it is.
         ux, uy, uz = 0.0, 0.0, 1.0
         s[S_ACC_REJ] = 0.0
+    elif s[S_REST] != 0.0:
+        # At rest the force is gravity (and u, carried through a fast motion, may not be).
+        n = math.sqrt(fx * fx + fy * fy + fz * fz) + _TINY
+        ux, uy, uz = fx / n, fy / n, fz / n
+        s[S_ACC_REJ] = 0.0
     tx, ty, tz = fx, fy, fz
     if th > 0.0 and not starting:
         off = _angle(fx, fy, fz, ux, uy, uz)
@@ -73,7 +81,12 @@ def acc_rotation(s, fx, fy, fz, dt, starting):
     # u in the corrected world frame, then a step towards its vertical.
     kap = s[C_K_ACC]
     ux, uy, uz = rotate(1.0 - kap + kap * dw, kap * dx, kap * dy, 0.0, ux, uy, uz)
-    k = dt / (_TAU_CARRIED + dt)
+    # Tilting the gyro carries the vertical with its scale and axis errors:
+    # u forgets per radian tilted, too (a vehicle turns about the vertical).
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    rx, ry, rz = s[S_REST_GYR] - s[S_BIAS], s[S_REST_GYR + 1] - s[S_BIAS + 1], s[S_REST_GYR + 2] - s[S_BIAS + 2]
+    wx, wy, wz = rotate(w, x, y, z, rx, ry, rz)
+    k = min(1.0, dt / _TAU_CARRIED + math.sqrt(wx * wx + wy * wy) * dt / _TILT_CARRIED)
     ux, uy, uz = ux - k * ux, uy - k * uy, uz + k * (1.0 - uz)
     n = math.sqrt(ux * ux + uy * uy + uz * uz) + _TINY
     s[S_ACC_CARRIED] = ux / n
