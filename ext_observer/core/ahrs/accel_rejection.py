@@ -22,8 +22,8 @@ Written in the part of Python that numba compiles, as
 import math
 
 from .ahrs_filters import rotate
-from .ahrs_layout import (C_K_ACC, P_ACC_REJECT, P_ACC_REJECT_TIME, S_ACC_CARRIED, S_ACC_REJ, S_BIAS,
-                          S_Q, S_REST, S_REST_GYR)
+from .ahrs_layout import (C_K_ACC, P_ACC_REJECT, P_ACC_REJECT_TIME, P_TAU_ACC, S_ACC_CARRIED,
+                          S_ACC_REJ, S_ACC_TILT, S_BIAS, S_Q, S_REST_GYR)
 
 # s: how slowly the carried vertical follows the inclination's corrections
 # (BROAD's motions average out in the low-pass within a few seconds).
@@ -41,6 +41,24 @@ def _angle(ax, ay, az, bx, by, bz):
     return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz)
 
 
+def _tilting(s, dt):
+    """
+    The rate of tilting rotation (rad/s), low-passed over two ``tau_acc``.
+
+    The gyro carries the vertical through a tilt with its scale and axis
+    errors, and the low-passed force settles only after it: u forgets per
+    radian tilted until then (a vehicle turns about the vertical).
+    """
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    rx = s[S_REST_GYR] - s[S_BIAS]
+    ry = s[S_REST_GYR + 1] - s[S_BIAS + 1]
+    rz = s[S_REST_GYR + 2] - s[S_BIAS + 2]
+    wx, wy, wz = rotate(w, x, y, z, rx, ry, rz)
+    k = dt / (2.0 * s[P_TAU_ACC] + dt)
+    s[S_ACC_TILT] += k * (math.sqrt(wx * wx + wy * wy) - s[S_ACC_TILT])
+    return s[S_ACC_TILT]
+
+
 def acc_rotation(s, fx, fy, fz, dt, starting):
     """
     δ = (w, x, y): the rotation taking the target to the vertical; the target is ``f`` or ``u``.
@@ -54,11 +72,6 @@ def acc_rotation(s, fx, fy, fz, dt, starting):
     if starting or th <= 0.0 or uz <= 0.0:
         # From the start (or a clipped gyro), and when off: the force as it is.
         ux, uy, uz = 0.0, 0.0, 1.0
-        s[S_ACC_REJ] = 0.0
-    elif s[S_REST] != 0.0:
-        # At rest the force is gravity (and u, carried through a fast motion, may not be).
-        n = math.sqrt(fx * fx + fy * fy + fz * fz) + _TINY
-        ux, uy, uz = fx / n, fy / n, fz / n
         s[S_ACC_REJ] = 0.0
     tx, ty, tz = fx, fy, fz
     if th > 0.0 and not starting:
@@ -81,12 +94,7 @@ def acc_rotation(s, fx, fy, fz, dt, starting):
     # u in the corrected world frame, then a step towards its vertical.
     kap = s[C_K_ACC]
     ux, uy, uz = rotate(1.0 - kap + kap * dw, kap * dx, kap * dy, 0.0, ux, uy, uz)
-    # Tilting the gyro carries the vertical with its scale and axis errors:
-    # u forgets per radian tilted, too (a vehicle turns about the vertical).
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    rx, ry, rz = s[S_REST_GYR] - s[S_BIAS], s[S_REST_GYR + 1] - s[S_BIAS + 1], s[S_REST_GYR + 2] - s[S_BIAS + 2]
-    wx, wy, wz = rotate(w, x, y, z, rx, ry, rz)
-    k = min(1.0, dt / _TAU_CARRIED + math.sqrt(wx * wx + wy * wy) * dt / _TILT_CARRIED)
+    k = min(1.0, dt / _TAU_CARRIED + _tilting(s, dt) * dt / _TILT_CARRIED)
     ux, uy, uz = ux - k * ux, uy - k * uy, uz + k * (1.0 - uz)
     n = math.sqrt(ux * ux + uy * uy + uz * uz) + _TINY
     s[S_ACC_CARRIED] = ux / n

@@ -109,6 +109,7 @@ P_ACC_REJECT = AHRS.parameter('acc_reject')  # rad: a low-passed force this far 
 P_ACC_REJECT_TIME = AHRS.parameter('acc_reject_time')  # s: the longest rejection
 S_ACC_CARRIED = AHRS.field('acc_carried', 3)  # u: the vertical the gyro carries, world frame
 S_ACC_REJ = AHRS.field('acc_rej')  # s the force has been rejected (0: used)
+S_ACC_TILT = AHRS.field('acc_tilt')  # rad/s: the recent rate of tilting rotation
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 
