@@ -23,13 +23,15 @@ import math
 
 from .ahrs_filters import rotate
 from .ahrs_layout import (C_K_ACC, P_ACC_REJECT, P_ACC_REJECT_TIME, P_TAU_ACC, S_ACC_CARRIED,
-                          S_ACC_REJ, S_ACC_TILT, S_BIAS, S_Q, S_REST_GYR)
+                          S_ACC_REJ, S_ACC_TILT, S_BIAS, S_BIAS_P, S_Q, S_REST_GYR)
 
 # s: how slowly the carried vertical follows the inclination's corrections
 # (BROAD's motions average out in the low-pass within a few seconds).
 _TAU_CARRIED = 10.0
 # rad: and per this angle of tilting rotation.
 _TILT_CARRIED = 1.0
+# The bias's error is taken as this many σ (a bias beyond 2σ is common at first).
+_SIGMAS = 3.0
 # The force is taken back below this share of the rejection angle.
 _RELEASE = 0.5
 _TINY = 1e-300
@@ -59,6 +61,15 @@ def _tilting(s, dt):
     return s[S_ACC_TILT]
 
 
+def _longest(s, th):
+    """
+    The longest rejection (s): ``acc_reject_time``, and no longer than the
+    bias's 3σ (the largest per axis) takes to turn the vertical by ``th``.
+    """
+    var = max(s[S_BIAS_P], max(s[S_BIAS_P + 3], s[S_BIAS_P + 5]))
+    return min(s[P_ACC_REJECT_TIME], th / (_SIGMAS * math.sqrt(max(var, 0.0)) + _TINY))
+
+
 def acc_rotation(s, fx, fy, fz, dt, starting):
     """
     δ = (w, x, y): the rotation taking the target to the vertical; the target is ``f`` or ``u``.
@@ -78,9 +89,10 @@ def acc_rotation(s, fx, fy, fz, dt, starting):
         off = _angle(fx, fy, fz, ux, uy, uz)
         if s[S_ACC_REJ] > 0.0 and off < _RELEASE * th:
             s[S_ACC_REJ] = 0.0
-        elif s[S_ACC_REJ] > 0.0 or off > th:
+        elif s[S_ACC_REJ] > 0.0 or (off > th and _longest(s, th) > _TAU_CARRIED):
+            # (A bias too uncertain to carry the vertical for _TAU_CARRIED: no rejection.)
             s[S_ACC_REJ] += dt
-            if s[S_ACC_REJ] > s[P_ACC_REJECT_TIME]:
+            if s[S_ACC_REJ] > _longest(s, th):
                 # Rejected too long: the force is gravity after all.
                 n = math.sqrt(fx * fx + fy * fy + fz * fz) + _TINY
                 ux, uy, uz = fx / n, fy / n, fz / n
