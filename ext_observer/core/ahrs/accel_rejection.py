@@ -30,7 +30,8 @@ from .ahrs_layout import (C_K_ACC, P_ACC_REJECT, P_ACC_REJECT_TIME, P_TAU_ACC, S
 _TAU_CARRIED = 10.0
 # rad: and per this angle of tilting rotation.
 _TILT_CARRIED = 1.0
-# The bias's error is taken as this many σ (a bias beyond 2σ is common at first).
+# A rejection begins only if the bias's error, taken as this many σ (beyond 2σ
+# is common at first), carries the vertical for _TAU_CARRIED.
 _SIGMAS = 3.0
 # The force is taken back below this share of the rejection angle.
 _RELEASE = 0.5
@@ -61,13 +62,13 @@ def _tilting(s, dt):
     return s[S_ACC_TILT]
 
 
-def _longest(s, th):
+def _longest(s, th, sigmas):
     """
     The longest rejection (s): ``acc_reject_time``, and no longer than the
-    bias's 3σ (the largest per axis) takes to turn the vertical by ``th``.
+    bias's ``sigmas`` σ (the largest per axis) takes to turn the vertical by ``th``.
     """
     var = max(s[S_BIAS_P], max(s[S_BIAS_P + 3], s[S_BIAS_P + 5]))
-    return min(s[P_ACC_REJECT_TIME], th / (_SIGMAS * math.sqrt(max(var, 0.0)) + _TINY))
+    return min(s[P_ACC_REJECT_TIME], th / (sigmas * math.sqrt(max(var, 0.0)) + _TINY))
 
 
 def acc_rotation(s, fx, fy, fz, dt, starting):
@@ -89,10 +90,10 @@ def acc_rotation(s, fx, fy, fz, dt, starting):
         off = _angle(fx, fy, fz, ux, uy, uz)
         if s[S_ACC_REJ] > 0.0 and off < _RELEASE * th:
             s[S_ACC_REJ] = 0.0
-        elif s[S_ACC_REJ] > 0.0 or (off > th and _longest(s, th) > _TAU_CARRIED):
+        elif s[S_ACC_REJ] > 0.0 or (off > th and _longest(s, th, _SIGMAS) > _TAU_CARRIED):
             # (A bias too uncertain to carry the vertical for _TAU_CARRIED: no rejection.)
             s[S_ACC_REJ] += dt
-            if s[S_ACC_REJ] > _longest(s, th):
+            if s[S_ACC_REJ] > _longest(s, th, 1.0):
                 # Rejected too long: the force is gravity after all.
                 n = math.sqrt(fx * fx + fy * fy + fz * fz) + _TINY
                 ux, uy, uz = fx / n, fy / n, fz / n
