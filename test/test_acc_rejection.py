@@ -29,15 +29,11 @@ needs_numba = pytest.mark.skipif(not compiled_module.compiled_available(),
 
 def _turn(yaw_rate, seconds=30.0, still=10.0):
     """A level vehicle at SPEED: still (the bias learned at rest), then a constant turn."""
-    n = int((still + seconds) * RATE)
-    t = np.arange(n) / RATE
+    t = np.arange(int((still + seconds) * RATE)) / RATE
     rate = np.where(t >= still, yaw_rate, 0.0)
-    gyr = np.zeros((n, 3))
-    gyr[:, 2] = rate
-    acc = np.zeros((n, 3))
-    acc[:, 1] = rate * SPEED  # ω × v
-    acc[:, 2] = G
-    return gyr, acc
+    zero = np.zeros_like(t)  # body x forward, z up; the specific force is ω × v and g
+    return (np.column_stack((zero, zero, rate)),
+            np.column_stack((zero, rate * SPEED, np.full_like(t, G))))
 
 
 def _run(gyr, acc, params=None, compiled=False, watch=None):
