@@ -44,6 +44,14 @@ def _angle(ax, ay, az, bx, by, bz):
     return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz)
 
 
+def acc_rejection_reset(s):
+    """Forget the carried vertical, a rejection and the tilting rate (a reset)."""
+    for i in range(3):
+        s[S_ACC_CARRIED + i] = 0.0
+    s[S_ACC_REJ] = 0.0
+    s[S_ACC_TILT] = 0.0
+
+
 def _tilting(s, dt):
     """
     The rate of tilting rotation (rad/s), low-passed over two ``tau_acc``.

@@ -43,7 +43,7 @@ from .ahrs_layout import (  # noqa: F401
                           S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR, S_HOLES,
                           S_WAIT_N, S_ACC_REJ,
                           S_WAIT_TURN)
-from .accel_rejection import acc_rotation
+from .accel_rejection import acc_rejection_reset, acc_rotation
 from .gyro_watch import clipped_variance, detect_rest
 from .hole_kernel import (acc_deviation, calibration_restart, forget_wait, hole_after, hole_ends,
                           hole_rate, hole_starts, hole_variance, restart_mean)
@@ -88,6 +88,7 @@ def ahrs_reset(s):
     s[S_ACC_DEV] = 0.0
     s[S_HOLE_T0] = 0.0
     hole_ends(s)
+    acc_rejection_reset(s)
     # The learned calibration stays; the field is followed afresh.
     calibration_restart(s)
     if s[P_HAS_CAL] != 0.0:
