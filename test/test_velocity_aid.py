@@ -19,6 +19,7 @@ from ext_observer import attitude_from_imu
 from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs import velocity_kernel as vk
 from ext_observer.core.ahrs.ahrs_layout import S_VEL_N, S_VEL_USED
+from ext_observer.core.ahrs.ahrs_params import AhrsParams
 from ext_observer.core.ahrs.estimator import AhrsObserver
 
 G = 9.81
@@ -71,9 +72,9 @@ def test_in_a_constant_turn_the_corrected_specific_force_is_gravity_and_stale_is
     assert vk.velocity_removed(s, 0.0, YAW_RATE * SPEED, G) == (0.0, YAW_RATE * SPEED, G)
 
 
-def _run(gyr, acc, velocity=None, compiled=False, given=None):
+def _run(gyr, acc, velocity=None, compiled=False, given=None, params=None):
     """The core per sample; ``velocity`` at the samples ``given`` (default: every one)."""
-    core = AhrsObserver(use_mag=False, compiled=compiled)
+    core = AhrsObserver(params, use_mag=False, compiled=compiled)
     dt = 1.0 / RATE
     out, last = [], None
     for k in range(len(gyr)):
@@ -87,7 +88,8 @@ def _run(gyr, acc, velocity=None, compiled=False, given=None):
 def test_the_core_stays_level_in_a_long_turn_with_the_velocity_and_tilts_without():
     _, gyr, acc, velocity = _turn()
     aided = _tilt_deg(_run(gyr, acc, velocity))
-    plain = _tilt_deg(_run(gyr, acc))
+    # (Without acceleration rejection, which keeps it near level: test_acc_rejection.py.)
+    plain = _tilt_deg(_run(gyr, acc, params=AhrsParams(acc_reject=0.0)))
     assert aided.max() < 0.01
     assert plain[-1000:].mean() > 10.0
 
@@ -133,7 +135,8 @@ def test_plain_and_compiled_agree_to_the_bit_with_the_velocity():
 @pytest.mark.parametrize('at_own_times', [False, True])
 def test_attitude_from_imu_takes_a_velocity_per_sample_or_at_its_own_times(at_own_times):
     t, gyr, acc, velocity = _turn(seconds=20.0)
-    without = attitude_from_imu(gyr, acc, rate=RATE, parameters={'use_mag': False})
+    without = attitude_from_imu(gyr, acc, rate=RATE,  # acceleration rejection off
+                                parameters={'use_mag': False, 'ahrs.acc_reject': 0.0})
     if at_own_times:  # odometry at 20 Hz, on the IMU's clock
         extra = {'velocity': velocity[::5], 'velocity_times': t[::5]}
     else:

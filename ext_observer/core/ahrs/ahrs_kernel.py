@@ -41,7 +41,8 @@ from .ahrs_layout import (  # noqa: F401
                           S_INIT, S_LP, S_HOLE_END, S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE,
                           S_REJECTED, S_REST, S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START,
                           S_START_N, S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR,
-                          S_HOLES, S_STUCK, S_WAIT_N, S_WAIT_TURN)
+                          S_HOLES, S_STUCK, S_WAIT_N, S_ACC_REJ, S_WAIT_TURN)
+from .accel_rejection import acc_rejection_reset, acc_rotation
 from .gyro_watch import clipped_variance, detect_rest
 from .hole_kernel import (acc_deviation, calibration_restart, forget_wait, hole_after,
                           hole_end_fix, hole_ends, hole_rate, hole_slope, hole_starts,
@@ -87,6 +88,7 @@ def ahrs_reset(s):
     s[S_ACC_DEV] = 0.0
     s[S_HOLE_T0] = 0.0
     hole_ends(s)
+    acc_rejection_reset(s)
     # The learned calibration stays; the field is followed afresh.
     calibration_restart(s)
     if s[P_HAS_CAL] != 0.0:
@@ -310,13 +312,9 @@ def ahrs_update_acc(s, ax, ay, az):
                          b1 * vz - a1 * fz + s2z)
         s2x, s2y, s2z = b2 * vx - a2 * fx, b2 * vy - a2 * fy, b2 * vz - a2 * fz
 
-    # δ: the rotation taking f/|f| to the vertical, [1 + u_z, u_y, −u_x, 0].
-    # (A filtered vector pointing straight down, |δ| = 0, only shrinks the
-    # estimate; the extension term restores it.)
-    n = math.sqrt(fx * fx + fy * fy + fz * fz) + _TINY
-    dw, dx, dy = 1.0 + fz / n, fy / n, -fx / n
-    dn = math.sqrt(dw * dw + dx * dx + dy * dy) + _TINY
-    dw, dx, dy = dw / dn, dx / dn, dy / dn
+    # δ: the rotation taking f/|f| (or, f rejected, the gyro's vertical) to
+    # the vertical, [1 + u_z, u_y, −u_x, 0] (|δ| = 0 only shrinks q̂).
+    dw, dx, dy = acc_rotation(s, fx, fy, fz, dt, starting)
     # q̂ + κ (δ ⊗ q̂ − q̂) = r ⊗ q̂ with r = (1 − κ) + κ δ.
     kap = s[C_K_ACC]
     rw, rx, ry = 1.0 - kap + kap * dw, kap * dx, kap * dy
@@ -340,7 +338,7 @@ def ahrs_update_acc(s, ax, ay, az):
     settled = s[S_START] >= 2.0 * s[P_TAU_ACC]
     if not settled:
         s[S_START] += dt
-    if s[P_MOTION_BIAS] != 0.0:
+    if s[P_MOTION_BIAS] != 0.0 and s[S_ACC_REJ] == 0.0:
         learn_bias(s, rw, rx, ry, dt, settled)
 
 

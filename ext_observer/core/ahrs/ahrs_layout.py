@@ -107,6 +107,13 @@ S_VEL_N = AHRS.field('vel_n')  # velocities taken since the last gap (2: a deriv
 S_VEL_AGE = AHRS.field('vel_age')  # s of IMU steps since the latest velocity
 S_VEL_ACC = AHRS.field('vel_acc', 3)  # m/s²: the kinematic acceleration of this step
 S_VEL_USED = AHRS.field('vel_used')  # 1: this step's specific force had it removed
+
+# Acceleration rejection (accel_rejection).
+P_ACC_REJECT = AHRS.parameter('acc_reject')  # rad: a low-passed force this far from u is rejected
+P_ACC_REJECT_TIME = AHRS.parameter('acc_reject_time')  # s: the longest rejection
+S_ACC_CARRIED = AHRS.field('acc_carried', 3)  # u: the vertical the gyro carries, world frame
+S_ACC_REJ = AHRS.field('acc_rej')  # s the force has been rejected (0: used)
+S_ACC_TILT = AHRS.field('acc_tilt')  # rad/s: the recent rate of tilting rotation
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 

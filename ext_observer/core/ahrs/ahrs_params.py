@@ -99,6 +99,13 @@ AHRS_TABLE = (
        "the gyro's measuring range per axis where the driver knows it (a sample at it is "
        'clipped); 0: unknown, a rate stuck at the largest magnitude seen is taken as clipped',
        low_closed=True, zero_off=True),
+    # A long turn: Fusion's acceleration rejection, with its maximum time
+    # (docs/raw_imu.md#acceleration-rejection).
+    _T('acc_reject', math.radians(3.0), 'rad', 0.0, math.pi,
+       'acceleration rejection: a low-passed specific force this far from the vertical the '
+       'gyro carries is not taken for gravity', low_closed=True, zero_off=True),
+    _T('acc_reject_time', 60.0, 's', 0.0, _LONG,
+       'acceleration rejection: the longest it lasts; then the specific force is gravity again'),
 )
 
 

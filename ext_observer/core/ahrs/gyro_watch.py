@@ -29,6 +29,9 @@ _AT_RANGE = 1e-4
 # magnitude seen is stuck (a smooth peak of a quantized rate repeats once;
 # none of BROAD's 22 trials repeats twice).
 _STUCK = 2.0
+# A low-passed rate beyond bias_max by more than this share of rest_gyr is
+# not rest (a bias beyond bias_max is still learned, clipped, at rest).
+_BEYOND = 0.5
 
 
 def _at_range(s, i, g):
@@ -86,7 +89,9 @@ def detect_rest(s, gx, gy, gz):
     mx, my, mz = lx - bx, ly - by, lz - bz
     mean = mx * mx + my * my + mz * mz
     th = s[P_REST_GYR] * s[P_REST_GYR]
-    still = (dev < th) and (mean < th) and s[S_ACC_STILL] != 0.0
+    # A rate well beyond bias_max on any axis is no bias: a steady turn is not rest.
+    big = max(abs(lx), max(abs(ly), abs(lz))) > s[P_BIAS_MAX] + _BEYOND * s[P_REST_GYR]
+    still = (dev < th) and (mean < th) and s[S_ACC_STILL] != 0.0 and not big
     s[S_REST_TIME] = (s[S_REST_TIME] + s[C_DT]) if still else 0.0
     rest = s[S_REST_TIME] >= s[P_REST_TIME]
     s[S_REST] = 1.0 if rest else 0.0

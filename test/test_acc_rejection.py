@@ -1,0 +1,95 @@
+"""
+Acceleration rejection: a long turn without a velocity, and a steady turn that is not rest.
+
+The core on a simulated level turn without odometry (the low-passed specific
+force tilted for tens of seconds): rejected, the estimate stays near level;
+off, it tilts; after ``acc_reject_time`` the force is trusted again. The rest
+detection does not take a steady turn's yaw rate for a bias. Plain and
+compiled agree to the bit. No ROS.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from ext_observer.core.ahrs import compiled as compiled_module
+from ext_observer.core.ahrs.ahrs_layout import S_ACC_REJ, S_ACC_STILL, S_BIAS, S_REST
+from ext_observer.core.ahrs.ahrs_params import AhrsParams
+from ext_observer.core.ahrs.estimator import AhrsObserver
+from ext_observer.core.ahrs.gyro_watch import detect_rest
+
+G = 9.81
+RATE = 100.0
+SPEED = 15.0  # m/s
+
+needs_numba = pytest.mark.skipif(not compiled_module.compiled_available(),
+                                 reason='numba is not installed')
+
+
+def _turn(yaw_rate, seconds=30.0, still=10.0):
+    """A level vehicle at SPEED: still (the bias learned at rest), then a constant turn."""
+    t = np.arange(int((still + seconds) * RATE)) / RATE
+    rate = np.where(t >= still, yaw_rate, 0.0)
+    zero = np.zeros_like(t)  # body x forward, z up; the specific force is ω × v and g
+    return (np.column_stack((zero, zero, rate)),
+            np.column_stack((zero, rate * SPEED, np.full_like(t, G))))
+
+
+def _run(gyr, acc, params=None, compiled=False, watch=None):
+    core = AhrsObserver(params, use_mag=False, compiled=compiled)
+    out, seen = [], []
+    for k in range(len(gyr)):
+        out.append(core.update(gyr[k], acc[k], None, 1.0 / RATE))
+        if watch is not None:
+            seen.append([core.flat_state[i] for i in watch])
+    return np.array(out), np.array(seen)
+
+
+def _tilt_deg(q):
+    w, x, y, z = np.asarray(q).T
+    return np.degrees(np.arccos(np.clip(w * w - x * x - y * y + z * z, -1.0, 1.0)))
+
+
+def test_a_long_turn_without_a_velocity_is_rejected_and_stays_near_level():
+    gyr, acc = _turn(0.3)  # 0.46 g: the apparent gravity 24.6° off the vertical
+    held, seen = _run(gyr, acc, watch=(S_ACC_REJ,))
+    off, _ = _run(gyr, acc, AhrsParams(acc_reject=0.0))
+    assert _tilt_deg(held).max() < 3.0  # at most about acc_reject before it begins
+    assert _tilt_deg(held)[-1000:].mean() < 1.0
+    assert _tilt_deg(off)[-1000:].mean() > 10.0
+    assert seen[-1, 0] > 25.0  # rejected since the turn began
+
+
+def test_after_the_longest_rejection_the_force_is_gravity_again():
+    gyr, acc = _turn(0.3)
+    q, seen = _run(gyr, acc, AhrsParams(acc_reject_time=5.0), watch=(S_ACC_REJ,))
+    tilt = _tilt_deg(q)
+    assert tilt[-1000:].mean() > 10.0
+    assert seen[:, 0].max() <= 5.0 + 1.0 / RATE
+
+
+def test_a_steady_turn_faster_than_bias_max_is_not_rest():
+    # A bias grown to bias_max (2 °/s) along z, a steady yaw rate of 3.7 °/s:
+    # within rest_gyr of the bias, but no bias can be that large.
+    core = AhrsObserver(use_mag=False, compiled=False)
+    core.update((0.0, 0.0, 0.0), (0.0, 0.0, G), None, 1.0 / RATE)
+    s = core.flat_state
+    s[S_BIAS + 2] = AhrsParams().bias_max
+    for _ in range(int(3.0 * RATE)):
+        s[S_ACC_STILL] = 1.0
+        detect_rest(s, 0.0, 0.0, 0.065)
+    assert s[S_REST] == 0.0
+    assert s[S_BIAS + 2] == AhrsParams().bias_max
+    for _ in range(int(3.0 * RATE)):  # a rate a bias can be, steady: rest
+        detect_rest(s, 0.0, 0.0, 0.5 * AhrsParams().bias_max)
+    assert s[S_REST] == 1.0
+
+
+@needs_numba
+def test_plain_and_compiled_agree_to_the_bit_through_a_rejection_and_its_end():
+    gyr, acc = _turn(0.3, seconds=12.0)
+    params = AhrsParams(acc_reject_time=5.0)
+    plain, _ = _run(gyr, acc, params)
+    compiled, _ = _run(gyr, acc, params, compiled=True)
+    assert np.array_equal(plain, compiled)
