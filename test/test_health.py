@@ -137,6 +137,25 @@ def test_a_velocity_given_is_velocity_aided(slow):
     assert aided[1:given].all() and not aided[given + int(rate):].any()
 
 
+def test_a_long_turn_without_a_velocity_is_accelerometer_rejected():
+    # A level vehicle at 15 m/s, still for 10 s, then turning at 0.3 rad/s
+    # (0.46 g): the low-passed force leaves the carried vertical and is rejected;
+    # with rejection off the state never comes.
+    rate, still = 100.0, 10.0
+    t = np.arange(int(40.0 * rate)) / rate
+    yaw = np.where(t >= still, 0.3, 0.0)
+    zero = np.zeros_like(t)
+    gyr = np.column_stack((zero, zero, yaw))
+    acc = np.column_stack((zero, yaw * 15.0, np.full_like(t, 9.81)))
+    params = {'use_mag': False}
+    rejected = attitude_from_imu(gyr, acc, rate=rate, parameters=params).in_state(
+        'accelerometer_rejected')
+    assert not rejected[:int(still * rate)].any() and rejected[int(20.0 * rate):].mean() > 0.9
+    off = attitude_from_imu(gyr, acc, rate=rate,
+                            parameters=dict(params, **{'ahrs.acc_reject': 0.0}))
+    assert not off.in_state('accelerometer_rejected').any()
+
+
 def test_the_node_states_its_health_in_diagnostics(ros_context, spinner):
     node = spinner.add(ImuFilterNode(context=ros_context, parameter_overrides=overrides(
         diagnostic_period=60.0, **{'ahrs.gyro_range': 0.5, 'ahrs.tau_acc': 0.5})))

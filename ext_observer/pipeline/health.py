@@ -11,8 +11,9 @@ A state more is one line in ``_STATES`` (its name and whether it is
 active); :data:`HEALTH_STATES` and the Recording's bits follow the table.
 """
 
-from ext_observer.core.ahrs.ahrs_layout import (P_TAU_ACC, S_CLIPPED, S_CLIPS, S_INIT,
-                                                 S_MAG_DIST, S_REST, S_START, S_VEL_USED)
+from ext_observer.core.ahrs.ahrs_layout import (P_TAU_ACC, S_ACC_REJ, S_CLIPPED, S_CLIPS,
+                                                 S_INIT, S_MAG_DIST, S_REST, S_START,
+                                                 S_VEL_USED)
 
 __all__ = ['HEALTH_STATES', 'HealthWatch', 'NO_STATE', 'health_text']
 
@@ -21,6 +22,7 @@ __all__ = ['HEALTH_STATES', 'HealthWatch', 'NO_STATE', 'health_text']
 _STATES = (
     ('initializing', lambda w, s, p: w.initializing),
     ('at_rest', lambda w, s, p: s[S_REST] != 0.0),
+    ('accelerometer_rejected', lambda w, s, p: s[S_ACC_REJ] > 0.0),
     ('field_rejected', lambda w, s, p: s[S_MAG_DIST] != 0.0),
     ('gyro_clipped', lambda w, s, p: w.recovering),
     ('field_lost', lambda w, s, p: field_lost(p)),
