@@ -231,7 +231,8 @@ def batch_section(batch, markdown):
 def render(results):
     """The whole page from the results :func:`main` saves with ``--json``."""
     half = batch_half()
-    batch = results.get('batch', {'missing': 'Not run (`--dds-only`).'})
+    batch = results.get('batch', {'missing': 'Not run (`--dds-only`); the last batch run\'s '
+                                             'figures: [raw_imu.md](raw_imu.md#holes-in-the-stream).'})
     if 'rows' in batch and half is None:
         batch = {'missing': 'Saved rows, but `bench/load_batch.py` is not in this tree to '
                             'render them.'}
