@@ -231,8 +231,9 @@ def batch_section(batch, markdown):
 def render(results):
     """The whole page from the results :func:`main` saves with ``--json``."""
     half = batch_half()
-    batch = results.get('batch', {'missing': 'Not run (`--dds-only`); the last batch run\'s '
-                                             'figures: [raw_imu.md](raw_imu.md#holes-in-the-stream).'})
+    batch = results.get('batch', {'missing': (
+        'Not run (`--dds-only`); the last batch run\'s figures: '
+        '[raw_imu.md](raw_imu.md#holes-in-the-stream).')})
     if 'rows' in batch and half is None:
         batch = {'missing': 'Saved rows, but `bench/load_batch.py` is not in this tree to '
                             'render them.'}
@@ -350,7 +351,8 @@ def main(argv=None):
     # SIGTERM ends the run through the finally blocks that stop the children.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     start = time.monotonic()
-    results = {'machine': machine.describe(), 'command': shown_command(['python -m bench.load', *argv]),
+    results = {'machine': machine.describe(),
+               'command': shown_command(['python -m bench.load', *argv]),
                'note': args.note}
     if not args.dds_only:
         results['batch'] = run_batch(args)
