@@ -43,7 +43,7 @@ MACHINE_PATH = re.compile(
 # hash then digits after a space or an opening parenthesis.
 ISSUE_NUMBER = re.compile(r'\bissues?\s*#?\s*\d+\b|(?:(?<=\s)|(?<=\())#\d+(?![\w-])', re.I)
 # What may stand before one: another project, named (`CCNYRoboticsLab/imu_tools #195`,
-# `dlaidig/vqf #25`, `imu_tools #3`, `vqf issue 25`).
+# `dlaidig/vqf #25`, `imu_tools #3`, or the word issue after the project's name).
 OTHER_PROJECT = re.compile(r'(?:[\w.-]+/[\w.-]+|\bimu_tools|\bvqf|\bFusion|\bimu_filter_madgwick'
                            r'|\brobot_localization|\brclpy|\bnumba|\bnumpy)`?\s*$', re.I)
 def issue_numbers(text):
@@ -309,7 +309,7 @@ def test_issue_numbers_are_flagged_unless_another_project_is_named():
     # Split literals, so that this file names no issue itself.
     assert [m for _, m in issue_numbers(
         'iss' 'ue 18\'s bounds; Iss' 'ues 27; see (' '#31), or ' '#6. imu_tools #3, '
-        'dlaidig/vqf #25, `CCNYRoboticsLab/imu_tools #195`, vqf issue 25; [x](#6-raw-imu); '
+        'dlaidig/vqf #25, `CCNYRoboticsLab/imu_tools #195`, vqf iss' 'ue 25; [x](#6-raw-imu); '
         '4 issues')] == ['iss' 'ue 18', 'Iss' 'ues 27', '#' '31', '#' '6']
 
 

@@ -134,24 +134,9 @@ class ImuFilterNode(EstimatorNode):
         self._calibration_state = None  # as last reported
         self.save_calibration_service = self.create_service(
             Trigger, '~/save_calibration', self.save_calibration_callback)
-        self.rpy_filtered_publisher = self.rpy_raw_publisher = None
-        self.steady_state_publisher = None
-        if settings['publish_debug_topics']:
-            # imu_filter_madgwick's debug topics (and the complementary filter's).
-            qos = QoSProfile(depth=settings['queue_depth'])
-            self.rpy_filtered_publisher = self.create_publisher(
-                Vector3Stamped, 'imu/rpy/filtered', qos)
-            self.rpy_raw_publisher = self.create_publisher(Vector3Stamped, 'imu/rpy/raw', qos)
-            self.steady_state_publisher = self.create_publisher(Bool, 'imu/steady_state', qos)
         self._cache_settings(settings)
         logger = self.get_logger()
-        self.tf_broadcaster = None
-        if settings['publish_tf']:
-            self.tf_broadcaster, error = transform_broadcaster(self)
-            if self.tf_broadcaster is None:
-                logger.warning(NO_TF2.format(error=error))
-            else:
-                self._transform = TransformStamped()
+        self._create_extra_outputs(settings, logger)
         logger.info(
             f'raw IMU on {self.increment_subscription.topic_name}'
             + (f' and {self.measurement_subscription.topic_name}' if settings['use_mag']
@@ -175,6 +160,25 @@ class ImuFilterNode(EstimatorNode):
         unused = unused_text(self.parameters.values, self.parameters.given)
         if unused:
             logger.warning(unused)
+
+    def _create_extra_outputs(self, settings, logger):
+        """imu_filter_madgwick's debug topics and TF, where the settings ask for them."""
+        self.rpy_filtered_publisher = self.rpy_raw_publisher = None
+        self.steady_state_publisher = None
+        if settings['publish_debug_topics']:
+            # imu_filter_madgwick's debug topics (and the complementary filter's).
+            qos = QoSProfile(depth=settings['queue_depth'])
+            self.rpy_filtered_publisher = self.create_publisher(
+                Vector3Stamped, 'imu/rpy/filtered', qos)
+            self.rpy_raw_publisher = self.create_publisher(Vector3Stamped, 'imu/rpy/raw', qos)
+            self.steady_state_publisher = self.create_publisher(Bool, 'imu/steady_state', qos)
+        self.tf_broadcaster = None
+        if settings['publish_tf']:
+            self.tf_broadcaster, error = transform_broadcaster(self)
+            if self.tf_broadcaster is None:
+                logger.warning(NO_TF2.format(error=error))
+            else:
+                self._transform = TransformStamped()
 
     @property
     def state(self):
