@@ -693,6 +693,20 @@ QOS_CASES = {
 }
 
 
+def healed_gap_s(config):
+    """
+    The healed time after a loss phase, s.
+
+    A reliable input stalls behind its repairs for up to its history (depth
+    over rate): the phase's estimates go out in a burst up to that long after
+    the link healed. The next phase must not begin before, or that burst
+    crosses the next phase's lossier link and its history overwrites them.
+    """
+    if config['input_reliability'] != 'reliable':
+        return QOS_GAP_SECONDS
+    return max(QOS_GAP_SECONDS, config['queue_depth'] / RATE_HZ + 1.0)
+
+
 @pytest.mark.parametrize('case', list(QOS_CASES))
 def test_qos_across_the_link(bed, ros_domain_id, tmp_path, case):
     config = QOS_CASES[case]
@@ -712,7 +726,7 @@ def test_qos_across_the_link(bed, ros_domain_id, tmp_path, case):
             timeline.append(dict(loss_percent=loss, start=start, end=time.time_ns(),
                                  packet_loss_measured=round(dropped / total, 4)
                                  if total else None))
-            pipeline.hold(QOS_GAP_SECONDS)
+            pipeline.hold(healed_gap_s(config))
         pipeline.stop()
     finally:
         for process in pipeline.processes.values():
@@ -722,7 +736,7 @@ def test_qos_across_the_link(bed, ros_domain_id, tmp_path, case):
     rows = []
     for phase in timeline:
         start, end = phase['start'], phase['end']
-        after = end + QOS_GAP_SECONDS * SECOND
+        after = end + healed_gap_s(config) * SECOND
         row = dict(phase)
         row.update(
             reliable=delivery(pipeline, pipeline.remote, start, end),
