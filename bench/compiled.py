@@ -408,7 +408,7 @@ def markdown(broad, steps, starts, meta, node=None, whole=None):
 
 def write_docs(folder, section):
     """Put ``section`` between the markers of ``folder/compiled.md``."""
-    from bench.pages import replace_section
+    from docgen.sections import replace_section
     return replace_section(os.path.join(folder, 'compiled.md'), section, BEGIN, END)
 
 

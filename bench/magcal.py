@@ -530,7 +530,7 @@ def floor_report(f):
 
 def write_docs(docs_dir, section):
     """Put ``section`` between the markers of ``docs_dir/calibration.md``."""
-    from bench.pages import replace_section
+    from docgen.sections import replace_section
     return replace_section(os.path.join(docs_dir, 'calibration.md'), section, BEGIN, END)
 
 

@@ -89,7 +89,7 @@ def build_parser():
     docs = sub.add_parser(
         'docs', add_help=False,
         help='regenerate the parameter tables of docs/parameters.md (see docs -h)')
-    docs.set_defaults(func=None, module='ext_observer.docs')
+    docs.set_defaults(func=None, module='docgen.parameter_tables')
     broad = sub.add_parser(
         'broad', add_help=False,
         help='the raw-IMU estimator and the anchors on BROAD (see broad -h)')

@@ -423,7 +423,7 @@ def test_replay_reproduces_the_pipelines_covariance():
 
 
 def test_the_benchmark_writes_its_page_and_figures(tmp_path, capsys):
-    from ext_observer.broad.covariance_page import report
+    from docgen.covariance_page import report
 
     trials = [synthetic_trial('02_undisturbed_a'),
               synthetic_trial('32_disturbed_attached_magnet_1cm'),

@@ -611,7 +611,7 @@ ALL_SPECS = (('gyro', GYRO_PARAMETERS), ('observer', OBSERVER_PARAMETERS),
 def test_params_file_has_every_parameter_with_a_comment():
     import yaml
 
-    from ext_observer.docs import render_config
+    from docgen.parameter_tables import render_config
     with open(CONFIG, encoding='utf-8') as config:
         text = config.read()
         lines = text.splitlines()

@@ -16,10 +16,10 @@ One module per step, each importing only the ones above it in this list:
 - :mod:`~ext_observer.broad.scoring`: BROAD's error angles, RMSE, averages;
 - :mod:`~ext_observer.broad.anchors`: the other filters, brought to ENU;
 - :mod:`~ext_observer.broad.run`: ours and the anchors on the trials, scored;
-- :mod:`~ext_observer.broad.report`, :mod:`~ext_observer.broad.page`,
-  :mod:`~ext_observer.broad.plots`: stdout and JSON, the page, the figures;
+- :mod:`~ext_observer.broad.report`, :mod:`~docgen.broad_page`,
+  :mod:`~docgen.broad_plots`: stdout and JSON, the page, the figures;
 - :mod:`~ext_observer.broad.stress`, :mod:`~ext_observer.broad.stress_run`,
-  :mod:`~ext_observer.broad.stress_page`: the robustness benchmark
+  :mod:`~docgen.robustness_page`: the robustness benchmark
   (``--stress``): the trials made harder, their run and tables, their page;
 - :mod:`~ext_observer.broad.cli`: the command;
 - :mod:`~ext_observer.broad.fetch` (standard library only, apart): BROAD from
@@ -48,8 +48,8 @@ from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_group
                                      Trial)
 from ext_observer.broad.names import (algorithms_in, ALGORITHMS, ANCHORS, FUSION_DEFAULTS,
                                       MODES, OURS, OURS_PLAIN)
-from ext_observer.broad.page import fusion_text, markdown, shown_meta
-from ext_observer.broad.plots import plot
+from docgen.broad_page import fusion_text, markdown, shown_meta
+from docgen.broad_plots import plot
 from ext_observer.broad.report import fmt, text_report, write_json
 from ext_observer.broad.run import estimate_ours, log, run
 from ext_observer.broad.scoring import (combined_norms, criteria, error_angles, group_means,
@@ -60,7 +60,7 @@ from ext_observer.broad.stress import (BIAS, bias_of, blocks, clip_gyro, cut_at_
                                        GYRO_RANGE, half_of, LABELS, LOW_RATE, RATIO_DONE,
                                        RATIO_GOAL, trial_number, variant, VARIANTS, variants,
                                        with_bias)
-from ext_observer.broad.stress_page import plot_stress, stress_markdown
+from docgen.robustness_page import plot_stress, stress_markdown
 from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, MODE_KEYS,
                                            GYRO_RANGES, modes_of, ratio_to_vqf, run_stress,
                                            STRESS_ANCHORS, stress_summary, table_rows,

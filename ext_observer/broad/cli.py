@@ -23,8 +23,8 @@ from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_group
                                      find_trials, has_trials, HOW_TO_GET, load_trials,
                                      shown_command, shown_path, TREE)
 from ext_observer.broad.names import ANCHORS, MODES
-from ext_observer.broad.page import markdown
-from ext_observer.broad.plots import plot
+from docgen.broad_page import markdown
+from docgen.broad_plots import plot
 from ext_observer.broad.report import text_report, write_json
 from ext_observer.broad.run import log, run
 from ext_observer.broad.stress import VARIANTS
@@ -157,7 +157,7 @@ def main(argv=None):
 
 def _covariance(args, argv, source, folder, trials, groups, progress):
     """The covariance benchmark (``--covariance``) on the trials read."""
-    from ext_observer.broad.covariance_page import report
+    from docgen.covariance_page import report
     meta = dict(source, command=shown_command(['python -m ext_observer broad', *argv]),
                 data=shown_path(folder), machine=_machine())
     # The covariance is the node's: its pipeline and uncertainty model count too.
@@ -171,7 +171,7 @@ def _covariance(args, argv, source, folder, trials, groups, progress):
 
 def _stress(args, argv, source, folder, trials, anchors, progress):
     """The robustness benchmark (``--stress``) on the trials read."""
-    from ext_observer.broad.stress_page import plot_stress, stress_markdown
+    from docgen.robustness_page import plot_stress, stress_markdown
     from ext_observer.broad.stress_run import (half_counts, run_stress, stress_summary,
                                                text_table, write_stress_json)
     modes = MODES if args.mode == 'both' else (args.mode,)

@@ -22,7 +22,7 @@ from ext_observer.core.paper.experiments import (accuracy_limit, error_table,
                                            ObserverSpec, observer_runs)
 from ext_observer.core.paper.observer import GAIN_MODES, VARIANTS
 # The page's writer; its table and the paper's numbers are read from here too.
-from ext_observer.paper.reproduction_page import (COLUMNS, docs_markdown,  # noqa: F401
+from docgen.reproduction_page import (COLUMNS, docs_markdown,  # noqa: F401
                                                   markdown_table, PAPER_ROWS, PAPER_TABLE, STATS)
 
 # Gyro noise of the "with gyro errors" rows: 0.01 rad of angle noise per step.
