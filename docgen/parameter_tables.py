@@ -27,6 +27,8 @@ import os
 import re
 import sys
 
+from docgen.sections import replaced
+
 __all__ = ['CONFIG', 'NODES', 'PAGE', 'main', 'parameter_tables', 'render', 'render_config']
 
 PAGE = 'parameters.md'
@@ -96,11 +98,11 @@ def render(text):
 
     """
     for name, begin, table in parameter_tables():
-        pattern = re.compile(re.escape(begin) + r'\n.*?' + re.escape(_END), re.DOTALL)
-        if not pattern.search(text):
+        try:
+            text = replaced(text, f'{begin}\n{table}{_END}', begin + '\n', _END)
+        except ValueError:
             raise ValueError(f'no generated table of {name}: the page needs the line\n'
-                             f'{begin}\nand, after the table, {_END}')
-        text = pattern.sub(lambda _: f'{begin}\n{table}{_END}', text, count=1)
+                             f'{begin}\nand, after the table, {_END}') from None
     return text
 
 

@@ -147,9 +147,9 @@ ROOT = PACKAGE.parent
 
 
 def _modules():
-    """``{dotted name: path}`` of every module of ext_observer and bench."""
+    """``{dotted name: path}`` of every module of ext_observer, bench and docgen."""
     found = {}
-    for base in ('ext_observer', 'bench'):
+    for base in ('ext_observer', 'bench', 'docgen'):
         for path in (ROOT / base).rglob('*.py'):
             parts = list(path.relative_to(ROOT).with_suffix('').parts)
             if parts[-1] == '__init__':
@@ -228,6 +228,15 @@ def test_no_import_cycle_and_no_private_name_across_modules():
     assert private == []
     # The check finds a cycle where there is one.
     assert _cycles({'a': {'b'}, 'b': {'c'}, 'c': {'a'}, 'd': {'a'}}) == [['a', 'b', 'c']]
+
+
+def test_the_package_imports_neither_the_docs_writers_nor_the_benchmarks():
+    # Neither is installed: the package finds docgen through source_tree only.
+    edges, _ = _imports(_modules())
+    found = [f'{name} imports {target}' for name, targets in edges.items()
+             if name.startswith('ext_observer') for target in targets
+             if target.split('.')[0] in ('docgen', 'bench')]
+    assert found == []
 
 
 def test_the_core_manages_no_processes_and_imports_no_ros():
