@@ -320,7 +320,7 @@ def test_every_public_name_is_importable_from_the_package():
     import importlib
     import inspect
     missing = [n for n in FORMER_NAMES if not hasattr(broad, n)]
-    for module in ('names', 'data', 'scoring', 'anchors', 'run', 'report', 'cli', 'stress',
+    for module in ('result_keys', 'data', 'scoring', 'anchors', 'run', 'report', 'cli', 'stress',
                    'stress_run'):
         found = importlib.import_module(f'ext_observer.broad.{module}')
         missing += [f'{module}.{name}' for name, value in vars(found).items()

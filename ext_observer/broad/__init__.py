@@ -11,7 +11,7 @@ only; the estimator never calls them.
 
 One module per step, each importing only the ones above it in this list:
 
-- :mod:`~ext_observer.broad.names`: the modes and algorithms, in table order;
+- :mod:`~ext_observer.broad.result_keys`: the modes and algorithms, in table order;
 - :mod:`~ext_observer.broad.data`: where the data is, the trials, the groups;
 - :mod:`~ext_observer.broad.scoring`: BROAD's error angles, RMSE, averages;
 - :mod:`~ext_observer.broad.anchors`: the other filters, brought to ENU;
@@ -46,7 +46,7 @@ from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_group
                                      find_trials, groups_from_name, has_trials, HOW_TO_GET,
                                      load_trial, load_trials, shown_command, shown_path,
                                      Trial)
-from ext_observer.broad.names import (algorithms_in, ALGORITHMS, ANCHORS, FUSION_DEFAULTS,
+from ext_observer.broad.result_keys import (algorithms_in, ALGORITHMS, ANCHORS, FUSION_DEFAULTS,
                                       MODES, OURS, OURS_PLAIN)
 from ext_observer.broad.report import fmt, text_report, write_json
 from ext_observer.broad.run import estimate_ours, log, run

@@ -22,7 +22,7 @@ from ext_observer.broad.anchors import missing_anchor_packages
 from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_groups,
                                      find_trials, has_trials, HOW_TO_GET, load_trials,
                                      shown_command, shown_path, TREE)
-from ext_observer.broad.names import ANCHORS, MODES
+from ext_observer.broad.result_keys import ANCHORS, MODES
 from ext_observer.broad.report import text_report, write_json
 from ext_observer.broad.run import log, run
 from ext_observer.broad.stress import VARIANTS

@@ -11,7 +11,7 @@ import json
 import math
 import os
 
-from ext_observer.broad.names import MODES
+from ext_observer.broad.result_keys import MODES
 from ext_observer.broad.scoring import summary
 
 

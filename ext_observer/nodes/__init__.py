@@ -1,7 +1,7 @@
 """
 Everything that imports rclpy or message types: one module per executable
 (``gyro_node``, ``observer_node``, ``monitor_node``, ``imu_filter_node``),
-the machinery they share (``estimator_node``, ``node_common``), the rclpy
+the machinery they share (``estimator_node_base``, ``node_common``), the rclpy
 declaration of the parameter rows (``parameters``) and the message
 conversions (``conversions``).
 """

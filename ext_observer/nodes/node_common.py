@@ -6,7 +6,7 @@ The parameter rows (:class:`ParameterSpec`, plain data in
 (:class:`NodeParameters`, :mod:`ext_observer.nodes.parameters`) are
 re-exported here; the input
 machinery of the two estimator nodes (stamps, checks, silence, resets,
-status) in :mod:`ext_observer.nodes.estimator_node`.
+status) in :mod:`ext_observer.nodes.estimator_node_base`.
 """
 
 import gc

@@ -13,7 +13,7 @@ from rclpy.qos import ReliabilityPolicy
 
 from ext_observer.core import (certified_alpha_max, GAIN_MODES, PAPER_ALPHA, PAPER_GAIN,
                                SingleObserver, VARIANTS)
-from ext_observer.nodes.estimator_node import SECOND
+from ext_observer.nodes.estimator_node_base import SECOND
 from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_settings,
                                                    ParameterSpec)
 

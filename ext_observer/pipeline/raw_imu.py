@@ -29,7 +29,7 @@ from ext_observer.core.ahrs.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_
 from ext_observer.core.validation import check_state
 from ext_observer.pipeline.guard import GUARD_REASONS
 from ext_observer.pipeline.imu_filter_parameters import ahrs_params, uncertainty_params
-from ext_observer.pipeline.imu_tools import heading_factor, mounting_matrix
+from ext_observer.pipeline.imu_filter_outputs import heading_factor, mounting_matrix
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
 from ext_observer.pipeline.velocity_aid import VelocityInput
