@@ -392,7 +392,7 @@ class RawImuEstimator:
                 ('initialized', q is not None), ('bias_x', float(bx)),
                 ('bias_y', float(by)), ('bias_z', float(bz)), ('bias_std_x', float(sx)),
                 ('bias_std_y', float(sy)), ('bias_std_z', float(sz)), ('rest', bool(core.rest)),
-                ('bias_learning', self._held_bias is None), ('gyro_clipped', clipped),
+                ('bias_learning', self.bias_learning), ('gyro_clipped', clipped),
                 ('holes_bridged', core.holes),
                 ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
                 ('inclination_std_deg',
