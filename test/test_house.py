@@ -95,7 +95,7 @@ def test_every_raw_imu_parameter_comes_from_the_one_table():
     from ext_observer.nodes.parameters import descriptor
     from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS,
                                                              imu_filter_settings)
-    from ext_observer.pipeline.parameter_specs import markdown_table
+    from docgen.parameter_tables import markdown_table
 
     specs = {spec.name: spec for spec in IMU_FILTER_PARAMETERS}
     rows = _raw_imu_rows()
