@@ -44,7 +44,7 @@ IMU_FILTER_CONFIG = os.path.join('config', 'imu_filter.yaml')
 # about.
 NODES = (
     ('gyro', 'ext_observer.nodes.gyro_node', 'GYRO_PARAMETERS', CONFIG, 'GYRO_PARAMETERS'),
-    ('observer', 'ext_observer.nodes.observer_parameters', 'OBSERVER_PARAMETERS', CONFIG,
+    ('observer', 'ext_observer.nodes.node_parameters', 'OBSERVER_PARAMETERS', CONFIG,
      'OBSERVER_PARAMETERS'),
     ('monitor', 'ext_observer.nodes.monitor_node', 'MONITOR_PARAMETERS', CONFIG,
      'MONITOR_PARAMETERS'),

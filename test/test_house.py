@@ -92,7 +92,7 @@ def _raw_imu_rows():
 def test_every_raw_imu_parameter_comes_from_the_one_table():
     from ext_observer.core.ahrs.ahrs_params import AhrsParams
     from ext_observer.core.ahrs.uncertainty import UncertaintyParams
-    from ext_observer.nodes.parameters import descriptor
+    from ext_observer.nodes.ros_parameters import descriptor
     from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS,
                                                              imu_filter_settings)
     from docgen.parameter_tables import markdown_table

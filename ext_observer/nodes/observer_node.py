@@ -25,7 +25,7 @@ from ext_observer.nodes.estimator_node_base import (EstimatorNode, floor_text, L
                                          RESET_CAUSES, SECOND, STATUS_SUFFIX)
 from ext_observer.pipeline.guard import GUARD_REASONS, GuardedObserver
 from ext_observer.nodes.node_common import run_node
-from ext_observer.nodes.observer_parameters import (CERTIFIED_EPSILON, INCREMENT_TOPICS,
+from ext_observer.nodes.node_parameters import (CERTIFIED_EPSILON, INCREMENT_TOPICS,
                                               make_observer, MEASUREMENT_TOPICS,
                                               OBSERVER_PARAMETERS, observer_settings,
                                               pairing_settings, RELIABILITIES)

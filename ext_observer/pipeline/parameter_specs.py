@@ -1,7 +1,7 @@
 """
 The nodes' parameters as plain data: :class:`ParameterSpec` rows, and the docs made of them.
 
-A node lists its parameters once, as rows; :mod:`ext_observer.nodes.parameters`
+A node lists its parameters once, as rows; :mod:`ext_observer.nodes.ros_parameters`
 declares them with rclpy (a ``ParameterDescriptor`` per row), and in a clone
 ``python -m ext_observer docs`` (``docgen/parameter_tables.py``) writes
 docs/parameters.md and config/*.yaml from the same rows. No ROS here: the offline tools read the same tables.
