@@ -43,10 +43,10 @@ IMU_FILTER_CONFIG = os.path.join('config', 'imu_filter.yaml')
 # parameters of imu_filter_madgwick it does not use: given, they are warned
 # about.
 NODES = (
-    ('gyro', 'ext_observer.nodes.gyro_node', 'GYRO_PARAMETERS', CONFIG, 'GYRO_PARAMETERS'),
+    ('gyro', 'ext_observer.nodes.node_parameters', 'GYRO_PARAMETERS', CONFIG, 'GYRO_PARAMETERS'),
     ('observer', 'ext_observer.nodes.node_parameters', 'OBSERVER_PARAMETERS', CONFIG,
      'OBSERVER_PARAMETERS'),
-    ('monitor', 'ext_observer.nodes.monitor_node', 'MONITOR_PARAMETERS', CONFIG,
+    ('monitor', 'ext_observer.nodes.node_parameters', 'MONITOR_PARAMETERS', CONFIG,
      'MONITOR_PARAMETERS'),
     ('imu_filter', 'ext_observer.pipeline.imu_filter_parameters', 'IMU_FILTER_PARAMETERS',
      IMU_FILTER_CONFIG, 'IMU_FILTER_OWN'),
