@@ -21,7 +21,7 @@ import sys
 import tempfile
 import time
 
-from bench import machine, report
+from bench import machine, performance_page
 from bench.procs import REPO, reserved_domain_id, ros_env
 from ext_observer.broad.data import shown_command
 
@@ -30,9 +30,9 @@ SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu', 'compiled', 'loa
 # The raw-IMU benchmarks, each a command of its own that prints its figures
 # and verdict (its output goes to stderr here) and writes them with --json.
 RAW_IMU = (
-    ('node_events', ['bench.raw_imu', '--executor', 'events', '--seconds', '8',
+    ('node_events', ['bench.imu_filter_cpu', '--executor', 'events', '--seconds', '8',
                      '--rounds', '5', '--floor']),
-    ('node_single', ['bench.raw_imu', '--executor', 'single', '--seconds', '8',
+    ('node_single', ['bench.imu_filter_cpu', '--executor', 'single', '--seconds', '8',
                      '--rounds', '3']),
     ('direct', ['bench.raw_imu_direct']),
     ('batch', ['bench.broad_batch', '--runs', '3', '--vectorized']),
@@ -45,7 +45,7 @@ LOAD = ['bench.load']
 LOAD_QUICK = ['bench.load', '--dds-only', '--start', '30', '--seconds', '20',
               '--speeds', '1', '4', '--modes', '9D', '--fields', '100']
 RAW_IMU_QUICK = (
-    ('node_events', ['bench.raw_imu', '--executor', 'events', '--seconds', '2',
+    ('node_events', ['bench.imu_filter_cpu', '--executor', 'events', '--seconds', '2',
                      '--rounds', '1']),
     ('direct', ['bench.raw_imu_direct', '--samples', '1000']),
 )
@@ -56,20 +56,20 @@ def _log(text):
 
 
 def _batch(quick):
-    from bench import batch
+    from bench import core_speed
     result = {}
     _log('batch core: observer updates per second ...')
-    sizes = (1, 1000) if quick else batch.BATCH_SIZES
-    result['observer_rates'] = batch.observer_rates(sizes)
-    result['single'] = batch.single_observer_costs()
+    sizes = (1, 1000) if quick else core_speed.BATCH_SIZES
+    result['observer_rates'] = core_speed.observer_rates(sizes)
+    result['single'] = core_speed.single_observer_costs()
     _log('batch core: products and exp ...')
-    result['products'] = batch.product_costs()
-    result['lean'] = batch.lean_prototype_rate()
+    result['products'] = core_speed.product_costs()
+    result['lean'] = core_speed.lean_prototype_rate()
     result['reproduce'] = []
     if not quick:
         _log('batch core: reproduce --seeds 5 ...')
-        result['reproduce'].append(batch.reproduce_time(5))
-        result['reproduce'].append(batch.reproduce_time(5, no_plots=True))
+        result['reproduce'].append(core_speed.reproduce_time(5))
+        result['reproduce'].append(core_speed.reproduce_time(5, no_plots=True))
     return result
 
 
@@ -146,8 +146,8 @@ def _raw_imu(quick, log_dir):
 
 
 def _compiled(quick):
-    """The compiled kernels' figures: ``python -m bench.compiled --json`` (node CPU: section 6's)."""
-    args = ['bench.compiled'] + (['--sections', 'steps'] if quick else [])
+    """The compiled kernels' figures: ``python -m bench.compiled_kernels --json`` (node CPU: section 6's)."""
+    args = ['bench.compiled_kernels'] + (['--sections', 'steps'] if quick else [])
     _log(f'compiled kernels: python -m {" ".join(args)} ...')
     # Relative to the repository, as the page shows the command (a reader can rerun it).
     out = os.path.join('out', 'bench_compiled.json')
@@ -230,7 +230,7 @@ def main(argv=None):
         os.makedirs(args.log_dir, exist_ok=True)
     if args.render:
         with open(args.render) as saved:
-            return machine.write_page(report.render(json.load(saved)),
+            return machine.write_page(performance_page.render(json.load(saved)),
                                       None if args.no_write else args.output)
     # SIGTERM ends the run through the finally blocks that stop the children.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
@@ -241,9 +241,9 @@ def main(argv=None):
     if 'batch' in sections:
         results['batch'] = _batch(args.quick)
     if 'accuracy' in sections:
-        from bench import batch
+        from bench import core_speed
         _log('accuracy: Table 1 setup ...')
-        results['accuracy'] = batch.accuracy()
+        results['accuracy'] = core_speed.accuracy()
     if 'nodes' in sections:
         results['nodes'], results['rates'], results['node_notes'] = _nodes(
             args.quick, args.log_dir)
@@ -267,7 +267,7 @@ def main(argv=None):
     if args.json:
         with open(args.json, 'w') as out:
             json.dump(results, out, indent=1)
-    return machine.write_page(report.render(results), None if args.no_write else args.output)
+    return machine.write_page(performance_page.render(results), None if args.no_write else args.output)
 
 
 if __name__ == '__main__':

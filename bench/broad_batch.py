@@ -20,7 +20,7 @@ import statistics
 import sys
 
 from bench.machine import load, load_range
-from bench.raw_imu import verdict
+from bench.imu_filter_cpu import verdict
 
 # The raw-IMU speed goal: the core over all 22 trials, both modes, batched, in under this (s).
 BATCH_GOAL = 10.0

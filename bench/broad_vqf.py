@@ -5,7 +5,7 @@ The yardstick of the BROAD command's whole-process time: what
 ``python -m ext_observer broad --no-anchors`` does for our estimator, done
 for VQF (the ``vqf`` package's C++ core, one process): read the trials with
 the command's own reader, estimate each in 9D and 6D, score each estimate as
-BROAD does, print one line. ``bench.compiled`` times both processes whole,
+BROAD does, print one line. ``bench.compiled_kernels`` times both processes whole,
 interleaved.
 """
 

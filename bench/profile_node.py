@@ -391,7 +391,7 @@ def profile_loop(executor='single', index=0, rate=LOOP_RATE,
         return result
 
 
-# The raw-IMU targets of bench.raw_imu whose threads imu_threads() splits.
+# The raw-IMU targets of bench.imu_filter_cpu whose threads imu_threads() splits.
 IMU_TARGETS = ('relay', 'raw_relay', 'imu_filter_typed', 'imu_filter')
 IMU_DIRECT_SAMPLES = 5000
 
@@ -423,16 +423,16 @@ def thread_cpu(pid):
 def imu_threads(labels=IMU_TARGETS, rate=1000.0, mag_rate=100.0, seconds=8.0, rounds=1,
                 log_dir=None):
     """
-    CPU per IMU sample of each raw-IMU target by thread, fed by bench.raw_imu's driver.
+    CPU per IMU sample of each raw-IMU target by thread, fed by bench.imu_filter_cpu's driver.
 
     Returns
     -------
     result : dict
         ``{label: [{thread kind: µs per sample}, ...]}``, one dict per round
-        (``total`` the whole process's, as bench.raw_imu measures it).
+        (``total`` the whole process's, as bench.imu_filter_cpu measures it).
 
     """
-    from bench.raw_imu import load_samples, measure, RAW_RELAY, target_args
+    from bench.imu_filter_cpu import load_samples, measure, RAW_RELAY, target_args
     samples = load_samples()
     result = {label: [] for label in labels}
     with tempfile.TemporaryDirectory(prefix='bench-') as tmp:
@@ -458,7 +458,7 @@ def imu_direct(samples=IMU_DIRECT_SAMPLES):
     imu_filter_node's serialized callbacks called directly with prepared bytes.
 
     Publishing is a no-op (the messages are built, not sent); 1 kHz stamps, a
-    field every tenth sample, the BROAD excerpt of bench.raw_imu; the
+    field every tenth sample, the BROAD excerpt of bench.imu_filter_cpu; the
     compiled kernels once loaded.
 
     Returns
@@ -471,7 +471,7 @@ def imu_direct(samples=IMU_DIRECT_SAMPLES):
     import rclpy
     from rclpy.context import Context
 
-    from bench.raw_imu import load_samples
+    from bench.imu_filter_cpu import load_samples
     from ext_observer.nodes.imu_filter_node import ImuFilterNode
     from ext_observer.recordings import cdr
     gyr, acc, mag = load_samples()

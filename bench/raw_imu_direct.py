@@ -2,7 +2,7 @@
 Where ``imu_filter_node``'s time per IMU sample goes, its callbacks called directly.
 
 ``python -m bench.raw_imu_direct [--samples 5000] [--json PATH]`` builds the
-node (``ImuFilterNode``, its defaults) and :class:`bench.raw_imu.ImuRelay`
+node (``ImuFilterNode``, its defaults) and :class:`bench.imu_filter_cpu.ImuRelay`
 in one process and calls their callbacks with prepared messages: the BROAD
 excerpt of the tests at 1 kHz, a field every tenth sample (no executor, no
 DDS receive, warm caches). Publishing is replaced by a no-op in both, and
@@ -23,7 +23,7 @@ import sys
 import time
 
 from bench.numpy_use import numpy_use_per_step
-from bench.raw_imu import ImuRelay, load_samples
+from bench.imu_filter_cpu import ImuRelay, load_samples
 from bench.rosutil import set_stamp
 
 SAMPLES = 5000

@@ -2,15 +2,15 @@
 The compiled kernels' part of docs/performance.md: their speed goals and section 7.
 
 Rendered from what ``python -m bench`` gathers under ``compiled``
-(``python -m bench.compiled --json``: BROAD, the step per sample, the
+(``python -m bench.compiled_kernels --json``: BROAD, the step per sample, the
 start-up times) and, for the node's CPU, the raw-IMU run of section 6
 (``raw_imu['node_events']``, with the ``step_only`` floor). Either may be
 missing or hold an ``error``. Every verdict is computed here from the
 figures, never typed.
 """
 
-from bench.compiled import BEGIN, END, COMPILED_NODE_GOAL
-from bench.raw_imu import FLOOR, verdict
+from bench.compiled_kernels import BEGIN, END, COMPILED_NODE_GOAL
+from bench.imu_filter_cpu import FLOOR, verdict
 
 HEADING = '7. Compiled kernels'
 # The compiled kernels' speed goals: BROAD's wall time within this factor of VQF's (aim: 1),
@@ -118,7 +118,7 @@ def targets_section(compiled, raw):
 
 
 def _whole_row(whole):
-    from bench.compiled import whole_medians
+    from bench.compiled_kernels import whole_medians
     m = whole_medians(whole)
     ratio = m['ours'] / m['VQF']
     aim = '' if ratio <= WHOLE_AIM else f' (the aim, ≤ {WHOLE_AIM:g}×, not reached)'
@@ -131,7 +131,7 @@ def _whole_row(whole):
 
 
 def section(compiled):
-    """Section 7: what ``python -m bench.compiled`` printed (as in docs/compiled.md)."""
+    """Section 7: what ``python -m bench.compiled_kernels`` printed (as in docs/compiled.md)."""
     if not compiled:
         return ''
     if 'error' in compiled:

@@ -3,7 +3,7 @@ The raw-IMU part of docs/performance.md: the raw-IMU node's speed goals and sect
 
 Rendered from what ``python -m bench`` gathers under ``raw_imu`` (see
 ``bench/__main__.py``): ``node_events`` and ``node_single``
-(:func:`bench.raw_imu.compare`), ``direct``
+(:func:`bench.imu_filter_cpu.compare`), ``direct``
 (:func:`bench.raw_imu_direct.direct`) and ``batch``
 (:func:`bench.broad_batch.batch`); any of them may be missing or hold an
 ``error``. Every verdict is computed here from the figures, never typed.
@@ -13,7 +13,7 @@ import statistics
 
 from bench.broad_batch import BATCH_GOAL
 from bench.machine import load_range
-from bench.raw_imu import FLOOR, NODE_GOAL, short_text, verdict
+from bench.imu_filter_cpu import FLOOR, NODE_GOAL, short_text, verdict
 
 HEADING = '6. Raw-IMU estimator (imu_filter_node)'
 EXECUTOR_NAMES = {'events': 'EventsExecutor (the default)', 'single': 'SingleThreadedExecutor'}
@@ -113,15 +113,15 @@ def section(raw):
             f'`imu_filter_node` (the console script, its defaults: `use_mag` true) fed a raw '
             f'IMU at {first["rate"]:g} Hz (`sensor_msgs/Imu` on `imu/data_raw`) and a field at '
             f'{first["mag_rate"]:g} Hz (`imu/mag`), both best effort, from the BROAD excerpt '
-            'of the tests (`test/data`) looped, beside `bench.raw_imu.ImuRelay`: the same '
+            'of the tests (`test/data`) looped, beside `bench.imu_filter_cpu.ImuRelay`: the same '
             'message path without the maths (per sample the two outputs, `imu/data` and '
             '`attitude_estimate`; the latest field kept). Node CPU per IMU sample: user + '
             'system time of the target\'s process over the publishing window, divided by the '
             f'samples; {first["seconds"]:g} s per run, relay and filter runs interleaved, '
-            'medians. `python -m bench.raw_imu --executor events|single --seconds '
+            'medians. `python -m bench.imu_filter_cpu --executor events|single --seconds '
             f'{first["seconds"]:g} --rounds N` prints the same table and the verdict; with '
             f'`--floor` (the events runs here) also `{FLOOR}`, the node cut down to the '
-            'estimate\'s arithmetic and its outputs (`bench.raw_imu.step_only_node`).', '',
+            'estimate\'s arithmetic and its outputs (`bench.imu_filter_cpu.step_only_node`).', '',
             _table(['target (executor)', 'CPU per IMU sample, median (runs)',
                     'outputs received (fewest) / samples', 'achieved rate (slowest)'], rows), '']
         for executor, node in nodes:

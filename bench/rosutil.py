@@ -60,11 +60,6 @@ def spin_until_shutdown(executor, context, stop=None):
         pass
 
 
-def stamp_ns(stamp):
-    """Return a builtin_interfaces/Time as integer nanoseconds."""
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
 def set_stamp(stamp, ns):
     """Set a builtin_interfaces/Time from integer nanoseconds."""
     stamp.sec, stamp.nanosec = divmod(ns, 1_000_000_000)

@@ -8,7 +8,7 @@ is tested on made-up records; the report must render any partial results.
 import numpy as np
 import pytest
 
-from bench import report
+from bench import performance_page
 from bench.lean import check_against_core
 from bench.nodes import analyze, sustained_rate
 from bench.rosutil import raw_stamp_ns, write_raw_stamp
@@ -79,14 +79,14 @@ def test_report_renders_partial_results():
     machine = {'date': 'today', 'commit': 'abc', 'cores': 2, 'cpu': 'x',
                'python': '3', 'numpy': '2', 'rclpy': '7', 'rmw': 'r',
                'rmw_fastrtps_cpp': '8', 'load_start': 0.1, 'load_end': 0.2}
-    text = report.render({'machine': machine, 'command': 'python -m bench'})
+    text = performance_page.render({'machine': machine, 'command': 'python -m bench'})
     assert text.startswith('# Performance')
     node_run = {'target': 'relay/single', 'label': 'relay', 'executor': 'single',
                 'rate': 1000, 'steps': 10, 'lost': 0, 'extra': 0, 'p50': 0.4,
                 'p99': 1.0, 'max': 2.0, 'sustained': True, 'achieved': 1000.0,
                 'seconds': 1.0, 'cpu_us_per_step': 600.0, 'propagated': None,
                 'dropped': None}
-    text = report.render({'machine': machine, 'command': 'c',
+    text = performance_page.render({'machine': machine, 'command': 'c',
                           'nodes': [node_run, {'target': 'observer/single',
                                                'label': 'observer',
                                                'executor': 'single',
@@ -172,12 +172,12 @@ def test_numpy_use_sees_ufuncs_and_operators_that_a_profiler_does_not():
 
 
 def test_numpy_row_of_the_targets():
-    row = report.numpy_use_row({'numpy_use_per_step': {}, 'numpy_use_steps': 1000})
+    row = performance_page.numpy_use_row({'numpy_use_per_step': {}, 'numpy_use_steps': 1000})
     assert row[2] == 'yes' and '1000 steps' in row[1]
-    row = report.numpy_use_row({'numpy_use_per_step': {
+    row = performance_page.numpy_use_row({'numpy_use_per_step': {
         'quaternion.py:normalize': {'per_step': 1.0, 'numpy': ['numpy asarray']}}})
     assert row[2] == 'no' and '`quaternion.py:normalize` ×1 (numpy asarray)' in row[1]
-    assert report.numpy_use_row({})[2] == 'not measured'
+    assert performance_page.numpy_use_row({})[2] == 'not measured'
 
 
 # The raw-IMU goals: verdicts computed from the figures.
@@ -190,7 +190,7 @@ def _node_runs(filter_us, relay_us):
 
 
 def _node_result(filter_us, relay_us, executor='events'):
-    from bench.raw_imu import summarize
+    from bench.imu_filter_cpu import summarize
     runs = _node_runs(filter_us, relay_us)
     result = {'executor': executor, 'rate': 1000.0, 'mag_rate': 100.0, 'seconds': 8.0,
               'rounds': len(filter_us), 'runs': runs}
@@ -199,7 +199,7 @@ def _node_result(filter_us, relay_us, executor='events'):
 
 
 def test_raw_imu_node_verdict_is_the_ratio_of_the_medians_against_the_goal():
-    from bench.raw_imu import goal_line, NODE_GOAL
+    from bench.imu_filter_cpu import goal_line, NODE_GOAL
     met = _node_result([220, 230, 260], [200, 195, 190])
     assert met['ratio'] == pytest.approx(230 / 195) and met['met']
     assert met['round_ratios'] == pytest.approx([1.1, 230 / 195, 260 / 190])
@@ -234,7 +234,7 @@ def test_report_renders_the_raw_imu_goals_and_section():
     raw = {'node_events': _node_result([230, 232, 236], [200, 201, 199]),
            'node_single': {'error': 'ended with exit code 1 and no result'},
            'direct': direct, 'batch': batch}
-    text = report.render({'machine': machine, 'command': 'python -m bench', 'raw_imu': raw})
+    text = performance_page.render({'machine': machine, 'command': 'python -m bench', 'raw_imu': raw})
     assert "## Targets: the raw-IMU node's speed" in text
     assert f'## {report_raw_imu.HEADING}' in text
     assert '(#6-raw-imu-estimator-imu_filter_node)' in text
@@ -246,13 +246,13 @@ def test_report_renders_the_raw_imu_goals_and_section():
     assert 'numpy (`bench/numpy_use.py`): none.' in text
     assert '- **Raw IMU.**' in text
     raw['batch'] = {'error': 'not run: no BROAD data'}
-    text = report.render({'machine': machine, 'command': 'c', 'raw_imu': raw})
+    text = performance_page.render({'machine': machine, 'command': 'c', 'raw_imu': raw})
     assert 'not run: no BROAD data | not measured |' in text
 
 
 def test_report_renders_the_compiled_kernels_goals_from_the_figures():
     from bench import report_compiled
-    from bench.compiled import as_json, markdown
+    from bench.compiled_kernels import as_json, markdown
     machine = {'date': 'today', 'commit': 'abc', 'cores': 2, 'cpu': 'x',
                'python': '3', 'numpy': '2', 'rclpy': '7', 'rmw': 'r',
                'rmw_fastrtps_cpp': '8', 'load_start': 0.1, 'load_end': 0.2}
@@ -265,13 +265,13 @@ def test_report_renders_the_compiled_kernels_goals_from_the_figures():
     starts = {'imu_filter_node to its first /diagnostics': (0.7, 0.6),
               'imu_filter_node to the compiled kernels': (25.0, 1.9),
               'observer_node to its first /diagnostics': (11.0, 0.5)}
-    meta = {'command': 'python -m bench.compiled', 'commit': 'abc', 'numba': '0', 'machine': 'x'}
+    meta = {'command': 'python -m bench.compiled_kernels', 'commit': 'abc', 'numba': '0', 'machine': 'x'}
     whole = {'ours': [1.6, 1.2, 1.3], 'ours, 1 process': [1.5, 1.6, 1.7], 'VQF': [2.0, 2.2, 2.1],
              'first estimate': [0.7, 0.8, 0.9], 'load': [1.0, 1.5]}
     compiled = as_json(broad, steps, starts, markdown(broad, steps, starts, meta, whole=whole),
                        whole)
     node = _node_result([230, 232, 236], [200, 201, 199])  # 1.15x: not met
-    text = report.render({'machine': machine, 'command': 'python -m bench',
+    text = performance_page.render({'machine': machine, 'command': 'python -m bench',
                           'raw_imu': {'node_events': node}, 'compiled': compiled})
     rows = {line.split(' | ')[0]: line for line in text.splitlines()
             if line.startswith('| ') and line.endswith(' |')}
@@ -301,7 +301,7 @@ def test_report_renders_the_compiled_kernels_goals_from_the_figures():
 
 
 def test_a_target_that_got_fewer_outputs_back_is_flagged():
-    from bench.raw_imu import goal_line
+    from bench.imu_filter_cpu import goal_line
     result = _node_result([230, 232, 236], [200, 201, 199])
     assert 'outputs short' not in goal_line(result)
     result['runs']['relay'][1]['outputs'] = 5294
@@ -317,14 +317,14 @@ def test_the_header_says_when_the_machine_was_not_idle():
     machine = {'date': 'today', 'commit': 'abc', 'cores': 2, 'cpu': 'x', 'python': '3',
                'numpy': '2', 'rclpy': '7', 'rmw': 'r', 'rmw_fastrtps_cpp': '8',
                'load_start': 0.4, 'load_end': 1.5}
-    assert 'not idle' not in report.machine_section(machine, 'c')
+    assert 'not idle' not in performance_page.machine_section(machine, 'c')
     machine['load_end'] = 6.02
-    assert 'load average reached 6.02 on 2 cores' in report.machine_section(machine, 'c')
+    assert 'load average reached 6.02 on 2 cores' in performance_page.machine_section(machine, 'c')
 
 
 def test_the_magcal_yardstick_recovers_a_known_calibration_from_known_attitudes():
-    """bench.magcal's least-squares yardstick: ``A y − c`` is the field again, up to scale."""
-    from bench.magcal import oracle_calibration
+    """bench.calibration's least-squares yardstick: ``A y − c`` is the field again, up to scale."""
+    from bench.calibration import oracle_calibration
     from ext_observer.core.quaternion import random_unit_quaternions
     rng = np.random.default_rng(3)
     q = random_unit_quaternions(rng, (400,))
@@ -350,8 +350,8 @@ def test_the_magcal_yardstick_recovers_a_known_calibration_from_known_attitudes(
 
 
 def test_the_magcal_floor_is_the_start_error_held_for_t_then_the_undistorted_figure():
-    """bench.magcal --floor on a synthetic trial with a known field and attitude."""
-    from bench.magcal import floor_figures
+    """bench.calibration --floor on a synthetic trial with a known field and attitude."""
+    from bench.calibration import floor_figures
     from ext_observer.broad.data import Trial
     rate, n = 100.0, 10000  # 100 s, all of it movement
     angle = np.linspace(0.0, 20.0, n)  # a turn about the vertical

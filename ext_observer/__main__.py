@@ -10,7 +10,7 @@ reproduce
 demo
     The gyro → observer → monitor pipeline in one process.
 docs
-    Regenerate the parameter tables of docs/parameters.md.
+    Regenerate the parameter tables of docs/parameters.md (in a clone only).
 broad
     The raw-IMU estimator and the anchors on the BROAD recordings.
 bag, csv
@@ -88,8 +88,9 @@ def build_parser():
     demo.set_defaults(func=None, module='ext_observer.demo')
     docs = sub.add_parser(
         'docs', add_help=False,
-        help='regenerate the parameter tables of docs/parameters.md (see docs -h)')
-    docs.set_defaults(func=None, module='ext_observer.docs')
+        help='regenerate the parameter tables of docs/parameters.md (in a clone: '
+             'docgen/ is not installed; see docs -h)')
+    docs.set_defaults(func=None, module='docgen.parameter_tables')
     broad = sub.add_parser(
         'broad', add_help=False,
         help='the raw-IMU estimator and the anchors on BROAD (see broad -h)')
@@ -113,7 +114,16 @@ def main(argv=None):
     if args.func is None:
         # reproduce, demo, docs and broad parse their own options.
         import importlib
-        return importlib.import_module(args.module).main(rest)
+        package, _, module = args.module.partition('.')
+        if package != 'docgen':
+            return importlib.import_module(args.module).main(rest)
+        from ext_observer.source_tree import docgen
+        try:
+            writer = docgen(module)
+        except RuntimeError as error:
+            print(f'error: {error}', file=sys.stderr)
+            return 2
+        return writer.main(rest)
     if rest:
         parser.error(f'unrecognized arguments: {" ".join(rest)}')
     try:

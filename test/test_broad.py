@@ -20,6 +20,7 @@ import pytest
 
 from broad_data import broad_data_dir
 from conftest import REPO
+from docgen import broad_page, broad_plots
 from ext_observer import broad
 from ext_observer.broad import data
 from ext_observer.core.quaternion import conjugate, multiply
@@ -203,7 +204,7 @@ def _meta(names):
 @pytest.mark.parametrize('tuning', [False, True])
 def test_page_opens_with_a_sentence_credits_broad_and_leaves_the_tuning_place(tmp_path, tuning):
     groups = broad.find_groups('/nonexistent', NAMES)
-    page = broad.markdown(_fake_result(NAMES), groups, _meta(NAMES), {}, str(tmp_path),
+    page = broad_page.markdown(_fake_result(NAMES), groups, _meta(NAMES), {}, str(tmp_path),
                           str(tmp_path / 'broad_tuning.md') if tuning else None)
     lines = [line for line in page.splitlines() if line.strip()]
     assert lines[0] == '# Real data: the BROAD benchmark'
@@ -228,7 +229,7 @@ def test_figures_are_written(tmp_path):
     angles = tuple(np.full(n, 0.01) for _ in range(3))
     result['series'] = {broad.OURS: {'9D': angles, '6D': angles}, 'VQF': {'9D': angles}}
     meta = dict(_meta(NAMES), plot_movement=np.arange(n) > 50)
-    figures = broad.plot(result, groups, meta, str(tmp_path / 'figures'))
+    figures = broad_plots.plot(result, groups, meta, str(tmp_path / 'figures'))
     assert set(figures) == {'groups', 'trial'}
     for path in figures.values():
         assert os.path.basename(path).startswith('broad_') and os.path.getsize(path) > 1000
@@ -305,13 +306,13 @@ def test_groups_come_from_data_mat_as_in_a_clone_of_broad(tmp_path):
 
 
 # Every public name of the module ext_observer/broad.py had, before it became
-# a package.
+# a package (but its page and figures, now docgen's).
 FORMER_NAMES = (
     'ALGORITHMS', 'ANCHORS', 'ANCHOR_PACKAGES', 'IDENTITY', 'MADGWICK_BETA', 'MAHONY_KI',
     'MAHONY_KP', 'MODES', 'NWU_TO_ENU', 'OURS', 'OURS_PLAIN', 'PLOT_TRIAL',
     'STANDARD_GRAVITY', 'Trial', 'anchor_estimates', 'attitude_from_acc_mag', 'build_parser',
     'error_angles', 'find_groups', 'find_trials', 'group_means', 'groups_from_name',
-    'load_trial', 'main', 'markdown', 'missing_anchor_packages', 'norm_deviation', 'plot',
+    'load_trial', 'main', 'missing_anchor_packages', 'norm_deviation',
     'rmse_deg', 'run', 'score', 'summary', 'text_report')
 
 
@@ -319,8 +320,8 @@ def test_every_public_name_is_importable_from_the_package():
     import importlib
     import inspect
     missing = [n for n in FORMER_NAMES if not hasattr(broad, n)]
-    for module in ('names', 'data', 'scoring', 'anchors', 'run', 'report', 'page', 'plots',
-                   'cli', 'stress', 'stress_run', 'stress_page'):
+    for module in ('result_keys', 'data', 'scoring', 'anchors', 'run', 'report', 'cli', 'stress',
+                   'stress_run'):
         found = importlib.import_module(f'ext_observer.broad.{module}')
         missing += [f'{module}.{name}' for name, value in vars(found).items()
                     if not name.startswith('_') and (inspect.isfunction(value)
@@ -414,16 +415,16 @@ def test_fusions_settings_reach_the_filter():
 def test_pages_name_no_absolute_path_and_fusions_settings():
     command = ('python -m ext_observer broad --data /work/shared/broad --json=/tmp/x/broad.json '
                '--docs docs --trials 01')
-    shown, folder = broad.shown_meta({'command': command, 'data': '/work/shared/broad'})
+    shown, folder = broad_page.shown_meta({'command': command, 'data': '/work/shared/broad'})
     assert not any(os.path.isabs(word.split('=')[-1]) for word in shown.split()) \
         and not os.path.isabs(folder)
     assert shown.endswith(' --docs docs --trials 01') and '--json=' in shown
     assert os.path.normpath(os.path.join(REPO, folder)) == '/work/shared/broad'
-    assert broad.shown_meta({'command': 'x --data ../shared/broad', 'data': '../shared/broad'}) \
+    assert broad_page.shown_meta({'command': 'x --data ../shared/broad', 'data': '../shared/broad'}) \
         == ('x --data ../shared/broad', '../shared/broad')
     groups = broad.find_groups('/nonexistent', NAMES)
     meta = dict(_meta(NAMES), command=command, data='/work/shared/broad')
-    page = broad.markdown(_fake_result(NAMES), groups, meta, {}, REPO)
+    page = broad_page.markdown(_fake_result(NAMES), groups, meta, {}, REPO)
     made_by = next(line for line in page.splitlines() if line.startswith('**Made by**'))
     assert f'on the data in `{folder}`' in made_by and not any(
         os.path.isabs(word.strip('`')) for word in made_by.split())

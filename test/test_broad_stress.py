@@ -19,7 +19,7 @@ from broad_data import broad_data_dir
 from conftest import REPO
 from ext_observer import broad
 from ext_observer.broad import stress
-from ext_observer.broad.stress_page import plot_stress, stress_markdown
+from docgen.robustness_page import plot_stress, stress_markdown
 from ext_observer.broad.stress_run import (half_counts, ratio_to_vqf, run_stress,
                                            stress_summary, text_table)
 from ext_observer.core.quaternion import conjugate, multiply

@@ -57,6 +57,20 @@ def test_colcon_installs_the_ros_layout(workspace):
     assert (share / 'ext_observer' / 'config' / 'ext_observer.yaml').exists()
     assert (share / 'ext_observer' / 'config' / 'imu_filter.yaml').exists()
     assert (share / 'ext_observer' / 'launch' / 'imu_filter.launch.py').exists()
+    # What writes the clone's docs, and the benchmarks, are not installed.
+    packages = {path.name for path in (prefix / 'lib').glob('python*/site-packages/*')}
+    assert 'ext_observer' in packages
+    assert not packages & {'docgen', 'bench', 'test'}, packages
+
+
+def test_the_installed_package_says_it_cannot_write_the_docs(workspace):
+    root, env = workspace
+    sourced = sourced_environment(root, env)
+    # A folder without docgen/: only the installed copy is found.
+    result = subprocess.run([sys.executable, '-m', 'ext_observer', 'docs'], cwd=root / 'install',
+                            env=sourced, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert 'docgen/' in result.stderr and 'Traceback' not in result.stderr
 
 
 def test_ros2_run_path_with_the_installed_params_file(workspace, ros_processes):

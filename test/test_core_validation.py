@@ -53,6 +53,11 @@ def test_check_state():
     assert check_state((3.0, 0, 0, 0), max_residual=1.0) == 'residual_too_large'
     assert check_state((1.0, 0, 0, 0), 2.5, max_innovation=2.0) == \
         'innovation_too_large'
+    # A zero estimate has no attitude: the guard's last reason, after the others.
+    assert check_state((0.0, 0.0, 0.0, 0.0)) == 'state_zero'
+    assert check_state((1e-7, 0.0, 0.0, 0.0)) == 'state_zero'
+    assert check_state((2e-6, 0.0, 0.0, 0.0)) is None
+    assert check_state((0.0, 0.0, 0.0, 0.0), max_residual=0.5) == 'residual_too_large'
 
 
 @settings(max_examples=500, deadline=None)

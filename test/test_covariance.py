@@ -423,7 +423,8 @@ def test_replay_reproduces_the_pipelines_covariance():
 
 
 def test_the_benchmark_writes_its_page_and_figures(tmp_path, capsys):
-    from ext_observer.broad.covariance_page import report
+    from docgen.covariance_page import write_page
+    from ext_observer.broad.covariance import report
 
     trials = [synthetic_trial('02_undisturbed_a'),
               synthetic_trial('32_disturbed_attached_magnet_1cm'),
@@ -432,8 +433,8 @@ def test_the_benchmark_writes_its_page_and_figures(tmp_path, capsys):
                           'disturbed': [trials[1].name, trials[2].name]}}
     meta = dict(command='test', commit='abc', dirty=False, date='today', machine='here',
                 data='synthetic')
-    summary = report(trials, groups, meta, docs=str(tmp_path),
-                     json_path=str(tmp_path / 'c.json'))
+    summary, runs = report(trials, groups, meta, json_path=str(tmp_path / 'c.json'))
+    write_page(trials, runs, groups, summary, meta, str(tmp_path))
     assert ('9D', 'dev', 'undisturbed', 'heading') in summary
     assert ('6D', 'held-out', 'disturbed', 'inclination') in summary
     assert 'within the coverage bounds' in capsys.readouterr().out

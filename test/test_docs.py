@@ -181,7 +181,7 @@ def test_relative_links_resolve_to_files_and_headings():
 # Generated tables -----------------------------------------------------------
 
 def test_parameter_tables_equal_the_specs():
-    from ext_observer.docs import PAGE, render
+    from docgen.parameter_tables import PAGE, render
 
     path = os.path.join(DOCS, PAGE)
     text = _read(path)
@@ -192,7 +192,7 @@ def test_parameter_tables_equal_the_specs():
 
 def test_docs_command_checks_and_regenerates(tmp_path, capsys):
     from ext_observer.__main__ import main
-    from ext_observer.docs import PAGE
+    from docgen.parameter_tables import PAGE
 
     text = _read(os.path.join(DOCS, PAGE))
     stale = re.sub(r'(\| `rate_hz` \| double \| )`[^`]*`', r'\1`0.0`', text)

@@ -17,7 +17,7 @@ from broad_replay import fields_tesla, load, START, SECOND
 from ext_observer.broad.scoring import error_angles
 from ext_observer.core.quaternion import conjugate, multiply
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
-from ext_observer.pipeline.imu_tools import mounting_matrix
+from ext_observer.pipeline.imu_filter_outputs import mounting_matrix
 from ext_observer.recordings.recording import attitude_from_imu
 from ros_helpers import overrides, values_of
 from test_raw_imu import connect, Driver

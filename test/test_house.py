@@ -92,10 +92,10 @@ def _raw_imu_rows():
 def test_every_raw_imu_parameter_comes_from_the_one_table():
     from ext_observer.core.ahrs.ahrs_params import AhrsParams
     from ext_observer.core.ahrs.uncertainty import UncertaintyParams
-    from ext_observer.nodes.parameters import descriptor
+    from ext_observer.nodes.ros_parameters import descriptor
     from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS,
                                                              imu_filter_settings)
-    from ext_observer.pipeline.parameter_specs import markdown_table
+    from docgen.parameter_tables import markdown_table
 
     specs = {spec.name: spec for spec in IMU_FILTER_PARAMETERS}
     rows = _raw_imu_rows()
@@ -147,9 +147,9 @@ ROOT = PACKAGE.parent
 
 
 def _modules():
-    """``{dotted name: path}`` of every module of ext_observer and bench."""
+    """``{dotted name: path}`` of every module of ext_observer, bench and docgen."""
     found = {}
-    for base in ('ext_observer', 'bench'):
+    for base in ('ext_observer', 'bench', 'docgen'):
         for path in (ROOT / base).rglob('*.py'):
             parts = list(path.relative_to(ROOT).with_suffix('').parts)
             if parts[-1] == '__init__':
@@ -228,6 +228,15 @@ def test_no_import_cycle_and_no_private_name_across_modules():
     assert private == []
     # The check finds a cycle where there is one.
     assert _cycles({'a': {'b'}, 'b': {'c'}, 'c': {'a'}, 'd': {'a'}}) == [['a', 'b', 'c']]
+
+
+def test_the_package_imports_neither_the_docs_writers_nor_the_benchmarks():
+    # Neither is installed: the package finds docgen through source_tree only.
+    edges, _ = _imports(_modules())
+    found = [f'{name} imports {target}' for name, targets in edges.items()
+             if name.startswith('ext_observer') for target in targets
+             if target.split('.')[0] in ('docgen', 'bench')]
+    assert found == []
 
 
 def test_the_core_manages_no_processes_and_imports_no_ros():

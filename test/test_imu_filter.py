@@ -545,7 +545,7 @@ def test_a_clock_switch_resets_and_the_guard_reinitializes(ros_context, spinner)
 
 
 def test_a_silent_imu_is_named_in_its_own_words_and_never_rounded_up(ros_context):
-    from ext_observer.nodes.estimator_node import floor_text
+    from ext_observer.nodes.estimator_node_base import floor_text
 
     # 4.99997 s of silence is "4.99 s or more", never "5 s": the text states
     # no more than was measured.

@@ -231,7 +231,7 @@ def random_unit(rng):
 
 def test_rpy_is_tf2s_first_solution_and_rebuilds_the_attitude():
     from ext_observer.core.quaternion import multiply_floats
-    from ext_observer.pipeline.imu_tools import rpy_from_quaternion
+    from ext_observer.pipeline.imu_filter_outputs import rpy_from_quaternion
 
     def about(axis, angle):
         q = [math.cos(0.5 * angle), 0.0, 0.0, 0.0]
@@ -255,8 +255,8 @@ def test_rpy_is_tf2s_first_solution_and_rebuilds_the_attitude():
 
 
 def test_gravity_removed_in_the_sensor_frame():
-    from ext_observer.pipeline.imu_tools import gravity_in_sensor, STANDARD_GRAVITY
-    from ext_observer.pipeline.imu_tools import without_gravity
+    from ext_observer.pipeline.imu_filter_outputs import gravity_in_sensor, STANDARD_GRAVITY
+    from ext_observer.pipeline.imu_filter_outputs import without_gravity
 
     rng = np.random.default_rng(31)
     for _ in range(100):
@@ -274,7 +274,7 @@ def test_gravity_removed_in_the_sensor_frame():
 
 
 def test_transform_is_imu_filter_madgwicks_and_its_reverse():
-    from ext_observer.pipeline.imu_tools import transform_from_estimate
+    from ext_observer.pipeline.imu_filter_outputs import transform_from_estimate
 
     q = (0.5, 0.5, -0.5, 0.5)
     assert transform_from_estimate((1.0, 1.0, -1.0, 1.0), 'odom', 'imu_link') == (
@@ -293,7 +293,7 @@ def test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest(
 
     from ext_observer.core.quaternion import multiply_floats
     from ext_observer.nodes.imu_filter_node import ImuFilterNode
-    from ext_observer.pipeline.imu_tools import gravity_in_sensor, rpy_from_quaternion
+    from ext_observer.pipeline.imu_filter_outputs import gravity_in_sensor, rpy_from_quaternion
     from ros_helpers import overrides
     from test_raw_imu import connect
 
@@ -517,7 +517,7 @@ def test_publish_tf_broadcasts_the_orientation_where_tf2_ros_imports(ros_context
     tf2_ros = pytest.importorskip(
         'tf2_ros', reason='tf2_ros is not on PyPI: the TF broadcast needs a ROS installation')
     from ext_observer.nodes.imu_filter_node import ImuFilterNode
-    from ext_observer.pipeline.imu_tools import transform_from_estimate
+    from ext_observer.pipeline.imu_filter_outputs import transform_from_estimate
     from ros_helpers import overrides
     from test_raw_imu import connect
 

@@ -19,11 +19,12 @@ from ext_observer.nodes.conversions import (nanoseconds_from_stamp, quaternion_s
 from ext_observer.core import (attitude_error, certified_alpha_max, manifold_distance,
                                multiply, norm, quaternion_from_rotation_vector,
                                SingleObserver)
-from ext_observer.nodes.gyro_node import GYRO_PARAMETERS, GyroNode
-from ext_observer.nodes.monitor_node import (DIAGNOSTIC_KEYS, ERROR_KEYS, MONITOR_PARAMETERS,
-                                       MonitorNode, STATUS_NAME)
+from ext_observer.nodes.gyro_node import GyroNode
+from ext_observer.nodes.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, MonitorNode, STATUS_NAME
 from ext_observer.nodes.node_common import ParameterError
-from ext_observer.nodes.observer_node import DROP_REASONS, OBSERVER_PARAMETERS, ObserverNode
+from ext_observer.nodes.node_parameters import (GYRO_PARAMETERS, MONITOR_PARAMETERS,
+                                                OBSERVER_PARAMETERS)
+from ext_observer.nodes.observer_node import DROP_REASONS, ObserverNode
 from ros_helpers import overrides, Probe, SECOND, unit, values_of, wait_for_subscribers
 
 # A measurement_timeout no pair published together outlasts, s (the
@@ -611,7 +612,7 @@ ALL_SPECS = (('gyro', GYRO_PARAMETERS), ('observer', OBSERVER_PARAMETERS),
 def test_params_file_has_every_parameter_with_a_comment():
     import yaml
 
-    from ext_observer.docs import render_config
+    from docgen.parameter_tables import render_config
     with open(CONFIG, encoding='utf-8') as config:
         text = config.read()
         lines = text.splitlines()

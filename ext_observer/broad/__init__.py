@@ -11,17 +11,17 @@ only; the estimator never calls them.
 
 One module per step, each importing only the ones above it in this list:
 
-- :mod:`~ext_observer.broad.names`: the modes and algorithms, in table order;
+- :mod:`~ext_observer.broad.result_keys`: the modes and algorithms, in table order;
 - :mod:`~ext_observer.broad.data`: where the data is, the trials, the groups;
 - :mod:`~ext_observer.broad.scoring`: BROAD's error angles, RMSE, averages;
 - :mod:`~ext_observer.broad.anchors`: the other filters, brought to ENU;
 - :mod:`~ext_observer.broad.run`: ours and the anchors on the trials, scored;
-- :mod:`~ext_observer.broad.report`, :mod:`~ext_observer.broad.page`,
-  :mod:`~ext_observer.broad.plots`: stdout and JSON, the page, the figures;
-- :mod:`~ext_observer.broad.stress`, :mod:`~ext_observer.broad.stress_run`,
-  :mod:`~ext_observer.broad.stress_page`: the robustness benchmark
-  (``--stress``): the trials made harder, their run and tables, their page;
-- :mod:`~ext_observer.broad.cli`: the command;
+- :mod:`~ext_observer.broad.report`: stdout and JSON;
+- :mod:`~ext_observer.broad.stress`, :mod:`~ext_observer.broad.stress_run`:
+  the robustness benchmark (``--stress``): the trials made harder, their
+  run and tables;
+- :mod:`~ext_observer.broad.cli`: the command (``--docs``: the pages and
+  figures of a clone's docs/, written by ``docgen/``, not installed);
 - :mod:`~ext_observer.broad.fetch` (standard library only, apart): BROAD from
   its repository into ``data/broad`` (``make broad-data``).
 
@@ -46,10 +46,8 @@ from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_group
                                      find_trials, groups_from_name, has_trials, HOW_TO_GET,
                                      load_trial, load_trials, shown_command, shown_path,
                                      Trial)
-from ext_observer.broad.names import (algorithms_in, ALGORITHMS, ANCHORS, FUSION_DEFAULTS,
+from ext_observer.broad.result_keys import (algorithms_in, ALGORITHMS, ANCHORS, FUSION_DEFAULTS,
                                       MODES, OURS, OURS_PLAIN)
-from ext_observer.broad.page import fusion_text, markdown, shown_meta
-from ext_observer.broad.plots import plot
 from ext_observer.broad.report import fmt, text_report, write_json
 from ext_observer.broad.run import estimate_ours, log, run
 from ext_observer.broad.scoring import (combined_norms, criteria, error_angles, group_means,
@@ -60,7 +58,6 @@ from ext_observer.broad.stress import (BIAS, bias_of, blocks, clip_gyro, cut_at_
                                        GYRO_RANGE, half_of, LABELS, LOW_RATE, RATIO_DONE,
                                        RATIO_GOAL, trial_number, variant, VARIANTS, variants,
                                        with_bias)
-from ext_observer.broad.stress_page import plot_stress, stress_markdown
 from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, MODE_KEYS,
                                            GYRO_RANGES, modes_of, ratio_to_vqf, run_stress,
                                            STRESS_ANCHORS, stress_summary, table_rows,
@@ -68,15 +65,14 @@ from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, M
 
 __all__ = [
     'ALGORITHMS', 'ANCHOR_PACKAGES', 'ANCHORS', 'BROAD_GYRO_RANGE', 'DEFAULT_DIRS', 'ENV_VAR',
-    'FUSION_DEFAULTS', 'FUSION_README', 'HOW_TO_GET', 'fusion_settings', 'fusion_text',
-    'shown_meta',
+    'FUSION_DEFAULTS', 'FUSION_README', 'HOW_TO_GET', 'fusion_settings',
     'IDENTITY', 'MADGWICK_BETA', 'MAHONY_KI', 'MAHONY_KP', 'MODES', 'NWU_TO_ENU', 'OURS',
     'OURS_PLAIN', 'PLOT_TRIAL', 'STANDARD_GRAVITY', 'Trial', 'VQF_RATIO_GOAL',
     'algorithms_in', 'anchor_estimates', 'attitude_from_acc_mag', 'build_parser',
     'combined_norms', 'criteria', 'data_dir', 'error_angles', 'estimate_ours', 'find_groups',
     'find_trials',
     'fmt', 'group_means', 'groups_from_name', 'has_trials', 'load_trial', 'load_trials', 'log', 'main',
-    'markdown', 'missing_anchor_packages', 'norm_deviation', 'norm_parts', 'plot', 'rmse_deg',
+    'missing_anchor_packages', 'norm_deviation', 'norm_parts', 'rmse_deg',
     'run',
     'score', 'shown_command', 'shown_path', 'summary', 'text_report', 'write_json',
     # The robustness benchmark (--stress).
@@ -85,7 +81,7 @@ __all__ = [
     'RATIO_DONE', 'RATIO_GOAL',
     'STRESS_ANCHORS', 'VARIANTS', 'algorithms_of', 'bias_of', 'blocks', 'clip_gyro',
     'cut_at_movement', 'downsample', 'first_movement', 'half_counts', 'half_of', 'modes_of',
-    'plot_stress', 'ratio_to_vqf', 'run_stress', 'stress_markdown', 'stress_summary',
+    'ratio_to_vqf', 'run_stress', 'stress_summary',
     'table_rows', 'text_table', 'trial_number', 'variant', 'variants', 'with_bias',
     'write_stress_json',
 ]

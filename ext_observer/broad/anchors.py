@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from ext_observer.broad.names import ANCHORS, FUSION_DEFAULTS
+from ext_observer.broad.result_keys import ANCHORS, FUSION_DEFAULTS
 from ext_observer.core.quaternion import conjugate, multiply
 
 # Packages each anchor needs (PyPI names = import names).

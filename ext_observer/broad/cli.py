@@ -22,15 +22,14 @@ from ext_observer.broad.anchors import missing_anchor_packages
 from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_groups,
                                      find_trials, has_trials, HOW_TO_GET, load_trials,
                                      shown_command, shown_path, TREE)
-from ext_observer.broad.names import ANCHORS, MODES
-from ext_observer.broad.page import markdown
-from ext_observer.broad.plots import plot
+from ext_observer.broad.result_keys import ANCHORS, MODES
 from ext_observer.broad.report import text_report, write_json
 from ext_observer.broad.run import log, run
 from ext_observer.broad.stress import VARIANTS
 from ext_observer.broad.stress_run import STRESS_ANCHORS
 from ext_observer.core.ahrs.compiled import warn_if_plain
 from ext_observer.pipeline.kernel_cache import preload
+from ext_observer.source_tree import docgen
 
 # Trial shown over time in the report: magnetically disturbed.
 PLOT_TRIAL = '28_disturbed_stationary_magnet_A'
@@ -60,7 +59,9 @@ def build_parser():
                         help="also run our estimator without the extension term "
                              "(doubles our run time)")
     parser.add_argument('--docs', metavar='DOCS_DIR',
-                        help='write DOCS_DIR/broad.md and DOCS_DIR/figures/broad_*.png')
+                        help='write DOCS_DIR/broad.md and DOCS_DIR/figures/broad_*.png '
+                             "(in a clone of ext_observer: the pages' writers, docgen/, "
+                             'are not installed)')
     parser.add_argument('--trials', nargs='+', metavar='NAME',
                         help='only these trials (name prefixes or fnmatch patterns)')
     parser.add_argument('--head', type=float, metavar='SECONDS',
@@ -157,21 +158,23 @@ def main(argv=None):
 
 def _covariance(args, argv, source, folder, trials, groups, progress):
     """The covariance benchmark (``--covariance``) on the trials read."""
-    from ext_observer.broad.covariance_page import report
+    from ext_observer.broad.covariance import report
     meta = dict(source, command=shown_command(['python -m ext_observer broad', *argv]),
                 data=shown_path(folder), machine=_machine())
     # The covariance is the node's: its pipeline and uncertainty model count too.
     meta['dirty'] = bool(_git('status', '--porcelain', '--', *_ESTIMATOR_FILES,
                               'ext_observer/core/ahrs/uncertainty.py', 'ext_observer/pipeline/raw_imu.py'))
     modes = MODES if args.mode == 'both' else (args.mode,)
-    report(trials, groups, meta, modes, workers=args.workers, docs=args.docs,
-           json_path=args.json, progress=progress)
+    summary, runs = report(trials, groups, meta, modes, workers=args.workers,
+                           json_path=args.json, progress=progress)
+    if args.docs:
+        docgen('covariance_page').write_page(trials, runs, groups, summary, meta, args.docs,
+                                             progress)
     return 0
 
 
 def _stress(args, argv, source, folder, trials, anchors, progress):
     """The robustness benchmark (``--stress``) on the trials read."""
-    from ext_observer.broad.stress_page import plot_stress, stress_markdown
     from ext_observer.broad.stress_run import (half_counts, run_stress, stress_summary,
                                                text_table, write_stress_json)
     modes = MODES if args.mode == 'both' else (args.mode,)
@@ -198,10 +201,11 @@ def _stress(args, argv, source, folder, trials, anchors, progress):
     if args.json:
         write_stress_json(args.json, out, meta)
     if args.docs:
-        figure = plot_stress(out, os.path.join(args.docs, 'figures', 'robustness.png'))
+        writer = docgen('robustness_page')
+        figure = writer.plot_stress(out, os.path.join(args.docs, 'figures', 'robustness.png'))
         page = os.path.join(args.docs, 'robustness.md')
         with open(page, 'w', encoding='utf-8') as f:
-            f.write(stress_markdown(out, meta, figure, args.docs))
+            f.write(writer.stress_markdown(out, meta, figure, args.docs))
         progress(f'wrote {page} and {figure}')
     return 0
 
@@ -235,6 +239,11 @@ def _check(args, anchors):
         return '--jobs and --workers must be at least 1'
     if args.head is not None and not args.head > 0.0:
         return '--head must be positive'
+    if args.docs:
+        try:
+            docgen('broad_page')
+        except RuntimeError as error:
+            return str(error)
     missing = missing_anchor_packages() if anchors else []
     if missing:
         return (f'the anchors need {", ".join(missing)}: pip install -r '
@@ -273,12 +282,12 @@ def _read(folder, args, progress):
 
 def _write_page(docs, result, groups, meta, progress):
     """Write the figures and ``docs/broad.md`` (linking the tuning page if there)."""
-    figures = plot(result, groups, meta, os.path.join(docs, 'figures'))
+    figures = docgen('broad_plots').plot(result, groups, meta, os.path.join(docs, 'figures'))
     tuning = os.path.join(docs, 'broad_tuning.md')
     tuning = tuning if os.path.isfile(tuning) else None
     page = os.path.join(docs, 'broad.md')
     with open(page, 'w', encoding='utf-8') as f:
-        f.write(markdown(result, groups, meta, figures, docs, tuning))
+        f.write(docgen('broad_page').markdown(result, groups, meta, figures, docs, tuning))
     progress(f'wrote {page} and {", ".join(sorted(figures.values()))}')
 
 

@@ -20,9 +20,11 @@ odd-numbered ones did not (``held-out``). The coverage bounds: 90–99 % and
 
 :func:`replay` runs the uncertainty model alone again on what a run logged
 (the estimator's steps do not depend on it), so other parameters are tried
-in seconds (:func:`tune`).
+in seconds (:func:`tune`). :func:`report` runs, prints and saves the
+benchmark; its page is ``docgen/covariance_page.py``'s (in a clone).
 """
 
+import json
 import math
 import multiprocessing
 
@@ -381,6 +383,49 @@ def _keep(runs, trials, modes, index, run, i, count, progress):
 # near 1.
 TARGET_FRACTION, FRACTION_SCALE = 0.95, 0.025
 TARGET_MEAN, MEAN_SCALE = 1.1, math.log(1.6)
+
+
+def report(trials, groups, meta, modes=MODES, workers=1, json_path=None, progress=None):
+    """
+    Run the covariance benchmark, print its table, write the JSON if asked.
+
+    Parameters
+    ----------
+    trials : list of Trial
+    groups : dict
+        ``find_groups``'s output.
+    meta : dict
+        ``command``, ``commit``, ``dirty``, ``date``, ``machine``, ``data``.
+    modes : sequence of {'9D', '6D'}
+    workers : int
+    json_path : str, optional
+
+    Returns
+    -------
+    summary : dict
+        :func:`summarize`'s.
+    runs : dict
+        :func:`run_all`'s, for the page (``docgen.covariance_page``).
+
+    """
+    if progress:
+        progress(f'{len(trials)} trials × {len(modes)} modes through RawImuPipeline, '
+                 f'{workers} process{"es" if workers > 1 else ""} ...')
+    runs = run_all(trials, modes, workers=workers, progress=progress)
+    summary = summarize(trials, runs, groups)
+    print(text_table(summary))
+    missed = [key for key, f in summary.items() if key[1] != 'all' and not verdict(f)]
+    print(f'{len(summary) - len(missed) - sum(k[1] == "all" for k in summary)} of '
+          f'{sum(k[1] != "all" for k in summary)} rows within the coverage bounds '
+          f'(90–99 % within 2σ, mean e²/σ² 0.5–2)'
+          + ('' if not missed else '; outside: ' + ', '.join(' '.join(k) for k in missed)))
+    if json_path:
+        with open(json_path, 'w', encoding='utf-8') as f:
+            json.dump({'meta': meta, 'params': UncertaintyParams().as_dict(),
+                       'figures': [dict(zip(('mode', 'split', 'group', 'component'), key),
+                                        **value) for key, value in sorted(summary.items())]},
+                      f, indent=1)
+    return summary, runs
 
 
 def tuning_cost(summary):

@@ -4,14 +4,14 @@ What a run prints and saves: the short report on stdout and the JSON files.
 ``--json OUT`` writes ``{algorithm: {mode: {trial: RMSEs}}}`` to OUT and the
 rest (the summary, the norms, the times, the groups, how the run was made)
 to ``OUT_details.json``. The page with tables and figures is
-:mod:`ext_observer.broad.page`.
+:mod:`docgen.broad_page`.
 """
 
 import json
 import math
 import os
 
-from ext_observer.broad.names import MODES
+from ext_observer.broad.result_keys import MODES
 from ext_observer.broad.scoring import summary
 
 

@@ -12,7 +12,7 @@ import sys
 import time
 
 from ext_observer.broad.anchors import anchor_estimates, BROAD_GYRO_RANGE
-from ext_observer.broad.names import ANCHORS, MODES, OURS, OURS_PLAIN
+from ext_observer.broad.result_keys import ANCHORS, MODES, OURS, OURS_PLAIN
 from ext_observer.broad.scoring import combined_norms, error_angles, norm_parts, score
 
 

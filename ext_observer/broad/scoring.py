@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from ext_observer.broad.names import algorithms_in, OURS
+from ext_observer.broad.result_keys import algorithms_in, OURS
 from ext_observer.core.quaternion import conjugate, multiply
 
 KEYS = ('total_rmse_deg', 'heading_rmse_deg', 'inclination_rmse_deg')

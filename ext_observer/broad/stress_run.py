@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from ext_observer.broad.anchors import BROAD_GYRO_RANGE
-from ext_observer.broad.names import ALGORITHMS, FUSION_DEFAULTS, MODES, OURS
+from ext_observer.broad.result_keys import ALGORITHMS, FUSION_DEFAULTS, MODES, OURS
 from ext_observer.broad.run import log, run
 from ext_observer.broad.stress import (DESCRIPTIONS, GYRO_RANGE, half_of, LABELS, variant,
                                        VARIANTS)

@@ -18,7 +18,7 @@ increment_too_large
 zero_vector
     A direction (specific force, magnetic field) whose norm is below the
     bound: no direction.
-state_non_finite, residual_too_large, innovation_too_large
+state_non_finite, residual_too_large, innovation_too_large, state_zero
     The divergence guard on the estimate (see :func:`check_state`).
 """
 
@@ -124,7 +124,12 @@ def check_vector(vector, min_norm):
 def check_state(state, innovation_norm=None, max_residual=math.inf,
                 max_innovation=math.inf):
     """
-    Divergence guard on an estimate ``q̂``.
+    Divergence guard on an estimate ``q̂``: the one rule of every guard.
+
+    :class:`~ext_observer.pipeline.guard.GuardedObserver` and the raw-IMU
+    pipeline call it; the compiled sample step
+    (:func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step`) checks
+    its first two reasons in numba, as integer outcomes mapped to these names.
 
     Parameters
     ----------
@@ -140,7 +145,8 @@ def check_state(state, innovation_norm=None, max_residual=math.inf,
     -------
     reason : str or None
         ``state_non_finite``, ``residual_too_large``,
-        ``innovation_too_large`` or None.
+        ``innovation_too_large``, ``state_zero`` (``‖q̂‖`` below
+        :data:`MIN_NORM`) or None.
 
     """
     w, x, y, z = state
@@ -151,4 +157,8 @@ def check_state(state, innovation_norm=None, max_residual=math.inf,
         return 'residual_too_large'
     if innovation_norm is not None and innovation_norm > max_innovation:
         return 'innovation_too_large'
+    # 0 is a fixed point of every observer variant without measurements, and
+    # has no attitude: as bad as a divergence.
+    if n2 < MIN_NORM * MIN_NORM:
+        return 'state_zero'
     return None

@@ -30,108 +30,14 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from ext_observer.nodes.conversions import quaternion_stamped, vector_stamped
-from ext_observer.core import SimulatedGyro
 from ext_observer.nodes.node_common import (diagnostic_array, key_values, NodeParameters,
-                                      ParameterError, ParameterSpec, QosWatch, run_node)
+                                      ParameterError, QosWatch, run_node)
+from ext_observer.nodes.node_parameters import GYRO_PARAMETERS, gyro_settings, make_gyro
 
-__all__ = ['GYRO_PARAMETERS', 'GyroNode', 'STATUS_SUFFIX', 'main']
+__all__ = ['GyroNode', 'STATUS_SUFFIX', 'main']
 
 # The status is named '<node name>: outputs'.
 STATUS_SUFFIX = ': outputs'
-
-INT32_MAX = 2 ** 31 - 1
-
-GYRO_PARAMETERS = (
-    ParameterSpec('rate_hz', 20.0, 'Steps per second, Hz.', (0.1, 10000.0)),
-    ParameterSpec('increment_max', 10.0,
-                  'Upper bound of the uniform increment θ_k per axis, rad per step '
-                  '(the paper: 10).', (0.0, 100.0), read_only=True),
-    ParameterSpec('measurement_noise_std', 0.1,
-                  'σ of the measurement noise ν_k, rad (the paper: 0.1).',
-                  (0.0, 10.0), read_only=True),
-    ParameterSpec('gyro_noise_std', 0.0,
-                  'σ_g of the noise added to each reported increment, rad per step per '
-                  'axis (0: exact increments, the paper).', (0.0, 10.0), read_only=True),
-    ParameterSpec('gyro_bias', [0.0, 0.0, 0.0],
-                  'Initial bias of the reported increment as x, y, z, rad per step.',
-                  read_only=True, constraints='3 finite numbers.'),
-    ParameterSpec('bias_walk_std', 0.0,
-                  'Random-walk step of the bias, rad per step per step (0: constant '
-                  'bias).', (0.0, 10.0), read_only=True),
-    ParameterSpec('seed', -1, 'Seed of the random stream; -1 = fresh from the OS.',
-                  (-1, INT32_MAX), read_only=True),
-    ParameterSpec('initial_attitude', [0.0, 0.0, 0.0, 0.0],
-                  'True attitude q_0 as w, x, y, z (normalized); all zeros = uniform '
-                  'random on S³.', read_only=True,
-                  constraints='4 finite numbers.'),
-    ParameterSpec('steps', 0, 'Steps to publish, then stop publishing; 0 = no end.',
-                  (0, INT32_MAX), read_only=True),
-    ParameterSpec('wait_for_subscribers', 0,
-                  'Publish nothing until gyro/increment and attitude/measurement each '
-                  'have this many subscribers (so that no step is published before '
-                  'discovery has matched them); 0 = start at once.', (0, 1000),
-                  read_only=True),
-    ParameterSpec('frame_id', 'world',
-                  'frame_id of the attitude messages (the reference frame).'),
-    ParameterSpec('body_frame_id', 'base_link',
-                  'frame_id of the increment (a rotation of the body frame).'),
-    ParameterSpec('queue_depth', 100, 'History depth of the publishers (reliable, '
-                  'keep last).', (1, 10000), read_only=True),
-    ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.', (0.01, 3600.0),
-                  read_only=True),
-)
-
-
-def gyro_settings(values):
-    """
-    Validate the gyro's parameters.
-
-    Parameters
-    ----------
-    values : dict
-        Every parameter of :data:`GYRO_PARAMETERS` by name.
-
-    Returns
-    -------
-    settings : dict
-        ``values`` with ``initial_attitude`` as ``None`` (random) or 4 floats.
-
-    Raises
-    ------
-    ValueError
-        With the reason.
-
-    """
-    settings = dict(values)
-    initial = values['initial_attitude']
-    if len(initial) != 4:
-        raise ValueError('initial_attitude must have 4 elements (w, x, y, z; all zeros: '
-                         f'random), got {len(initial)}')
-    if not any(initial):
-        settings['initial_attitude'] = None
-    if len(values['gyro_bias']) != 3:
-        raise ValueError('gyro_bias must have 3 elements (x, y, z), '
-                         f'got {len(values["gyro_bias"])}')
-    if not values['rate_hz'] > 0.0:
-        raise ValueError(f'rate_hz must be positive, got {values["rate_hz"]}')
-    # The core's constructor is the reference for what it accepts.
-    try:
-        _make_gyro(settings)
-    except ValueError as error:
-        raise ValueError(f'the simulated gyro refuses these parameters: {error}') from None
-    return settings
-
-
-def _make_gyro(settings):
-    seed = settings['seed']
-    return SimulatedGyro(increment_max=settings['increment_max'],
-                         noise_std=settings['measurement_noise_std'],
-                         seed=None if seed < 0 else seed,
-                         initial_attitude=settings['initial_attitude'],
-                         gyro_noise_std=settings['gyro_noise_std'],
-                         gyro_bias=settings['gyro_bias'],
-                         bias_walk_std=settings['bias_walk_std'])
-
 
 class GyroNode(Node):
     """
@@ -169,7 +75,7 @@ class GyroNode(Node):
             self.destroy_node()
             raise
         settings = self.parameters.settings
-        self.gyro = _make_gyro(settings)
+        self.gyro = make_gyro(settings)
         qos = QoSProfile(depth=settings['queue_depth'])
         self.qos = QosWatch(self)
         self.truth_publisher = self.create_publisher(

@@ -49,14 +49,14 @@ from ext_observer.recordings.cdr import (decode_field, frame_id, ImuData, imu_la
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
 from ext_observer.core.ahrs.compiled import plain_warning
 from ext_observer.pipeline.kernel_cache import BackgroundCompile, start_plan
-from ext_observer.nodes.estimator_node import EstimatorNode, LOG_THROTTLE
+from ext_observer.nodes.estimator_node_base import EstimatorNode, LOG_THROTTLE
 from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
                                                          imu_filter_settings, unused_text)
 from ext_observer.nodes.node_common import NO_TF2, run_node, transform_broadcaster
 from ext_observer.nodes.stream_watch import StreamWatch
 from ext_observer.nodes.velocity_topic import VelocityTopic
 from ext_observer.pipeline.health import health_text, HealthWatch
-from ext_observer.pipeline.imu_tools import (raw_attitude, rpy_from_quaternion,
+from ext_observer.pipeline.imu_filter_outputs import (raw_attitude, rpy_from_quaternion,
                                              transform_from_estimate, without_gravity)
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, KINDS
 from ext_observer.pipeline.raw_imu import RawImuPipeline

@@ -49,11 +49,11 @@ from std_msgs.msg import Float64
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, quaternion_from_msg
 from ext_observer.core import attitude_error
 from ext_observer.nodes.node_common import (CounterDeltas, diagnostic_array, key_values,
-                                      NodeParameters, ParameterError, ParameterSpec,
-                                      QosWatch, run_node)
+                                      NodeParameters, ParameterError, QosWatch, run_node)
+from ext_observer.nodes.node_parameters import MONITOR_PARAMETERS, monitor_settings
 
 __all__ = ['COUNTER_KEYS', 'DIAGNOSTIC_KEYS', 'DROP_REASONS', 'ERROR_KEYS',
-           'MONITOR_PARAMETERS', 'MonitorNode', 'STATUS_NAME', 'main', 'monitor_settings']
+           'MonitorNode', 'STATUS_NAME', 'main']
 
 STATUS_NAME = 'monitor: attitude estimate'
 
@@ -92,58 +92,6 @@ ERROR_KEYS = (
     'attitude_error_std',
     'attitude_error_max',
 )
-
-MONITOR_PARAMETERS = (
-    ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.',
-                  (0.01, 3600.0), read_only=True),
-    ParameterSpec('stale_timeout', 2.0,
-                  'STALE when no estimate arrived for this long, s.', (0.0, 3600.0)),
-    ParameterSpec('warn_distance', 0.15,
-                  'WARN when the mean distance |‖q̂‖ − 1| over the window exceeds this.',
-                  (0.0, 100.0)),
-    ParameterSpec('error_distance', 0.3,
-                  'ERROR when the mean distance over the window exceeds this (0.307: '
-                  '‖q̂‖² = 1 + √0.5, the outer edge of the certified set V ≤ 0.5).',
-                  (0.0, 100.0), constraints='Not below warn_distance.'),
-    ParameterSpec('window', 50, 'Estimates in the running statistics and the level.',
-                  (1, 1000000), read_only=True),
-    ParameterSpec('stamp_tolerance', 0.001,
-                  'Largest stamp difference between an estimate and the ground truth '
-                  'paired with it, s.', (0.0, 10.0)),
-    ParameterSpec('hardware_id', '', "hardware_id of the status; '' = the node's full "
-                  "name (/monitor), as the other nodes' statuses."),
-    ParameterSpec('queue_depth', 100, 'History depth of the subscriptions and the '
-                  'publisher (reliable, keep last).', (1, 10000), read_only=True),
-    ParameterSpec('clock_jump_threshold', 1.0,
-                  'A backward jump of the node clock by more than this clears the '
-                  'statistics, s.', (0.001, 3600.0), read_only=True),
-)
-
-
-def monitor_settings(values):
-    """
-    Validate the monitor's parameters.
-
-    Parameters
-    ----------
-    values : dict
-        Every parameter of :data:`MONITOR_PARAMETERS` by name.
-
-    Returns
-    -------
-    settings : dict
-
-    Raises
-    ------
-    ValueError
-        With the reason.
-
-    """
-    if values['error_distance'] < values['warn_distance']:
-        raise ValueError(f'error_distance ({values["error_distance"]:g}) must not be '
-                         f'below warn_distance ({values["warn_distance"]:g})')
-    return dict(values)
-
 
 def _statistics(values):
     array = np.asarray(values, dtype=float)

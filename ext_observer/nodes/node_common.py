@@ -3,10 +3,10 @@ What the nodes share beyond their parameters: diagnostics, QoS, ``main``.
 
 The parameter rows (:class:`ParameterSpec`, plain data in
 :mod:`ext_observer.pipeline.parameter_specs`) and their declaration
-(:class:`NodeParameters`, :mod:`ext_observer.nodes.parameters`) are
+(:class:`NodeParameters`, :mod:`ext_observer.nodes.ros_parameters`) are
 re-exported here; the input
 machinery of the two estimator nodes (stamps, checks, silence, resets,
-status) in :mod:`ext_observer.nodes.estimator_node`.
+status) in :mod:`ext_observer.nodes.estimator_node_base`.
 """
 
 import gc
@@ -19,7 +19,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import (DurabilityPolicy, qos_check_compatible, qos_policy_name_from_kind,
                        QoSCompatibility, ReliabilityPolicy)
 
-from ext_observer.nodes.parameters import NodeParameters, ParameterError
+from ext_observer.nodes.ros_parameters import NodeParameters, ParameterError
 from ext_observer.pipeline.parameter_specs import ParameterSpec
 
 __all__ = [

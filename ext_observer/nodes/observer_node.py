@@ -21,11 +21,11 @@ from sensor_msgs.msg import Imu
 
 from ext_observer.nodes.conversions import (nanoseconds_from_stamp, quaternion_from_msg,
                                       STAMP_MAX, vector_from_msg)
-from ext_observer.nodes.estimator_node import (EstimatorNode, floor_text, LOG_THROTTLE,
+from ext_observer.nodes.estimator_node_base import (EstimatorNode, floor_text, LOG_THROTTLE,
                                          RESET_CAUSES, SECOND, STATUS_SUFFIX)
 from ext_observer.pipeline.guard import GUARD_REASONS, GuardedObserver
 from ext_observer.nodes.node_common import run_node
-from ext_observer.nodes.observer_parameters import (CERTIFIED_EPSILON, INCREMENT_TOPICS,
+from ext_observer.nodes.node_parameters import (CERTIFIED_EPSILON, INCREMENT_TOPICS,
                                               make_observer, MEASUREMENT_TOPICS,
                                               OBSERVER_PARAMETERS, observer_settings,
                                               pairing_settings, RELIABILITIES)

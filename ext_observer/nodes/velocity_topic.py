@@ -14,7 +14,7 @@ the latest IMU sample (stale) is dropped, counted by reason and logged
 import math
 
 from ext_observer.core.ahrs.ahrs_layout import S_VEL_AGE, S_VEL_N
-from ext_observer.nodes.estimator_node import LOG_THROTTLE
+from ext_observer.nodes.estimator_node_base import LOG_THROTTLE
 
 __all__ = ['VELOCITY_DROP_REASONS', 'VELOCITY_TOPICS', 'VelocityTopic']
 

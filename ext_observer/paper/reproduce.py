@@ -21,9 +21,10 @@ from ext_observer.core.paper.experiments import (accuracy_limit, error_table,
                                            manifold_convergence,
                                            ObserverSpec, observer_runs)
 from ext_observer.core.paper.observer import GAIN_MODES, VARIANTS
-# The page's writer; its table and the paper's numbers are read from here too.
-from ext_observer.paper.reproduction_page import (COLUMNS, docs_markdown,  # noqa: F401
-                                                  markdown_table, PAPER_ROWS, PAPER_TABLE, STATS)
+# Table 1 and the paper's numbers; read from here too.
+from ext_observer.paper.table1 import (COLUMNS, markdown_table, PAPER_ROWS,  # noqa: F401
+                                       PAPER_TABLE, STATS)
+from ext_observer.source_tree import docgen
 
 # Gyro noise of the "with gyro errors" rows: 0.01 rad of angle noise per step.
 DEFAULT_GYRO_NOISE = 0.01
@@ -332,7 +333,8 @@ def build_parser():
                         help="also write the JSON summary ('-' for stdout)")
     parser.add_argument('--docs', metavar='DIR',
                         help='write DIR/reproduction.md with the figures in '
-                             'DIR/figures (implies --out DIR/figures)')
+                             'DIR/figures (implies --out DIR/figures; in a clone of '
+                             'ext_observer: the page writer, docgen/, is not installed)')
     parser.add_argument('--quiet', action='store_true',
                         help='no progress display and no report')
     return parser
@@ -348,6 +350,11 @@ def main(argv=None):
     if args.epochs <= 25:
         print('error: --epochs must exceed 25 (Max/Min are over k > 25)',
               file=sys.stderr)
+        return 2
+    try:
+        page = docgen('reproduction_page') if args.docs else None
+    except RuntimeError as error:
+        print(f'error: {error}', file=sys.stderr)
         return 2
     progress = Progress(3 * args.seeds, enabled=not args.quiet)
     if args.docs:
@@ -370,8 +377,8 @@ def main(argv=None):
         command = 'python -m ext_observer reproduce ' + ' '.join(
             sys.argv[2:] if argv is None else argv)
         with open(os.path.join(args.docs, 'reproduction.md'), 'w') as f:
-            f.write(docs_markdown(result, result['figures'], command.strip(),
-                                  args.docs))
+            f.write(page.docs_markdown(result, result['figures'], command.strip(),
+                                       args.docs))
     result.pop('_histories', None)
     if not args.quiet:
         print(report(result))

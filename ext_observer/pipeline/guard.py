@@ -3,8 +3,8 @@ The divergence guard around the core's observer; no ROS.
 
 :class:`GuardedObserver` runs a :class:`~ext_observer.core.SingleObserver`
 step by step and checks every new estimate with
-:func:`~ext_observer.core.validation.check_state`: if ``|q̂̄q̂ − 1|``
-exceeds ``max_residual``, the innovation ``‖y − q̂‖`` exceeds
+:func:`~ext_observer.core.validation.check_state` (the one divergence rule):
+if ``|q̂̄q̂ − 1|`` exceeds ``max_residual``, the innovation ``‖y − q̂‖`` exceeds
 ``max_innovation``, the estimate is not finite or (nearly) zero, or the
 step raised (the ``projected`` variant at a zero quaternion), the observer
 is reinitialized from the latest valid measurement, carried forward by the
@@ -19,7 +19,7 @@ increments with ``‖θ‖`` bounded, unit measurements.
 
 import math
 
-from ext_observer.core.validation import check_state, MIN_NORM
+from ext_observer.core.validation import check_state
 
 __all__ = ['GUARD_REASONS', 'GuardedObserver', 'carried']
 
@@ -121,12 +121,6 @@ class GuardedObserver:
             reason = 'step_failed'
         else:
             reason = check_state(state, innovation, self.max_residual, self.max_innovation)
-            # 0 is a fixed point of every variant without measurements, and
-            # has no attitude: as bad as a divergence.
-            if reason is None and (state[0] * state[0] + state[1] * state[1]
-                                   + state[2] * state[2] + state[3] * state[3]
-                                   ) < MIN_NORM * MIN_NORM:
-                reason = 'state_zero'
         if self.latest is not None:
             self.latest = carried(self.latest, increment)
         if reason is not None:

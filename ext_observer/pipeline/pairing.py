@@ -100,8 +100,8 @@ import math
 
 from ext_observer.core.validation import check_increment, check_measurement, check_vector
 from ext_observer.pipeline.guard import carried
-# The vocabulary lives in steps.py; its names are importable from here too.
-from ext_observer.pipeline.steps import (VALUE_REASONS, BACKWARD_JUMP, DROP_REASONS,  # noqa: F401
+# The vocabulary lives in pairing_terms.py; its names are importable from here too.
+from ext_observer.pipeline.pairing_terms import (VALUE_REASONS, BACKWARD_JUMP, DROP_REASONS,  # noqa: F401
                                 EVENTS, INCREMENT_DROP_REASONS, KINDS,
                                 MEASUREMENT_DROP_REASONS, MIN_ACCELERATION, MIN_FIELD, Step)
 

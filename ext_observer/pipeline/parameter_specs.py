@@ -1,11 +1,10 @@
 """
 The nodes' parameters as plain data: :class:`ParameterSpec` rows, and the docs made of them.
 
-A node lists its parameters once, as rows; :mod:`ext_observer.nodes.parameters`
-declares them with rclpy (a ``ParameterDescriptor`` per row), and
-``python -m ext_observer docs`` writes docs/parameters.md
-(:func:`markdown_table`) and config/*.yaml (:func:`yaml_section`) from the
-same rows. No ROS here: the offline tools read the same tables.
+A node lists its parameters once, as rows; :mod:`ext_observer.nodes.ros_parameters`
+declares them with rclpy (a ``ParameterDescriptor`` per row), and in a clone
+``python -m ext_observer docs`` (``docgen/parameter_tables.py``) writes
+docs/parameters.md and config/*.yaml from the same rows. No ROS here: the offline tools read the same tables.
 
 Every parameter has a value: rclpy's ``get_parameters`` (what ``ros2 param
 dump`` calls) answers nothing for a whole request that names a parameter
@@ -14,11 +13,10 @@ declared with a type and no value, so "not set" is spelled as a value
 """
 
 import dataclasses
-import textwrap
 from typing import Any, Optional, Tuple
 
 __all__ = ['COMMON_PARAMETERS', 'FORWARD_GAP_ACTIONS', 'ParameterSpec', 'common_settings',
-           'markdown_table', 'ros_type_name', 'spec_from_tunable', 'yaml_section']
+           'ros_type_name', 'spec_from_tunable']
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,69 +108,6 @@ def _yaml_value(value):
     if isinstance(value, (list, tuple)):
         return '[' + ', '.join(_yaml_value(v) for v in value) + ']'
     return repr(value)
-
-
-def markdown_table(specs):
-    """
-    Return the table of a node's parameters in ``docs/parameters.md``.
-
-    Parameters
-    ----------
-    specs : sequence of ParameterSpec
-
-    Returns
-    -------
-    table : str
-        Markdown, one row per parameter, ending with a newline.
-
-    """
-    rows = ['| parameter | type | default | range | runtime | description |',
-            '| --- | --- | --- | --- | --- | --- |']
-    for spec in specs:
-        bounds = '' if spec.range is None else f'[{spec.range[0]}, {spec.range[1]}]'
-        runtime = 'no' if spec.read_only else 'yes'
-        description = spec.description
-        if spec.constraints:
-            description += f' {spec.constraints}'
-        description = description.replace('|', '\\|')
-        rows.append(f'| `{spec.name}` | {spec.type_name} | `{spec.default_text}` | '
-                    f'{bounds} | {runtime} | {description} |')
-    return '\n'.join(rows) + '\n'
-
-
-def yaml_section(node_name, specs):
-    """
-    Return a node's section of ``config/ext_observer.yaml``.
-
-    Every parameter with its default, under a comment made of its description,
-    constraints, range and whether it is start-up only, wrapped at 78
-    columns.
-
-    Parameters
-    ----------
-    node_name : str
-        The section is ``/**/<node_name>``.
-    specs : sequence of ParameterSpec
-
-    Returns
-    -------
-    section : str
-        YAML, ending with a newline.
-
-    """
-    lines = [f'/**/{node_name}:', '  ros__parameters:']
-    for spec in specs:
-        text = spec.description
-        if spec.constraints:
-            text += f' {spec.constraints}'
-        if spec.range is not None:
-            text += f' Range [{spec.range[0]}, {spec.range[1]}].'
-        if spec.read_only:
-            text += ' Start-up only.'
-        lines += textwrap.wrap(text, width=78, initial_indent='    # ',
-                               subsequent_indent='    # ', break_on_hyphens=False)
-        lines.append(f'    {spec.name}: {spec.default_text}')
-    return '\n'.join(lines) + '\n'
 
 
 # At a forward gap of the inputs (the estimator nodes).

@@ -29,7 +29,7 @@ from ext_observer.core.ahrs.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_
 from ext_observer.core.validation import check_state
 from ext_observer.pipeline.guard import GUARD_REASONS
 from ext_observer.pipeline.imu_filter_parameters import ahrs_params, uncertainty_params
-from ext_observer.pipeline.imu_tools import heading_factor, mounting_matrix
+from ext_observer.pipeline.imu_filter_outputs import heading_factor, mounting_matrix
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
 from ext_observer.pipeline.velocity_aid import VelocityInput
@@ -392,7 +392,7 @@ class RawImuEstimator:
                 ('initialized', q is not None), ('bias_x', float(bx)),
                 ('bias_y', float(by)), ('bias_z', float(bz)), ('bias_std_x', float(sx)),
                 ('bias_std_y', float(sy)), ('bias_std_z', float(sz)), ('rest', bool(core.rest)),
-                ('bias_learning', self._held_bias is None), ('gyro_clipped', clipped),
+                ('bias_learning', self.bias_learning), ('gyro_clipped', clipped),
                 ('holes_bridged', core.holes),
                 ('mag_disturbed', bool(core.mag_disturbed)), ('residual', residual),
                 ('inclination_std_deg',

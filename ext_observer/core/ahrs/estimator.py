@@ -517,10 +517,6 @@ class AhrsObserver:
         for i, s in enumerate(self._states):
             func(s, *(float(c) for c in v[:, i]), *extra)
 
-    def update_gyr(self, gyr):
-        """Propagate with ``exp((ω − b̂) dt / 2)`` and apply the extension term."""
-        self._each(self._kernels.ahrs.ahrs_update_gyr, gyr)
-
     def update_acc(self, acc):
         """Correct the inclination from the world-frame filtered specific force."""
         self._each(self._kernels.ahrs.ahrs_update_acc, acc)

@@ -1,10 +1,13 @@
 """
-The parameters of ``observer_node`` (the paper's observer) and their validation.
+The parameters of the paper's nodes (``observer_node``, ``gyro_node``, ``monitor_node``) and their validation.
 
-:data:`OBSERVER_PARAMETERS` lists them once (the descriptors, the tables of
-``docs/parameters.md`` and ``config/ext_observer.yaml`` come from it);
-:func:`observer_settings` checks a set of values together, building the
-core's observer from them so that the core's own checks apply.
+Each node's rows are listed once (:data:`OBSERVER_PARAMETERS`,
+:data:`GYRO_PARAMETERS`, :data:`MONITOR_PARAMETERS`: the descriptors, the
+tables of ``docs/parameters.md`` and ``config/ext_observer.yaml`` come from
+them); its ``*_settings`` function checks a set of values together, building
+the core's object from them so that the core's own checks apply.
+``imu_filter_node``'s rows are plain data in
+:mod:`ext_observer.pipeline.imu_filter_parameters` (the offline tools read them).
 """
 
 import math
@@ -12,14 +15,15 @@ import math
 from rclpy.qos import ReliabilityPolicy
 
 from ext_observer.core import (certified_alpha_max, GAIN_MODES, PAPER_ALPHA, PAPER_GAIN,
-                               SingleObserver, VARIANTS)
-from ext_observer.nodes.estimator_node import SECOND
+                               SimulatedGyro, SingleObserver, VARIANTS)
+from ext_observer.nodes.estimator_node_base import SECOND
 from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_settings,
                                                    ParameterSpec)
 
-__all__ = ['ALIGN_SIGN_AUTO', 'CERTIFIED_EPSILON', 'INCREMENT_SOURCES', 'INCREMENT_TOPICS',
-           'MEASUREMENT_SOURCES', 'MEASUREMENT_TOPICS', 'OBSERVER_PARAMETERS',
-           'RELIABILITIES', 'make_observer', 'observer_settings', 'pairing_settings']
+__all__ = ['ALIGN_SIGN_AUTO', 'CERTIFIED_EPSILON', 'GYRO_PARAMETERS', 'INCREMENT_SOURCES',
+           'INCREMENT_TOPICS', 'MEASUREMENT_SOURCES', 'MEASUREMENT_TOPICS', 'MONITOR_PARAMETERS',
+           'OBSERVER_PARAMETERS', 'RELIABILITIES', 'gyro_settings', 'make_gyro', 'make_observer',
+           'monitor_settings', 'observer_settings', 'pairing_settings']
 
 # The sublevel V = (q̄q − 1)² ≤ ε of Theorem 1 that certifies `alpha`.
 CERTIFIED_EPSILON = 0.5
@@ -215,3 +219,154 @@ def pairing_settings(settings):
                 forward_gap=round(settings['forward_gap_threshold'] * SECOND),
                 max_dt=round(settings['max_dt'] * SECOND),
                 constant_dt=settings['constant_dt'])
+
+
+# --- gyro_node: the paper's simulated gyro and attitude sensor ---------------------
+
+INT32_MAX = 2 ** 31 - 1
+
+GYRO_PARAMETERS = (
+    ParameterSpec('rate_hz', 20.0, 'Steps per second, Hz.', (0.1, 10000.0)),
+    ParameterSpec('increment_max', 10.0,
+                  'Upper bound of the uniform increment θ_k per axis, rad per step '
+                  '(the paper: 10).', (0.0, 100.0), read_only=True),
+    ParameterSpec('measurement_noise_std', 0.1,
+                  'σ of the measurement noise ν_k, rad (the paper: 0.1).',
+                  (0.0, 10.0), read_only=True),
+    ParameterSpec('gyro_noise_std', 0.0,
+                  'σ_g of the noise added to each reported increment, rad per step per '
+                  'axis (0: exact increments, the paper).', (0.0, 10.0), read_only=True),
+    ParameterSpec('gyro_bias', [0.0, 0.0, 0.0],
+                  'Initial bias of the reported increment as x, y, z, rad per step.',
+                  read_only=True, constraints='3 finite numbers.'),
+    ParameterSpec('bias_walk_std', 0.0,
+                  'Random-walk step of the bias, rad per step per step (0: constant '
+                  'bias).', (0.0, 10.0), read_only=True),
+    ParameterSpec('seed', -1, 'Seed of the random stream; -1 = fresh from the OS.',
+                  (-1, INT32_MAX), read_only=True),
+    ParameterSpec('initial_attitude', [0.0, 0.0, 0.0, 0.0],
+                  'True attitude q_0 as w, x, y, z (normalized); all zeros = uniform '
+                  'random on S³.', read_only=True,
+                  constraints='4 finite numbers.'),
+    ParameterSpec('steps', 0, 'Steps to publish, then stop publishing; 0 = no end.',
+                  (0, INT32_MAX), read_only=True),
+    ParameterSpec('wait_for_subscribers', 0,
+                  'Publish nothing until gyro/increment and attitude/measurement each '
+                  'have this many subscribers (so that no step is published before '
+                  'discovery has matched them); 0 = start at once.', (0, 1000),
+                  read_only=True),
+    ParameterSpec('frame_id', 'world',
+                  'frame_id of the attitude messages (the reference frame).'),
+    ParameterSpec('body_frame_id', 'base_link',
+                  'frame_id of the increment (a rotation of the body frame).'),
+    ParameterSpec('queue_depth', 100, 'History depth of the publishers (reliable, '
+                  'keep last).', (1, 10000), read_only=True),
+    ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.', (0.01, 3600.0),
+                  read_only=True),
+)
+
+
+def gyro_settings(values):
+    """
+    Validate the gyro's parameters.
+
+    Parameters
+    ----------
+    values : dict
+        Every parameter of :data:`GYRO_PARAMETERS` by name.
+
+    Returns
+    -------
+    settings : dict
+        ``values`` with ``initial_attitude`` as ``None`` (random) or 4 floats.
+
+    Raises
+    ------
+    ValueError
+        With the reason.
+
+    """
+    settings = dict(values)
+    initial = values['initial_attitude']
+    if len(initial) != 4:
+        raise ValueError('initial_attitude must have 4 elements (w, x, y, z; all zeros: '
+                         f'random), got {len(initial)}')
+    if not any(initial):
+        settings['initial_attitude'] = None
+    if len(values['gyro_bias']) != 3:
+        raise ValueError('gyro_bias must have 3 elements (x, y, z), '
+                         f'got {len(values["gyro_bias"])}')
+    if not values['rate_hz'] > 0.0:
+        raise ValueError(f'rate_hz must be positive, got {values["rate_hz"]}')
+    # The core's constructor is the reference for what it accepts.
+    try:
+        make_gyro(settings)
+    except ValueError as error:
+        raise ValueError(f'the simulated gyro refuses these parameters: {error}') from None
+    return settings
+
+
+def make_gyro(settings):
+    """The core's simulated gyro of validated ``settings`` (:func:`gyro_settings`)."""
+    seed = settings['seed']
+    return SimulatedGyro(increment_max=settings['increment_max'],
+                         noise_std=settings['measurement_noise_std'],
+                         seed=None if seed < 0 else seed,
+                         initial_attitude=settings['initial_attitude'],
+                         gyro_noise_std=settings['gyro_noise_std'],
+                         gyro_bias=settings['gyro_bias'],
+                         bias_walk_std=settings['bias_walk_std'])
+
+
+# --- monitor_node: the estimate against the ground truth ---------------------------
+
+MONITOR_PARAMETERS = (
+    ParameterSpec('diagnostic_period', 1.0, 'Period of /diagnostics, s.',
+                  (0.01, 3600.0), read_only=True),
+    ParameterSpec('stale_timeout', 2.0,
+                  'STALE when no estimate arrived for this long, s.', (0.0, 3600.0)),
+    ParameterSpec('warn_distance', 0.15,
+                  'WARN when the mean distance |‖q̂‖ − 1| over the window exceeds this.',
+                  (0.0, 100.0)),
+    ParameterSpec('error_distance', 0.3,
+                  'ERROR when the mean distance over the window exceeds this (0.307: '
+                  '‖q̂‖² = 1 + √0.5, the outer edge of the certified set V ≤ 0.5).',
+                  (0.0, 100.0), constraints='Not below warn_distance.'),
+    ParameterSpec('window', 50, 'Estimates in the running statistics and the level.',
+                  (1, 1000000), read_only=True),
+    ParameterSpec('stamp_tolerance', 0.001,
+                  'Largest stamp difference between an estimate and the ground truth '
+                  'paired with it, s.', (0.0, 10.0)),
+    ParameterSpec('hardware_id', '', "hardware_id of the status; '' = the node's full "
+                  "name (/monitor), as the other nodes' statuses."),
+    ParameterSpec('queue_depth', 100, 'History depth of the subscriptions and the '
+                  'publisher (reliable, keep last).', (1, 10000), read_only=True),
+    ParameterSpec('clock_jump_threshold', 1.0,
+                  'A backward jump of the node clock by more than this clears the '
+                  'statistics, s.', (0.001, 3600.0), read_only=True),
+)
+
+
+def monitor_settings(values):
+    """
+    Validate the monitor's parameters.
+
+    Parameters
+    ----------
+    values : dict
+        Every parameter of :data:`MONITOR_PARAMETERS` by name.
+
+    Returns
+    -------
+    settings : dict
+
+    Raises
+    ------
+    ValueError
+        With the reason.
+
+    """
+    if values['error_distance'] < values['warn_distance']:
+        raise ValueError(f'error_distance ({values["error_distance"]:g}) must not be '
+                         f'below warn_distance ({values["warn_distance"]:g})')
+    return dict(values)

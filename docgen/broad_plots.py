@@ -10,7 +10,7 @@ import os
 
 import numpy as np
 
-from ext_observer.broad.names import algorithms_in, MODES, OURS, OURS_PLAIN
+from ext_observer.broad.result_keys import algorithms_in, MODES, OURS, OURS_PLAIN
 from ext_observer.broad.scoring import group_means
 
 

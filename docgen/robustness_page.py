@@ -13,8 +13,8 @@ import os
 import numpy as np
 
 from ext_observer.broad.anchors import BROAD_GYRO_RANGE, MADGWICK_BETA
-from ext_observer.broad.names import FUSION_DEFAULTS, OURS
-from ext_observer.broad.page import fusion_text, shown_meta
+from ext_observer.broad.result_keys import FUSION_DEFAULTS, OURS
+from docgen.broad_page import fusion_text, shown_meta
 from ext_observer.broad.stress import (BIAS, DESCRIPTIONS, GYRO_RANGE, LABELS, LOW_RATE,
                                        RATIO_DONE, RATIO_GOAL, trial_number, VARIANTS)
 from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, modes_of,

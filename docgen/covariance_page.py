@@ -1,14 +1,11 @@
 """
-The covariance benchmark's report: the figures and ``docs/covariance.md``.
+The covariance benchmark's page: the figures and ``docs/covariance.md``.
 
-:func:`report` is what ``python -m ext_observer broad --covariance`` runs
-once the trials are read: every trial in 9D and 6D through the node's
-pipeline (:func:`~ext_observer.broad.covariance.run_all`), the table on
-stdout, and with ``--docs`` the reliability plot, the magnet trial and the
-page; with ``--json`` the figures.
+What ``python -m ext_observer broad --covariance --docs DIR`` writes after
+:func:`ext_observer.broad.covariance.report` ran the trials through the
+node's pipeline: the reliability plot, the magnet trial and the page.
 """
 
-import json
 import math
 import os
 
@@ -25,58 +22,28 @@ _BINS = 12
 _PANELS = (('9D', 'inclination'), ('9D', 'heading'), ('6D', 'inclination'))
 
 
-def report(trials, groups, meta, modes=cv.MODES, workers=1, docs=None, json_path=None,
-           progress=None):
+def write_page(trials, runs, groups, summary, meta, docs, progress=None):
     """
-    Run the benchmark, print its table, write what is asked; return the summary.
+    Write ``docs/covariance.md`` and ``docs/figures/covariance_*.png``.
 
-    Parameters
-    ----------
-    trials : list of Trial
-    groups : dict
-        ``find_groups``'s output.
-    meta : dict
-        ``command``, ``commit``, ``dirty``, ``date``, ``machine``, ``data``.
-    modes : sequence of {'9D', '6D'}
-    workers : int
-    docs : str, optional
-        Write ``docs/covariance.md`` and ``docs/figures/covariance_*.png`` here.
-    json_path : str, optional
-
+    ``runs`` and ``summary`` are what
+    :func:`ext_observer.broad.covariance.report` returned.
     """
+    folder = os.path.join(docs, 'figures')
+    os.makedirs(folder, exist_ok=True)
+    figures = {'reliability': plot_reliability(
+        trials, runs, groups, os.path.join(folder, RELIABILITY_FIGURE))}
+    by_name = {t.name: t for t in trials}
+    magnet = next((name for name in MAGNET_TRIALS if name in by_name), None)
+    if magnet and all(magnet in runs[m] for m in ('9D', '6D') if m in runs):
+        figures['magnet'] = plot_magnet(by_name[magnet], runs,
+                                        os.path.join(folder, MAGNET_FIGURE))
+    page = os.path.join(docs, 'covariance.md')
+    with open(page, 'w', encoding='utf-8') as f:
+        f.write(markdown(summary, meta, figures, docs, magnet))
     if progress:
-        progress(f'{len(trials)} trials × {len(modes)} modes through RawImuPipeline, '
-                 f'{workers} process{"es" if workers > 1 else ""} ...')
-    runs = cv.run_all(trials, modes, workers=workers, progress=progress)
-    summary = cv.summarize(trials, runs, groups)
-    print(cv.text_table(summary))
-    missed = [key for key, f in summary.items() if key[1] != 'all' and not cv.verdict(f)]
-    print(f'{len(summary) - len(missed) - sum(k[1] == "all" for k in summary)} of '
-          f'{sum(k[1] != "all" for k in summary)} rows within the coverage bounds '
-          f'(90–99 % within 2σ, mean e²/σ² 0.5–2)'
-          + ('' if not missed else '; outside: ' + ', '.join(' '.join(k) for k in missed)))
-    if json_path:
-        with open(json_path, 'w', encoding='utf-8') as f:
-            json.dump({'meta': meta, 'params': UncertaintyParams().as_dict(),
-                       'figures': [dict(zip(('mode', 'split', 'group', 'component'), key),
-                                        **value) for key, value in sorted(summary.items())]},
-                      f, indent=1)
-    if docs:
-        folder = os.path.join(docs, 'figures')
-        os.makedirs(folder, exist_ok=True)
-        figures = {'reliability': plot_reliability(
-            trials, runs, groups, os.path.join(folder, RELIABILITY_FIGURE))}
-        by_name = {t.name: t for t in trials}
-        magnet = next((name for name in MAGNET_TRIALS if name in by_name), None)
-        if magnet and all(magnet in runs[m] for m in ('9D', '6D') if m in runs):
-            figures['magnet'] = plot_magnet(by_name[magnet], runs,
-                                            os.path.join(folder, MAGNET_FIGURE))
-        page = os.path.join(docs, 'covariance.md')
-        with open(page, 'w', encoding='utf-8') as f:
-            f.write(markdown(summary, meta, figures, docs, magnet))
-        if progress:
-            progress(f'wrote {page} and {", ".join(sorted(figures.values()))}')
-    return summary
+        progress(f'wrote {page} and {", ".join(sorted(figures.values()))}')
+    return page
 
 
 # --- figures ---------------------------------------------------------------

@@ -2,7 +2,7 @@
 The generated parts of ``docs/``: ``python -m ext_observer docs``.
 
 ``docs/parameters.md`` holds one table per node, made by
-:func:`~ext_observer.pipeline.parameter_specs.markdown_table` from the node's
+:func:`markdown_table` from the node's
 ``ParameterSpec`` rows (``GYRO_PARAMETERS``, ``OBSERVER_PARAMETERS``,
 ``MONITOR_PARAMETERS``). Each table sits between two marker comments; the
 prose around them is written by hand and left as it is. After a change to a
@@ -12,7 +12,7 @@ node's parameters, run ``python -m ext_observer docs`` (or ``make docs``);
 The same command rewrites the node sections of the params files,
 ``config/ext_observer.yaml`` (gyro, observer, monitor) and
 ``config/imu_filter.yaml`` (every parameter with its default and a comment,
-:func:`~ext_observer.pipeline.parameter_specs.yaml_section`; the header comment is left
+:func:`yaml_section`; the header comment is left
 as it is); ``test/test_nodes.py`` loads that file and checks it.
 
 The other generated pages have their own commands: ``docs/reproduction.md``
@@ -26,8 +26,12 @@ import importlib
 import os
 import re
 import sys
+import textwrap
 
-__all__ = ['CONFIG', 'NODES', 'PAGE', 'main', 'parameter_tables', 'render', 'render_config']
+from docgen.sections import replaced
+
+__all__ = ['CONFIG', 'NODES', 'PAGE', 'main', 'markdown_table', 'parameter_tables', 'render',
+           'render_config', 'yaml_section']
 
 PAGE = 'parameters.md'
 # The params files, relative to the parent of the docs folder.
@@ -39,10 +43,10 @@ IMU_FILTER_CONFIG = os.path.join('config', 'imu_filter.yaml')
 # parameters of imu_filter_madgwick it does not use: given, they are warned
 # about.
 NODES = (
-    ('gyro', 'ext_observer.nodes.gyro_node', 'GYRO_PARAMETERS', CONFIG, 'GYRO_PARAMETERS'),
-    ('observer', 'ext_observer.nodes.observer_parameters', 'OBSERVER_PARAMETERS', CONFIG,
+    ('gyro', 'ext_observer.nodes.node_parameters', 'GYRO_PARAMETERS', CONFIG, 'GYRO_PARAMETERS'),
+    ('observer', 'ext_observer.nodes.node_parameters', 'OBSERVER_PARAMETERS', CONFIG,
      'OBSERVER_PARAMETERS'),
-    ('monitor', 'ext_observer.nodes.monitor_node', 'MONITOR_PARAMETERS', CONFIG,
+    ('monitor', 'ext_observer.nodes.node_parameters', 'MONITOR_PARAMETERS', CONFIG,
      'MONITOR_PARAMETERS'),
     ('imu_filter', 'ext_observer.pipeline.imu_filter_parameters', 'IMU_FILTER_PARAMETERS',
      IMU_FILTER_CONFIG, 'IMU_FILTER_OWN'),
@@ -57,6 +61,70 @@ def _begin(module, specs):
     return _BEGIN.format(specs=specs, path=module.replace('.', '/') + '.py')
 
 
+def markdown_table(specs):
+    """
+    Return the table of a node's parameters in ``docs/parameters.md``.
+
+    Parameters
+    ----------
+    specs : sequence of ParameterSpec
+
+    Returns
+    -------
+    table : str
+        Markdown, one row per parameter, ending with a newline.
+
+    """
+    rows = ['| parameter | type | default | range | runtime | description |',
+            '| --- | --- | --- | --- | --- | --- |']
+    for spec in specs:
+        bounds = '' if spec.range is None else f'[{spec.range[0]}, {spec.range[1]}]'
+        runtime = 'no' if spec.read_only else 'yes'
+        description = spec.description
+        if spec.constraints:
+            description += f' {spec.constraints}'
+        description = description.replace('|', '\\|')
+        rows.append(f'| `{spec.name}` | {spec.type_name} | `{spec.default_text}` | '
+                    f'{bounds} | {runtime} | {description} |')
+    return '\n'.join(rows) + '\n'
+
+
+def yaml_section(node_name, specs):
+    """
+    Return a node's section of ``config/ext_observer.yaml``.
+
+    Every parameter with its default, under a comment made of its description,
+    constraints, range and whether it is start-up only, wrapped at 78
+    columns.
+
+    Parameters
+    ----------
+    node_name : str
+        The section is ``/**/<node_name>``.
+    specs : sequence of ParameterSpec
+
+    Returns
+    -------
+    section : str
+        YAML, ending with a newline.
+
+    """
+    lines = [f'/**/{node_name}:', '  ros__parameters:']
+    for spec in specs:
+        text = spec.description
+        if spec.constraints:
+            text += f' {spec.constraints}'
+        if spec.range is not None:
+            text += f' Range [{spec.range[0]}, {spec.range[1]}].'
+        if spec.read_only:
+            text += ' Start-up only.'
+        lines += textwrap.wrap(text, width=78, initial_indent='    # ',
+                               subsequent_indent='    # ', break_on_hyphens=False)
+        lines.append(f'    {spec.name}: {spec.default_text}')
+    return '\n'.join(lines) + '\n'
+
+
+
 def parameter_tables():
     """
     Return the generated parameter tables.
@@ -67,8 +135,6 @@ def parameter_tables():
         (node name, begin marker, Markdown table) per node of :data:`NODES`.
 
     """
-    from ext_observer.pipeline.parameter_specs import markdown_table
-
     tables = []
     for name, module, specs, _, _ in NODES:
         rows = getattr(importlib.import_module(module), specs)
@@ -96,11 +162,11 @@ def render(text):
 
     """
     for name, begin, table in parameter_tables():
-        pattern = re.compile(re.escape(begin) + r'\n.*?' + re.escape(_END), re.DOTALL)
-        if not pattern.search(text):
+        try:
+            text = replaced(text, f'{begin}\n{table}{_END}', begin + '\n', _END)
+        except ValueError:
             raise ValueError(f'no generated table of {name}: the page needs the line\n'
-                             f'{begin}\nand, after the table, {_END}')
-        text = pattern.sub(lambda _: f'{begin}\n{table}{_END}', text, count=1)
+                             f'{begin}\nand, after the table, {_END}') from None
     return text
 
 
@@ -126,8 +192,6 @@ def render_config(text, config=CONFIG):
         If the section of a node is missing.
 
     """
-    from ext_observer.pipeline.parameter_specs import yaml_section
-
     for name, module, _, path, specs in NODES:
         if path != config:
             continue

@@ -12,7 +12,7 @@ import os
 from ext_observer.broad.anchors import (BROAD_GYRO_RANGE, FUSION_README, MADGWICK_BETA,
                                         MAHONY_KI, MAHONY_KP)
 from ext_observer.broad.data import DEFAULT_DIRS, ENV_VAR, shown_command, shown_path
-from ext_observer.broad.names import (algorithms_in, ANCHORS, FUSION_DEFAULTS, MODES, OURS,
+from ext_observer.broad.result_keys import (algorithms_in, ANCHORS, FUSION_DEFAULTS, MODES, OURS,
                                       OURS_PLAIN)
 from ext_observer.broad.report import fmt
 from ext_observer.broad.scoring import criteria, group_means, summary, VQF_RATIO_GOAL

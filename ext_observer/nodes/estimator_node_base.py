@@ -5,7 +5,7 @@ What the two estimator nodes share: inputs, stamps, faults, diagnostics.
 raw-IMU estimator) differ in their estimator and their topics; everything
 else is written here once, in :class:`EstimatorNode`:
 
-- the parameters (:class:`~ext_observer.nodes.parameters.NodeParameters`);
+- the parameters (:class:`~ext_observer.nodes.ros_parameters.NodeParameters`);
 - the inputs' QoS (the sensor-data profile, overridable) and the watch for
   incompatible peers (:class:`~ext_observer.nodes.node_common.QosWatch`);
 - the outputs ``attitude_estimate`` and ``imu/data``, and whether anyone
@@ -78,7 +78,7 @@ class EstimatorNode(Node):
 
     Attributes
     ----------
-    parameters : ext_observer.nodes.parameters.NodeParameters
+    parameters : ext_observer.nodes.ros_parameters.NodeParameters
     resets : dict
         Restarts, by cause (:data:`RESET_CAUSES`).
     reinitializations : dict

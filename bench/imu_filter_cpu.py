@@ -1,7 +1,7 @@
 """
 Node CPU per IMU sample of ``imu_filter_node``, beside a bare relay, against its speed goal.
 
-``python -m bench.raw_imu [--executor events] [--rate 1000] [--mag-rate 100]
+``python -m bench.imu_filter_cpu [--executor events] [--rate 1000] [--mag-rate 100]
 [--seconds 10] [--rounds 3] [--json PATH]`` publishes ``sensor_msgs/Imu`` on
 ``imu/data_raw`` at ``--rate`` and ``sensor_msgs/MagneticField`` on
 ``imu/mag`` at ``--mag-rate`` (both best effort, as IMU drivers publish)
@@ -26,8 +26,8 @@ and every run), outputs received (the fewest of any run), and the ratio of
 the medians against the goal, ``met`` or ``not met``: within
 :data:`NODE_GOAL` × the relay's.
 
-``python -m bench.raw_imu relay --executor events`` runs the relay alone
-(SIGINT ends it); ``python -m bench.raw_imu step_only`` the floor.
+``python -m bench.imu_filter_cpu relay --executor events`` runs the relay alone
+(SIGINT ends it); ``python -m bench.imu_filter_cpu step_only`` the floor.
 """
 
 import argparse
@@ -210,7 +210,7 @@ def _step_only_main(argv):
 
 
 def _relay_main(argv):
-    parser = argparse.ArgumentParser(prog='python -m bench.raw_imu relay')
+    parser = argparse.ArgumentParser(prog='python -m bench.imu_filter_cpu relay')
     parser.add_argument('--executor', choices=EXECUTORS, default='events')
     parser.add_argument('--raw', action='store_true', help='RawImuRelay: on bytes')
     args = parser.parse_args(argv)
@@ -230,11 +230,11 @@ def _relay_main(argv):
 def target_args(label, executor):
     """The command line of a target (``relay`` or ``imu_filter``) on ``executor``."""
     if label == 'relay':
-        return ['-m', 'bench.raw_imu', 'relay', '--executor', executor]
+        return ['-m', 'bench.imu_filter_cpu', 'relay', '--executor', executor]
     if label == RAW_RELAY:
-        return ['-m', 'bench.raw_imu', 'relay', '--executor', executor, '--raw']
+        return ['-m', 'bench.imu_filter_cpu', 'relay', '--executor', executor, '--raw']
     if label == FLOOR:
-        return ['-m', 'bench.raw_imu', FLOOR, '--executor', executor, '--ros-args', '-p',
+        return ['-m', 'bench.imu_filter_cpu', FLOOR, '--executor', executor, '--ros-args', '-p',
                 'use_mag:=true']
     script = os.path.join(os.path.dirname(sys.executable), 'imu_filter_node')
     command = [script] if os.path.exists(script) else ['-m', 'ext_observer.nodes.imu_filter_node']
@@ -531,7 +531,7 @@ def main(argv=None):
         return _relay_main(argv[1:])
     if argv[:1] == [FLOOR]:
         return _step_only_main(argv[1:])
-    parser = argparse.ArgumentParser(prog='python -m bench.raw_imu')
+    parser = argparse.ArgumentParser(prog='python -m bench.imu_filter_cpu')
     parser.add_argument('--rate', type=float, default=1000.0, help='IMU rate, Hz')
     parser.add_argument('--mag-rate', type=float, default=100.0, help='field rate, Hz')
     parser.add_argument('--seconds', type=float, default=10.0, help='per run')
