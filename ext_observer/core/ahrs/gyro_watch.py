@@ -32,6 +32,12 @@ _STUCK = 2.0
 # A low-passed rate beyond bias_max by more than this share of rest_gyr is
 # not rest (a bias beyond bias_max is still learned, clipped, at rest).
 _BEYOND = 0.5
+# Once at rest, the low-passed rate may lead the bias by this share of
+# rest_gyr, or by _HELD_SIGMAS of the bias's σ while it is still being
+# learned: a rate that keeps leading it is ramping (a vehicle steering slowly
+# into a turn), which the bias would otherwise follow to bias_max.
+_HELD = 0.25
+_HELD_SIGMAS = 3.0
 
 
 def _at_range(s, i, g):
@@ -89,9 +95,13 @@ def detect_rest(s, gx, gy, gz):
     mx, my, mz = lx - bx, ly - by, lz - bz
     mean = mx * mx + my * my + mz * mz
     th = s[P_REST_GYR] * s[P_REST_GYR]
+    held = th
+    if s[S_REST] != 0.0:
+        var = max(s[S_BIAS_P], max(s[S_BIAS_P + 3], s[S_BIAS_P + 5]))
+        held = max(_HELD * _HELD * th, _HELD_SIGMAS * _HELD_SIGMAS * var)
     # A rate well beyond bias_max on any axis is no bias: a steady turn is not rest.
     big = max(abs(lx), max(abs(ly), abs(lz))) > s[P_BIAS_MAX] + _BEYOND * s[P_REST_GYR]
-    still = (dev < th) and (mean < th) and s[S_ACC_STILL] != 0.0 and not big
+    still = (dev < th) and (mean < held) and s[S_ACC_STILL] != 0.0 and not big
     s[S_REST_TIME] = (s[S_REST_TIME] + s[C_DT]) if still else 0.0
     rest = s[S_REST_TIME] >= s[P_REST_TIME]
     s[S_REST] = 1.0 if rest else 0.0
