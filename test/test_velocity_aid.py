@@ -179,3 +179,39 @@ def test_a_velocity_in_the_vehicles_frame_with_the_imus_mounting_and_lever_arm()
     with pytest.raises(ValueError, match='velocity_mounting'):
         attitude_from_imu(gyr, acc, rate=RATE, velocity=velocity,
                           parameters={'velocity_mounting': [1.0, 1.0, 0.0, 0.0]})
+
+
+def test_a_csv_with_velocity_columns_runs_aided(tmp_path):
+    # Odometry at 20 Hz in the same file: vel_* empty on the other lines.
+    from ext_observer.recordings.csvio import main as csv_main, read_columns, read_velocity
+    t, gyr, acc, velocity = _turn(seconds=20.0)
+    rows = ['t,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,vel_x,vel_y,vel_z']
+    t = t.tolist()
+    for k in range(len(t)):
+        vel = ','.join(map(repr, velocity[k].tolist())) if k % 5 == 0 else ',,'
+        rows.append(','.join(map(repr, [t[k], *gyr[k].tolist(), *acc[k].tolist()])) + ',' + vel)
+    path = tmp_path / 'drive.csv'
+    path.write_text('\n'.join(rows) + '\n')
+    times, read = read_velocity(str(path))
+    np.testing.assert_array_equal(times, t[::5])  # t as written
+    np.testing.assert_array_equal(read, velocity[::5])
+    out = tmp_path / 'out.csv'
+    assert csv_main([str(path), '--out', str(out), '--no-mag']) == 0
+    columns = read_columns(str(out), ('qw', 'qx', 'qy', 'qz'))
+    q = np.column_stack([columns[name] for name in ('qw', 'qx', 'qy', 'qz')])
+    assert _tilt_deg(q).max() < 0.05
+    # Without the columns (and without rejection) the same drive tilts.
+    plain = tmp_path / 'plain.csv'
+    plain.write_text('\n'.join(row.rsplit(',', 3)[0] for row in rows) + '\n')
+    assert read_velocity(str(plain)) == (None, None)
+    params = tmp_path / 'off.yaml'
+    params.write_text('imu_filter_node:\n  ros__parameters:\n    ahrs:\n      acc_reject: 0.0\n')
+    assert csv_main([str(plain), '--out', str(out), '--no-mag', '--params', str(params)]) == 0
+    columns = read_columns(str(out), ('qw', 'qx', 'qy', 'qz'))
+    q = np.column_stack([columns[name] for name in ('qw', 'qx', 'qy', 'qz')])
+    assert _tilt_deg(q)[-500:].mean() > 10.0
+    # A line with part of a velocity is refused, naming it.
+    rows[3] = rows[3].rsplit(',', 3)[0] + ',1.0,,'
+    path.write_text('\n'.join(rows) + '\n')
+    with pytest.raises(ValueError, match=r't = 0\.02: a velocity with only some'):
+        read_velocity(str(path))
