@@ -215,3 +215,57 @@ def test_a_csv_with_velocity_columns_runs_aided(tmp_path):
     path.write_text('\n'.join(rows) + '\n')
     with pytest.raises(ValueError, match=r't = 0\.02: a velocity with only some'):
         read_velocity(str(path))
+
+
+@pytest.mark.parametrize('msgtype', ['nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'])
+def test_a_bag_with_a_velocity_topic_runs_aided(tmp_path, msgtype):
+    # The turn as a bag: the IMU at 100 Hz, the velocity at 20 Hz on its own topic.
+    from rosbags.typesys import get_typestore, Stores
+    from ext_observer.recordings import bag_io, cdr
+    from ext_observer.recordings.bag import main as bag_main, run_bag
+    store = get_typestore(Stores.ROS2_JAZZY)
+    t, gyr, acc, velocity = _turn(seconds=20.0)
+    writer = bag_io.BagWriter(str(tmp_path / 'in'), 'mcap',
+                              [('/imu/data_raw', cdr.IMU_TYPE, []), ('/wheels', msgtype, [])])
+    imu, wheels = writer.ids
+    Header, Time = store.types['std_msgs/msg/Header'], store.types['builtin_interfaces/msg/Time']
+    Vector3 = store.types['geometry_msgs/msg/Vector3']
+    for k in range(len(t)):
+        stamp = 10 ** 9 + k * 10 ** 7
+        if k % 5 == 0:
+            header = Header(stamp=Time(sec=stamp // 10 ** 9, nanosec=stamp % 10 ** 9),
+                            frame_id='imu')
+            twist = store.types['geometry_msgs/msg/Twist'](
+                linear=Vector3(*velocity[k].tolist()), angular=Vector3(0.0, 0.0, 0.0))
+            if msgtype.endswith('Odometry'):
+                msg = store.types[msgtype](
+                    header=header, child_frame_id='imu',
+                    pose=store.types['geometry_msgs/msg/PoseWithCovariance'](
+                        pose=store.types['geometry_msgs/msg/Pose'](
+                            position=store.types['geometry_msgs/msg/Point'](0.0, 0.0, 0.0),
+                            orientation=store.types['geometry_msgs/msg/Quaternion'](
+                                0.0, 0.0, 0.0, 1.0)),
+                        covariance=np.zeros(36)),
+                    twist=store.types['geometry_msgs/msg/TwistWithCovariance'](
+                        twist=twist, covariance=np.zeros(36)))
+            else:
+                msg = store.types[msgtype](header=header, twist=twist)
+            if k == 1000:  # a bad one: dropped and counted, never in an estimate
+                twist.linear.x = math.nan
+            writer.write(wheels, stamp, bytes(store.serialize_cdr(msg, msgtype)))
+        writer.write(imu, stamp + 1, cdr.encode_imu(stamp, 'imu', gyr[k].tolist(),
+                                                   acc[k].tolist()))
+    writer.close()
+    run = run_bag(str(tmp_path / 'in'), str(tmp_path / 'out'), velocity_topic='wheels',
+                  parameters={'use_mag': False})
+    assert run.topics['velocity'][2] == len(t[::5])  # copied to the new bag too
+    assert run.velocity_drops == {'not_finite': 1}
+    assert np.isfinite(run.recording.quaternions).all()
+    assert _tilt_deg(run.recording.quaternions[1:]).max() < 0.05
+    assert run.recording.in_state('velocity_aided')[-500:].all()
+    plain = run_bag(str(tmp_path / 'in'), None, parameters={'use_mag': False,
+                                                            'ahrs.acc_reject': 0.0})
+    assert _tilt_deg(plain.recording.quaternions[-500:]).mean() > 10.0
+    # The command: a topic of another type is refused, naming it.
+    assert bag_main([str(tmp_path / 'in'), '--out', str(tmp_path / 'o2'), '--no-mag',
+                     '--velocity-topic', 'imu/data_raw']) == 2
