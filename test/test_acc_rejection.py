@@ -86,6 +86,30 @@ def test_a_steady_turn_faster_than_bias_max_is_not_rest():
     assert s[S_REST] == 1.0
 
 
+def _steered(yaw_rate, slope_deg, cruise=15.0, ramp=2.0, hold=10.0):
+    """
+    A vehicle cruising straight on a road sloping sideways (rest, to an IMU),
+    then steering into a turn over ``ramp`` s (body z: the road's normal).
+    """
+    t = np.arange(int((cruise + ramp + hold) * RATE)) / RATE
+    rate = yaw_rate * np.clip((t - cruise) / ramp, 0.0, 1.0)
+    c, s = math.cos(math.radians(slope_deg)), math.sin(math.radians(slope_deg))
+    zero = np.zeros_like(t)
+    return (np.column_stack((zero, zero, rate)),
+            np.column_stack((zero, rate * SPEED + G * s, np.full_like(t, G * c))))
+
+
+def test_a_rate_ramping_into_a_turn_is_not_learned_as_a_bias():
+    # Steering slowly into a 0.1 g turn: the rate leads its low-pass by under
+    # rest_gyr, and a bias following it (to bias_max) would tilt a sloped road.
+    gyr, acc = _steered(0.065, 5.0)
+    _, seen = _run(gyr, acc, watch=(S_BIAS + 2, S_REST))
+    cruise = int(15.0 * RATE)
+    assert seen[cruise - 1, 1] == 1.0  # cruising straight is rest
+    assert abs(seen[-1, 0]) < math.radians(0.5)
+    assert seen[cruise + int(2.0 * RATE):, 1].max() == 0.0
+
+
 @needs_numba
 def test_plain_and_compiled_agree_to_the_bit_through_a_rejection_and_its_end():
     gyr, acc = _turn(0.3, seconds=12.0)

@@ -228,6 +228,29 @@ def test_heading_sigma_grows_while_the_field_is_rejected_and_shrinks_after():
     assert after[-1, 0] < 0.7 * rejected[-1, 0]
 
 
+def test_a_lost_fields_heading_sigma_grows_with_the_net_turn_the_gyro_carried_it_through():
+    # The gyro's scale error: the net turn about the vertical since the field
+    # was lost, times GYRO_SCALE_SIGMA. Turning one way and back and forth
+    # at the same rate: the same noise, a different net turn.
+    from ext_observer.core.ahrs.uncertainty_kernel import FIELD_SILENT, GYRO_SCALE_SIGMA
+    variances = {}
+    for name, signs in (('one way', [1.0] * 30), ('back and forth', [1.0, -1.0] * 15)):
+        pipeline = RawImuPipeline(plain_fields())
+        _, stamp = turning_run(pipeline, 30.0)
+        sigmas = []
+        for sign in signs:
+            chunk, stamp = turning_run(pipeline, 1.0, field=None, start=stamp,
+                                       gyr=(0.0, 0.0, sign))
+            sigmas.extend(np.radians(chunk[:, 0]))
+        variances[name] = np.square(sigmas)
+    turned = 30.0 - FIELD_SILENT
+    added = variances['one way'][-1] - variances['back and forth'][-1]
+    assert added == pytest.approx((GYRO_SCALE_SIGMA * turned) ** 2, rel=0.05)
+    # Within FIELD_SILENT of the last field (a slower magnetometer) nothing is added.
+    early = int(0.5 * FIELD_SILENT * 100)
+    assert variances['one way'][early] == variances['back and forth'][early]
+
+
 def test_9d_heading_is_unknown_until_a_field_sets_it():
     pipeline = RawImuPipeline(plain_fields())
     sigmas, stamp = turning_run(pipeline, 1.0, field=None)

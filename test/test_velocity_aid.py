@@ -179,3 +179,93 @@ def test_a_velocity_in_the_vehicles_frame_with_the_imus_mounting_and_lever_arm()
     with pytest.raises(ValueError, match='velocity_mounting'):
         attitude_from_imu(gyr, acc, rate=RATE, velocity=velocity,
                           parameters={'velocity_mounting': [1.0, 1.0, 0.0, 0.0]})
+
+
+def test_a_csv_with_velocity_columns_runs_aided(tmp_path):
+    # Odometry at 20 Hz in the same file: vel_* empty on the other lines.
+    from ext_observer.recordings.csvio import main as csv_main, read_columns, read_velocity
+    t, gyr, acc, velocity = _turn(seconds=20.0)
+    rows = ['t,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,vel_x,vel_y,vel_z']
+    t = t.tolist()
+    for k in range(len(t)):
+        vel = ','.join(map(repr, velocity[k].tolist())) if k % 5 == 0 else ',,'
+        rows.append(','.join(map(repr, [t[k], *gyr[k].tolist(), *acc[k].tolist()])) + ',' + vel)
+    path = tmp_path / 'drive.csv'
+    path.write_text('\n'.join(rows) + '\n')
+    times, read = read_velocity(str(path))
+    np.testing.assert_array_equal(times, t[::5])  # t as written
+    np.testing.assert_array_equal(read, velocity[::5])
+    out = tmp_path / 'out.csv'
+    assert csv_main([str(path), '--out', str(out), '--no-mag']) == 0
+    columns = read_columns(str(out), ('qw', 'qx', 'qy', 'qz'))
+    q = np.column_stack([columns[name] for name in ('qw', 'qx', 'qy', 'qz')])
+    assert _tilt_deg(q).max() < 0.05
+    # Without the columns (and without rejection) the same drive tilts.
+    plain = tmp_path / 'plain.csv'
+    plain.write_text('\n'.join(row.rsplit(',', 3)[0] for row in rows) + '\n')
+    assert read_velocity(str(plain)) == (None, None)
+    params = tmp_path / 'off.yaml'
+    params.write_text('imu_filter_node:\n  ros__parameters:\n    ahrs:\n      acc_reject: 0.0\n')
+    assert csv_main([str(plain), '--out', str(out), '--no-mag', '--params', str(params)]) == 0
+    columns = read_columns(str(out), ('qw', 'qx', 'qy', 'qz'))
+    q = np.column_stack([columns[name] for name in ('qw', 'qx', 'qy', 'qz')])
+    assert _tilt_deg(q)[-500:].mean() > 10.0
+    # A line with part of a velocity is refused, naming it.
+    rows[3] = rows[3].rsplit(',', 3)[0] + ',1.0,,'
+    path.write_text('\n'.join(rows) + '\n')
+    with pytest.raises(ValueError, match=r't = 0\.02: a velocity with only some'):
+        read_velocity(str(path))
+
+
+@pytest.mark.parametrize('msgtype', ['nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'])
+def test_a_bag_with_a_velocity_topic_runs_aided(tmp_path, msgtype):
+    # The turn as a bag: the IMU at 100 Hz, the velocity at 20 Hz on its own topic.
+    from rosbags.typesys import get_typestore, Stores
+    from ext_observer.recordings import bag_io, cdr
+    from ext_observer.recordings.bag import main as bag_main, run_bag
+    store = get_typestore(Stores.ROS2_JAZZY)
+    t, gyr, acc, velocity = _turn(seconds=20.0)
+    writer = bag_io.BagWriter(str(tmp_path / 'in'), 'mcap',
+                              [('/imu/data_raw', cdr.IMU_TYPE, []), ('/wheels', msgtype, [])])
+    imu, wheels = writer.ids
+    Header, Time = store.types['std_msgs/msg/Header'], store.types['builtin_interfaces/msg/Time']
+    Vector3 = store.types['geometry_msgs/msg/Vector3']
+    for k in range(len(t)):
+        stamp = 10 ** 9 + k * 10 ** 7
+        if k % 5 == 0:
+            header = Header(stamp=Time(sec=stamp // 10 ** 9, nanosec=stamp % 10 ** 9),
+                            frame_id='imu')
+            twist = store.types['geometry_msgs/msg/Twist'](
+                linear=Vector3(*velocity[k].tolist()), angular=Vector3(0.0, 0.0, 0.0))
+            if msgtype.endswith('Odometry'):
+                msg = store.types[msgtype](
+                    header=header, child_frame_id='imu',
+                    pose=store.types['geometry_msgs/msg/PoseWithCovariance'](
+                        pose=store.types['geometry_msgs/msg/Pose'](
+                            position=store.types['geometry_msgs/msg/Point'](0.0, 0.0, 0.0),
+                            orientation=store.types['geometry_msgs/msg/Quaternion'](
+                                0.0, 0.0, 0.0, 1.0)),
+                        covariance=np.zeros(36)),
+                    twist=store.types['geometry_msgs/msg/TwistWithCovariance'](
+                        twist=twist, covariance=np.zeros(36)))
+            else:
+                msg = store.types[msgtype](header=header, twist=twist)
+            if k == 1000:  # a bad one: dropped and counted, never in an estimate
+                twist.linear.x = math.nan
+            writer.write(wheels, stamp, bytes(store.serialize_cdr(msg, msgtype)))
+        writer.write(imu, stamp + 1, cdr.encode_imu(stamp, 'imu', gyr[k].tolist(),
+                                                   acc[k].tolist()))
+    writer.close()
+    run = run_bag(str(tmp_path / 'in'), str(tmp_path / 'out'), velocity_topic='wheels',
+                  parameters={'use_mag': False})
+    assert run.topics['velocity'][2] == len(t[::5])  # copied to the new bag too
+    assert run.velocity_drops == {'not_finite': 1}
+    assert np.isfinite(run.recording.quaternions).all()
+    assert _tilt_deg(run.recording.quaternions[1:]).max() < 0.05
+    assert run.recording.in_state('velocity_aided')[-500:].all()
+    plain = run_bag(str(tmp_path / 'in'), None, parameters={'use_mag': False,
+                                                            'ahrs.acc_reject': 0.0})
+    assert _tilt_deg(plain.recording.quaternions[-500:]).mean() > 10.0
+    # The command: a topic of another type is refused, naming it.
+    assert bag_main([str(tmp_path / 'in'), '--out', str(tmp_path / 'o2'), '--no-mag',
+                     '--velocity-topic', 'imu/data_raw']) == 2

@@ -118,9 +118,9 @@ def inclination_errors_deg(estimates, stamps):
     return np.array(out)
 
 
-def start(spinner, ros_context, source='odom'):
+def start(spinner, ros_context, source='odom', frame='base_link'):
     """
-    A node aided by ``source`` and one without, and their driver.
+    A node aided by ``source`` (its ``velocity_frame`` ``frame``) and one without, and their driver.
 
     The aided one is in the namespace AIDED, its inputs remapped to the
     global topics (remapping works), its outputs its own.
@@ -128,7 +128,8 @@ def start(spinner, ros_context, source='odom'):
     topic = VELOCITY_TOPICS[source]
     aided = spinner.add(ImuFilterNode(
         node_name='aided', namespace=AIDED, context=ros_context,
-        parameter_overrides=overrides(use_mag=False, velocity_source=source),
+        parameter_overrides=overrides(use_mag=False, velocity_source=source,
+                                      velocity_frame=frame),
         cli_args=['--ros-args', '-r', 'imu/data_raw:=/imu/data_raw',
                   '-r', f'{topic}:=/{topic}']))
     plain = spinner.add(ImuFilterNode(node_name='plain', context=ros_context,
@@ -202,6 +203,37 @@ def test_bad_velocities_are_dropped_counted_and_warned(ros_context, spinner):
     # Never in an estimate: the estimator's velocity is still the last good one.
     assert int(values['velocities_used']) == len(data) // ODOM_EVERY
     assert all(math.isfinite(c) for c in aided.state)
+
+
+def test_odometry_in_another_frame_than_expected_warns_and_is_counted(ros_context,
+                                                                     spinner):
+    # velocity_frame empty: the velocity is expected in the IMU's frame
+    # (imu_link); the odometry's child_frame_id is base_link.
+    aided, _, driver = start(spinner, ros_context, frame='')
+    data = drive(seconds=1.0)
+    replay(spinner, driver, [aided], data, send=driver.send_odom)
+    status = aided.status()
+    values = values_of(status)
+    sent = len(data) // ODOM_EVERY
+    assert values['velocity_frame_mismatch'] == 'true'
+    # The first came before any IMU sample: no frame to compare it with yet.
+    assert int(values['velocity_frame_mismatches']) == sent - 1
+    assert status.level == DiagnosticStatus.WARN
+    assert "in frame 'base_link' (child_frame_id), expected 'imu_link'" in status.message
+    # Still used: only the frame's name is in doubt.
+    assert int(values['velocities_used']) == sent
+    # Odometry in the IMU's frame: no longer a mismatch (the count stays).
+    stamp = data[-1][0] + SECOND // RATE
+    count = aided.velocity_input.received
+    msg = Odometry()
+    msg.header.stamp = stamp_from_nanoseconds(stamp)
+    msg.child_frame_id = 'imu_link'
+    msg.twist.twist.linear.x = SPEED
+    driver.odom_publisher.publish(msg)
+    wait(spinner, lambda: aided.velocity_input.received > count, 'the odometry in imu_link')
+    values = values_of(aided.status())
+    assert values['velocity_frame_mismatch'] == 'false'
+    assert int(values['velocity_frame_mismatches']) == sent - 1
 
 
 def test_velocity_keys_are_documented_and_a_wrong_source_is_refused(ros_context):

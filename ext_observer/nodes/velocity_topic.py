@@ -8,7 +8,11 @@ The velocity aid's topic in ``imu_filter_node``: the body's velocity from odomet
 :meth:`RawImuPipeline.velocity <ext_observer.pipeline.raw_imu.RawImuPipeline.velocity>`;
 one that is not finite, out of order or stamped ``velocity_timeout`` before
 the latest IMU sample (stale) is dropped, counted by reason and logged
-(throttled). Deserialized messages: they come at tens of Hz, not the IMU's rate.
+(throttled). A velocity whose frame (Odometry's ``child_frame_id``,
+TwistStamped's ``frame_id``) is not ``velocity_frame`` (by default the IMU
+samples' ``frame_id``) is used, as the field in another frame is, but counted
+and warned of once: the mounting and lever arm describe another frame.
+Deserialized messages: they come at tens of Hz, not the IMU's rate.
 """
 
 import math
@@ -51,6 +55,8 @@ class VelocityTopic:
         Velocities handed to the estimator.
     drops : dict
         Dropped velocities by reason (:data:`VELOCITY_DROP_REASONS`).
+    mismatches : int
+        Velocities in another frame than the one expected (:meth:`frame_mismatch`).
     """
 
     def __init__(self, node, settings):
@@ -58,6 +64,9 @@ class VelocityTopic:
         self.source = settings['velocity_source']
         self.received = self.used = 0
         self.drops = dict.fromkeys(VELOCITY_DROP_REASONS, 0)
+        self.mismatches = 0
+        self._frame = None  # the latest velocity's
+        self._warned_frame = False
         self._aided = None  # as last reported: None before the first status
         self.subscription = None
         if self.source != 'none':
@@ -69,6 +78,9 @@ class VelocityTopic:
         self.received += 1
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         linear = msg.twist.twist.linear if self.source == 'odom' else msg.twist.linear
+        self._frame = msg.child_frame_id if self.source == 'odom' else msg.header.frame_id
+        if self.frame_mismatch() is not None:
+            self.mismatches += 1
         pipeline = self.node.pipeline
         latest = pipeline.pairer.last_stamp
         timeout = self.node.parameters.settings['velocity_timeout']
@@ -86,6 +98,23 @@ class VelocityTopic:
             f'{stamp * 1e-9:.3f} s, linear {linear.x:g}, {linear.y:g}, {linear.z:g}); '
             f'counted as dropped_velocity_{reason}', throttle_duration_sec=LOG_THROTTLE)
 
+    def expected_frame(self):
+        """The velocity's frame expected: `velocity_frame`, else the IMU samples' (None: none yet)."""
+        return self.node.parameters.settings['velocity_frame'] or self.node._frames['imu']
+
+    def frame_mismatch(self):
+        """The text for the latest velocity in another frame than expected, or None."""
+        expected = self.expected_frame()
+        if self._frame is None or not expected or self._frame == expected:
+            return None
+        what = 'child_frame_id' if self.source == 'odom' else 'frame_id'
+        origin = ('velocity_frame' if self.node.parameters.settings['velocity_frame']
+                  else "the IMU samples' frame_id; velocity_frame is empty")
+        return (f"velocity on {self.subscription.topic_name} in frame '{self._frame}' "
+                f"({what}), expected '{expected}' ({origin}): velocity_mounting and "
+                'velocity_lever_arm place the IMU in the expected frame; set velocity_frame '
+                'to the frame they describe')
+
     def faults(self):
         """``dropped_velocity_<reason>``: a rise makes the status WARN."""
         return {f'dropped_velocity_{reason}': count for reason, count in self.drops.items()}
@@ -97,12 +126,24 @@ class VelocityTopic:
         age = float(s[S_VEL_AGE]) if s[S_VEL_N] > 0.0 else math.nan
         return [('velocity_source', self.source), ('velocity_used', bool(core.velocity_used)),
                 ('velocity_age_s', age), ('velocities_received', self.received),
-                ('velocities_used', self.used)]
+                ('velocities_used', self.used),
+                ('velocity_frame_mismatch', self.frame_mismatch() is not None),
+                ('velocity_frame_mismatches', self.mismatches)]
 
     def problems(self, steps):
-        """A WARN while a velocity is asked for and the steps go on without one."""
-        if self.subscription is None or steps == 0:
+        """A WARN while the steps go on without a velocity asked for, or it is in another frame."""
+        if self.subscription is None:
             return []
+        mismatch = self.frame_mismatch()
+        if mismatch is not None and not self._warned_frame:
+            self._warned_frame = True  # said once in the log; /diagnostics at every status
+            self.node.get_logger().warning(mismatch)
+        parts = [] if mismatch is None else [mismatch]
+        if steps == 0:
+            return parts
+        return parts + self._aid_problems()
+
+    def _aid_problems(self):
         aided = bool(self.node.observer.velocity_used)
         logger = self.node.get_logger()
         topic = self.subscription.topic_name

@@ -278,6 +278,13 @@ IMU_FILTER_OWN = (
                   "Velocity aid: the IMU's orientation in the velocity's frame (e.g. the "
                   "odometry's child frame), a unit quaternion w, x, y, z: v_imu = R^T v.",
                   read_only=True, constraints='4 finite numbers of norm 1 (within 1e-6).'),
+    ParameterSpec('velocity_frame', '',
+                  "Velocity aid: the frame velocity_mounting and velocity_lever_arm place the "
+                  "IMU in, which the velocity must come in (Odometry's child_frame_id, "
+                  "TwistStamped's frame_id); '': the IMU's own (imu/data_raw's frame_id). "
+                  'A velocity in another frame is still used; the node warns once and counts '
+                  'it (velocity_frame_mismatches).',
+                  read_only=True),
     ParameterSpec('velocity_lever_arm', [0.0, 0.0, 0.0],
                   "Velocity aid: the IMU's position in the velocity's frame, m: the IMU's "
                   'own velocity is v + ω × r (its acceleration gains ω̇ × r + ω × (ω × r)).',

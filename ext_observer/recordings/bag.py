@@ -19,7 +19,11 @@ OUT`` replays them. ``--compare TOPIC`` scores the estimate against an
 orientation topic of the bag (``sensor_msgs/Imu``,
 ``geometry_msgs/QuaternionStamped`` or ``PoseStamped``, sensor → world in
 the same world frame), matched by stamp, with BROAD's error angles
-(:mod:`ext_observer.broad.scoring`). The input bag is only read.
+(:mod:`ext_observer.broad.scoring`). ``--velocity-topic TOPIC`` takes the
+body's velocity from a ``nav_msgs/Odometry`` (``twist.twist.linear``) or
+``geometry_msgs/TwistStamped`` (``twist.linear``) topic, m/s, for the
+velocity aid (``velocity_mounting``, ``velocity_lever_arm`` as the node's).
+The input bag is only read.
 
 Bad input: a missing topic or a topic of another type stops the command
 with an error naming it and listing the bag's topics; samples the node would
@@ -49,7 +53,7 @@ import numpy as np
 from ext_observer.core.ahrs.compiled import warn_if_plain
 from ext_observer.recordings.bag_io import BagReader, STORAGES
 from ext_observer.recordings.bag_worker import (BagEstimator, BagSide, fork_context, forked,
-                                               in_process)
+                                               in_process, VELOCITY_TYPES)
 from ext_observer.recordings.cdr import FIELD_TYPE, IMU_TYPE, QUATERNION_TYPE, REFERENCE_TYPES
 from ext_observer.recordings.recording import (add_parameter_options, node_settings,
                                     parameters_from_options, SECOND)
@@ -90,7 +94,8 @@ class _Progress:
                 print(file=self.stream)
 
 
-BagRun = collections.namedtuple('BagRun', 'recording comparison storage topics undecodable')
+BagRun = collections.namedtuple('BagRun', 'recording comparison storage topics undecodable '
+                                'velocity_drops')
 BagRun.__doc__ = """\
 What :func:`run_bag` did.
 
@@ -104,9 +109,11 @@ storage : str
     Of the output.
 topics : dict
     ``role -> (topic, type, messages)`` for ``imu``, ``mag``, ``reference``,
-    ``data``, ``estimate``.
+    ``velocity``, ``data``, ``estimate``.
 undecodable : dict
     Messages that did not decode, by topic.
+velocity_drops : dict
+    Velocities the pipeline dropped, by reason (``not_finite``, ``out_of_order``).
 """
 
 
@@ -140,7 +147,8 @@ def _find(connections, topic, types, role, option):
 
 def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_topic=None,
             parameters=None, storage=None, data_topic='imu/data',
-            estimate_topic='attitude_estimate', progress=None, parallel=True):
+            estimate_topic='attitude_estimate', progress=None, parallel=True,
+            velocity_topic=None):
     """
     Run ``imu_filter_node``'s estimator on a bag; write the new bag.
 
@@ -169,6 +177,9 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
         messages on).
     parallel : bool
         Read and write in a forked process (module docstring).
+    velocity_topic : str, optional
+        ``nav_msgs/Odometry`` or ``geometry_msgs/TwistStamped``: the body's
+        velocity for the velocity aid.
 
     Returns
     -------
@@ -185,7 +196,8 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     storage = storage or _storage_of(str(path))
     _check_paths(path, out, storage)
     reader = BagReader(path)
-    roles, topics = _roles_and_topics(reader, settings, (imu_topic, mag_topic, compare_topic),
+    roles, topics = _roles_and_topics(reader, settings, (imu_topic, mag_topic, compare_topic,
+                                                         velocity_topic),
                                       (data_topic, estimate_topic))
     side = BagSide(reader, roles, out, storage, topics, settings)
     estimator = BagEstimator(settings, _Progress(side.total, progress))
@@ -205,7 +217,8 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     return BagRun(recording, comparison, storage,
                   {role: (topic, msgtype, counts[role])
                    for role, (topic, msgtype, _) in topics.items()},
-                  {topics[role][0]: n for role, n in estimator.undecodable.items()})
+                  {topics[role][0]: n for role, n in estimator.undecodable.items()},
+                  dict(estimator.velocity_drops))
 
 
 def _check_paths(path, out, storage):
@@ -226,11 +239,11 @@ def _roles_and_topics(reader, settings, inputs, outputs):
     """
     Find the input connections by role and name every topic of the run.
 
-    ``inputs`` are the IMU, field and reference topics (the last may be
-    None), ``outputs`` the data and estimate topics. Returns ``roles``
-    (role: the connections) and ``topics`` (role: name, type, QoS).
+    ``inputs`` are the IMU, field, reference and velocity topics (the last
+    two may be None), ``outputs`` the data and estimate topics. Returns
+    ``roles`` (role: the connections) and ``topics`` (role: name, type, QoS).
     """
-    imu_topic, mag_topic, compare_topic = inputs
+    imu_topic, mag_topic, compare_topic, velocity_topic = inputs
     roles = {'imu': _find(reader.connections, _absolute(imu_topic), (IMU_TYPE,), 'IMU',
                           '--imu-topic')}
     if settings['use_mag']:
@@ -239,6 +252,9 @@ def _roles_and_topics(reader, settings, inputs, outputs):
     if compare_topic is not None:
         roles['reference'] = _find(reader.connections, _absolute(compare_topic),
                                    tuple(REFERENCE_TYPES), 'reference', '--compare')
+    if velocity_topic is not None:
+        roles['velocity'] = _find(reader.connections, _absolute(velocity_topic),
+                                  VELOCITY_TYPES, 'velocity', '--velocity-topic')
     data_topic, estimate_topic = outputs
     written = {'data': (_absolute(data_topic), IMU_TYPE,
                         roles['imu'][0].ext.offered_qos_profiles),
@@ -334,6 +350,9 @@ def build_parser():
     parser.add_argument('--compare', metavar='TOPIC',
                         help='score the estimate against this orientation topic '
                              '(sensor_msgs/Imu, geometry_msgs/QuaternionStamped or PoseStamped)')
+    parser.add_argument('--velocity-topic', metavar='TOPIC',
+                        help="the body's velocity, m/s, for the velocity aid: "
+                             'nav_msgs/Odometry or geometry_msgs/TwistStamped')
     add_parameter_options(parser)
     parser.add_argument('--storage', choices=STORAGES,
                         help="of the new bag (default: the input's)")
@@ -360,6 +379,9 @@ def report(run, out):
         lines.append(f'  resets: {resets}')
     for kind, (n, text) in recording.units.items():
         lines.append(f'  {n} samples of implausible {kind}: {text}')
+    if run.velocity_drops:
+        lines.append('  velocities dropped: ' + ', '.join(
+            f'{reason} {n}' for reason, n in sorted(run.velocity_drops.items())))
     for topic, n in run.undecodable.items():
         lines.append(f'  {topic}: {n} messages did not decode (skipped)')
     comparison = run.comparison
@@ -382,7 +404,8 @@ def main(argv=None):
         run = run_bag(args.bag, args.out, imu_topic=args.imu_topic, mag_topic=args.mag_topic,
                       compare_topic=args.compare, parameters=parameters,
                       storage=args.storage, data_topic=args.data_topic,
-                      estimate_topic=args.estimate_topic)
+                      estimate_topic=args.estimate_topic,
+                      velocity_topic=args.velocity_topic)
     except (ValueError, OSError) as error:
         print(f'error: {error}', file=sys.stderr)
         return 2

@@ -54,12 +54,30 @@ def _xyz(vector):
     return (vector.x, vector.y, vector.z)
 
 
+def _typestore():
+    from rosbags.typesys import get_typestore, Stores
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _velocity(typestore, raw, msgtype):
+    """``(stamp, (x, y, z))`` of an Odometry or TwistStamped (tens of Hz: rosbags decodes it)."""
+    try:
+        msg = typestore.deserialize_cdr(raw, msgtype)
+    except Exception as error:  # noqa: BLE001 -- any failure of rosbags' decoder
+        raise Undecodable(str(error)) from None
+    twist = msg.twist.twist if msgtype == ODOMETRY_TYPE else msg.twist
+    return msg.header.stamp.sec * SECOND + msg.header.stamp.nanosec, _xyz(twist.linear)
+
+
 
 # What a message is to the estimator (the kinds that cross the pipe), and
 # how many values it carries.
-IMU, FIELD, REFERENCE, IMU_AND_REFERENCE = 0, 1, 2, 3
-UNDECODABLE = {'imu': 4, 'mag': 5, 'reference': 6}
-_SIZES = {IMU: 6, FIELD: 3, REFERENCE: 4, IMU_AND_REFERENCE: 10}
+IMU, FIELD, REFERENCE, IMU_AND_REFERENCE, VELOCITY = 0, 1, 2, 3, 7
+UNDECODABLE = {'imu': 4, 'mag': 5, 'reference': 6, 'velocity': 8}
+_SIZES = {IMU: 6, FIELD: 3, REFERENCE: 4, IMU_AND_REFERENCE: 10, VELOCITY: 3}
+ODOMETRY_TYPE = 'nav_msgs/msg/Odometry'
+TWIST_TYPE = 'geometry_msgs/msg/TwistStamped'
+VELOCITY_TYPES = (ODOMETRY_TYPE, TWIST_TYPE)
 _NAN4 = (math.nan,) * 4
 
 
@@ -81,7 +99,8 @@ class BagSide:
         self.kinds = {}
         for role, connections in roles.items():
             for c in connections:
-                kind = {'imu': IMU, 'mag': FIELD, 'reference': REFERENCE}[role]
+                kind = {'imu': IMU, 'mag': FIELD, 'reference': REFERENCE,
+                        'velocity': VELOCITY}[role]
                 if shared and role != 'mag':
                     kind, role = IMU_AND_REFERENCE, 'imu'
                 self.kinds[c.id] = (kind, role, c)
@@ -127,6 +146,10 @@ class BagSide:
                         found += _NAN4 if q is None else q
                 elif kind == FIELD:
                     stamp, found = decode_field(raw)
+                elif kind == VELOCITY:
+                    typestore = typestore or _typestore()
+                    stamp, found = _velocity(typestore, raw, source.msgtype)
+                    checked.add(cid)  # decoded by rosbags itself
                 else:
                     stamp, q = decode_orientation(raw, source.msgtype)
                     found = _NAN4 if q is None else q
@@ -135,9 +158,7 @@ class BagSide:
                 layout = () if role == 'imu' else None
             else:
                 if cid not in checked:
-                    if typestore is None:
-                        from rosbags.typesys import get_typestore, Stores
-                        typestore = get_typestore(Stores.ROS2_JAZZY)
+                    typestore = typestore or _typestore()
                     checked.add(cid)
                     _check_first(typestore, source, role, raw, stamp,
                                  found[:6] if role == 'imu' else
@@ -225,6 +246,7 @@ class BagEstimator:
         self.count = 0
         self.references = []
         self.undecodable = collections.Counter()
+        self.velocity_drops = collections.Counter()  # by the pipeline's reason
 
     def __call__(self, kinds, stamps, values):
         """Return the estimates (4 floats, NaN for none) of the batch's IMU messages."""
@@ -249,6 +271,11 @@ class BagEstimator:
                 i += 6
             elif kind == FIELD:
                 field(stamp, values[i:i + 3])
+                i += 3
+            elif kind == VELOCITY:
+                reason = self.run.pipeline.velocity(stamp, values[i:i + 3])
+                if reason is not None:
+                    self.velocity_drops[reason] += 1
                 i += 3
             else:
                 i = self._other(kind, stamp, values, i, extend)

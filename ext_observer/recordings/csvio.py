@@ -11,6 +11,10 @@ comma separated:
 ``acc_x, acc_y, acc_z``    specific force, m/s² (about +9.81 up at rest)
 ``mag_x, mag_y, mag_z``    optional: magnetic field, T; empty (or ``nan``) on the
                            lines without a field (a slower magnetometer)
+``vel_x, vel_y, vel_z``    optional: the body's velocity, m/s (wheel odometry: the
+                           velocity aid, in the frame ``velocity_mounting`` and
+                           ``velocity_lever_arm`` describe), at ``t``; empty on the
+                           lines without one (a slower odometry)
 =========================  =====================================================
 
 in any order, other columns ignored. Output, one line per input line:
@@ -33,11 +37,13 @@ from ext_observer.core.ahrs.compiled import warn_if_plain
 from ext_observer.recordings.recording import (add_parameter_options, attitude_from_imu,
                                     parameters_from_options)
 
-__all__ = ['FIELD_COLUMNS', 'IMU_COLUMNS', 'OUTPUT_COLUMNS', 'build_parser', 'main',
-           'read_columns', 'read_recording', 'write_columns', 'write_recording']
+__all__ = ['FIELD_COLUMNS', 'IMU_COLUMNS', 'OUTPUT_COLUMNS', 'VELOCITY_COLUMNS', 'build_parser',
+           'main', 'read_columns', 'read_recording', 'read_velocity', 'write_columns',
+           'write_recording']
 
 IMU_COLUMNS = ('t', 'gyr_x', 'gyr_y', 'gyr_z', 'acc_x', 'acc_y', 'acc_z')
 FIELD_COLUMNS = ('mag_x', 'mag_y', 'mag_z')
+VELOCITY_COLUMNS = ('vel_x', 'vel_y', 'vel_z')
 OUTPUT_COLUMNS = ('t', 'qw', 'qx', 'qy', 'qz', 'roll', 'pitch', 'yaw', 'rest',
                   'mag_disturbed')
 
@@ -123,6 +129,36 @@ def read_recording(path):
             stack(FIELD_COLUMNS) if field else None)
 
 
+def read_velocity(path):
+    """
+    Return ``times, velocity`` of the lines with a velocity (None, None without its columns).
+
+    Raises
+    ------
+    ValueError
+        Naming a missing column (``vel_*``: all three or none), or a line with
+        only some of the three.
+
+    """
+    columns = read_columns(path, ('t',) + VELOCITY_COLUMNS)
+    found = [name for name in VELOCITY_COLUMNS if name in columns]
+    if not found:
+        return None, None
+    if len(found) < 3:
+        missing = [name for name in VELOCITY_COLUMNS if name not in columns]
+        raise ValueError(f'{path}: no column {", ".join(missing)} (vel_x, vel_y, vel_z: all '
+                         'three or none)')
+    velocity = np.column_stack([columns[name] for name in VELOCITY_COLUMNS])
+    given = ~np.isnan(velocity)
+    partial = np.flatnonzero(given.any(axis=1) & ~given.all(axis=1))
+    if len(partial):
+        t = float(columns['t'][partial[0]])
+        raise ValueError(f'{path}, the line of t = {t!r}: a velocity with only some of vel_x, '
+                         'vel_y, vel_z')
+    rows = given.all(axis=1)
+    return columns['t'][rows], velocity[rows]
+
+
 def write_columns(path, names, array):
     """Write ``array`` (rows) under a header line of ``names``; floats in full (repr)."""
     with open(path, 'w', encoding='utf-8') as stream:
@@ -146,8 +182,9 @@ def build_parser():
     parser = argparse.ArgumentParser(
         prog='python -m ext_observer csv',
         description="imu_filter_node's estimator on a CSV recording: columns t, gyr_x, gyr_y, "
-                    'gyr_z, acc_x, acc_y, acc_z[, mag_x, mag_y, mag_z] (s, rad/s, m/s², T) '
-                    'in; t, qw, qx, qy, qz, roll, pitch, yaw, rest, mag_disturbed out.')
+                    'gyr_z, acc_x, acc_y, acc_z[, mag_x, mag_y, mag_z][, vel_x, vel_y, vel_z] '
+                    '(s, rad/s, m/s², T, m/s) in; t, qw, qx, qy, qz, roll, pitch, yaw, rest, '
+                    'mag_disturbed out.')
     parser.add_argument('csv', help='the input CSV file')
     parser.add_argument('--out', required=True, help='the output CSV file')
     add_parameter_options(parser)
@@ -162,7 +199,9 @@ def main(argv=None):
     try:
         parameters = parameters_from_options(args)
         times, gyr, acc, mag = read_recording(args.csv)
-        recording = attitude_from_imu(gyr, acc, mag, times=times, parameters=parameters)
+        velocity_times, velocity = read_velocity(args.csv)
+        recording = attitude_from_imu(gyr, acc, mag, times=times, parameters=parameters,
+                                      velocity=velocity, velocity_times=velocity_times)
         write_recording(args.out, recording)
     except (ValueError, OSError) as error:
         print(f'error: {error}', file=sys.stderr)

@@ -14,8 +14,9 @@ import math
 
 from .ahrs_filters import clip
 from .ahrs_layout import (C_DT, C_K_REST, P_BIAS_MAX, P_GYRO_RANGE, P_REST_GYR, P_REST_TIME,
-                          S_ACC_STILL, S_BIAS, S_BIAS_P, S_CLIPPED, S_CLIPS, S_GYR_LAST, S_GYR_PREV,
-                          S_GYR_PEAK, S_REST, S_REST_GYR, S_REST_TIME, S_STUCK)
+                          P_TAU_REST, S_ACC_STILL, S_BIAS, S_BIAS_P, S_CLIPPED, S_CLIPS,
+                          S_GYR_LAST, S_GYR_PREV, S_GYR_PEAK, S_REST, S_REST_GYR, S_REST_TIME,
+                          S_STUCK)
 
 # σ of the bias learned at rest (rad/s), VQF's value: the low-passed rate of
 # a body at rest is a far better measurement than any correction in motion.
@@ -32,6 +33,13 @@ _STUCK = 2.0
 # A low-passed rate beyond bias_max by more than this share of rest_gyr is
 # not rest (a bias beyond bias_max is still learned, clipped, at rest).
 _BEYOND = 0.5
+# Once the bias has settled at rest (_SETTLED tau_rest after rest began: a
+# first offset of bias_max is then 2 % of itself), the low-passed rate may
+# lead it by this share of rest_gyr only: a rate that keeps leading it is
+# ramping (a vehicle steering slowly into a turn), which the bias would
+# otherwise follow to bias_max.
+_HELD = 0.25
+_SETTLED = 4.0
 
 
 def _at_range(s, i, g):
@@ -89,9 +97,11 @@ def detect_rest(s, gx, gy, gz):
     mx, my, mz = lx - bx, ly - by, lz - bz
     mean = mx * mx + my * my + mz * mz
     th = s[P_REST_GYR] * s[P_REST_GYR]
+    settled = s[S_REST_TIME] > s[P_REST_TIME] + _SETTLED * s[P_TAU_REST]
+    held = _HELD * _HELD * th if settled else th
     # A rate well beyond bias_max on any axis is no bias: a steady turn is not rest.
     big = max(abs(lx), max(abs(ly), abs(lz))) > s[P_BIAS_MAX] + _BEYOND * s[P_REST_GYR]
-    still = (dev < th) and (mean < th) and s[S_ACC_STILL] != 0.0 and not big
+    still = (dev < th) and (mean < held) and s[S_ACC_STILL] != 0.0 and not big
     s[S_REST_TIME] = (s[S_REST_TIME] + s[C_DT]) if still else 0.0
     rest = s[S_REST_TIME] >= s[P_REST_TIME]
     s[S_REST] = 1.0 if rest else 0.0

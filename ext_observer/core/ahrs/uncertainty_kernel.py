@@ -85,6 +85,11 @@ U_HS_W0 = UNCERTAINTY.field('hs_w0')
 U_HS_TAN = UNCERTAINTY.field('hs_tan')
 U_HS_REST = UNCERTAINTY.field('hs_rest')
 U_HS = UNCERTAINTY.field('hs')
+# A field lost: s since the last field (used or not), and the rotation about
+# the world vertical (rad, signed) the gyro alone carried the heading through
+# since it was lost; the fields back shrink it as they correct the heading.
+U_FIELD_AGE = UNCERTAINTY.field('field_age')
+U_YAW_HELD = UNCERTAINTY.field('yaw_held')
 U_SIZE = UNCERTAINTY.size
 
 # sample_step's outcomes: 0 the step ran; else the estimator stepped but the
@@ -102,6 +107,14 @@ SAMPLE_NOT_STARTED = 4
 START_CORRELATION = 1.0
 # rad²: a start's share below this is forgotten (a millionth of a degree).
 _START_FORGOTTEN = 1e-16
+# σ of the gyro's scale error (relative): without a field, the heading drifts
+# by this share of the net rotation about the vertical (BROAD's dev trial 08
+# turns ten times one way without one and drifts 0.33 % of it; MEMS
+# datasheets give 0.1 to 1 %).
+GYRO_SCALE_SIGMA = 0.003
+# s: no field for this long is a field lost (mag_timeout's default), not the
+# interval of a slower magnetometer.
+FIELD_SILENT = 1.0
 
 
 def uncertainty_coefficients(u, dt):
@@ -164,6 +177,10 @@ def uncertainty_step(u, dt, gx, gy, gz, w, x, y, z, rest):
           + (w * w - x * x - y * y + z * z) * gz) / n2
     wz2 = wz * wz
     u[U_WZ2] = wz2
+    age = u[U_FIELD_AGE] + dt
+    u[U_FIELD_AGE] = age
+    # (A product, not a branch: the state's slots may be arrays.)
+    u[U_YAW_HELD] = u[U_YAW_HELD] + (age > FIELD_SILENT) * wz * dt
     u[U_WH2] = w2 - wz2
 
 
@@ -263,9 +280,11 @@ def uncertainty_start(u, dt, fx, fy, fz):
 def uncertainty_variances(u):
     """The published variances: ``(V_t, V_h)``, rad² (tilt per horizontal axis, heading)."""
     t = u[U_PT] + u[U_START_V] + u[U_TILT_FLOOR] + 0.5 * u[U_STAMP2] * u[U_WH2]
+    held = GYRO_SCALE_SIGMA * u[U_YAW_HELD]
     h = (u[U_PH] + u[U_UNKNOWN]
          + u[U_HEADING_SET] * (u[U_HEADING_FLOOR] + u[U_CALIBRATION])
-         + u[U_STAMP2] * u[U_WZ2] + u[U_HS] * u[U_HS])
+         + u[U_STAMP2] * u[U_WZ2] + u[U_HS] * u[U_HS]
+         + u[U_HEADING_SET] * held * held)
     return t, h
 
 
