@@ -186,42 +186,6 @@ def test_constant_dt_integrates_every_sample_of_same_stamp_pairs_over_dds(
     assert turn == pytest.approx(1.99, abs=0.005), turn
 
 
-def test_arrival_order_add_sample_is_add_angular_velocity_then_pop_ready():
-    # The one-call path and the general one agree in arrival order too, on
-    # test_pairing's arbitrary streams (duplicates, stale, jumps, gaps).
-    from hypothesis import given, settings
-
-    from ext_observer.pipeline.pairing import StepPairer
-    from test_pairing import _pairer_state, assert_accounted, sample_operations
-
-    @settings(max_examples=300, deadline=None)
-    @given(sample_operations)
-    def check(ops):
-        options = dict(timeout=0, depth=4, backward_jump=SECOND,
-                       forward_gap=SECOND // 2, max_dt=SECOND // 25, constant_dt=0.004,
-                       max_increment=3.0, arrival_order=True)
-        fast, general = StepPairer(**options), StepPairer(**options)
-        stamp = 2 * SECOND
-        for kind, delta, value, acc in ops:
-            if delta is not None:
-                stamp += delta
-            if kind == 'sample':
-                outcome, steps = fast.add_sample(stamp, value, acc)
-                assert outcome == general.add_angular_velocity(stamp, value, 0, acc)
-                assert list(steps) == general.pop_ready(0)
-                assert outcome in (None, 'backward_jump', 'non_finite_increment',
-                                   'non_finite_acceleration', 'zero_acceleration',
-                                   'increment_too_large'), outcome
-            elif kind == 'field':
-                assert fast.add_field(stamp, value) == general.add_field(stamp, value)
-            else:
-                assert fast.restart() == general.restart()
-            assert _pairer_state(fast) == _pairer_state(general)
-        assert_accounted(fast)
-
-    check()
-
-
 # Debug topics and gravity removal: the ROS-free part -----------------------------
 
 def random_unit(rng):

@@ -12,8 +12,8 @@ import numpy as np
 
 from ext_observer.core import quaternion as quat
 from ext_observer.core.ahrs.magcal import MagCalibrator
-from test_core_ahrs import rotate, synthetic
-from test_core_magcal import distort, distortion, NORM, RATE
+from synthetic_motion import rotate, synthetic
+from test_magcal import distort, distortion, NORM, RATE
 
 
 def test_a_passing_magnet_is_gated_and_teaches_nothing():

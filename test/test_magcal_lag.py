@@ -23,7 +23,7 @@ import pytest
 
 from ext_observer.core import quaternion as quat
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
-from test_core_ahrs import errors_deg, FIELD, rotate
+from synthetic_motion import errors_deg, FIELD, rotate
 
 RATE = 200.0
 NORM = float(np.linalg.norm(FIELD))

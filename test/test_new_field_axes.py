@@ -16,7 +16,7 @@ import math
 import pytest
 
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
-from test_core_ahrs_params import (angle_deg, DT, FIELD, first_index, qexp, qmul, RATE, run,
+from test_ahrs_params import (angle_deg, DT, FIELD, first_index, qexp, qmul, RATE, run,
                                    simulate, turning)
 
 # s: from here on the field is 30 % stronger (a new place); later than

@@ -15,14 +15,15 @@ import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 
+from conftest import REPO
 from ext_observer.recordings import calibrate
 from ext_observer.core import quaternion as quat
 from ext_observer.pipeline.batch import estimate_batch
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.magcal import check_calibration, MagCalibrator
-from test_core_ahrs import errors_deg, FIELD, RATE, rotate, synthetic
+from synthetic_motion import errors_deg, FIELD, RATE, rotate, synthetic
 
-DATA = os.path.join(os.path.dirname(__file__), 'data')
+DATA = os.path.join(REPO, 'test', 'data')
 NORM = float(np.linalg.norm(FIELD))
 
 
