@@ -151,25 +151,6 @@ def test_the_extension_term_holds_the_estimate_near_s3(motion):
         assert check(defect), (variant, defect[-1])
 
 
-def test_initial_attitude_from_gravity_and_field(motion):
-    truth, gyr, acc, mag = motion
-    q = np.asarray(initial_attitude(tuple(acc[0]), tuple(mag[0])))
-    total, _, _ = errors_deg(q, truth[0])
-    assert total < 1.0
-    q6 = np.asarray(initial_attitude(tuple(acc[0])))
-    _, _, incl = errors_deg(q6, truth[0])
-    assert incl < 1.0
-
-
-@pytest.mark.parametrize('frame, east', [('enu', (1, 0, 0)), ('nwu', (0, -1, 0)),
-                                         ('ned', (0, 1, 0))])
-def test_world_frames_name_east_as_rep_103_does(frame, east):
-    q = world_from_enu(np.array([1.0, 0.0, 0.0, 0.0]), frame)
-    assert_allclose(rotate(q, np.array([1.0, 0.0, 0.0])), east, atol=1e-15)
-    up = {'enu': (0, 0, 1), 'nwu': (0, 0, 1), 'ned': (0, 0, -1)}[frame]
-    assert_allclose(rotate(q, np.array([0.0, 0.0, 1.0])), up, atol=1e-15)
-
-
 @pytest.mark.parametrize('name, value, match', [
     ('tau_acc', 0.0, 'tau_acc must be positive'),
     ('tau_bias', -1.0, 'tau_bias must be >= 0'),
