@@ -289,7 +289,7 @@ def lockstep(spinner, ros_context, data, name, **parameters):
 
 
 def offline(settings, data):
-    """The estimates of RawImuPipeline, fed as test_imu_filter.replay feeds the node."""
+    """The estimates of RawImuPipeline, fed as imu_filter_runs.replay feeds the node."""
     pipeline = RawImuPipeline(settings)
     out = {}
     for stamp, gyr, acc, field in data:

@@ -211,7 +211,7 @@ def test_at_rest_the_bias_covariance_is_that_of_a_measurement_of_the_rests_sigma
 @pytest.mark.parametrize('stuck', [(0.5, 3.0, -1.0), (0.5, -1.0, -3.0)])
 def test_a_gyro_stuck_from_its_first_sample_on_any_axis_is_clipped(stuck):
     # Unknown range: the second repeat of the largest rate seen is the range
-    # (test_kernel_edges.py has it on x); on y and on z alike.
+    # (the edges below have it on x); on y and on z alike.
     est = AhrsObserver(AhrsParams(), use_mag=False)
     counts = []
     for _ in range(4):
