@@ -18,7 +18,7 @@ Each place, and the test that runs it in every frame:
 
 The TF (``publish_tf``) is ``transform_from_estimate`` of the published
 orientation, whatever the frame
-(``test_imu_tools_dropin.py::test_transform_is_imu_filter_madgwicks_and_its_reverse``);
+(``test_imu_tools.py::test_transform_is_imu_filter_madgwicks_and_its_reverse``);
 its broadcaster needs tf2_ros, which pip does not install.
 """
 
