@@ -42,7 +42,7 @@ demo: $(RUNTIME_STAMP)
 # folder holds them (test/broad_data.py; EXT_OBSERVER_BROAD_URL for a
 # mirror). Then the whole suite on every core (pytest-xdist; each test has
 # its own ROS domain, test/conftest.py), with the benchmark's own logic
-# checks (bench/test_*.py); test_core_observer.py checks in a fresh
+# checks (bench/test_*.py); test/core/paper/test_observer.py checks in a fresh
 # interpreter that the core imports no ROS.
 # Then, with EXT_OBSERVER_COMPILED=0, what the plain kernels (a machine
 # where numba cannot be installed) can break that the first run does not
@@ -50,16 +50,16 @@ demo: $(RUNTIME_STAMP)
 # covariance on edge inputs, the plain batch in workers, one node process
 # on plain kernels end to end (docs/tests.md says what is left out and why).
 TEST_WORKERS ?= auto
-PLAIN_TESTS := test/test_core_ahrs.py test/test_core_ahrs_params.py test/test_core_ahrs_robust.py \
-	test/test_core_magcal.py \
+PLAIN_TESTS := test/core/ahrs/test_estimator.py test/core/ahrs/test_ahrs_params.py \
+	test/core/ahrs/test_estimator_robust.py test/core/ahrs/test_magcal.py \
 	test/test_covariance.py \
-	test/test_compiled.py::test_the_whole_recording_loop_gives_the_per_sample_estimates \
+	test/core/ahrs/test_compiled.py::test_the_whole_recording_loop_gives_the_per_sample_estimates \
 	test/test_raw_imu.py::test_drop_in_for_imu_filter_madgwick_as_a_process
 PLAIN_DESELECT := $(foreach t,test_the_benchmark_writes_its_page_and_figures \
 	test_fixed_mode_reproduces_todays_imu_data_bit_for_bit \
 	test_estimate_mode_publishes_the_pipelines_covariance_and_diagnostics \
 	test_diagnostics_before_the_first_step_say_nan,--deselect test/test_covariance.py::$(t)) \
-	--deselect test/test_core_magcal.py::test_a_csv_and_a_bag_with_an_offset_calibrate_as_the_node_would
+	--deselect test/core/ahrs/test_magcal.py::test_a_csv_and_a_bag_with_an_offset_calibrate_as_the_node_would
 
 test: $(TEST_STAMP)
 	$(PY) test/broad_data.py

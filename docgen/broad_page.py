@@ -407,7 +407,7 @@ def _reproduce():
             '`--data DIR`: BROAD\'s HDF5 files directly in DIR or under `DIR/data_hdf5/`, '
             'as in a clone of BROAD). `make bench` does not run it; `make test` scores our '
             'estimator on two whole trials against the figures of this page '
-            '(`test_core_real_data.py`). Options: `--mode 6D|9D|both`, '
+            '(`test_broad_whole_trials.py`). Options: `--mode 6D|9D|both`, '
             '`--no-anchors`, `--plain` (also without the extension term), '
             '`--trials NAME...`, `--jobs N` (processes for the anchors) and `--workers N` '
             '(for our batched call; 1: one process), both by default the '

@@ -12,7 +12,7 @@ The 9D total RMSE and the 6D inclination RMSE of each trial, our estimator
 with its shipped defaults through the benchmark's own path, must be within
 5 % of the page's figure (plus its rounding to 0.01°).
 
-Needs BROAD (as test_core_real_data.py: ``make broad-data``, or
+Needs BROAD (as test_broad_whole_trials.py: ``make broad-data``, or
 ``EXT_OBSERVER_BROAD_DATA``; ``EXT_OBSERVER_ALLOW_NO_BROAD=1`` skips).
 """
 
@@ -23,7 +23,7 @@ import pytest
 from broad_data import broad_data_dir
 from conftest import REPO
 from ext_observer import broad
-from test_core_real_data import COLUMNS, page_figures
+from test_broad_whole_trials import COLUMNS, page_figures
 
 PAGE = os.path.join(REPO, 'docs', 'broad.md')
 # The two trials each subtle mutant moves most (and 29, the only one the

@@ -304,7 +304,7 @@ def test_the_covariance_is_the_same_in_every_world_frame():
 
 def lockstep(spinner, ros_context, data, name, **parameters):
     """Start a node, feed it ``data`` in lockstep, return the node and its outputs."""
-    from test_imu_filter import run_node
+    from imu_filter_runs import run_node
 
     node, driver = run_node(spinner, ros_context, data, name, **parameters)
     spinner.spin_until(lambda: len(driver.outputs) >= len(data) - 1, 10.0, 'imu/data')
@@ -312,7 +312,7 @@ def lockstep(spinner, ros_context, data, name, **parameters):
 
 
 def offline(settings, data):
-    """The estimates of RawImuPipeline, fed as test_imu_filter.replay feeds the node."""
+    """The estimates of RawImuPipeline, fed as imu_filter_runs.replay feeds the node."""
     pipeline = RawImuPipeline(settings)
     out = {}
     for stamp, gyr, acc, field in data:
@@ -324,7 +324,7 @@ def offline(settings, data):
 
 
 def test_fixed_mode_reproduces_todays_imu_data_bit_for_bit(ros_context, spinner):
-    from test_imu_filter import turning
+    from imu_filter_runs import turning
 
     data = turning(150)
     _, driver = lockstep(spinner, ros_context, data, 'fixed',
@@ -351,7 +351,7 @@ def test_fixed_mode_reproduces_todays_imu_data_bit_for_bit(ros_context, spinner)
 
 def test_estimate_mode_publishes_the_pipelines_covariance_and_diagnostics(ros_context,
                                                                           spinner):
-    from test_imu_filter import turning
+    from imu_filter_runs import turning
 
     data = turning(150)
     node, driver = lockstep(spinner, ros_context, data, 'estimated')
@@ -475,7 +475,7 @@ def learning_run(level, seed=3):
     Returns the heading error and the published heading σ (degrees) per
     sample, and the calibration's state per sample.
     """
-    from test_core_ahrs import errors_deg, FIELD as FIELD_UT, RATE, synthetic
+    from synthetic_motion import errors_deg, FIELD as FIELD_UT, RATE, synthetic
     truth, gyr, acc, mag = synthetic(seconds=40.0, seed=seed)
     rng = np.random.default_rng(seed)
     u = rng.normal(size=3)

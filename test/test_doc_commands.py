@@ -83,9 +83,9 @@ NOT_RUN = {
     'cd ~/ws': 'the same colcon workspace',
     'source install/setup.bash': 'the same colcon workspace',
     'ros2 run': 'ros2cli is not on PyPI; test_colcon.py runs the installed executable',
-    'ros2 service': 'ros2cli is not on PyPI; test_imu_filter.py calls ~/save_calibration '
+    'ros2 service': 'ros2cli is not on PyPI; test_imu_filter_node.py calls ~/save_calibration '
                     'with an rclpy client',
-    '# before': 'a launch file: ros2 launch (launch_ros) is not on PyPI; test_imu_filter.py '
+    '# before': 'a launch file: ros2 launch (launch_ros) is not on PyPI; test_imu_filter_node.py '
                 'starts the node with imu_filter_madgwick\'s parameters instead',
 }
 

@@ -250,7 +250,7 @@ def test_cited_tests_exist():
         text = INLINE_CODE.sub(lambda match: f' {match.group(2)} ', _read(page))
         for file, name in re.findall(r'\b(test_[\w*]+\.py)(?:::([\w*…]+))?', text):
             paths = [path for folder in ('test', 'bench')
-                     for path in glob.glob(os.path.join(REPO, folder, file))]
+                     for path in glob.glob(os.path.join(REPO, folder, '**', file), recursive=True)]
             if not paths:
                 missing.append(f'{_name(page)}: {file}')
             elif name:

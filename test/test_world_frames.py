@@ -7,7 +7,7 @@ Each place, and the test that runs it in every frame:
 - the published orientation (``imu/data``, ``attitude_estimate``):
   ``test_raw_imu.py::test_world_frames_rotate_the_enu_estimate``;
 - ``declination`` and ``yaw_offset`` (their sign about the frame's own z):
-  ``test_imu_filter.py::test_declination_turns_the_heading_to_true_north_in_every_frame``;
+  ``test_imu_filter_node.py::test_declination_turns_the_heading_to_true_north_in_every_frame``;
 - ``remove_gravity_vector`` (gravity from the estimator's ENU attitude, not the
   published one) and the debug topics ``imu/rpy/filtered`` and ``imu/rpy/raw``:
   ``test_imu_tools_dropin.py::test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest``;
@@ -18,7 +18,7 @@ Each place, and the test that runs it in every frame:
 
 The TF (``publish_tf``) is ``transform_from_estimate`` of the published
 orientation, whatever the frame
-(``test_imu_tools_dropin.py::test_transform_is_imu_filter_madgwicks_and_its_reverse``);
+(``test_imu_filter_outputs.py::test_transform_is_imu_filter_madgwicks_and_its_reverse``);
 its broadcaster needs tf2_ros, which pip does not install.
 """
 

@@ -654,3 +654,343 @@ def test_arrival_order_steps_with_a_repeated_stamp_are_all_accounted():
     assert pairer.received['increment'] == 4
     assert_accounted(pairer)
     assert len(released) == 3
+
+
+def test_arrival_order_add_sample_is_add_angular_velocity_then_pop_ready():
+    # The one-call path and the general one agree in arrival order too, on
+    # the arbitrary streams above (duplicates, stale, jumps, gaps).
+    @settings(max_examples=300, deadline=None)
+    @given(sample_operations)
+    def check(ops):
+        options = dict(timeout=0, depth=4, backward_jump=S,
+                       forward_gap=S // 2, max_dt=S // 25, constant_dt=0.004,
+                       max_increment=3.0, arrival_order=True)
+        fast, general = StepPairer(**options), StepPairer(**options)
+        stamp = 2 * S
+        for kind, delta, value, acc in ops:
+            if delta is not None:
+                stamp += delta
+            if kind == 'sample':
+                outcome, steps = fast.add_sample(stamp, value, acc)
+                assert outcome == general.add_angular_velocity(stamp, value, 0, acc)
+                assert list(steps) == general.pop_ready(0)
+                assert outcome in (None, 'backward_jump', 'non_finite_increment',
+                                   'non_finite_acceleration', 'zero_acceleration',
+                                   'increment_too_large'), outcome
+            elif kind == 'field':
+                assert fast.add_field(stamp, value) == general.add_field(stamp, value)
+            else:
+                assert fast.restart() == general.restart()
+            assert _pairer_state(fast) == _pairer_state(general)
+        assert_accounted(fast)
+
+    check()
+
+
+# A step's interval bound and the step a measurement at a step's end belongs to -----------
+
+def test_an_interval_of_max_dt_is_a_step_and_one_nanosecond_more_is_dropped():
+    pairer = StepPairer(timeout=0, max_dt=50 * MS)
+    pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0)
+    assert pairer.add_angular_velocity(2 * S + 50 * MS, (0.1, 0.0, 0.0), 0) is None
+    [step] = pairer.pop_ready(0)
+    assert (step.stamp, step.end) == (2 * S, 2 * S + 50 * MS)
+    assert pairer.add_angular_velocity(2 * S + 100 * MS + 1, (0.1, 0.0, 0.0), 0) == 'dt_too_large'
+    assert pairer.add_angular_velocity(2 * S + 130 * MS, (0.1, 0.0, 0.0), 0) is None
+    [step] = pairer.pop_ready(0)
+    assert (step.stamp, step.end) == (2 * S + 100 * MS + 1, 2 * S + 130 * MS)
+
+
+def test_a_measurement_at_a_steps_end_corrects_the_next_step():
+    # Samples at 0, 10 and 20 ms; a measurement stamped 10 ms is the
+    # attitude at the start of the second interval, not the end of the first.
+    pairer = StepPairer(depth=4, timeout=100 * MS)
+    t0 = 1 * S
+    pairer.add_angular_velocity(t0, (0.1, 0.2, 0.3), 0)
+    pairer.add_angular_velocity(t0 + 10 * MS, (0.1, 0.2, 0.3), 0)
+    pairer.add_measurement(t0 + 10 * MS, Y)
+    pairer.add_angular_velocity(t0 + 20 * MS, (0.1, 0.2, 0.3), 0)
+    pairer.add_angular_velocity(t0 + 30 * MS, (0.1, 0.2, 0.3), 0)
+    steps = pairer.pop_ready(1 * S)
+    assert [(s.stamp, s.measurement) for s in steps] == [
+        (t0, None), (t0 + 10 * MS, Y), (t0 + 20 * MS, None)]
+
+
+# The pairing rules at their edges -------------------------------------------------------
+
+def test_a_sample_the_caller_rejects_is_received_and_dropped_with_its_reason():
+    pairer = StepPairer()
+    for count in (1, 2):
+        assert pairer.reject('increment', 'non_finite_increment') == 'non_finite_increment'
+        assert pairer.received['increment'] == count
+        assert pairer.drops['non_finite_increment'] == count
+    assert pairer.received['measurement'] == 0
+    assert pairer.accounted('increment') == 2
+
+
+def test_a_sample_backward_by_backward_jump_is_stale_and_one_nanosecond_more_a_jump():
+    pairer = StepPairer(timeout=0, backward_jump=1 * S)
+    t = 10 * S
+    pairer.add_angular_velocity(t, (0.1, 0.0, 0.0), 0)
+    assert pairer.add_angular_velocity(t - 1 * S, (0.1, 0.0, 0.0), 0) == 'stale_increment'
+    assert pairer.events['backward_jumps'] == 0
+    for count in (1, 2):
+        t -= 1 * S + 1
+        assert pairer.add_angular_velocity(t, (0.1, 0.0, 0.0), 0) == BACKWARD_JUMP
+        assert pairer.events['backward_jumps'] == count
+
+
+def test_a_field_at_stamp_1_is_taken_and_one_backward_by_backward_jump_is_stale():
+    pairer = StepPairer(timeout=0, backward_jump=1 * S)
+    assert pairer.add_field(1, (2e-5, 0.0, -4e-5)) is None
+    assert pairer.add_field(3 * S, (2e-5, 0.0, -4e-5)) is None
+    assert pairer.add_field(2 * S, (2e-5, 0.0, -4e-5)) == 'stale_measurement'
+    assert pairer.add_field(2 * S - 1, (2e-5, 0.0, -4e-5)) is None  # a jump back: taken
+    assert pairer.field_stamp == 2 * S - 1
+
+
+@pytest.mark.parametrize('constant_dt', [0.0, 0.005])
+def test_arrival_order_takes_a_repeated_stamp_only_with_a_constant_dt(constant_dt):
+    # imu_tools' constant_dt: with arrival_order and a constant_dt > 0
+    # every sample is taken in the order it comes; without a constant_dt the
+    # stamps rule (a repeated one is a duplicate).
+    pairer = StepPairer(timeout=0, constant_dt=constant_dt, arrival_order=True)
+    pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0)
+    outcome = pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0)
+    assert outcome == (None if constant_dt > 0.0 else 'duplicate_increment')
+
+
+# The pairing rules' edges that mutmut's run of pairing.py (docs/tests.md#mutmut)
+# found untested: each is a documented rule, checked at its bound.
+
+@pytest.mark.parametrize('axis', [0, 1, 2])
+def test_a_rate_with_one_non_finite_component_is_dropped(axis):
+    pairer = StepPairer(timeout=0)
+    for value in (math.nan, math.inf):
+        rate = [0.1, 0.2, 0.3]
+        rate[axis] = value
+        assert pairer.add_angular_velocity(2 * S, tuple(rate), 0) == 'non_finite_increment'
+    assert pairer.drops['non_finite_increment'] == 2
+    assert pairer.waiting('increment') == 0
+
+
+def test_an_increment_beyond_max_increment_is_dropped_on_the_general_path():
+    pairer = StepPairer(timeout=0, max_increment=0.01)
+    pairer.add_angular_velocity(2 * S, (1.0, 0.0, 0.0), 0)
+    # 10 ms at 1 rad/s: 0.01 rad, at the bound (kept); at 1.1 rad/s beyond it.
+    assert pairer.add_angular_velocity(2 * S + 10 * MS, (1.0, 0.0, 0.0), 0) is None
+    assert pairer.add_angular_velocity(2 * S + 20 * MS, (1.2, 0.0, 0.0), 0) == (
+        'increment_too_large')
+    assert [s.stamp for s in pairer.pop_ready(0)] == [2 * S]
+    assert pairer.drops['increment_too_large'] == 1
+
+
+def test_a_step_waits_for_its_measurement_until_now_reaches_timeout():
+    pairer = StepPairer(timeout=10 * MS)
+    pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0)
+    pairer.add_angular_velocity(2 * S + 5 * MS, (0.1, 0.0, 0.0), 0)
+    assert pairer.pop_ready(0) == []
+    assert pairer.pop_ready(10 * MS - 1) == []
+    [step] = pairer.pop_ready(10 * MS)
+    assert (step.stamp, step.measurement) == (2 * S, None)
+
+
+def test_a_sample_at_stamp_1_after_a_later_one_is_a_backward_jump():
+    # Stamp 1 ns is a stamp (only 0 and below are refused), here 10 s back.
+    pairer = StepPairer(timeout=0)
+    pairer.add_angular_velocity(10 * S, (0.1, 0.0, 0.0), 0)
+    assert pairer.add_angular_velocity(0, (0.1, 0.0, 0.0), 0) == 'zero_stamp_increment'
+    assert pairer.add_angular_velocity(1, (0.1, 0.0, 0.0), 0) == BACKWARD_JUMP
+    assert pairer.pending_stamp == 1
+    fresh = StepPairer(timeout=0)
+    assert fresh.add_angular_velocity(1, (0.1, 0.0, 0.0), 0) is None
+    assert fresh.add_increment(2, (0.0, 0.0, 0.0), 0) is None
+    assert fresh.add_measurement(0, Y) == 'zero_stamp_measurement'
+
+
+def test_in_arrival_order_stamps_only_mark_jumps_back():
+    # imu_tools' constant_dt: samples are taken as they come, the first one
+    # whatever its stamp; a jump back beyond backward_jump starts over
+    # (counted each time) from that sample; exactly backward_jump back is a
+    # step like any other.
+    pairer = StepPairer(timeout=0, constant_dt=0.005, arrival_order=True, backward_jump=1 * S)
+    assert pairer.add_angular_velocity(0, (0.1, 0.0, 0.0), 0) is None
+    assert pairer.add_angular_velocity(10 * S, (0.1, 0.0, 0.0), 0) is None
+    assert pairer.add_angular_velocity(9 * S, (0.1, 0.0, 0.0), 0) is None
+    assert [s.stamp for s in pairer.pop_ready(0)] == [0, 10 * S]
+    t = 9 * S
+    for count in (1, 2):
+        t -= 1 * S + 1
+        assert pairer.add_angular_velocity(t, (0.1, 0.0, 0.0), 0) == BACKWARD_JUMP
+        assert pairer.events['backward_jumps'] == count
+        assert pairer.pending_stamp == t
+    assert pairer.add_angular_velocity(t + 1, (0.2, 0.0, 0.0), 0) is None
+    [step] = pairer.pop_ready(0)
+    assert step.stamp == t and step.increment[0] == pytest.approx(0.15 * 0.005)
+
+
+def test_add_sample_in_arrival_order_restarts_at_a_jump_back():
+    pairer = StepPairer(timeout=0, constant_dt=0.005, arrival_order=True, backward_jump=1 * S)
+    acc = (0.0, 0.0, 9.8)
+    pairer.add_sample(10 * S, (0.1, 0.0, 0.0), acc)
+    assert pairer.add_sample(5 * S, (0.1, 0.0, 0.0), acc) == (BACKWARD_JUMP, ())
+    assert pairer.events['backward_jumps'] == 1
+    # Without a constant interval, arrival order does not apply: a repeated
+    # stamp is a duplicate on the one-call path too.
+    plain = StepPairer(timeout=0, arrival_order=True)
+    plain.add_sample(2 * S, (0.1, 0.0, 0.0), acc)
+    assert plain.add_sample(2 * S, (0.1, 0.0, 0.0), acc) == ('duplicate_increment', ())
+
+
+def test_add_sample_refuses_an_infinite_acceleration_and_an_increment_too_large():
+    pairer = StepPairer(timeout=0, max_increment=0.01)
+    acc = (0.0, 0.0, 9.8)
+    pairer.add_sample(2 * S, (0.1, 0.0, 0.0), acc)
+    assert pairer.add_sample(2 * S + 5 * MS, (0.1, 0.0, 0.0), (math.inf, 0.0, 9.8)) == (
+        'non_finite_acceleration', ())
+    # Trapezoid over 5 ms: 0.3 rad/s on average, 0.0015 rad, kept; 2.75 rad/s
+    # on average, 0.01375 rad, beyond 0.01.
+    outcome, steps = pairer.add_sample(2 * S + 5 * MS, (0.5, 0.0, 0.0), acc)
+    assert outcome is None and len(steps) == 1
+    assert pairer.add_sample(2 * S + 10 * MS, (5.0, 0.0, 0.0), acc) == ('increment_too_large', ())
+
+
+def test_add_sample_with_a_timeout_waits_as_the_general_path_does():
+    # The one-call path is for steps that wait for nothing; with a timeout
+    # a step waits for its measurement (or the deadline) as it would.
+    pairer = StepPairer(timeout=50 * MS)
+    acc = (0.0, 0.0, 9.8)
+    assert pairer.add_sample(2 * S, (0.1, 0.0, 0.0), acc) == (None, ())
+    assert pairer.add_sample(2 * S + 5 * MS, (0.1, 0.0, 0.0), acc) == (None, ())
+    assert pairer.waiting('increment') == 2
+    [step] = pairer.pop_ready(50 * MS)
+    assert step.stamp == 2 * S
+
+
+def test_after_a_one_call_step_a_measurement_inside_it_is_stale_and_at_its_end_taken():
+    acc = (0.0, 0.0, 9.8)
+    for at, outcome in ((2 * S + 5 * MS - 1, 'stale_measurement'), (2 * S + 5 * MS, None)):
+        pairer = StepPairer(timeout=0)
+        pairer.add_sample(2 * S, (0.1, 0.0, 0.0), acc)
+        [step] = pairer.add_sample(2 * S + 5 * MS, (0.1, 0.0, 0.0), acc)[1]
+        assert (step.stamp, step.end) == (2 * S, 2 * S + 5 * MS)
+        assert pairer.add_measurement(at, Y) == outcome
+        # The uncorrected last step's start is stale too (not a duplicate).
+        assert pairer.add_measurement(2 * S, Y) == 'stale_measurement'
+
+
+def test_a_measurement_jump_back_is_counted_each_time_and_its_edge_is_stale():
+    pairer = StepPairer(timeout=0, backward_jump=1 * S)
+    pairer.add_increment(10 * S, (0.0, 0.0, 0.0), 0)
+    pairer.pop_ready(0)
+    assert pairer.add_measurement(9 * S, Y) == 'stale_measurement'
+    assert pairer.add_measurement(9 * S - 1, Y) == BACKWARD_JUMP
+    assert pairer.add_increment(20 * S, (0.0, 0.0, 0.0), 0) is None
+    pairer.pop_ready(1)
+    assert pairer.add_measurement(19 * S - 1, Y) == BACKWARD_JUMP
+    assert pairer.events['backward_jumps'] == 2
+
+
+def test_restart_returns_everything_it_discards():
+    pairer = StepPairer(timeout=1 * S)
+    pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0)
+    pairer.add_angular_velocity(2 * S + 5 * MS, (0.1, 0.0, 0.0), 0)
+    pairer.add_measurement(3 * S, Y)
+    pairer.add_measurement(4 * S, Y)
+    assert pairer.restart() == 4   # one step and one sample waiting, two measurements
+    assert pairer.drops['discarded_increment'] == 2
+    assert pairer.drops['discarded_measurement'] == 2
+
+
+def test_a_later_measurement_releases_a_step_at_once_from_its_edge_on():
+    # A publisher sends in stamp order: a measurement at or after a step's
+    # limit (its end, or its stamp + 1 for a given increment) shows the
+    # step's own is not coming.
+    pairer = StepPairer(timeout=1 * S)
+    pairer.add_angular_velocity(2 * S, (0.1, 0.0, 0.0), 0)
+    pairer.add_angular_velocity(2 * S + 5 * MS, (0.1, 0.0, 0.0), 0)
+    pairer.add_measurement(2 * S + 5 * MS, Y)
+    [step] = pairer.pop_ready(0)
+    assert (step.stamp, step.measurement) == (2 * S, None)
+    given = StepPairer(timeout=1 * S)
+    given.add_increment(2 * S, (0.0, 0.0, 0.0), 0)
+    given.add_measurement(2 * S - 1, Y)   # older: no sign
+    assert given.pop_ready(0) == []
+    given.add_measurement(2 * S + 1, Y)
+    [step] = given.pop_ready(0)
+    assert (step.stamp, step.measurement) == (2 * S, None)
+
+
+def test_a_step_released_for_depth_is_marked_early():
+    pairer = StepPairer(depth=1, timeout=1 * S)
+    pairer.add_increment(2 * S, (0.0, 0.0, 0.0), 0)
+    pairer.add_increment(3 * S, (0.0, 0.0, 0.0), 0)
+    [step] = pairer.pop_ready(0)
+    assert step.stamp == 2 * S and step.early is True
+    assert pairer.events['early_releases'] == 1
+
+
+def test_forward_gaps_are_counted_each_time():
+    pairer = StepPairer(timeout=0, forward_gap=1 * S)
+    for k, stamp in enumerate((2 * S, 4 * S, 6 * S)):
+        pairer.add_increment(stamp, (0.0, 0.0, 0.0), 0)
+        [step] = pairer.pop_ready(0)
+        assert step.gap == (k > 0)
+    assert pairer.events['forward_gaps'] == 2
+
+
+def test_the_measurements_of_a_step_after_its_first_are_dropped_at_its_release():
+    # Three inside one 10 ms interval: the first corrects it, the others
+    # (the last at end - 1 ns) are unpaired; one at its end waits.
+    pairer = StepPairer(timeout=1 * S)
+    t0 = 2 * S
+    pairer.add_angular_velocity(t0, (0.0, 0.0, 0.0), 0)
+    pairer.add_angular_velocity(t0 + 10 * MS, (0.0, 0.0, 0.0), 0)
+    for stamp in (t0, t0 + 3 * MS, t0 + 10 * MS - 1, t0 + 10 * MS):
+        pairer.add_measurement(stamp, Y)
+    [step] = pairer.pop_ready(0)
+    assert step.measurement == Y
+    assert pairer.drops['unpaired_measurement'] == 2
+    assert pairer.waiting('measurement') == 1
+
+
+@pytest.mark.parametrize('constant_dt', [0.0, 0.004])
+def test_the_one_call_step_is_the_trapezoid_of_the_two_rates(constant_dt):
+    # Slow rates, so that an increment off by any factor still passes the
+    # bound and shows; over the stamps' 5 ms, or constant_dt when given.
+    pairer = StepPairer(timeout=0, constant_dt=constant_dt)
+    acc = (0.0, 0.0, 9.8)
+    pairer.add_sample(2 * S, (0.001, -0.002, 0.0), acc)
+    outcome, [step] = pairer.add_sample(2 * S + 5 * MS, (0.003, 0.0, 0.001), acc)
+    dt = constant_dt or 0.005
+    assert outcome is None
+    assert step.increment == pytest.approx((0.002 * dt, -0.001 * dt, 0.0005 * dt), rel=1e-12)
+
+
+def test_a_measurement_for_a_given_increment_already_released_is_stale():
+    # The step of 2 s went on without one: its measurement, late, is stale
+    # (not taken, not a duplicate); one for the next stamp is taken.
+    pairer = StepPairer(timeout=0)
+    pairer.add_increment(2 * S, (0.0, 0.0, 0.0), 0)
+    [step] = pairer.pop_ready(0)
+    assert step.measurement is None
+    assert pairer.add_measurement(2 * S, Y) == 'stale_measurement'
+    # The increment again, corrected or not, is a duplicate.
+    assert pairer.add_increment(2 * S, (0.0, 0.0, 0.0), 0) == 'duplicate_increment'
+    assert pairer.add_measurement(3 * S, Y) is None
+    assert pairer.add_increment(3 * S, (0.0, 0.0, 0.0), 0) is None
+    [step] = pairer.pop_ready(0)
+    assert step.measurement == Y
+    # Corrected, its stamp again is a duplicate.
+    assert pairer.add_measurement(3 * S, Y) == 'duplicate_measurement'
+
+
+def test_an_unknown_setting_is_refused_by_name():
+    with pytest.raises(TypeError, match="unknown setting 'max_gap'"):
+        StepPairer().configure(max_gap=1)
+
+
+def test_a_default_pairer_refuses_a_measurement_off_unit_norm_by_more_than_10_percent():
+    pairer = StepPairer()
+    assert pairer.add_measurement(2 * S, (1.09, 0.0, 0.0, 0.0)) is None
+    assert pairer.add_measurement(3 * S, (1.12, 0.0, 0.0, 0.0)) == 'norm_out_of_tolerance'

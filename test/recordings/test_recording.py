@@ -26,6 +26,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_typestore, Stores
 
 from broad_replay import fields_tesla, load, offline, stamps as broad_stamps, TRIALS
+from conftest import REPO
 from ext_observer.core.ahrs.estimator import AhrsParams
 from ext_observer.recordings import bag_io
 from ext_observer.recordings import cdr
@@ -36,7 +37,6 @@ from ext_observer.recordings.example_data import excerpt, LATENCY, REFERENCE_TOP
 from ext_observer.recordings.recording import (attitude_from_imu, node_settings, parameters_from_yaml,
                                     roll_pitch_yaw)
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 # The same float code on the same float64 values in the same order: equal
 # to rounding (measured: 0, bit for bit).

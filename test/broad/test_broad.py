@@ -4,7 +4,7 @@ Tests of the BROAD benchmark (``python -m ext_observer broad``).
 The scoring, the grouping and the page run on synthetic arrays (no h5py, no
 data). The anchors' frame conversions run on a synthetic static sensor
 (their packages are in requirements-test.txt). Where the data is looked for
-runs on temporary folders (the fetch: test_broad_fetch.py). The command end
+runs on temporary folders (the fetch: test_fetch.py). The command end
 to end runs on two short trials of BROAD (see broad_data.py: without the data it fails, or
 skips with EXT_OBSERVER_ALLOW_NO_BROAD=1).
 """

@@ -15,8 +15,8 @@ from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import RawImuPipeline
-from test_core_ahrs_params import (angle_deg, DT, FIELD, first_index, qconj, qexp, qmul, RATE,
-                                   rotate, rotated_field, simulate, still, tilt_deg, turning,
+from test_ahrs_params import (angle_deg, DT, FIELD, first_index, qconj, qexp, qmul, RATE,
+                              rotate, rotated_field, simulate, still, tilt_deg, turning,
                                    wandering)
 
 DEG = math.pi / 180.0

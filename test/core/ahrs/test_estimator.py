@@ -11,54 +11,7 @@ from ext_observer.core.ahrs.compiled import kernels
 from ext_observer.pipeline.batch import estimate_batch
 from ext_observer.core.ahrs.estimator import (AhrsObserver, AhrsParams,
                                     initial_attitude, world_from_enu)
-
-G = 9.81
-# A field of 50 µT pointing north and 60° down (ENU).
-FIELD = 50.0 * np.array([0.0, math.cos(math.radians(60)), -math.sin(math.radians(60))])
-RATE = 200.0
-
-
-def rotate(q, v):
-    """World coordinates of body vectors ``v`` for unit ``q`` (sensor → world)."""
-    v4 = np.concatenate([np.zeros(np.shape(v)[:-1] + (1,)), v], axis=-1)
-    return quat.multiply(quat.multiply(q, v4), quat.conjugate(q))[..., 1:]
-
-
-def synthetic(seconds=60.0, rest=5.0, bias=(0.01, -0.015, 0.008), seed=0,
-              accel=0.0, disturb=None):
-    """
-    Truth and IMU samples: rest, then smooth rotation about changing axes.
-
-    Returns truth (N, 4) and gyr, acc, mag (N, 3); the gyro has a constant
-    ``bias`` and small noise, ``accel`` m/s² of oscillating translation, and
-    ``disturb = (t0, t1, degrees)`` turns the field by that angle about the
-    east axis between t0 and t1 (norm and dip change: a nearby magnet).
-    """
-    rng = np.random.default_rng(seed)
-    n = int(seconds * RATE)
-    t = np.arange(n) / RATE
-    moving = t >= rest
-    omega = np.stack([0.8 * np.sin(0.7 * t), 0.6 * np.cos(0.45 * t + 1.0),
-                      0.9 * np.sin(0.3 * t + 2.0)], axis=1) * moving[:, None]
-    truth = np.empty((n, 4))
-    truth[0] = quat.normalize(np.array([0.9, 0.1, -0.2, 0.3]))
-    for k in range(1, n):
-        truth[k] = quat.multiply(truth[k - 1], quat.exp(np.r_[0.0, omega[k] / (2 * RATE)]))
-    conj = quat.conjugate(truth)
-    lin = accel * np.stack([np.sin(6.9 * t), np.cos(5.3 * t), np.sin(8.2 * t)],
-                           axis=1) * moving[:, None]
-    acc = rotate(conj, np.array([0.0, 0.0, G]) + lin) + rng.normal(0, 0.02, (n, 3))
-    field = np.broadcast_to(FIELD, (n, 3)).copy()
-    if disturb is not None:
-        t0, t1, degrees = disturb
-        a = math.radians(degrees)
-        rot = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
-        inside = (t >= t0) & (t < t1)
-        field[inside] = 1.5 * field[inside] @ rot.T
-    mag = rotate(conj, field) + rng.normal(0, 0.2, (n, 3))
-    gyr = omega + np.asarray(bias) + rng.normal(0, 0.002, (n, 3))
-    return truth, gyr, acc, mag
-
+from synthetic_motion import errors_deg, FIELD, G, RATE, rotate, synthetic
 
 def run_float(gyr, acc, mag, use_mag=True, params=None, variant='extended'):
     est = AhrsObserver(params, use_mag=use_mag, variant=variant)
@@ -66,16 +19,6 @@ def run_float(gyr, acc, mag, use_mag=True, params=None, variant='extended'):
     for k in range(len(gyr)):
         out[k] = est.update(tuple(gyr[k]), tuple(acc[k]), tuple(mag[k]), 1.0 / RATE)
     return out, est
-
-
-def errors_deg(q, truth):
-    """Total, heading and inclination error (degrees) as BROAD scores them."""
-    d = quat.multiply(quat.normalize(q), quat.conjugate(truth))
-    w, z = np.abs(d[..., 0]), d[..., 3]
-    total = 2 * np.arccos(np.clip(w, 0, 1))
-    heading = 2 * np.arctan(np.abs(z / d[..., 0]))
-    incl = 2 * np.arccos(np.clip(np.sqrt(d[..., 0] ** 2 + z ** 2), 0, 1))
-    return np.degrees(total), np.degrees(heading), np.degrees(incl)
 
 
 @pytest.fixture(scope='module')
@@ -206,25 +149,6 @@ def test_the_extension_term_holds_the_estimate_near_s3(motion):
             q = est.update(tuple(gyr[k]), tuple(acc[k]), tuple(mag[k]), 1.0 / RATE)
             defect.append(abs(sum(v * v for v in q) - 1.0))
         assert check(defect), (variant, defect[-1])
-
-
-def test_initial_attitude_from_gravity_and_field(motion):
-    truth, gyr, acc, mag = motion
-    q = np.asarray(initial_attitude(tuple(acc[0]), tuple(mag[0])))
-    total, _, _ = errors_deg(q, truth[0])
-    assert total < 1.0
-    q6 = np.asarray(initial_attitude(tuple(acc[0])))
-    _, _, incl = errors_deg(q6, truth[0])
-    assert incl < 1.0
-
-
-@pytest.mark.parametrize('frame, east', [('enu', (1, 0, 0)), ('nwu', (0, -1, 0)),
-                                         ('ned', (0, 1, 0))])
-def test_world_frames_name_east_as_rep_103_does(frame, east):
-    q = world_from_enu(np.array([1.0, 0.0, 0.0, 0.0]), frame)
-    assert_allclose(rotate(q, np.array([1.0, 0.0, 0.0])), east, atol=1e-15)
-    up = {'enu': (0, 0, 1), 'nwu': (0, 0, 1), 'ned': (0, 0, -1)}[frame]
-    assert_allclose(rotate(q, np.array([0.0, 0.0, 1.0])), up, atol=1e-15)
 
 
 @pytest.mark.parametrize('name, value, match', [

@@ -16,11 +16,12 @@ import time
 import numpy as np
 import pytest
 
+from conftest import REPO
 from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.pipeline.batch import estimate_batch
 
-DATA = os.path.join(os.path.dirname(__file__), 'data')
+DATA = os.path.join(REPO, 'test', 'data')
 EXCERPTS = sorted(f for f in os.listdir(DATA) if f.endswith('.npz'))
 
 needs_numba = pytest.mark.skipif(not compiled_module.compiled_available(),

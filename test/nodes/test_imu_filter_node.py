@@ -28,6 +28,7 @@ from ext_observer.nodes.stream_watch import StreamWatch
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import heading_factor, RawImuPipeline
 from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
+from imu_filter_runs import replay, run_node, samples, turning
 from ros_helpers import installed, overrides, SECOND, values_of
 from test_raw_imu import (connect, Driver, MAG_EVERY, published, replay_lockstep,
                           TOLERANCE)
@@ -54,29 +55,6 @@ imu_filter:
     yaw_offset: 0.3
     declination: 0.1
 """
-
-
-def samples(count, gyr=(0.0, 0.0, 0.2), acc=(0.5, -0.3, 9.7), field=(2e-5, 1e-5, -4e-5)):
-    """A turning body at 100 Hz: (stamp ns, gyr, acc, field) per sample."""
-    return [(START + k * SECOND // 100, gyr, acc, field) for k in range(count)]
-
-
-def replay(spinner, driver, nodes, data):
-    """Publish in lockstep: each sample and its field reach every node first."""
-    deadline = time.monotonic() + 60.0
-    fields0 = [n.pairer.received['measurement'] for n in nodes]
-    samples0 = [n.pairer.received['increment'] for n in nodes]
-    for k, (stamp, gyr, acc, field) in enumerate(data):
-        driver.send_field(stamp, field)
-        while any(n.pairer.received['measurement'] < f0 + k + 1
-                  for n, f0 in zip(nodes, fields0)):
-            spinner.executor.spin_once(timeout_sec=0.01)
-            assert time.monotonic() < deadline, f'field {k} never arrived'
-        driver.send_imu(stamp, gyr, acc)
-        while any(n.pairer.received['increment'] < s0 + k + 1
-                  for n, s0 in zip(nodes, samples0)):
-            spinner.executor.spin_once(timeout_sec=0.01)
-            assert time.monotonic() < deadline, f'sample {k} never arrived'
 
 
 def test_madgwick_params_file_starts_unchanged_warns_once_and_takes_effect(
@@ -266,19 +244,6 @@ def offline(settings, data, use_fields=True):
     return out
 
 
-def turning(count, seed=0):
-    """Samples of a body turning about a changing axis, with noise (seeded)."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for k, (stamp, _, _, _) in enumerate(samples(count)):
-        gyr = tuple(float(v) for v in (0.3 * math.sin(0.02 * k), 0.2, 0.4 * math.cos(0.03 * k))
-                    + rng.normal(0.0, 0.01, 3))
-        acc = tuple(float(v) for v in (0.4, -0.2, 9.7) + rng.normal(0.0, 0.05, 3))
-        field = tuple(float(v) for v in (2e-5, 1e-5, -4e-5) + rng.normal(0.0, 5e-7, 3))
-        out.append((stamp, gyr, acc, field))
-    return out
-
-
 def published_states(driver, stamps):
     return {t: quaternion_from_msg(driver.estimates[t].quaternion) for t in stamps
             if t in driver.estimates}
@@ -288,17 +253,6 @@ def assert_equal_estimates(got, expected):
     assert len(got) >= len(expected) - 1 and len(expected) > 10
     worst = max(np.abs(np.array(got[t]) - np.array(expected[t])).max() for t in got)
     assert worst <= OPTION_TOLERANCE, worst
-
-
-def run_node(spinner, ros_context, data, name, **parameters):
-    node = spinner.add(ImuFilterNode(node_name=name, context=ros_context,
-                                     parameter_overrides=overrides(**parameters)))
-    driver = spinner.add(Driver(ros_context))
-    connect(spinner, driver, node)
-    replay(spinner, driver, [node], data)
-    spinner.spin_until(lambda: len(driver.estimates) >= len(data) - 1, 10.0,
-                       'the estimates')
-    return node, driver
 
 
 def test_a_fixed_calibration_is_removed_from_the_field(ros_context, spinner):

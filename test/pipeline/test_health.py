@@ -17,11 +17,12 @@ import pytest
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.pipeline.health import HEALTH_STATES, health_text, NO_STATE
 from ext_observer.recordings.recording import attitude_from_imu
+from conftest import REPO
+from imu_filter_runs import replay, samples
 from ros_helpers import overrides, values_of
-from test_imu_filter import replay, samples
 from test_raw_imu import connect, Driver
 
-DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data')
+DATA = os.path.join(REPO, 'test', 'data')
 SLOW = '01_undisturbed_slow_rotation_A'
 MAGNET = '28_disturbed_stationary_magnet_A'
 TAU_ACC = 2.0         # s, ahrs.tau_acc: the running mean of the start and of a recovery

@@ -88,7 +88,7 @@ def _run(gyr, acc, velocity=None, compiled=False, given=None, params=None):
 def test_the_core_stays_level_in_a_long_turn_with_the_velocity_and_tilts_without():
     _, gyr, acc, velocity = _turn()
     aided = _tilt_deg(_run(gyr, acc, velocity))
-    # (Without acceleration rejection, which keeps it near level: test_acc_rejection.py.)
+    # (Without acceleration rejection, which keeps it near level: test_accel_rejection.py.)
     plain = _tilt_deg(_run(gyr, acc, params=AhrsParams(acc_reject=0.0)))
     assert aided.max() < 0.01
     assert plain[-1000:].mean() > 10.0

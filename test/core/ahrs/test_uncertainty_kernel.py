@@ -1,0 +1,220 @@
+"""
+The uncertainty's kernel (``uncertainty_kernel.py``) against its documented model (no ROS).
+
+The heading variance's growth with the gyro's noise, the model written as
+2 × 2 matrices per axis against the kernel's scalar arithmetic, the
+node's sample in one call (``sample_step``) against the steps one at a
+time and what it refuses, a start's variance and the published sums. The
+covariance end to end (the pipeline, the node, its coverage bounds on
+BROAD): test_covariance.py.
+"""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from ext_observer.core.ahrs import uncertainty_kernel
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, GRAVITY, UncertaintyParams
+
+
+@pytest.mark.parametrize('rate', [(0.0, 0.0, 0.0), (0.3, -0.4, 1.2)])
+def test_the_heading_variance_grows_with_the_gyros_noise_in_6d(rate):
+    # No bias (known to be zero) and no correction of the heading: each
+    # sample adds the gyro's angle variance, (σ² + σ_r² |ω|²) dt: a random walk.
+    params = UncertaintyParams(bias_std=0.0, bias_init=0.0, gyro_noise=2e-3,
+                               gyro_rate_noise=1e-2, stamp_error=0.0)
+    dt, count = 0.01, 1000
+    tracker = AttitudeUncertainty(params, use_mag=False)
+    tracker.start(dt)
+    tracker.step(dt, rate, (1.0, 0.0, 0.0, 0.0), False)
+    before = tracker.heading_variance
+    for _ in range(count):
+        tracker.step(dt, rate, (1.0, 0.0, 0.0, 0.0), False)
+    w2 = sum(v * v for v in rate)
+    expected = count * (2e-3 ** 2 + 1e-2 ** 2 * w2) * dt
+    assert tracker.heading_variance - before == pytest.approx(expected, rel=1e-9)
+
+
+def _rotation(q):
+    """The rotation matrix of ``q`` (any nonzero norm), body → world."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def test_the_uncertainty_is_its_documented_model_in_matrix_form():
+    # core/ahrs/uncertainty.py's model, written here as 2×2 matrices per axis
+    # (x = [θ, β]: F P Fᵀ + Q between samples, the rest and the inclination
+    # corrections as congruences plus their noise), against the kernel's
+    # scalar arithmetic, over samples of changing intervals, rates,
+    # attitudes and rest: equal to rounding. 6D: nothing corrects the heading.
+    params = UncertaintyParams(gyro_noise=3e-3, gyro_rate_noise=2e-2, bias_std=4e-3,
+                               bias_time=30.0, bias_init=1e-2, acc_noise=0.05,
+                               inclination_floor=0.0, heading_floor=0.0, stamp_error=2e-3)
+    tau_acc, tau_rest = 1.5, 0.7
+    tracker = AttitudeUncertainty(params, tau_acc=tau_acc, tau_rest=tau_rest, use_mag=False)
+    rng = np.random.default_rng(31)
+    dt = 0.01
+    tracker.start(dt)
+    r_acc = (0.05 / GRAVITY) ** 2
+    tilt = np.array([[r_acc / dt, 0.0], [0.0, 1e-2 ** 2]])
+    heading = np.array([[3e-3 ** 2 * dt, 0.0], [0.0, 1e-2 ** 2]])
+    for k in range(400):
+        dt = (0.01, 0.005, 0.02)[k // 100 % 3]
+        rate = rng.normal(0.0, 1.0, 3)
+        q = rng.normal(0.0, 1.0, 4)
+        rest = k % 50 < 20
+        tracker.step(dt, tuple(rate), tuple(q), rest)
+        phi = math.exp(-dt / 30.0)
+        f = np.array([[1.0, dt], [0.0, phi]])
+        noise = np.diag([(3e-3 ** 2 + (2e-2 * np.linalg.norm(rate)) ** 2) * dt,
+                         4e-3 ** 2 * (1.0 - phi * phi)])
+        tilt = f @ tilt @ f.T + noise
+        heading = f @ heading @ f.T + noise
+        if rest:
+            kr = 1.0 - math.exp(-dt / tau_rest)
+            g = np.diag([1.0, 1.0 - kr])
+            learned = np.diag([0.0, kr * kr * 3e-3 ** 2 / dt])
+            tilt = g @ tilt @ g.T + learned
+            heading = g @ heading @ g.T + learned
+        ka = 1.0 - math.exp(-dt / tau_acc)
+        h = np.diag([1.0 - ka, 1.0])
+        tilt = h @ tilt @ h.T + np.diag([ka * ka * r_acc / dt, 0.0])
+        vertical = (_rotation(q) @ rate)[2]
+        stamp2 = 2e-3 ** 2
+        assert tracker.tilt_variance == pytest.approx(
+            tilt[0, 0] + 0.5 * stamp2 * (rate @ rate - vertical ** 2), rel=1e-9)
+        assert tracker.heading_variance == pytest.approx(
+            heading[0, 0] + stamp2 * vertical ** 2, rel=1e-9)
+
+
+ROLLED = (0.0, 6.9367, 6.9367)  # m/s²: gravity seen rolled by 45°
+
+
+def _pair(use_mag=False):
+    """An estimator and its uncertainty, started from one still sample rolled 45° (100 Hz)."""
+    est = AhrsObserver(AhrsParams(), use_mag=use_mag)
+    tracker = AttitudeUncertainty.for_estimator(est.params, use_mag=use_mag)
+    est.update((0.0, 0.0, 0.0), ROLLED, None, 0.01)
+    tracker.start(0.01, ROLLED)
+    return est, tracker
+
+
+@pytest.mark.parametrize('use_mag', [False, True])
+def test_the_one_call_sample_step_is_the_general_steps(use_mag):
+    # sample_step (the node's usual sample in one call) against the steps
+    # one at a time: the estimate, and the covariance it writes (diag(V_t,
+    # V_t, V_h), zeros elsewhere), through rest (the bias learned) and a turn
+    # of 1.75 rad about the body's z (every component of the estimate large),
+    # the interval changing now and then.
+    # In 9D the samples come without a field (fields have their own calls):
+    # the whole state stays that of the general steps, the field's part too.
+    one, one_tracker = _pair(use_mag)
+    general, tracker = _pair(use_mag)
+    cov = np.full(9, np.nan)
+    rng = np.random.default_rng(5)
+    for k in range(600):
+        moving = k >= 300
+        dt = (0.01, 0.005, 0.02)[k // 50 % 3]
+        gyr = tuple(rng.normal(0.0, 0.002, 3) + (0.0, 0.0, 0.5 if moving else 0.0))
+        acc = tuple(np.array(ROLLED) + rng.normal(0.0, 0.05, 3))
+        outcome, *q = uncertainty_kernel.sample_step(
+            one.flat_state, one_tracker.state, cov, *gyr, *acc, dt, 0.01)
+        assert outcome == uncertainty_kernel.SAMPLE_OK
+        expected = general.update(gyr, acc, None, dt)
+        # 0.005 s to 0.02 s is a hole: the step keeps the usual interval.
+        hole, usual = general.hole_variance, general.step_interval
+        tracker.step(usual, gyr, expected, general.rest, general.bias_variance,
+                     general.clip_variance, acc,
+                     (dt - usual, hole, general.hole_restart) if hole else None)
+        assert tuple(q) == tuple(expected)
+        assert tuple(cov) == tuple(tracker.covariance)
+        t, h = tracker.tilt_variance, tracker.heading_variance
+        assert tuple(cov) == (t, 0.0, 0.0, 0.0, t, 0.0, 0.0, 0.0, h)
+        assert np.array_equal(np.array(one.flat_state, dtype=float),
+                              np.array(general.flat_state, dtype=float), equal_nan=True)
+    assert general.rest is False and tracker.heading_variance > 0.0
+    assert min(abs(v) for v in general.q) > 0.1
+
+
+def test_the_one_call_sample_step_refuses_what_it_cannot_run():
+    est = AhrsObserver(AhrsParams(), use_mag=False)
+    tracker = AttitudeUncertainty.for_estimator(est.params, use_mag=False)
+    cov = np.zeros(9)
+    step = uncertainty_kernel.sample_step
+    still = (0.0, 0.0, 0.0) + ROLLED
+    assert step(est.flat_state, tracker.state, cov, *still, 0.01, 0.01)[0] == (
+        uncertainty_kernel.SAMPLE_NOT_STARTED)
+    est, tracker = _pair()
+    for dt in (0.0, -0.01, math.inf, math.nan):
+        assert step(est.flat_state, tracker.state, cov, *still, dt, 0.01)[0] == (
+            uncertainty_kernel.SAMPLE_BAD_DT), dt
+    assert not cov.any()  # nothing written
+    # The guard: |q̂̄q̂ − 1| above max_residual fails, at it passes.
+    turn = (3.0, -2.0, 1.0) + ROLLED
+    _, *q = step(copy.copy(est.flat_state), copy.copy(tracker.state), cov, *turn, 0.01, 1.0)
+    residual = abs(sum(v * v for v in q) - 1.0)
+    assert residual > 0.0
+    for max_residual, expected in ((residual, uncertainty_kernel.SAMPLE_OK),
+                                   (0.5 * residual, uncertainty_kernel.SAMPLE_RESIDUAL)):
+        outcome = step(copy.copy(est.flat_state), copy.copy(tracker.state), cov, *turn, 0.01,
+                       max_residual)[0]
+        assert outcome == expected
+
+
+@pytest.mark.parametrize('first, then', [((3.0, 0.0, GRAVITY), (0.5, -0.3, GRAVITY + 0.2)),
+                                         ((0.3, 0.0, GRAVITY), (3.0, -2.0, GRAVITY + 0.5))])
+def test_a_starts_variance_is_its_documented_model_then_decays_sample_by_sample(first, then):
+    # uncertainty_start's model (its docstring): until tau_acc, the running
+    # mean m of e = max(dz², (fx² + fy²)/2)/g² (and the first sample's e, if
+    # larger) owes atan(√max(m, e₁))² c/(c + t) per horizontal axis; then the
+    # low-pass forgets it by (1 − k)² per sample, to zero below 1e-16. The
+    # first sample's error larger than the rest's, then smaller (the mean
+    # rules).
+    tracker = AttitudeUncertainty.for_estimator(AhrsParams(tau_acc=0.2), use_mag=False)
+    dt = 0.01
+    tracker.start(dt)
+    u = tracker.state
+    K, C = uncertainty_kernel, uncertainty_kernel.START_CORRELATION
+    u[K.U_START_T] = u[K.U_START_N] = u[K.U_START_M] = u[K.U_START_V] = u[K.U_START_F] = 0.0
+    forces = [first] + [then] * 40
+    errors = [max((fz - GRAVITY) ** 2, 0.5 * (fx * fx + fy * fy)) / GRAVITY ** 2
+              for fx, fy, fz in forces]
+    tau, k = u[K.U_TAU_ACC], u[K.U_K_ACC]   # the accelerometer's low-pass (0.25 s here)
+    assert k == pytest.approx(1.0 - math.exp(-dt / tau), rel=1e-12)
+    phases = []
+    for n, f in enumerate(forces, start=1):
+        t, before = u[K.U_START_T], u[K.U_START_V]
+        K.uncertainty_start(u, dt, *f)
+        if t < tau:
+            a = math.atan(math.sqrt(max(np.mean(errors[:n]), errors[0])))
+            assert u[K.U_START_V] == pytest.approx(a * a * C / (C + t), rel=1e-9), n
+        else:
+            assert u[K.U_START_V] == pytest.approx((1.0 - k) ** 2 * before, rel=1e-12), n
+        phases.append(t < tau)
+    assert abs(sum(phases) - round(tau / dt)) <= 1 and not phases[-1]
+    assert u[K.U_START_V] > 1e-6
+
+
+def test_the_published_variances_are_the_sum_of_their_parts_and_b_the_larger():
+    # uncertainty_variances' sums, each part nonzero and distinct; the bias
+    # variance B the larger of its own and the estimator's, exactly (also
+    # when equal).
+    K = uncertainty_kernel
+    u = [0.0] * K.U_SIZE
+    parts = dict(U_PT=1.0, U_START_V=2.0, U_TILT_FLOOR=4.0, U_STAMP2=8.0, U_WH2=16.0,
+                 U_PH=32.0, U_UNKNOWN=64.0, U_HEADING_SET=1.0, U_HEADING_FLOOR=128.0,
+                 U_CALIBRATION=256.0, U_WZ2=512.0, U_HS=3.0)
+    for name, value in parts.items():
+        u[getattr(K, name)] = value
+    t, h = K.uncertainty_variances(u)
+    assert t == 1.0 + 2.0 + 4.0 + 0.5 * 8.0 * 16.0
+    assert h == 32.0 + 64.0 + 1.0 * (128.0 + 256.0) + 8.0 * 512.0 + 3.0 * 3.0
+    for before, var, after in ((2e-6, 1e-6, 2e-6), (1e-6, 2e-6, 2e-6), (1e-6, 1e-6, 1e-6)):
+        u[K.U_B] = before
+        K.uncertainty_bias(u, var)
+        assert u[K.U_B] == after
