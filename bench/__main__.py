@@ -31,7 +31,7 @@ SECTIONS = ('batch', 'accuracy', 'nodes', 'profile', 'raw_imu', 'compiled', 'loa
 # and verdict (its output goes to stderr here) and writes them with --json.
 RAW_IMU = (
     ('node_events', ['bench.imu_filter_cpu', '--executor', 'events', '--seconds', '8',
-                     '--rounds', '5', '--floor']),
+                     '--rounds', '5', '--serialized']),
     ('node_single', ['bench.imu_filter_cpu', '--executor', 'single', '--seconds', '8',
                      '--rounds', '3']),
     ('direct', ['bench.raw_imu_direct']),

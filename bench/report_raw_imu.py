@@ -13,7 +13,8 @@ import statistics
 
 from bench.broad_batch import BATCH_GOAL
 from bench.machine import load_range
-from bench.imu_filter_cpu import FLOOR, NODE_GOAL, short_text, verdict
+from bench.imu_filter_cpu import (FLOOR, NODE_GOAL, RAW_RELAY, SERIALIZED_GOAL, SERIALIZED_AIM,
+                           short_text, TYPED, verdict)
 
 HEADING = '6. Raw-IMU estimator (imu_filter_node)'
 EXECUTOR_NAMES = {'events': 'EventsExecutor (the default)', 'single': 'SingleThreadedExecutor'}
@@ -51,9 +52,33 @@ def _node_verdict(node, where=': see section 6'):
     return text + (f' ({"; ".join(notes)})' if notes else '')
 
 
+def _serialized_row(node):
+    """The serialized node against the typed relay, same run: the goal's row, or None."""
+    if not _ok(node) or RAW_RELAY not in node.get('runs', {}):
+        return None
+    cpu = {label: [r['cpu_us_per_sample'] for r in rows] for label, rows in node['runs'].items()}
+    relay = statistics.median(cpu['relay'])
+    ratio = statistics.median(cpu['imu_filter']) / relay
+    rounds = [f / r for f, r in zip(cpu['imu_filter'], cpu['relay'])]
+    raw = statistics.median(cpu[RAW_RELAY]) / relay
+    goal = (f'node CPU per IMU sample (1 kHz IMU, 100 Hz field, `serialized_io` true, the '
+            f'default) ≤ {SERIALIZED_GOAL:g}× a typed rclpy relay\'s in the same run '
+            f'(aim {SERIALIZED_AIM:g}×), EventsExecutor')
+    measured = (f'{ratio:.2f}× (imu_filter {_us(ratio * relay)}, relay {_us(relay)}; medians '
+                f'of {node["rounds"]}, rounds {min(rounds):.2f}–{max(rounds):.2f}); the relay on '
+                f'bytes ({RAW_RELAY}) {raw:.2f}×')
+    text = verdict(ratio <= SERIALIZED_GOAL)
+    if ratio <= SERIALIZED_GOAL:
+        text += f' (the aim {verdict(ratio <= SERIALIZED_AIM)})'
+    return [goal, measured, text]
+
+
 def targets_section(raw):
     """The raw-IMU node's speed targets: each goal, what was measured, met or not met."""
     rows = []
+    serialized = _serialized_row(raw.get('node_events'))
+    if serialized is not None:
+        rows.append(serialized)
     for key in ('node_events', 'node_single'):
         node = raw.get(key)
         if node is None:
@@ -92,7 +117,8 @@ def _anchor(heading):
 
 def _node_rows(node, executor):
     rows = []
-    for label in [t for t in ('imu_filter', FLOOR, 'relay') if t in node['runs']]:
+    for label in [t for t in ('imu_filter', TYPED, FLOOR, RAW_RELAY, 'relay')
+                  if t in node['runs']]:
         runs = node['runs'][label]
         cpu = ', '.join(f'{r["cpu_us_per_sample"]:.0f}' for r in runs)
         rows.append([f'{label} ({executor})', f'{node["medians"][label]:.1f} µs ({cpu})',
@@ -120,8 +146,11 @@ def section(raw):
             f'samples; {first["seconds"]:g} s per run, relay and filter runs interleaved, '
             'medians. `python -m bench.imu_filter_cpu --executor events|single --seconds '
             f'{first["seconds"]:g} --rounds N` prints the same table and the verdict; with '
-            f'`--floor` (the events runs here) also `{FLOOR}`, the node cut down to the '
-            'estimate\'s arithmetic and its outputs (`bench.imu_filter_cpu.step_only_node`).', '',
+            f'`--floor` also `{FLOOR}`, the node cut down to the '
+            'estimate\'s arithmetic and its outputs (`bench.imu_filter_cpu.step_only_node`); with '
+            f'`--serialized` (the events runs here) also `{TYPED}` (the node with '
+            f'`serialized_io` false) and `{RAW_RELAY}` (the relay on bytes, '
+            '`bench.imu_filter_cpu.RawImuRelay`).', '',
             _table(['target (executor)', 'CPU per IMU sample, median (runs)',
                     'outputs received (fewest) / samples', 'achieved rate (slowest)'], rows), '']
         for executor, node in nodes:

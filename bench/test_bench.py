@@ -250,6 +250,29 @@ def test_report_renders_the_raw_imu_goals_and_section():
     assert 'not run: no BROAD data | not measured |' in text
 
 
+def _serialized_row(text):
+    return next(line for line in text.splitlines() if '`serialized_io` true' in line)
+
+
+def test_report_renders_the_serialized_node_against_the_typed_relay():
+    from bench import report_raw_imu
+    from bench.imu_filter_cpu import RAW_RELAY, summarize, TYPED
+    node = _node_result([110, 130, 120], [200, 210, 190])
+    extra = _node_runs([100, 105, 95], [250, 240, 260])
+    node['runs'][RAW_RELAY], node['runs'][TYPED] = extra['imu_filter'], extra['relay']
+    node.update(summarize(node['runs']))
+    row = _serialized_row(report_raw_imu.targets_section({'node_events': node}))
+    # 120 / 200: within 0.6, not within the aim 0.4; the relay on bytes 100 / 200.
+    assert '0.60× (imu_filter 120.0 µs, relay 200.0 µs; medians of 3, rounds 0.55–0.63)' in row
+    assert f'({RAW_RELAY}) 0.50×' in row and row.endswith('| met (the aim not met) |')
+    node['runs']['imu_filter'] = extra['relay']
+    node.update(summarize(node['runs']))
+    row = _serialized_row(report_raw_imu.targets_section({'node_events': node}))
+    assert row.endswith('| not met |')
+    section = report_raw_imu.section({'node_events': node})
+    assert f'| {TYPED} (events) |' in section and f'| {RAW_RELAY} (events) |' in section
+
+
 def test_report_renders_the_compiled_kernels_goals_from_the_figures():
     from bench import report_compiled
     from bench.compiled_kernels import as_json, markdown

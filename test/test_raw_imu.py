@@ -120,7 +120,7 @@ class Driver(Node):
 def connect(spinner, driver, *observers):
     spinner.spin_until(
         lambda: (driver.imu_publisher.get_subscription_count() == len(observers)
-                 and all(o._publish_imu for o in observers)),
+                 and all(o._publish_imu and o._publish_estimate for o in observers)),
         10.0, 'the subscriptions')
 
 

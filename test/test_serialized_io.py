@@ -106,7 +106,7 @@ def test_serialized_and_typed_paths_publish_the_same_bytes(ros_context, spinner,
                                            serialized_io=p == 'serialized', **settings)))
              for p in PATHS]
     feeder = spinner.add(Feeder(ros_context))
-    spinner.spin_until(lambda: all(n._publish_imu for n in nodes)
+    spinner.spin_until(lambda: all(n._publish_imu and n._publish_estimate for n in nodes)
                        and all(p.get_subscription_count() == 1 for p in feeder.imu + feeder.mag)
                        and all(feeder.count_publishers(f'/{p}/attitude_estimate') == 1
                                for p in PATHS), 10.0, 'the endpoints')

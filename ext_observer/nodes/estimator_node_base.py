@@ -9,7 +9,8 @@ else is written here once, in :class:`EstimatorNode`:
 - the inputs' QoS (the sensor-data profile, overridable) and the watch for
   incompatible peers (:class:`~ext_observer.nodes.node_common.QosWatch`);
 - the outputs ``attitude_estimate`` and ``imu/data``, and whether anyone
-  subscribes to ``imu/data`` (it goes out only then);
+  subscribes to each (``imu/data`` goes out only then, and
+  ``imu_filter_node``'s ``attitude_estimate`` too);
 - resets: a backward jump of the input stamps, of the node's clock or a
   switch of its time source, a forward gap (``forward_gap_action``), the
   service ``~/reset``; reinitializations by the divergence guard; each
@@ -118,7 +119,9 @@ class EstimatorNode(Node):
         output_qos = QoSProfile(depth=depth)
         self.estimate_publisher = self.create_publisher(
             QuaternionStamped, 'attitude_estimate', output_qos,
-            event_callbacks=self.qos.publisher('attitude_estimate', output_qos))
+            event_callbacks=self.qos.publisher('attitude_estimate', output_qos,
+                                               matched=self.estimate_matched_callback))
+        self._publish_estimate = self.estimate_publisher.get_subscription_count() > 0
         self.imu_publisher = self.create_publisher(
             Imu, 'imu/data', output_qos,
             event_callbacks=self.qos.publisher('imu/data', output_qos,
@@ -206,6 +209,10 @@ class EstimatorNode(Node):
     def imu_matched_callback(self, info):
         """A subscription to ``imu/data`` came or went."""
         self._publish_imu = info.current_count > 0
+
+    def estimate_matched_callback(self, info):
+        """A subscription to ``attitude_estimate`` came or went."""
+        self._publish_estimate = info.current_count > 0
 
     # Resets ---------------------------------------------------------------
 
@@ -400,5 +407,9 @@ class EstimatorNode(Node):
 
     def diagnostic_callback(self):
         """Publish :meth:`status` on ``/diagnostics``."""
+        # The outputs go out while someone subscribes: the matched events say
+        # so at once, this keeps it right should one be missed.
+        self._publish_imu = self.imu_publisher.get_subscription_count() > 0
+        self._publish_estimate = self.estimate_publisher.get_subscription_count() > 0
         self.diagnostics_publisher.publish(
             diagnostic_array(self.get_clock().now().to_msg(), [self.status()]))

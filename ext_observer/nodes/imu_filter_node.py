@@ -16,7 +16,7 @@ frame's axes, or ``orientation_stddev``'s where ``orientation_covariance_mode``
 says so (``fixed``; ``auto``, the default, when it is set); only while
 subscribed) and ``attitude_estimate``
 (``QuaternionStamped``, the ambient estimate, not normalized: its distance
-to S³ is what the extension term holds small); ``/diagnostics`` every
+to S³ is what the extension term holds small; only while subscribed too); ``/diagnostics`` every
 ``diagnostic_period``; as imu_filter_madgwick, with ``publish_debug_topics``
 ``imu/rpy/filtered``, ``imu/rpy/raw`` (and ``imu/steady_state``), with
 ``publish_tf`` the orientation on ``/tf`` where tf2_ros imports; the services
@@ -220,11 +220,12 @@ class ImuFilterNode(EstimatorNode):
         if state is None:
             return
         w, x, y, z = state
-        out = self._estimate_msg
-        out.header.stamp = header_stamp
-        q = out.quaternion
-        q.w, q.x, q.y, q.z = w, x, y, z
-        self.estimate_publisher.publish(out)
+        if self._publish_estimate:
+            out = self._estimate_msg
+            out.header.stamp = header_stamp
+            q = out.quaternion
+            q.w, q.x, q.y, q.z = w, x, y, z
+            self.estimate_publisher.publish(out)
         if self.rpy_filtered_publisher is not None:
             self._publish_debug(msg.header, state, (a.x, a.y, a.z))
         if self.tf_broadcaster is not None:
@@ -279,7 +280,8 @@ class ImuFilterNode(EstimatorNode):
         if state is None:
             return
         w, x, y, z = state
-        self.estimate_publisher.publish(self._estimate_bytes(stamp, w, x, y, z))
+        if self._publish_estimate:
+            self.estimate_publisher.publish(self._estimate_bytes(stamp, w, x, y, z))
         if self.rpy_filtered_publisher is not None or self.tf_broadcaster is not None:
             header = Header(frame_id=frame_id(raw))
             header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)

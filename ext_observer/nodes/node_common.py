@@ -18,6 +18,7 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import (DurabilityPolicy, qos_check_compatible, qos_policy_name_from_kind,
                        QoSCompatibility, ReliabilityPolicy)
+from rclpy.task import Future
 
 from ext_observer.nodes.ros_parameters import NodeParameters, ParameterError
 from ext_observer.pipeline.parameter_specs import ParameterSpec
@@ -265,7 +266,8 @@ LEVEL_NAMES = {
 # Executors of the nodes' main (``--executor``); the first is the default.
 EXECUTORS = ('events', 'single')
 # Spin timeout of the EventsExecutor loop, s. rclpy 7.1's EventsExecutor
-# busy-waits when spun without a timeout; with a finite one it sleeps.
+# busy-waits in spin() and never returns from it at shutdown; spun until a
+# future with a finite timeout it sleeps, and returns.
 EVENTS_SPIN_TIMEOUT = 0.1
 
 
@@ -322,8 +324,11 @@ def _spin(node, kind):
         if kind == 'single':
             executor.spin()
         else:
+            # Until a future that never completes: the executor's own loop
+            # runs every callback of the timeout, where spin_once returned to
+            # Python after each (a wake-up and the GIL twice per message).
             while context.ok():
-                executor.spin_once(timeout_sec=EVENTS_SPIN_TIMEOUT)
+                executor.spin_until_future_complete(Future(), timeout_sec=EVENTS_SPIN_TIMEOUT)
     finally:
         executor.shutdown()
 
@@ -340,8 +345,8 @@ def run_node(node_class, args=None):
 
     The executor is chosen on the command line, before ``--ros-args``:
     ``--executor events`` (the default: ``rclpy.experimental.EventsExecutor``
-    spun with ``spin_once(timeout_sec=0.1)`` in a loop while the context is
-    up) or ``--executor single`` (``SingleThreadedExecutor``, what
+    spun with ``spin_until_future_complete(future, timeout_sec=0.1)`` on a
+    future that never completes, in a loop while the context is up) or ``--executor single`` (``SingleThreadedExecutor``, what
     ``rclpy.spin`` uses).
 
     Parameters
