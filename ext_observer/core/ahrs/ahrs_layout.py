@@ -101,6 +101,7 @@ S_HOLE_END = AHRS.field('hole_end', 4)
 # rad: the inclination's error σ that holes and clipped samples left beyond the
 # usual, forgotten at the low-pass's pace (0: none).
 S_INC_SIGMA = AHRS.field('inc_sigma')
+S_STEPS = AHRS.field('steps')  # the usual steps this sample stands for (a hole's: more than 1)
 S_CLIP_LEFT = AHRS.field('clip_left')  # s of the recovery from a clipped sample still to run
 
 # The velocity aid (velocity_kernel): the body's velocity at the IMU, IMU frame.

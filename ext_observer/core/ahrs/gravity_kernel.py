@@ -15,7 +15,7 @@ from .accel_rejection import acc_rotation
 from .ahrs_filters import rotate, steady
 from .ahrs_layout import (C_BW, C_DT, C_K_ACC, C_K_REST, P_ACC_REJECT, P_MOTION_BIAS, P_REST_ACC,
                           P_TAU_ACC, S_ACC_REJ, S_ACC_STILL, S_INC_SIGMA, S_LP, S_Q, S_REST_ACC,
-                          S_START, S_START_N)
+                          S_START, S_START_N, S_STEPS)
 from .bias_kernel import learn_bias, rlp_steady
 from .hole_kernel import RECOVERING, acc_deviation
 from .velocity_kernel import velocity_removed
@@ -57,10 +57,12 @@ def ahrs_update_acc(s, ax, ay, az):
         b0, b1, b2, a1, a2 = s[C_BW], s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
         s1x, s1y, s1z = s[S_LP], s[S_LP + 1], s[S_LP + 2]
         s2x, s2y, s2z = s[S_LP + 3], s[S_LP + 4], s[S_LP + 5]
-        fx, fy, fz = b0 * vx + s1x, b0 * vy + s1y, b0 * vz + s1z
-        s1x, s1y, s1z = (b1 * vx - a1 * fx + s2x, b1 * vy - a1 * fy + s2y,
-                         b1 * vz - a1 * fz + s2z)
-        s2x, s2y, s2z = b2 * vx - a2 * fx, b2 * vy - a2 * fy, b2 * vz - a2 * fz
+        # A hole's sample stands for the steps lost too (held across them).
+        for _ in range(max(int(s[S_STEPS] + 0.5), 1)):
+            fx, fy, fz = b0 * vx + s1x, b0 * vy + s1y, b0 * vz + s1z
+            s1x, s1y, s1z = (b1 * vx - a1 * fx + s2x, b1 * vy - a1 * fy + s2y,
+                             b1 * vz - a1 * fz + s2z)
+            s2x, s2y, s2z = b2 * vx - a2 * fx, b2 * vy - a2 * fy, b2 * vz - a2 * fz
 
     # δ: the rotation taking f/|f| (or, f rejected, the gyro's vertical) to
     # the vertical, [1 + u_z, u_y, −u_x, 0] (|δ| = 0 only shrinks q̂).
@@ -69,6 +71,8 @@ def ahrs_update_acc(s, ax, ay, az):
     dw, dx, dy = acc_rotation(s, fx, fy, fz, dt, starting or recovering)
     # q̂ + κ (δ ⊗ q̂ − q̂) = r ⊗ q̂ with r = (1 − κ) + κ δ.
     kap = s[C_K_ACC]
+    if s[S_STEPS] > 1.0:
+        kap = 1.0 - (1.0 - kap) ** s[S_STEPS]
     rw, rx, ry = 1.0 - kap + kap * dw, kap * dx, kap * dy
     s[S_Q] = rw * w - rx * x - ry * y
     s[S_Q + 1] = rw * x + rx * w + ry * z

@@ -25,7 +25,7 @@ import math
 
 from .ahrs_layout import (C_DT, MC0, P_HAS_CAL, P_TAU_ACC, S_ACC_DEV, S_CAL_TURN, S_CLIP_LEFT, S_CAL_WAIT,
                           S_GYR_LAST, S_GYR_PREV, S_HOLE_END, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR,
-                          S_HOLES, S_INC_SIGMA, S_INIT, S_LP,
+                          S_HOLES, S_INC_SIGMA, S_INIT, S_STEPS, S_LP,
                           S_Q, S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
 from .magcal_kernel import mc_restart
 
@@ -109,6 +109,7 @@ def hole_starts(s, dt):
     """
     if s[S_INIT] != 0.0 and dt > HOLE_FACTOR * s[C_DT] and s[S_HOLE_RUN] < HOLE_RUN_TIME:
         s[S_HOLE_RUN] += dt
+        s[S_STEPS] = dt / s[C_DT]
         return True
     hole_ends(s)
     return False
@@ -118,6 +119,7 @@ def hole_ends(s):
     """A usual step: no hole in a row, nothing to add to the covariance."""
     s[S_HOLE_RUN] = 0.0
     s[S_HOLE_VAR] = 0.0
+    s[S_STEPS] = 1.0
 
 
 def hole_rate(s, gx, gy, gz, dt):
