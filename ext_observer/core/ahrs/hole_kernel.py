@@ -7,11 +7,14 @@ then integrates the rotation across the hole from the gyro samples on both
 sides (as the usual steps would have, had the rate changed linearly
 across the hole), keeps the coefficients of the usual interval (a one-off long
 ``dt`` would upset the Butterworth low-pass, whose states belong to its
-coefficients), says how unsure the bridge is (:func:`hole_variance`, which
-the covariance adds), corrects the bridge on the next sample from the
-rate's slopes beside a short hole (:func:`hole_end_fix`), and where the
-hole's variance is large starts the inclination's mean again, as after a
-start or a clipped gyro, from the running mean of the next specific forces.
+coefficients; the hole's sample stands for the steps it closes in the
+inclination instead, ``S_STEPS``), says how unsure the bridge is
+(:func:`hole_variance`, which the covariance adds), corrects the bridge on
+the next sample from the rate's slopes beside a short hole
+(:func:`hole_end_fix`), and where the hole's variance is large starts the
+inclination's mean again, from the running mean of the next specific forces
+with the old one weighed (:func:`restart_weighted`; a clipped stretch's
+error weighs it alike, :func:`clip_after`).
 The heading keeps its mean of the fields, gyro-held across the hole (the
 first fields after it would bring the inclination's error there, times
 ``tan(dip)``). The magnetometer calibration learns nothing across a hole it
@@ -62,7 +65,7 @@ HOLE_END_SHARE = 0.5
 # miss, summed along a clipped stretch (the rate stays beyond the range): the
 # clip's error σ that weighs the inclination's mean against new samples.
 # Chosen on the even-numbered BROAD trials, gyro clipped at ±250 °/s
-# (docs/raw_imu.md#a-clipped-gyro): 1 (the whole range) restarts the mean
+# (docs/raw_imu.md#wherever-the-robot-starts): 1 (the whole range) restarts the mean
 # in fast translation too, where one sample's vertical is worse than the gyro's.
 CLIP_SHARE = 0.2
 # While the inclination's error σ from holes and clipped samples is above
@@ -74,7 +77,7 @@ GRAVITY = 9.80665
 
 
 def restart_mean(s):
-    """Start (again) from a running mean of the vertical: a start, a clipped gyro, a hole."""
+    """Start from a running mean of the vertical, as at a start (nothing of the old weighed)."""
     s[S_START] = 0.0
     s[S_START_N] = 0.0
     s[S_LP + 3] = 0.0
