@@ -535,3 +535,16 @@ def test_the_bound_margin_is_a_share_of_each_range_and_the_smaller_counts():
     assert bound_margin({'within_2sigma': 0.90, 'mean_z2': 1.0}) == pytest.approx(0.0)
     assert bound_margin({'within_2sigma': 0.945, 'mean_z2': 0.25}) == pytest.approx(-0.5)
     assert bound_margin({'within_2sigma': 0.981, 'mean_z2': 1.0}) == pytest.approx(0.1)
+
+
+def test_a_holes_step_corrects_the_inclination_variance_as_the_steps_it_missed():
+    from ext_observer.core.ahrs import uncertainty_kernel as uk
+    tracker = AttitudeUncertainty(use_mag=False)
+    u = tracker._u
+    uk.uncertainty_coefficients(u, 0.01)
+    u[uk.U_PT], u[uk.U_CT], u[uk.U_B] = 1e-3, 1e-5, 0.0
+    uk.uncertainty_hole(u, 0.02, 0.0, True)  # two steps missed: three in all
+    a = (1.0 - u[uk.U_K_ACC]) ** 2
+    g = u[uk.U_GYRO_NOISE]
+    assert u[uk.U_PT] == pytest.approx(a * a * 1e-3 + g * g * 0.02)
+    assert u[uk.U_CT] == pytest.approx(a * 1e-5)

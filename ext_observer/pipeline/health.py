@@ -11,7 +11,8 @@ A state more is one line in ``_STATES`` (its name and whether it is
 active); :data:`HEALTH_STATES` and the Recording's bits follow the table.
 """
 
-from ext_observer.core.ahrs.ahrs_layout import (P_TAU_ACC, S_ACC_REJ, S_CLIPPED, S_CLIPS,
+from ext_observer.core.ahrs.ahrs_layout import (P_TAU_ACC, S_ACC_REJ, S_CLIP_LEFT, S_CLIPPED,
+                                                 S_CLIPS,
                                                  S_INIT, S_MAG_DIST, S_REST, S_START,
                                                  S_VEL_USED)
 
@@ -44,17 +45,18 @@ class HealthWatch:
     """
     The health of one :class:`~ext_observer.pipeline.raw_imu.RawImuPipeline`.
 
-    The start and a recovery from a clipped gyro both run the inclination's
-    running mean (the kernel's start slot below ``tau_acc``); what tells them
-    apart is remembered here: whether the mean has handed over since the
+    The start runs the inclination's running mean (the kernel's start slot
+    below ``tau_acc``), and so may a clipped stretch or a hole; what tells
+    them apart is remembered here: whether the mean has handed over since the
     estimator (re)started (the slot going back without a clip is a restart),
-    and whether a sample clipped since the last call. Asked at every sample
+    and whether a sample clipped since the last call. A clip's recovery is
+    the kernel's (``tau_acc`` after the last clipped sample). Asked at every sample
     (the Recording) or at every status (the node: at least once per ``tau_acc``).
     """
 
     def __init__(self):
         self.initializing = True   # the start's running mean has not handed over yet
-        self.recovering = False    # a clip's restarted running mean has not handed over yet
+        self.recovering = False    # tau_acc has not passed since the last clipped sample
         self._handed_over = False
         self._clips = 0
         self._start = 0.0
@@ -87,7 +89,8 @@ class HealthWatch:
             self._handed_over = False
         self._start = start
         starting = start < s[P_TAU_ACC]
-        self.recovering = starting and (clipped or self.recovering)
+        # A clip's recovery: the kernel's, tau_acc after the last clipped sample.
+        self.recovering = s[S_CLIP_LEFT] > 0.0
         if not starting:
             self._handed_over = True
         self.initializing = not self._handed_over

@@ -25,7 +25,7 @@ sensor → ENU.
 
 import math
 
-from .ahrs_filters import first_attitude, gain, rotate, rotation_matrix, steady
+from .ahrs_filters import first_attitude, gain, rotate, rotation_matrix
 # The layout's names (and bias_variance) are read from this module too: the
 # wrapper, the covariance and the tests see one module, plain or compiled.
 from .ahrs_layout import (  # noqa: F401
@@ -41,16 +41,16 @@ from .ahrs_layout import (  # noqa: F401
                           S_INIT, S_LP, S_HOLE_END, S_MAG_DIST, S_MAG_USED, S_Q, S_REF, S_REF_AGE,
                           S_REJECTED, S_REST, S_REST_ACC, S_REST_GYR, S_REST_TIME, S_RZLP, S_START,
                           S_START_N, S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR,
-                          S_HOLES, S_STUCK, S_WAIT_N, S_ACC_REJ, S_WAIT_TURN)
-from .accel_rejection import acc_rejection_reset, acc_rotation
+                          S_HOLES, S_INC_SIGMA, S_CLIP_LEFT, S_STUCK, S_WAIT_N, S_ACC_REJ, S_WAIT_TURN)
+from .accel_rejection import acc_rejection_reset
 from .gyro_watch import clipped_variance, detect_rest
-from .hole_kernel import (acc_deviation, calibration_restart, forget_wait, hole_after,
+from .gravity_kernel import ahrs_update_acc  # noqa: F401 (the steps' module serves it)
+from .hole_kernel import (calibration_restart, clip_after, forget_wait, hole_after,
                           hole_end_fix, hole_ends, hole_rate, hole_slope, hole_starts,
                           hole_variance, restart_mean)
-from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F401
-                          learn_bias, rlp_steady)
+from .bias_kernel import bias_forget, bias_measure, bias_variance  # noqa: F401
 from .magcal_kernel import MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn
-from .velocity_kernel import velocity_removed, velocity_sample, velocity_step  # noqa: F401
+from .velocity_kernel import velocity_sample, velocity_step  # noqa: F401
 
 
 _TINY = 1e-300
@@ -87,6 +87,8 @@ def ahrs_reset(s):
     s[S_CLIPPED] = 0.0
     s[S_ACC_DEV] = 0.0
     s[S_HOLE_T0] = 0.0
+    s[S_INC_SIGMA] = 0.0
+    s[S_CLIP_LEFT] = 0.0
     hole_ends(s)
     acc_rejection_reset(s)
     # The learned calibration stays; the field is followed afresh.
@@ -194,15 +196,15 @@ def _watch_clipping(s, gx, gy, gz):
     """
     A sample at the gyro's range (:func:`clipped_variance`): distrust the gyro, lean on the others.
 
-    The inclination starts again from the running mean of the specific
-    force (as at the start: the gyro's integral is not trusted across the
-    stretch), the heading from the running mean of the next fields, the
-    bias learns nothing until the low-pass has settled again, and the
-    magnetometer calibration does not learn across the stretch.
+    The inclination's mean of the specific force starts again where the
+    stretch's error outweighs it (:func:`clip_after`), the heading from the
+    running mean of the next fields, and the magnetometer calibration does
+    not learn across the stretch.
     """
-    if clipped_variance(s, gx, gy, gz) == 0.0:
+    var = clipped_variance(s, gx, gy, gz)
+    clip_after(s, var)
+    if var == 0.0:
         return
-    restart_mean(s)
     s[S_MAG_USED] = 0.0
     forget_wait(s)
     calibration_restart(s)
@@ -269,77 +271,6 @@ def _propagate(s, rx, ry, rz, gx, gy, gz, dt):
     s[S_Q + 1] = px
     s[S_Q + 2] = py
     s[S_Q + 3] = pz
-
-
-def ahrs_update_acc(s, ax, ay, az):
-    """Correct the inclination from the world-frame filtered specific force."""
-    # Rest detection needs the accelerometer's deviation from its mean.
-    k = s[C_K_REST]
-    rx, ry, rz = s[S_REST_ACC], s[S_REST_ACC + 1], s[S_REST_ACC + 2]
-    rx, ry, rz = rx + k * (ax - rx), ry + k * (ay - ry), rz + k * (az - rz)
-    s[S_REST_ACC] = rx
-    s[S_REST_ACC + 1] = ry
-    s[S_REST_ACC + 2] = rz
-    ex, ey, ez = ax - rx, ay - ry, az - rz
-    s[S_ACC_STILL] = 1.0 if (ex * ex + ey * ey + ez * ez) < s[P_REST_ACC] * s[P_REST_ACC] else 0.0
-    # Gravity from the specific force less the body's own acceleration (rest sees it all).
-    ax, ay, az = velocity_removed(s, ax, ay, az)
-
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    vx, vy, vz = rotate(w, x, y, z, ax, ay, az)
-    dt = s[C_DT]
-    acc_deviation(s, vx, vy, vz, dt)
-    starting = s[S_START] < s[P_TAU_ACC]
-    if starting:
-        # The first tau_acc seconds (from the start, or after a clipped
-        # gyro): the running mean of the world-frame specific force, which
-        # a low-pass started on one sample of a moving body would only
-        # approach at its own pace (VQF starts its low-pass so too).
-        n = s[S_START_N] + 1.0
-        s[S_START_N] = n
-        fx = s[S_LP] + (vx - s[S_LP]) / n
-        fy = s[S_LP + 1] + (vy - s[S_LP + 1]) / n
-        fz = s[S_LP + 2] + (vz - s[S_LP + 2]) / n
-        s1x, s1y, s1z = fx, fy, fz
-        s2x, s2y, s2z = 0.0, 0.0, 0.0
-        s[S_START] += dt
-    else:
-        b0, b1, b2, a1, a2 = s[C_BW], s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
-        s1x, s1y, s1z = s[S_LP], s[S_LP + 1], s[S_LP + 2]
-        s2x, s2y, s2z = s[S_LP + 3], s[S_LP + 4], s[S_LP + 5]
-        fx, fy, fz = b0 * vx + s1x, b0 * vy + s1y, b0 * vz + s1z
-        s1x, s1y, s1z = (b1 * vx - a1 * fx + s2x, b1 * vy - a1 * fy + s2y,
-                         b1 * vz - a1 * fz + s2z)
-        s2x, s2y, s2z = b2 * vx - a2 * fx, b2 * vy - a2 * fy, b2 * vz - a2 * fz
-
-    # δ: the rotation taking f/|f| (or, f rejected, the gyro's vertical) to
-    # the vertical, [1 + u_z, u_y, −u_x, 0] (|δ| = 0 only shrinks q̂).
-    dw, dx, dy = acc_rotation(s, fx, fy, fz, dt, starting)
-    # q̂ + κ (δ ⊗ q̂ − q̂) = r ⊗ q̂ with r = (1 − κ) + κ δ.
-    kap = s[C_K_ACC]
-    rw, rx, ry = 1.0 - kap + kap * dw, kap * dx, kap * dy
-    s[S_Q] = rw * w - rx * x - ry * y
-    s[S_Q + 1] = rw * x + rx * w + ry * z
-    s[S_Q + 2] = rw * y + ry * w - rx * z
-    s[S_Q + 3] = rw * z + rx * y - ry * x
-    # The filter's states follow the applied rotation (r need not be unit).
-    s[S_LP], s[S_LP + 1], s[S_LP + 2] = rotate(rw, rx, ry, 0.0, s1x, s1y, s1z)
-    s[S_LP + 3], s[S_LP + 4], s[S_LP + 5] = rotate(rw, rx, ry, 0.0, s2x, s2y, s2z)
-    if starting:
-        if s[S_START] >= s[P_TAU_ACC]:
-            # The mean hands over to the low-pass, steady at it.
-            steady(s, S_LP, s[S_LP], s[S_LP + 1], s[S_LP + 2])
-            rlp_steady(s)
-        else:
-            rlp_steady(s)
-        return
-    # The corrections measure a bias once the low-pass has settled from
-    # the start, one tau_acc after the running mean handed over.
-    settled = s[S_START] >= 2.0 * s[P_TAU_ACC]
-    if not settled:
-        s[S_START] += dt
-    if s[P_MOTION_BIAS] != 0.0 and s[S_ACC_REJ] == 0.0:
-        learn_bias(s, rw, rx, ry, dt, settled)
 
 
 # --- the bias in motion: a Kalman filter on the corrections ------------------------

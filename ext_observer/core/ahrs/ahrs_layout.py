@@ -98,6 +98,11 @@ S_GYR_PREV = AHRS.field('gyr_prev', 3)  # the rate of the sample before S_GYR_LA
 # The end correction a hole leaves for the next usual sample: T²/12 over the
 # usual interval (0: none), and the rate's change into the hole.
 S_HOLE_END = AHRS.field('hole_end', 4)
+# rad: the inclination's error σ that holes and clipped samples left beyond the
+# usual, forgotten at the low-pass's pace (0: none).
+S_INC_SIGMA = AHRS.field('inc_sigma')
+S_STEPS = AHRS.field('steps')  # the usual steps this sample stands for (a hole's: more than 1)
+S_CLIP_LEFT = AHRS.field('clip_left')  # s of the recovery from a clipped sample still to run
 
 # The velocity aid (velocity_kernel): the body's velocity at the IMU, IMU frame.
 P_VEL_TIMEOUT = AHRS.field('velocity_timeout')  # s: an older velocity is not used

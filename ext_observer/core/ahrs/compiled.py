@@ -44,7 +44,7 @@ __all__ = ['CompiledUnavailable', 'ENV', 'Kernels', 'PLAIN_COST', 'cache_folder'
 _SOURCES = ('layout.py', 'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
             'ahrs_layout.py', 'ahrs_filters.py', 'bias_kernel.py', 'gyro_watch.py',
             'hole_kernel.py', 'velocity_kernel.py', 'accel_rejection.py',
-            'ahrs_kernel.py', 'uncertainty_kernel.py')
+            'gravity_kernel.py', 'ahrs_kernel.py', 'uncertainty_kernel.py')
 ENV = 'EXT_OBSERVER_COMPILED'
 # What running plain costs, measured (docs/compiled.md#without-numba): said
 # once at start by imu_filter_node and the broad, csv and bag commands.

@@ -7,11 +7,14 @@ then integrates the rotation across the hole from the gyro samples on both
 sides (as the usual steps would have, had the rate changed linearly
 across the hole), keeps the coefficients of the usual interval (a one-off long
 ``dt`` would upset the Butterworth low-pass, whose states belong to its
-coefficients), says how unsure the bridge is (:func:`hole_variance`, which
-the covariance adds), corrects the bridge on the next sample from the
-rate's slopes beside a short hole (:func:`hole_end_fix`), and where the
-hole's variance is large starts the inclination's mean again, as after a
-start or a clipped gyro, from the running mean of the next specific forces.
+coefficients; the hole's sample stands for the steps it closes in the
+inclination instead, ``S_STEPS``), says how unsure the bridge is
+(:func:`hole_variance`, which the covariance adds), corrects the bridge on
+the next sample from the rate's slopes beside a short hole
+(:func:`hole_end_fix`), and where the hole's variance is large starts the
+inclination's mean again, from the running mean of the next specific forces
+with the old one weighed (:func:`restart_weighted`; a clipped stretch's
+error weighs it alike, :func:`clip_after`).
 The heading keeps its mean of the fields, gyro-held across the hole (the
 first fields after it would bring the inclination's error there, times
 ``tan(dip)``). The magnetometer calibration learns nothing across a hole it
@@ -23,9 +26,9 @@ constants. Plain Python that numba compiles, as
 
 import math
 
-from .ahrs_layout import (C_DT, MC0, P_HAS_CAL, P_TAU_ACC, S_ACC_DEV, S_CAL_TURN, S_CAL_WAIT,
+from .ahrs_layout import (C_DT, MC0, P_HAS_CAL, P_TAU_ACC, S_ACC_DEV, S_CAL_TURN, S_CLIP_LEFT, S_CAL_WAIT,
                           S_GYR_LAST, S_GYR_PREV, S_HOLE_END, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR,
-                          S_HOLES, S_INIT, S_LP,
+                          S_HOLES, S_INC_SIGMA, S_INIT, S_STEPS, S_LP,
                           S_Q, S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
 from .magcal_kernel import mc_restart
 
@@ -58,12 +61,23 @@ HOLE_DEVIATION_TIME = 1.0
 HOLE_END_TIME = 0.1
 # The share of the linear bridge's error σ left after the end correction.
 HOLE_END_SHARE = 0.5
+# The share of the range's rotation per sample that a clipped axis is taken to
+# miss, summed along a clipped stretch (the rate stays beyond the range): the
+# clip's error σ that weighs the inclination's mean against new samples.
+# Chosen on the even-numbered BROAD trials, gyro clipped at ±250 °/s
+# (docs/raw_imu.md#wherever-the-robot-starts): 1 (the whole range) restarts the mean
+# in fast translation too, where one sample's vertical is worse than the gyro's.
+CLIP_SHARE = 0.2
+# While the inclination's error σ from holes and clipped samples is above
+# this share of acc_reject, the gyro has not carried the vertical: no
+# acceleration rejection (the low-pass's force is the way back).
+RECOVERING = 1.0 / 3.0
 # Standard gravity, m/s².
 GRAVITY = 9.80665
 
 
 def restart_mean(s):
-    """Start (again) from a running mean of the vertical: a start, a clipped gyro, a hole."""
+    """Start from a running mean of the vertical, as at a start (nothing of the old weighed)."""
     s[S_START] = 0.0
     s[S_START_N] = 0.0
     s[S_LP + 3] = 0.0
@@ -98,6 +112,7 @@ def hole_starts(s, dt):
     """
     if s[S_INIT] != 0.0 and dt > HOLE_FACTOR * s[C_DT] and s[S_HOLE_RUN] < HOLE_RUN_TIME:
         s[S_HOLE_RUN] += dt
+        s[S_STEPS] = dt / s[C_DT]
         return True
     hole_ends(s)
     return False
@@ -107,6 +122,7 @@ def hole_ends(s):
     """A usual step: no hole in a row, nothing to add to the covariance."""
     s[S_HOLE_RUN] = 0.0
     s[S_HOLE_VAR] = 0.0
+    s[S_STEPS] = 1.0
 
 
 def hole_rate(s, gx, gy, gz, dt):
@@ -166,17 +182,53 @@ def hole_after(s, var):
     s[S_HOLES] += 1.0
     if var > HOLE_CALIBRATION:
         calibration_restart(s)
+    s[S_INC_SIGMA] = math.sqrt(s[S_INC_SIGMA] * s[S_INC_SIGMA] + var)
+    s[S_HOLE_T0] = restart_weighted(s, var)
+
+
+def restart_weighted(s, var):
+    """
+    Restart the inclination's mean where an error of ``var`` (rad²) makes it worth little.
+
+    The mean of ``t`` seconds of new samples is off by ``m c / (c + t)``
+    (:func:`hole_after`); where the old mean is worth less than ``tau_acc``
+    seconds of them, ``t0 = c (m / var − 1)``, and less than the running
+    mean's own weight, the mean starts again with the old weighed as ``t0``
+    seconds. Returns ``t0``, or −1.0 where the mean is kept.
+    """
     t0 = HOLE_CORRELATION * (s[S_ACC_DEV] / var - 1.0)
-    s[S_HOLE_T0] = -1.0
-    if t0 < s[P_TAU_ACC]:
-        t0 = max(t0, 0.0)
-        if s[S_START] >= s[P_TAU_ACC] or t0 < s[S_START]:
-            s[S_HOLE_T0] = t0
-            s[S_START] = t0
-            s[S_START_N] = t0 / s[C_DT]
-            s[S_LP + 3] = 0.0
-            s[S_LP + 4] = 0.0
-            s[S_LP + 5] = 0.0
+    if t0 >= s[P_TAU_ACC]:
+        return -1.0
+    t0 = max(t0, 0.0)
+    if s[S_START] < s[P_TAU_ACC] and t0 >= s[S_START]:
+        return -1.0
+    s[S_START] = t0
+    s[S_START_N] = t0 / s[C_DT]
+    s[S_LP + 3] = 0.0
+    s[S_LP + 4] = 0.0
+    s[S_LP + 5] = 0.0
+    return t0
+
+
+def clip_after(s, var):
+    """
+    Each gyro step: a clipped sample's variance ``var`` (rad², 0: not clipped) reaches the mean.
+
+    The rate beyond the range stays beyond it along a clipped stretch: the
+    errors add up, :data:`CLIP_SHARE` of the range's σ per sample, into the
+    inclination's σ (``S_INC_SIGMA``), which weighs the mean against new
+    samples as a hole's does (:func:`restart_weighted`). Without a clip, that
+    σ is forgotten at the low-pass's pace; the recovery (the health state)
+    lasts ``tau_acc`` after the last clipped sample.
+    """
+    if var == 0.0:
+        s[S_INC_SIGMA] *= 1.0 - s[C_DT] / s[P_TAU_ACC]
+        s[S_CLIP_LEFT] = max(s[S_CLIP_LEFT] - s[C_DT], 0.0)
+        return
+    s[S_CLIP_LEFT] = s[P_TAU_ACC]
+    sigma = s[S_INC_SIGMA] + CLIP_SHARE * math.sqrt(var)
+    s[S_INC_SIGMA] = sigma
+    restart_weighted(s, sigma * sigma)
 
 
 def hole_slope(s, dt):

@@ -215,8 +215,14 @@ def uncertainty_hole(u, extra, var, tilt):
     step counted that one): the gyro's noise and the bias over that time,
     and ``var`` (rad² per axis), the bridge's own error
     (:func:`~ext_observer.core.ahrs.hole_kernel.hole_variance`); the
-    inclination's only where its mean was not restarted (``tilt``).
+    inclination's only where its mean was not restarted (``tilt``). The
+    estimator's inclination correction stood for the steps the hole missed
+    too (``1 + extra / dt`` of them): what was there before it is corrected
+    as by as many.
     """
+    a = (1.0 - u[U_K_ACC]) ** (extra / u[U_DT])
+    u[U_PT] = a * a * u[U_PT]
+    u[U_CT] = a * u[U_CT]
     g = u[U_GYRO_NOISE]
     grow = g * g * extra + u[U_B] * extra * extra + var
     if tilt:

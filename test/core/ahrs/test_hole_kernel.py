@@ -15,17 +15,20 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs import hole_kernel
-from ext_observer.core.ahrs.ahrs_layout import (C_BW, C_DT, C_K_ACC, S_ACC_DEV, S_GYR_LAST,
-                                                S_GYR_PREV, S_HOLE_END, S_HOLE_RUN, S_HOLE_VAR,
-                                                S_HOLES, S_INIT,
-                                                S_MAG_USED, S_Q, S_START, S_START_N)
+from ext_observer.core.ahrs.ahrs_filters import rotate, steady
+from ext_observer.core.ahrs.ahrs_layout import (C_BW, C_DT, C_K_ACC, P_TAU_ACC, S_ACC_DEV,
+                                                S_ACC_REJ, S_CLIP_LEFT, S_GYR_LAST, S_GYR_PREV,
+                                                S_HOLE_END, S_HOLE_RUN, S_HOLE_VAR, S_HOLES,
+                                                S_INC_SIGMA, S_INIT, S_LP, S_MAG_USED, S_Q,
+                                                S_START, S_START_N, S_STEPS)
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.hole_kernel import (HOLE_CALIBRATION, HOLE_CORRELATION, HOLE_FACTOR,
                                                 HOLE_RATE_CHANGE, HOLE_RATE_WALK,
                                                 HOLE_END_SHARE, HOLE_END_TIME, HOLE_RUN_TIME,
-                                                hole_after,
+                                                CLIP_SHARE, RECOVERING, clip_after, hole_after,
                                                 hole_end_fix, hole_rate, hole_slope, hole_starts,
                                                 hole_variance)
+from ext_observer.core.ahrs.gravity_kernel import ahrs_update_acc
 from ext_observer.recordings.recording import attitude_from_imu
 
 DT = 0.01
@@ -221,3 +224,72 @@ def test_the_general_steps_follow_a_hole_as_the_one_call_sample_does():
     assert est.core.holes >= 3
     assert dict(est.key_values())['holes_bridged'] == est.core.holes  # in /diagnostics
     np.testing.assert_allclose(runs[1], runs[0], rtol=1e-12, atol=1e-15)
+
+
+def _tilt(s):
+    """The angle (rad) between the estimate's vertical and the world's."""
+    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    return math.acos(min(1.0, (w * w - x * x - y * y + z * z) / (w * w + x * x + y * y + z * z)))
+
+
+def test_a_holes_sample_corrects_the_inclination_as_the_steps_it_missed():
+    # A settled estimate tilted by 5°, its low-pass steady at the tilted force.
+    est = _started(AhrsParams(tau_bias=0.0, acc_reject=0.0))
+    for _ in range(500):
+        est.update(STILL, UP, None, DT)
+    s = est.flat_state
+    half = 0.5 * math.radians(5.0)
+    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = math.cos(half), math.sin(half), 0.0, 0.0
+    tilted = rotate(s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3], *UP)
+    steady(s, S_LP, *tilted)
+    one, hole, usual = list(s), list(s), list(s)
+    ahrs_update_acc(one, *UP)
+    hole[S_STEPS] = 3.0
+    ahrs_update_acc(hole, *UP)
+    for _ in range(3):
+        ahrs_update_acc(usual, *UP)
+    tilt0 = math.radians(5.0)
+    assert _tilt(hole) == pytest.approx(_tilt(usual), rel=0.05)
+    assert _tilt(hole) < (1.0 - s[C_K_ACC]) ** 2 * tilt0 < _tilt(one)
+
+
+def test_a_clipped_stretch_sums_its_error_and_weighs_the_inclinations_mean():
+    est = _started()
+    s = est.flat_state
+    s[S_START], s[S_START_N] = 10.0, 0.0
+    s[S_ACC_DEV] = 0.01  # the samples show the vertical to 0.1 rad
+    var = 1e-4  # each clipped sample: (range dt)², a σ of 0.01 rad
+    clip_after(s, var)
+    # One sample's share of the range's σ weighs little against the mean: kept.
+    assert s[S_INC_SIGMA] == pytest.approx(CLIP_SHARE * 0.01) and s[S_START] == 10.0
+    assert s[S_CLIP_LEFT] == s[P_TAU_ACC]
+    # Along the stretch the σ adds up (the rate stays beyond the range) until
+    # the old mean is worth less than tau_acc of new samples: restarted, weighed.
+    count = 1
+    while s[S_START] == 10.0:
+        clip_after(s, var)
+        count += 1
+    sigma = count * CLIP_SHARE * 0.01
+    assert s[S_INC_SIGMA] == pytest.approx(sigma)
+    t0 = HOLE_CORRELATION * (0.01 / sigma ** 2 - 1.0)
+    assert 0.0 < t0 < s[P_TAU_ACC] and s[S_START] == pytest.approx(t0)
+    # After it, the σ is forgotten at the low-pass's pace; the recovery lasts tau_acc.
+    clip_after(s, 0.0)
+    assert s[S_INC_SIGMA] == pytest.approx(sigma * (1.0 - DT / s[P_TAU_ACC]))
+    assert s[S_CLIP_LEFT] == pytest.approx(s[P_TAU_ACC] - DT)
+
+
+def test_no_acceleration_rejection_while_the_vertical_is_unsure():
+    def rejected(sigma):
+        est = _started()
+        for _ in range(500):
+            est.update(STILL, UP, None, DT)
+        s = est.flat_state
+        # The low-passed force 10° off the vertical the gyro carried.
+        tilted = (0.0, 9.81 * math.sin(0.17), 9.81 * math.cos(0.17))
+        steady(s, S_LP, *tilted)
+        s[S_INC_SIGMA] = sigma
+        ahrs_update_acc(s, *tilted)
+        return s[S_ACC_REJ] > 0.0
+    assert rejected(0.0)
+    assert not rejected(RECOVERING * AhrsParams().acc_reject * 1.01)
