@@ -51,7 +51,8 @@ from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F40
                           learn_bias, rlp_steady)
 from .magcal_kernel import mc_apply
 # The field step (read from this module too: the wrapper and the tests see one module).
-from .field_kernel import _turn_heading, ahrs_update_mag  # noqa: F401
+from .field_kernel import (_turn_heading, ahrs_update_mag, field_doubt,  # noqa: F401
+                           field_forget)
 from .velocity_kernel import velocity_removed, velocity_sample, velocity_step  # noqa: F401
 
 
@@ -84,6 +85,7 @@ def ahrs_reset(s):
     s[S_HOLE_T0] = 0.0
     hole_ends(s)
     acc_rejection_reset(s)
+    field_forget(s)
     # The learned calibration stays; the field is followed afresh.
     calibration_restart(s)
     if s[P_HAS_CAL] != 0.0:
@@ -188,8 +190,10 @@ def _watch_clipping(s, gx, gy, gz):
     bias learns nothing until the low-pass has settled again, and the
     magnetometer calibration does not learn across the stretch.
     """
-    if clipped_variance(s, gx, gy, gz) == 0.0:
+    var = clipped_variance(s, gx, gy, gz)
+    if var == 0.0:
         return
+    field_doubt(s, var)
     restart_mean(s)
     s[S_MAG_USED] = 0.0
     forget_wait(s)
@@ -218,6 +222,7 @@ def ahrs_bridge(s, gx, gy, gz, dt):
     _propagate(s, rx, ry, rz, gx, gy, gz, dt)
     detect_rest(s, gx, gy, gz)
     hole_after(s, var)
+    field_doubt(s, s[S_HOLE_VAR])
 
 
 def _propagate(s, rx, ry, rz, gx, gy, gz, dt):

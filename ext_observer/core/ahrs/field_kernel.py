@@ -20,7 +20,9 @@ from .ahrs_layout import (C_BIAS_R, C_K_MAG, C_K_REF, C_MAG_DT, MC0, P_CAL_PERIO
                           S_CAL_LOADED, S_CAL_MOVED, S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN,
                           S_CAL_WAIT, S_CAND, S_CAND_TIME, S_HAS_REF, S_LP, S_MAG_DIST,
                           S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REF_REST, S_REJECTED, S_REST,
-                          S_REST_GYR, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN)
+                          S_REST_GYR, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN, S_CLIPS,
+                          S_FIELD_CLIPS, S_HEAD_DOUBT, S_TILT_DOUBT,
+                          P_TAU_ACC_GAIN)
 from .bias_kernel import bias_measure
 from .hole_kernel import forget_wait
 from .magcal_kernel import MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn
@@ -39,6 +41,20 @@ MAG_REJECTION_FACTOR = 2.0
 # The heading's corrections teach the bias once the inclination's low-pass has
 # settled from a start: this many tau_acc after it (as the accelerometer's).
 _FIELD_SETTLED = 2.0
+# rad·√s: the noise density of a field's heading in motion, undisturbed (a
+# field's variance is its square over the field's interval).
+FIELD_HEADING_NOISE = 0.02
+# rad: the error of a field's heading that does not average out over fields
+# (a bent field that passes the norm and dip tests, the calibration's error).
+FIELD_HEADING_BIAS = 0.05
+# s: how long a field's error that does not average out keeps its value (its
+# variance counts once per this time, not once per field).
+FIELD_CORRELATION = 1.0
+# rad²: a heading this unsure is lost; the fields' running mean takes it again.
+HEADING_LOST = math.radians(20.0) ** 2
+# σ: a field whose heading is further from the estimate than this many of
+# the doubt's and its own does not correct it (a disturbance).
+FIELD_GATE = 3.0
 
 
 def ahrs_mag_coefficients(s, dt):
@@ -67,6 +83,8 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     if has_cal:
         use, psi = _calibration_wait(s, psi, use)
     kap = _heading_gain(s, use, has_cal, dt)
+    if s[S_HEAD_DOUBT] != 0.0 and valid and s[P_USE_MAG] != 0.0:
+        kap = _doubt_gain(s, kap, norm, dip, psi, dt)
     # y = R_z(ψ) ⊗ q̂; q̂ ← (1 − κ) q̂ + κ y, r = (1 − κ + κ cos(ψ/2), 0, 0, κ sin(ψ/2)).
     half = 0.5 * psi
     rw, rz = 1.0 - kap + kap * math.cos(half), kap * math.sin(half)
@@ -178,6 +196,11 @@ def _follow_references(s, norm, dip, use, dt):
 
 # --- the heading's correction ----------------------------------------------------------
 
+def _waits(s):
+    """Whether the heading waits for the calibration (the body has moved, none is ready)."""
+    return s[MC0 + MC_READY] == 0.0 and s[S_CAL_MOVED] != 0.0 and s[S_MAG_USED] != 0.0
+
+
 def _calibration_wait(s, psi, use):
     """
     Where the heading waits for the calibration: ``(use, ψ)`` after the wait.
@@ -187,7 +210,7 @@ def _calibration_wait(s, psi, use):
     started over; once the calibration is ready, a wait whose calibration
     found the field right as given counts as if the heading had used it.
     """
-    if s[MC0 + MC_READY] == 0.0 and s[S_CAL_MOVED] != 0.0 and s[S_MAG_USED] != 0.0:
+    if _waits(s):
         if use:
             _wait(s, psi)
         return False, psi
@@ -221,6 +244,80 @@ def _heading_gain(s, use, has_cal, dt):
     # κ = max(k_mag, 1/n, 1 − exp(−dt / max(t_min, t/2)))
     follow = 1.0 - math.exp(-dt / max(_REFINE_SHORTEST, _REFINE_SHARE * since))
     return max(max(k_mag, 1.0 / max(used, 1.0)), follow) if use else 0.0
+
+
+def field_forget(s):
+    """A new estimate: nothing lost by the gyro yet, the calibration not waiting."""
+    s[S_HEAD_DOUBT] = 0.0
+    s[S_TILT_DOUBT] = 0.0
+    s[S_FIELD_CLIPS] = s[S_CLIPS]
+
+
+def field_doubt(s, var):
+    """
+    The gyro step lost ``var`` rad² per axis (a clipped sample, a hole): the field's to give back.
+
+    Past :data:`HEADING_LOST` the heading is taken afresh from the running
+    mean of the next fields, as at the start.
+    """
+    if s[P_USE_MAG] == 0.0:
+        return
+    p = s[S_HEAD_DOUBT] + var
+    if p < HEADING_LOST:
+        s[S_HEAD_DOUBT] = p
+        s[S_TILT_DOUBT] += var
+    else:
+        s[S_HEAD_DOUBT] = 0.0
+        s[S_TILT_DOUBT] = 0.0
+        s[S_MAG_USED] = 0.0
+
+
+def _doubt_gain(s, kap, norm, dip, psi, dt):
+    """
+    The heading gain while the gyro's losses are not corrected: at least the Kalman gain.
+
+    ``P`` (``S_HEAD_DOUBT``) the heading variance the gyro lost, ``r`` the
+    field heading's: its noise; the tilt error the gyro lost alike, which
+    turns a field's heading by ``tan(dip)`` times it until the accelerometer
+    has corrected it (``T``, forgotten with ``tau_acc``); and the field's
+    deviation from the references as the size of a disturbance, over the
+    horizontal share ``cos(dip)``. So a field whose dip the turned estimate
+    shows off the references still counts (it is not locked out), by that
+    size; a field of another norm is disturbed whatever the attitude. While
+    the heading waits for the calibration, the field as given counts too
+    (the wait starts again from it). Once ``P`` no longer moves the gain
+    above the usual one, the usual path resumes.
+    """
+    tau = s[P_TAU_ACC] + s[P_TAU_ACC_GAIN]
+    # T ← T exp(−2 dt / τ): the inclination's correction forgets the tilt error
+    tilt = s[S_TILT_DOUBT] * math.exp(-2.0 * dt / tau)
+    s[S_TILT_DOUBT] = tilt
+    ref_n, ref_d = s[S_REF], s[S_REF + 1]
+    dn = (norm - ref_n) / ref_n
+    if abs(dn) > s[P_MAG_NORM_TH]:
+        return kap
+    c = math.cos(ref_d)
+    t = math.tan(ref_d)
+    dd = dip - ref_d
+    # r_c = σ_b² + T tan²(dip) + (δn² + δdip²) / cos²(dip): what fields do not average out
+    rc = FIELD_HEADING_BIAS * FIELD_HEADING_BIAS + tilt * t * t + (dn * dn + dd * dd) / (c * c)
+    p = s[S_HEAD_DOUBT]
+    if psi * psi > FIELD_GATE * FIELD_GATE * (p + rc):
+        return kap  # the field's heading ψ is no heading the doubt allows
+    r0 = FIELD_HEADING_NOISE * FIELD_HEADING_NOISE / dt
+    # r = σ_f² / dt + r_c τ_c / dt: the fields of one correlation time share r_c
+    r = r0 + rc * FIELD_CORRELATION / dt
+    # κ = max(κ_usual, P / (P + r)); P ← (1 − κ)² P + κ² r
+    k = max(kap, p / (p + r))
+    p = (1.0 - k) * (1.0 - k) * p + k * k * r
+    k_mag = s[C_K_MAG]
+    if p * (1.0 - k_mag) <= r0 * k_mag:
+        p = 0.0
+        s[S_TILT_DOUBT] = 0.0
+    s[S_HEAD_DOUBT] = p
+    if k > kap:
+        forget_wait(s)
+    return k
 
 
 def _heading_bias(s, kap, rw, rz, dt):
@@ -282,7 +379,7 @@ def _turn_heading(s, rw, rz):
 def field_calibrate(s, mx, my, mz, dt):
     """Teach the calibration this field (at most every ``cal_period``); the field to use."""
     s[S_CAL_WAIT] += dt
-    if s[S_CAL_WAIT] < s[P_CAL_PERIOD]:
+    if _after_clip(s) or s[S_CAL_WAIT] < s[P_CAL_PERIOD]:
         return mc_apply(s, MC0, mx, my, mz)  # learn at most at mag_cal_rate
     applied = s[MC0 + MC_APPLIED] != 0.0
     allow = True
@@ -308,6 +405,14 @@ def field_calibrate(s, mx, my, mz, dt):
     if switched and has_ref:
         _calibration_applied(s, w, x, y, z)
     return mc_apply(s, MC0, mx, my, mz)
+
+
+def _after_clip(s):
+    """Whether the gyro clipped since the latest field: the calibration learns nothing from it."""
+    if s[S_CLIPS] == s[S_FIELD_CLIPS]:
+        return False
+    s[S_FIELD_CLIPS] = s[S_CLIPS]
+    return True
 
 
 def _calibration_applied(s, w, x, y, z):
