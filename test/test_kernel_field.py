@@ -28,7 +28,8 @@ from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_R, MC0, S_BIAS, S_BIAS_P,
                                                 S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN, S_CAL_WAIT,
                                                 S_CAND, S_CAND_TIME, S_HAS_REF, S_LP, S_MAG_USED,
                                                 S_Q, S_REF, S_REF_AGE, S_REF_REST, S_REJECTED,
-                                                S_REST, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN)
+                                                S_REST, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN,
+                                                S_HEAD_DOUBT)
 from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.magcal_layout import MAGCAL, MC_READY, MC_REFUSED, MC_USED
 
@@ -398,3 +399,58 @@ def test_in_motion_the_steady_heading_correction_teaches_the_bias_through_the_lo
         assert np.allclose(s[S_BIAS_P:S_BIAS_P + 6], shadow[S_BIAS_P:S_BIAS_P + 6], rtol=1e-9,
                            atol=0.0), k
     assert learned > 250 and quiet > 250
+
+
+# --- after a clipped gyro or a hole ----------------------------------------------------
+
+RANGE = math.radians(250.0)
+
+
+def test_the_calibration_learns_nothing_from_a_clipped_stretch():
+    # A body turning about the vertical past the gyro's range for 0.3 s:
+    # the calibration sees no field of those samples (its field count
+    # stands), and learns again once the gyro is back in range.
+    est = AhrsObserver(AhrsParams(gyro_range=RANGE, mag_cal_rate=1e4), use_mag=True,
+                       compiled=False)
+    field = world_field(NORM, DIP)
+    yaw = 0.0
+    fields = MC0 + MAGCAL.offset('fields')
+
+    def step(rate):
+        nonlocal yaw
+        yaw += rate * DT
+        est.update((0.0, 0.0, max(-RANGE, min(RANGE, rate))), LEVEL, body_field(field, yaw), DT)
+
+    for _ in range(100):
+        step(0.5)
+    before = est.flat_state[fields]
+    assert before > 0.0
+    for _ in range(30):
+        step(1.5 * RANGE)
+    assert est.clipped == 30
+    assert est.flat_state[fields] == before
+    for _ in range(10):
+        step(0.5)
+    assert est.flat_state[fields] > before
+
+
+def test_after_a_hole_the_heading_comes_back_from_the_field_as_its_doubt_allows():
+    # A level body at rest, the field fixed; a 0.45 s hole hides a turn of
+    # 16° (40 °/s for 0.4 s) that the bridge between two still samples
+    # cannot see. The hole's variance (σ ≈ 6°) lets the field take most of
+    # the error back within 2 s, where tau_mag's gain alone gives back 12 %.
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    field = world_field(NORM, DIP)
+    for _ in range(300):
+        est.update(STILL, LEVEL, body_field(field, 0.0), DT)
+    turn = math.radians(40.0) * 0.4
+    est.update(STILL, LEVEL, body_field(field, turn), 0.45)
+    assert est.holes == 1
+    doubt = est.flat_state[S_HEAD_DOUBT]
+    assert doubt > math.radians(4.0) ** 2
+    lost = abs(wrap(yaw_of(est.q) - turn))
+    assert lost > math.radians(12.0)
+    for _ in range(200):
+        est.update(STILL, LEVEL, body_field(field, turn), DT)
+    assert abs(wrap(yaw_of(est.q) - turn)) < 0.4 * lost
+    assert est.flat_state[S_HEAD_DOUBT] < 0.5 * doubt

@@ -51,8 +51,8 @@ from .bias_kernel import (bias_forget, bias_measure, bias_variance,  # noqa: F40
                           learn_bias, rlp_steady)
 from .magcal_kernel import mc_apply
 # The field step (read from this module too: the wrapper and the tests see one module).
-from .field_kernel import (_turn_heading, ahrs_update_mag, field_doubt,  # noqa: F401
-                           field_forget)
+from .field_kernel import (_turn_heading, ahrs_update_mag, field_clipped,  # noqa: F401
+                           field_doubt, field_forget)
 from .velocity_kernel import velocity_removed, velocity_sample, velocity_step  # noqa: F401
 
 
@@ -193,7 +193,7 @@ def _watch_clipping(s, gx, gy, gz):
     var = clipped_variance(s, gx, gy, gz)
     if var == 0.0:
         return
-    field_doubt(s, var)
+    field_clipped(s, var)
     restart_mean(s)
     s[S_MAG_USED] = 0.0
     forget_wait(s)

@@ -20,8 +20,8 @@ from .ahrs_layout import (C_BIAS_R, C_K_MAG, C_K_REF, C_MAG_DT, MC0, P_CAL_PERIO
                           S_CAL_LOADED, S_CAL_MOVED, S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN,
                           S_CAL_WAIT, S_CAND, S_CAND_TIME, S_HAS_REF, S_LP, S_MAG_DIST,
                           S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REF_REST, S_REJECTED, S_REST,
-                          S_REST_GYR, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN, S_CLIPS,
-                          S_FIELD_CLIPS, S_HEAD_DOUBT, S_TILT_DOUBT,
+                          S_REST_GYR, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN,
+                          S_FIELD_CLIPPED, S_HEAD_DOUBT, S_TILT_DOUBT,
                           P_TAU_ACC_GAIN)
 from .bias_kernel import bias_measure
 from .hole_kernel import forget_wait
@@ -250,7 +250,13 @@ def field_forget(s):
     """A new estimate: nothing lost by the gyro yet, the calibration not waiting."""
     s[S_HEAD_DOUBT] = 0.0
     s[S_TILT_DOUBT] = 0.0
-    s[S_FIELD_CLIPS] = s[S_CLIPS]
+    s[S_FIELD_CLIPPED] = 0.0
+
+
+def field_clipped(s, var):
+    """A clipped gyro sample of variance ``var`` (rad² per axis): a doubt, and no calibration."""
+    s[S_FIELD_CLIPPED] = 1.0
+    field_doubt(s, var)
 
 
 def field_doubt(s, var):
@@ -311,7 +317,7 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
     k = max(kap, p / (p + r))
     p = (1.0 - k) * (1.0 - k) * p + k * k * r
     k_mag = s[C_K_MAG]
-    if p * (1.0 - k_mag) <= r0 * k_mag:
+    if p * (1.0 - k_mag) <= r * k_mag:  # P / (P + r) ≤ k_mag: the usual gain again
         p = 0.0
         s[S_TILT_DOUBT] = 0.0
     s[S_HEAD_DOUBT] = p
@@ -409,9 +415,9 @@ def field_calibrate(s, mx, my, mz, dt):
 
 def _after_clip(s):
     """Whether the gyro clipped since the latest field: the calibration learns nothing from it."""
-    if s[S_CLIPS] == s[S_FIELD_CLIPS]:
+    if s[S_FIELD_CLIPPED] == 0.0:
         return False
-    s[S_FIELD_CLIPS] = s[S_CLIPS]
+    s[S_FIELD_CLIPPED] = 0.0
     return True
 
 
