@@ -49,19 +49,15 @@ from .hole_kernel import (calibration_restart, clip_after, forget_wait, hole_aft
                           hole_end_fix, hole_ends, hole_rate, hole_slope, hole_starts,
                           hole_variance, restart_mean)
 from .bias_kernel import bias_forget, bias_measure, bias_variance  # noqa: F401
-from .magcal_kernel import MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn
+from .magcal_kernel import mc_apply
+# The field step (read from this module too: the wrapper and the tests see one module).
+from .field_kernel import (ahrs_update_mag, field_clipped,  # noqa: F401
+                           field_doubt, field_forget)
 from .velocity_kernel import velocity_sample, velocity_step  # noqa: F401
 
 
 _TINY = 1e-300
-# After a calibration is applied, the heading's time constant is this share
-# of the time since, and at least this (s), until it reaches tau_mag.
-_REFINE_SHARE = 0.5
-_REFINE_SHORTEST = 1.0
 _SQRT2 = math.sqrt(2.0)
-# s: a field rejected as disturbed for longer than this is the field (VQF's
-# maximum rejection time, Laidig & Seel 2023): the references follow it.
-_MAX_REJECTION = 60.0
 
 
 # --- state -----------------------------------------------------------------------
@@ -91,6 +87,7 @@ def ahrs_reset(s):
     s[S_CLIP_LEFT] = 0.0
     hole_ends(s)
     acc_rejection_reset(s)
+    field_forget(s)
     # The learned calibration stays; the field is followed afresh.
     calibration_restart(s)
     if s[P_HAS_CAL] != 0.0:
@@ -123,13 +120,6 @@ def ahrs_coefficients(s, dt):
     tb = s[P_TAU_BIAS] if s[P_TAU_BIAS] > 0.0 else 1.0
     s[C_BIAS_Q] = sm2 * dt / tb
     s[C_BIAS_R] = sm2 * tb
-
-
-def ahrs_mag_coefficients(s, dt):
-    """The heading's and the field references' gains for the field interval ``dt``."""
-    s[C_MAG_DT] = dt
-    s[C_K_MAG] = gain(s[P_TAU_MAG], dt)
-    s[C_K_REF] = gain(s[P_TAU_MAG_REF], dt)
 
 
 # --- the three steps ---------------------------------------------------------------
@@ -205,6 +195,7 @@ def _watch_clipping(s, gx, gy, gz):
     clip_after(s, var)
     if var == 0.0:
         return
+    field_clipped(s, var)
     s[S_MAG_USED] = 0.0
     forget_wait(s)
     calibration_restart(s)
@@ -232,6 +223,7 @@ def ahrs_bridge(s, gx, gy, gz, dt):
     _propagate(s, rx, ry, rz, gx, gy, gz, dt)
     detect_rest(s, gx, gy, gz)
     hole_after(s, var)
+    field_doubt(s, s[S_HOLE_VAR])
 
 
 def _propagate(s, rx, ry, rz, gx, gy, gz, dt):
@@ -274,237 +266,6 @@ def _propagate(s, rx, ry, rz, gx, gy, gz, dt):
 
 
 # --- the bias in motion: a Kalman filter on the corrections ------------------------
-
-
-def ahrs_update_mag(s, mx, my, mz, dt):
-    """Correct the heading from the magnetometer (interval ``dt``), rejecting disturbed fields."""
-    if dt != s[C_MAG_DT]:
-        ahrs_mag_coefficients(s, dt)
-    has_cal = s[P_HAS_CAL] != 0.0
-    if has_cal:
-        mx, my, mz = _calibrate(s, mx, my, mz, dt)
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    mx, my, mz = rotate(w, x, y, z, mx, my, mz)
-    h = math.sqrt(mx * mx + my * my)
-    norm = math.sqrt(h * h + mz * mz)
-    valid = (h > 0.0) and (norm > 0.0)
-    dip = math.atan2(mz, h)
-    psi = math.atan2(mx, my)
-
-    if s[S_HAS_REF] == 0.0:
-        s[S_REF] = norm
-        s[S_REF + 1] = dip
-        s[S_CAND] = norm
-        s[S_CAND + 1] = dip
-        s[S_HAS_REF] = 1.0
-        s[S_REF_AGE] = 0.0
-        s[S_REF_REST] = 0.0
-    ref_n, ref_d = s[S_REF], s[S_REF + 1]
-    th_n, th_d = s[P_MAG_NORM_TH], s[P_MAG_DIP_TH]
-    disturbed = (abs(norm - ref_n) > th_n * ref_n) or (abs(dip - ref_d) > th_d)
-    # A new field: consistent with the candidate while the body turns
-    # (VQF's candidate, Laidig & Seel 2023: its time counts whether or not
-    # the references reject the field, so that a field that passes the
-    # references' test now and then is not started over each time). A field
-    # off the candidate starts it over; while the references are young
-    # (confirmed by fewer than mag_new_time seconds of fields, none at rest:
-    # a start in motion takes them from one sample, while a rest shows the
-    # place's field without the motion's spread) it only takes back twice
-    # its length, as for the rejection time, so that the spread of a moving
-    # body's field does not keep one sample's references for ever.
-    cand_n, cand_d = s[S_CAND], s[S_CAND + 1]
-    consistent = (abs(norm - cand_n) < th_n * cand_n) and (abs(dip - cand_d) < th_d)
-    gx, gy, gz = s[S_REST_GYR], s[S_REST_GYR + 1], s[S_REST_GYR + 2]
-    turning = gx * gx + gy * gy + gz * gz > s[P_MAG_NEW_GYR] ** 2
-    if consistent:
-        if turning:
-            s[S_CAND_TIME] += dt
-    elif s[S_REF_REST] == 0.0 and s[S_REF_AGE] < s[P_MAG_NEW_TIME]:
-        s[S_CAND_TIME] = max(s[S_CAND_TIME] - 2.0 * dt, 0.0)
-    else:
-        s[S_CAND_TIME] = 0.0
-    kr = s[C_K_REF]
-    if consistent:
-        s[S_CAND] = cand_n + kr * (norm - cand_n)
-        s[S_CAND + 1] = cand_d + kr * (dip - cand_d)
-    elif s[S_CAND_TIME] == 0.0:
-        s[S_CAND] = norm
-        s[S_CAND + 1] = dip
-    # A new field is accepted once it has lasted mag_new_time, or longer
-    # than fields have confirmed the references: those taken from the
-    # first field of a body that starts beside a magnet are not trusted
-    # longer than the true field has been seen.
-    # A short undisturbed stretch takes back twice its length (VQF's rejection factor).
-    s[S_REJECTED] = s[S_REJECTED] + dt if disturbed else max(s[S_REJECTED] - 2.0 * dt, 0.0)
-    accept_new = disturbed and (s[S_CAND_TIME] >= min(s[P_MAG_NEW_TIME], s[S_REF_AGE])
-                                or s[S_REJECTED] >= _MAX_REJECTION)
-    if accept_new:
-        s[S_REJECTED] = 0.0
-    if accept_new:
-        ref_n, ref_d = s[S_CAND], s[S_CAND + 1]
-        if s[S_REF_AGE] < s[P_MAG_NEW_TIME]:
-            # The fields the heading followed so far were the disturbed
-            # ones: its running mean starts again from the new field.
-            s[S_MAG_USED] = 0.0
-            forget_wait(s)
-        s[S_REF_AGE] = s[S_CAND_TIME]
-        s[S_REF_REST] = 0.0
-    disturbed = disturbed and not accept_new
-    use = valid and not disturbed and s[P_USE_MAG] != 0.0
-    if use:
-        s[S_REF_AGE] += dt
-        if s[S_REST] != 0.0:
-            s[S_REF_REST] = 1.0
-        s[S_REF] = ref_n + kr * (norm - ref_n)
-        s[S_REF + 1] = ref_d + kr * (dip - ref_d)
-    else:
-        s[S_REF] = ref_n
-        s[S_REF + 1] = ref_d
-    s[S_MAG_DIST] = 1.0 if disturbed else 0.0
-    if has_cal:
-        # The heading waits for the calibration; before the body has
-        # first moved it is the field's as given, averaged (the start), and
-        # the first field after the running mean started over (the fields
-        # it followed were disturbed ones) sets it as the first one did.
-        if s[MC0 + MC_READY] == 0.0 and s[S_CAL_MOVED] != 0.0 and s[S_MAG_USED] != 0.0:
-            if use:
-                _wait(s, psi)
-            use = False
-        elif s[S_WAIT_N] != 0.0:
-            if s[MC0 + MC_APPLIED] == 0.0:
-                # The sensor looked calibrated: the fields of the wait were
-                # right as given, and count as if the heading had used them.
-                half = 0.5 * s[S_WAIT_TURN]
-                _turn_heading(s, math.cos(half), math.sin(half))
-                psi = math.atan2(math.sin(psi - s[S_WAIT_TURN]), math.cos(psi - s[S_WAIT_TURN]))
-                s[S_MAG_USED] += s[S_WAIT_N]
-            forget_wait(s)
-
-    # Heading measurement y = R_z(ψ) ⊗ q̂; gain κ_m, a running average at first.
-    used = s[S_MAG_USED] + (1.0 if use else 0.0)
-    s[S_MAG_USED] = used
-    k_mag = s[C_K_MAG]
-    if not has_cal:
-        kap = max(k_mag, 1.0 / max(used, 1.0)) if use else 0.0
-    else:
-        # A calibration applied t ago improves still: the heading follows
-        # it with the time constant t/2 (at least 1 s) until that reaches
-        # tau_mag; the fields of older calibrations weigh less.
-        since = s[S_CAL_SINCE] + dt
-        s[S_CAL_SINCE] = since
-        follow = 1.0 - math.exp(-dt / max(_REFINE_SHORTEST, _REFINE_SHARE * since))
-        kap = max(max(k_mag, 1.0 / max(used, 1.0)), follow) if use else 0.0
-    half = 0.5 * psi
-    rw, rz = 1.0 - kap + kap * math.cos(half), kap * math.sin(half)
-    _turn_heading(s, rw, rz)
-    if s[P_MOTION_BIAS] != 0.0:
-        # The heading correction follows the drift (R β)_z through a
-        # first-order low-pass of tau_mag: R's z row low-passed alike is
-        # what it measures β through. Only the steady gain's corrections
-        # teach (not the first fields' running mean, nor a calibration's
-        # refinement), and not at rest or in a start. A field's heading is
-        # disturbed far more often and for longer than gravity's direction:
-        # its correction rate is trusted as much less as its loop is slower
-        # (noise density times tau_mag / tau_acc).
-        r = rotation_matrix(s)
-        for j in range(3):
-            s[S_RZLP + j] += k_mag * (r[6 + j] - s[S_RZLP + j])
-        if (kap == k_mag and used * k_mag > 1.0 and s[S_REST] == 0.0
-                and s[S_START] >= 2.0 * s[P_TAU_ACC]):
-            bias_measure(s, s[S_RZLP], s[S_RZLP + 1], s[S_RZLP + 2], -2.0 * rz / (rw * dt),
-                          s[C_BIAS_R] * s[P_TAU_MAG] / (s[P_TAU_ACC] * dt))
-
-
-def _wait(s, psi):
-    """
-    A field while the heading waits for the calibration: what it would have done.
-
-    Were the calibration to find the field right as given (the sensor looks
-    calibrated), the heading should have followed this field as any other:
-    the turn it would have had by now follows the field's heading ``psi``
-    (rad, in the estimate's world frame) with the gain the heading would
-    have had (a running mean of the fields used, then ``k_mag``). The turn
-    is about the world vertical, which commutes with the body-frame
-    increments of the gyro in between.
-    """
-    n = s[S_MAG_USED] + s[S_WAIT_N] + 1.0
-    s[S_WAIT_N] += 1.0
-    kap = max(s[C_K_MAG], 1.0 / n)
-    d = psi - s[S_WAIT_TURN]
-    s[S_WAIT_TURN] += kap * math.atan2(math.sin(d), math.cos(d))
-
-
-def _turn_heading(s, rw, rz):
-    """``q̂ ← r ⊗ q̂`` for ``r = (rw, 0, 0, rz)`` (not unit), the filter's states with it."""
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    s[S_Q] = rw * w - rz * z
-    s[S_Q + 1] = rw * x - rz * y
-    s[S_Q + 2] = rw * y + rz * x
-    s[S_Q + 3] = rw * z + rz * w
-    # The filter's states turn with it about the vertical: (c, s) of 2θ.
-    n2 = rw * rw + rz * rz
-    c, sn = (rw * rw - rz * rz) / n2, 2.0 * rw * rz / n2
-    for i in (0, 3):
-        a, b = s[S_LP + i], s[S_LP + i + 1]
-        s[S_LP + i] = c * a - sn * b
-        s[S_LP + i + 1] = sn * a + c * b
-
-
-def _norm_dip(s, mx, my, mz):
-    """Norm and dip angle of a body-frame field in the world frame."""
-    mx, my, mz = rotate(s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3], mx, my, mz)
-    h = math.sqrt(mx * mx + my * my)
-    return math.sqrt(h * h + mz * mz), math.atan2(mz, h)
-
-
-def _calibrate(s, mx, my, mz, dt):
-    """Teach the calibration this field; return the field the heading logic uses."""
-    s[S_CAL_WAIT] += dt
-    if s[S_CAL_WAIT] < s[P_CAL_PERIOD]:
-        return mc_apply(s, MC0, mx, my, mz)  # learn at most at mag_cal_rate
-    ready = s[MC0 + MC_READY] != 0.0
-    applied = s[MC0 + MC_APPLIED] != 0.0
-    allow = True
-    has_ref = s[S_HAS_REF] != 0.0
-    if has_ref and ready:
-        # A field the norm/dip test rejects does not teach.
-        cx, cy, cz = mc_apply(s, MC0, mx, my, mz)
-        norm, dip = _norm_dip(s, cx, cy, cz)
-        ref_n, ref_d = s[S_REF], s[S_REF + 1]
-        disturbed = ((abs(norm - ref_n) > s[P_MAG_NORM_TH] * ref_n)
-                     or (abs(dip - ref_d) > s[P_MAG_DIP_TH]))
-        allow = not disturbed
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    n2 = w * w + x * x + y * y + z * z
-    mc_learn(s, MC0, mx, my, mz, s[S_CAL_TURN], s[S_CAL_TURN + 1], s[S_CAL_TURN + 2],
-             s[S_CAL_TURN + 3], s[S_CAL_WAIT], s[S_CAL_RATE], s[S_CAL_RATE + 1],
-             s[S_CAL_RATE + 2], 1.0, 2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
-             (w * w - x * x - y * y + z * z) / n2, 1.0 if allow else 0.0)
-    s[S_CAL_TURN] = 1.0
-    for i in range(1, 4):
-        s[S_CAL_TURN + i] = 0.0
-    s[S_CAL_WAIT] = 0.0
-    # A learned calibration applied: the heading is set once from the
-    # calibrated field as the calibration tracks it (its noise averaged
-    # over many fields); then it follows the calibrated fields.
-    switched = s[MC0 + MC_APPLIED] != 0.0 and (not applied or s[S_CAL_LOADED] != 0.0)
-    s[S_CAL_LOADED] = 0.0
-    if switched and has_ref:
-        fx, fy, fz = mc_field(s, MC0)
-        hx, hy, hz = rotate(w, x, y, z, fx, fy, fz)
-        half = 0.5 * math.atan2(hx, hy)
-        _turn_heading(s, math.cos(half), math.sin(half))
-        # No initial averaging: the refinement's gain follows.
-        s[S_MAG_USED] = math.inf
-        s[S_CAL_SINCE] = 0.0
-        # The references become the calibrated field's norm and dip.
-        h = math.sqrt(hx * hx + hy * hy)
-        s[S_REF] = math.sqrt(h * h + hz * hz)
-        s[S_REF + 1] = math.atan2(hz, h)
-        s[S_CAND] = s[S_REF]
-        s[S_CAND + 1] = s[S_REF + 1]
-        s[S_CAND_TIME] = 0.0
-    return mc_apply(s, MC0, mx, my, mz)
 
 
 # --- a whole recording -----------------------------------------------------------------

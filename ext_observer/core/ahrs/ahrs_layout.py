@@ -119,6 +119,10 @@ P_ACC_REJECT_TIME = AHRS.parameter('acc_reject_time')  # s: the longest rejectio
 S_ACC_CARRIED = AHRS.field('acc_carried', 3)  # u: the vertical the gyro carries, world frame
 S_ACC_REJ = AHRS.field('acc_rej')  # s the force has been rejected (0: used)
 S_ACC_TILT = AHRS.field('acc_tilt')  # rad/s: the recent rate of tilting rotation
+# The field step after a clipped gyro or a hole (field_kernel): what the gyro lost.
+S_HEAD_DOUBT = AHRS.field('head_doubt')  # rad²: heading variance no field has corrected yet
+S_TILT_DOUBT = AHRS.field('tilt_doubt')  # rad²: its share of tilt, as the accelerometer forgets it
+S_FIELD_CLIPPED = AHRS.field('field_clipped')  # 1: the gyro clipped since the latest field
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 

@@ -1,0 +1,456 @@
+"""
+The field step (core/ahrs/field_kernel.py), step by step (no ROS): fast known answers for mutmut.
+
+What ``ahrs_update_mag`` keeps of the fields (the references' norm and
+dip, the candidate of a new field, their times), what the heading does
+while it waits for the calibration and when the calibration finds the
+sensor calibrated, and what ``_calibrate`` hands the calibration at each of
+its steps. Each expected value is computed here from the rule the
+docstrings state (a first-order low-pass of gain ``1 − exp(−dt/τ)``,
+VQF's candidate timer with its factor of two, Laidig & Seel 2023; the
+world's vertical as ``R(q)ᵀ e_z``), not read from the code. Level, the
+norm and dip of a field are those of the world's field whatever the
+heading, so the scenarios set them exactly. Part of ``make mutation``'s
+subset of the kernel (docs/tests.md#mutmut): the whole file takes about
+a second on the plain kernels.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from ext_observer.core.ahrs import magcal_kernel
+from ext_observer.core.ahrs.ahrs_filters import rotate
+from ext_observer.core.ahrs.field_kernel import _turn_heading, ahrs_update_mag
+from ext_observer.core.ahrs.bias_kernel import bias_measure
+from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_R, MC0, S_BIAS, S_BIAS_P, S_CAL_MOVED,
+                                                S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN, S_CAL_WAIT,
+                                                S_CAND, S_CAND_TIME, S_HAS_REF, S_LP, S_MAG_USED,
+                                                S_Q, S_REF, S_REF_AGE, S_REF_REST, S_REJECTED,
+                                                S_REST, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN,
+                                                S_HEAD_DOUBT)
+from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.magcal_layout import MAGCAL, MC_READY, MC_REFUSED, MC_USED
+
+DT = 0.01
+LEVEL = (0.0, 0.0, 9.81)
+STILL = (0.0, 0.0, 0.0)
+NORM, DIP = 4.5e-5, math.radians(-60.0)
+
+
+def world_field(norm, dip, heading=0.0):
+    """A field of this norm and dip whose horizontal part points ``heading`` east of north."""
+    h = norm * math.cos(dip)
+    return np.array([h * math.sin(heading), h * math.cos(heading), norm * math.sin(dip)])
+
+
+def body_field(field, yaw):
+    """The world ``field`` seen by a level body turned ``yaw`` about the vertical."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return (c * field[0] + s * field[1], -s * field[0] + c * field[1], field[2])
+
+
+def yaw_of(q):
+    w, x, y, z = q
+    assert abs(x) < 1e-12 and abs(y) < 1e-12   # level
+    return 2.0 * math.atan2(z, w)
+
+
+def wrap(a):
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+def test_the_first_field_sets_the_references_and_the_candidate():
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True)
+    est.update(STILL, LEVEL, body_field(world_field(NORM, DIP, 0.7), 0.0), DT)
+    s = est.flat_state
+    assert s[S_HAS_REF] == 1.0
+    assert list(s[S_REF:S_REF + 2]) == pytest.approx([NORM, DIP], rel=1e-12)
+    assert list(s[S_CAND:S_CAND + 2]) == pytest.approx([NORM, DIP], rel=1e-12)
+
+
+@pytest.mark.parametrize('change', ['norm', 'dip'])
+def test_a_new_field_is_followed_by_its_candidate_and_accepted_after_mag_new_time(change):
+    # Level, turning at 1 rad/s (above mag_new_gyr once the low-passed rate
+    # is), mag_new_time 1 s. 2 s of the first field make the references old;
+    # then a field 30 % stronger (or 20 deg steeper), drifting slowly within
+    # the candidate's band: rejected; the candidate follows it as a
+    # low-pass of tau_mag_ref, its time counts the turning samples, the
+    # rejection time every rejected one; after mag_new_time the field is
+    # accepted: the references are the candidate's, the rejection time 0.
+    params = AhrsParams(mag_cal=False, mag_new_time=1.0)
+    est = AhrsObserver(params, use_mag=True)
+    s = est.flat_state
+    kr = 1.0 - math.exp(-DT / params.tau_mag_ref)
+    rate, yaw = 1.0, 0.0
+    for _ in range(200):
+        yaw += rate * DT
+        est.update((0.0, 0.0, rate), LEVEL, body_field(world_field(NORM, DIP), yaw), DT)
+    assert not est.mag_disturbed and s[S_REF_AGE] > 1.0
+    cand, cand_time, rejected, accepted = None, 0.0, 0.0, None
+    for k in range(200):
+        norm, dip = (1.3 * NORM * (1.0 + 1e-4 * k), DIP) if change == 'norm' else (
+            NORM, DIP - math.radians(20.0) + 1e-4 * k)
+        yaw += rate * DT
+        est.update((0.0, 0.0, rate), LEVEL, body_field(world_field(norm, dip), yaw), DT)
+        if cand is None:   # off the old candidate: it starts over here
+            cand = np.array([norm, dip])
+        else:
+            cand += kr * (np.array([norm, dip]) - cand)
+            cand_time += DT
+        if est.mag_disturbed:
+            rejected += DT
+            assert list(s[S_CAND:S_CAND + 2]) == pytest.approx(list(cand), rel=1e-9), k
+            assert s[S_CAND_TIME] == pytest.approx(cand_time, abs=1e-9), k
+            assert s[S_REJECTED] == pytest.approx(rejected, abs=1e-9), k
+            assert list(s[S_REF:S_REF + 2]) == pytest.approx([NORM, DIP], rel=1e-9), k
+        else:
+            accepted = k
+            break
+    assert accepted in (100, 101)
+    assert s[S_REJECTED] == 0.0 and s[S_REF_REST] == 0.0
+    # The references are the candidate's, then follow this field as any used.
+    ref = cand + kr * (np.array([norm, dip]) - cand)
+    assert list(s[S_REF:S_REF + 2]) == pytest.approx(list(ref), rel=1e-9)
+    assert s[S_REF_AGE] == pytest.approx(cand_time + DT, abs=1e-9)
+
+
+def test_while_the_references_are_young_a_field_off_the_candidate_takes_back_twice_its_time():
+    # Still 0.5 s, then turning with the first field: the references are
+    # younger than mag_new_time (2 s) and no rest confirmed them. A field
+    # 30 % stronger: off the candidate, each sample takes 2 dt from the
+    # candidate's time (the candidate kept) until it is 0, then the
+    # candidate is the new field, whose time counts up; it is accepted once
+    # that time reaches the references' age (not mag_new_time). Back to
+    # the first field, the rejection time decays by 2 dt a sample.
+    params = AhrsParams(mag_cal=False, mag_new_time=2.0)
+    est = AhrsObserver(params, use_mag=True)
+    s = est.flat_state
+    first = world_field(NORM, DIP)
+    for _ in range(50):
+        est.update(STILL, LEVEL, body_field(first, 0.0), DT)
+    rate, yaw = 1.0, 0.0
+    for _ in range(40):
+        yaw += rate * DT
+        est.update((0.0, 0.0, rate), LEVEL, body_field(first, yaw), DT)
+    cand_time, age = s[S_CAND_TIME], s[S_REF_AGE]
+    taken_back = math.ceil(cand_time / (2.0 * DT) - 1e-9)
+    assert 0.1 < cand_time < age < 1.0 and s[S_REF_REST] == 0.0
+    strong = world_field(1.3 * NORM, DIP)
+    n = 0
+    while cand_time > 0.0:
+        yaw += rate * DT
+        est.update((0.0, 0.0, rate), LEVEL, body_field(strong, yaw), DT)
+        cand_time = max(cand_time - 2.0 * DT, 0.0)
+        n += 1
+        assert s[S_CAND_TIME] == pytest.approx(cand_time, abs=1e-9), n
+        assert est.mag_disturbed
+        expected = [1.3 * NORM, DIP] if cand_time == 0.0 else [NORM, DIP]
+        assert list(s[S_CAND:S_CAND + 2]) == pytest.approx(expected, rel=1e-9), n
+    assert n == taken_back
+    assert s[S_REF_AGE] == pytest.approx(age, abs=1e-12)   # fields not used do not age them
+    steps = 0
+    while est.mag_disturbed:
+        yaw += rate * DT
+        est.update((0.0, 0.0, rate), LEVEL, body_field(strong, yaw), DT)
+        steps += 1
+        assert steps < 200
+    assert abs(steps * DT - age) <= 1.5 * DT
+    rejected = s[S_REJECTED]
+    assert rejected == 0.0
+    # A stretch of the old field (now rejected) then the new one again.
+    for _ in range(30):
+        yaw += rate * DT
+        est.update((0.0, 0.0, rate), LEVEL, body_field(first, yaw), DT)
+    assert s[S_REJECTED] == pytest.approx(30 * DT, abs=1e-9)
+    for k in range(1, 11):
+        yaw += rate * DT
+        est.update((0.0, 0.0, rate), LEVEL, body_field(strong, yaw), DT)
+        assert s[S_REJECTED] == pytest.approx((30 - 2 * k) * DT, abs=1e-9)
+
+
+@pytest.mark.parametrize('waited', [1, 40])
+def test_fields_waited_for_are_applied_when_the_calibration_finds_the_sensor_calibrated(waited):
+    # 9D with the calibration, learning every 5 s (its steps stay out of the
+    # way). Still, the first fields set the heading; turning, the body has
+    # moved and the calibration is not ready: the fields wait. They point
+    # 0.4 rad east of the heading: the heading does not follow them, but
+    # the turn it would have had is kept (a running mean over all the
+    # fields used, then k_mag). The calibration then says ready and not
+    # applied (as it does when it finds the sensor calibrated: here set in
+    # its flat state, a converged calibration takes minutes): at the next
+    # field the heading turns by the kept turn and corrects the rest of
+    # the field's heading with the gain of all the fields used.
+    params = AhrsParams(mag_cal_rate=0.2)
+    est = AhrsObserver(params, use_mag=True)
+    s = est.flat_state
+    k_mag = 1.0 - math.exp(-DT / params.tau_mag)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    assert abs(yaw_of(est.q)) < 1e-12
+    rate, yaw = 0.5, 0.0
+    while s[S_CAL_MOVED] == 0.0:
+        yaw += rate * DT
+        est.update((0.0, 0.0, rate), LEVEL, None, DT)
+        assert yaw < 1.0
+    assert s[MC0 + MC_READY] == 0.0 and s[S_WAIT_N] == 0.0
+    used = s[S_MAG_USED]
+    assert used == 20.0
+    turned = world_field(NORM, DIP, 0.4)
+    turn = 0.0
+    for k in range(waited):
+        yaw += rate * DT
+        q = est.update((0.0, 0.0, rate), LEVEL, body_field(turned, yaw), DT)
+        assert yaw_of(q) == pytest.approx(wrap(yaw), abs=1e-9)    # not corrected
+        kap = max(k_mag, 1.0 / (used + k + 1.0))
+        turn += kap * (0.4 - turn)
+        assert s[S_WAIT_N] == k + 1.0
+        assert s[S_WAIT_TURN] == pytest.approx(turn, abs=1e-12)
+    assert s[S_MAG_USED] == used
+    s[MC0 + MC_READY] = 1.0
+    yaw += rate * DT
+    since = s[S_CAL_SINCE] + DT
+    q = est.update((0.0, 0.0, rate), LEVEL, body_field(turned, yaw), DT)
+    total = used + waited + 1.0
+    assert s[S_MAG_USED] == total and s[S_WAIT_N] == 0.0 and s[S_WAIT_TURN] == 0.0
+    kap = max(k_mag, 1.0 / total, 1.0 - math.exp(-DT / max(1.0, 0.5 * since)))
+    rest = 0.4 - turn
+    correction = 2.0 * math.atan2(kap * math.sin(0.5 * rest),
+                                  1.0 - kap + kap * math.cos(0.5 * rest))
+    assert yaw_of(q) == pytest.approx(wrap(yaw + turn + correction), abs=1e-9)
+
+
+def up_of(q):
+    """The world's vertical in the body frame, ``R(q)ᵀ e_z``, from the rotation matrix."""
+    w, x, y, z = np.asarray(q) / np.linalg.norm(q)
+    r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                  [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                  [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return r.T @ np.array([0.0, 0.0, 1.0])
+
+
+def test_each_calibration_step_hands_the_calibration_its_turn_time_rate_vertical_and_verdict():
+    # 9D, a calibration loaded (so it is ready and its fields are checked
+    # against the references), learning at 20 Hz (every 5th field). The
+    # body turns about a tilted axis at a changing rate, tilted; every
+    # third field of a calibration step is 40 % too strong. At each field
+    # the kernel's calibration block is compared with one stepped here by
+    # the calibration's own mc_learn, given what the kernel must hand it:
+    # the gyro's rotation since the last step, the time since it, the
+    # latest rate, the vertical R(q)ᵀ e_z, and whether the calibrated field
+    # passes the references' norm and dip test. Between steps, nothing.
+    params = AhrsParams(mag_cal_rate=20.0)
+    est = AhrsObserver(params, use_mag=True)
+    offset, soft = np.array([2e-5, -1e-5, 0.5e-5]), np.diag([1.1, 0.95, 1.0])
+    est.load_calibration(tuple(offset), soft)
+    s = est.flat_state
+    field = world_field(NORM, DIP, 0.3)
+    period = 1.0 / params.mag_cal_rate
+    steps = refused = 0
+    # Turned 2 rad about the vertical and rolled 0.4 rad: no component of
+    # the attitude small, so a component read from the wrong slot shows.
+    truth = np.array([math.cos(1.0) * math.cos(0.2), math.cos(1.0) * math.sin(0.2),
+                      -math.sin(1.0) * math.sin(0.2), math.sin(1.0) * math.cos(0.2)])
+    for k in range(240):
+        rate = np.array([0.6 * math.sin(0.05 * k), 0.4 + 0.002 * k, -0.3])
+        t = np.linalg.norm(rate) * DT
+        w, v = truth[0], truth[1:]
+        e = np.concatenate(([math.cos(0.5 * t)], math.sin(0.5 * t) / t * rate * DT))
+        truth = np.concatenate(([w * e[0] - v @ e[1:]], w * e[1:] + e[0] * v + np.cross(v, e[1:])))
+        est.update(tuple(rate), tuple(9.81 * up_of(truth)), None, DT)
+        body = np.array(rotate(truth[0], -truth[1], -truth[2], -truth[3], *field))
+        strong = steps % 3 == 2
+        raw = soft @ (body * (1.4 if strong else 1.0)) + offset
+        wait = s[S_CAL_WAIT] + DT
+        if wait >= period:
+            # The kernel's attitude need not be unit (the extension term
+            # pulls it back): the vertical is that of its rotation.
+            for i in range(4):
+                s[S_Q + i] *= 1.03
+        before = np.array(s, dtype=float)
+        ahrs_update_mag(s, *raw, DT)
+        if wait < period:
+            assert s[S_CAL_WAIT] == pytest.approx(wait, abs=1e-15)
+            assert np.array_equal(s[MC0:MC0 + MAGCAL.size], before[MC0:MC0 + MAGCAL.size])
+            continue
+        shadow = before.copy()
+        c = np.array(magcal_kernel.mc_apply(shadow, MC0, *raw))
+        w = rotate(*before[S_Q:S_Q + 4], *c)
+        h = math.hypot(w[0], w[1])
+        norm, dip = math.hypot(h, w[2]), math.atan2(w[2], h)
+        ref_n, ref_d = before[S_REF], before[S_REF + 1]
+        # (the first field's step: no references yet, nothing to check)
+        allow = before[S_HAS_REF] == 0.0 or (abs(norm - ref_n) <= params.mag_norm_th * ref_n
+                                             and abs(dip - ref_d) <= params.mag_dip_th)
+        assert allow != strong, (k, norm / ref_n, dip - ref_d)
+        magcal_kernel.mc_learn(shadow, MC0, *raw, *before[S_CAL_TURN:S_CAL_TURN + 4], wait,
+                               *before[S_CAL_RATE:S_CAL_RATE + 3], 1.0,
+                               *up_of(before[S_Q:S_Q + 4]), 1.0 if allow else 0.0)
+        a, b = s[MC0:MC0 + MAGCAL.size], shadow[MC0:MC0 + MAGCAL.size]
+        bad = ~np.isclose(a, b, rtol=1e-9, atol=0.0)
+        assert not bad.any(), (k, np.flatnonzero(bad), a[bad], b[bad])
+        assert list(s[S_CAL_TURN:S_CAL_TURN + 4]) == [1.0, 0.0, 0.0, 0.0]
+        assert s[S_CAL_WAIT] == 0.0
+        steps += 1
+        refused += strong
+    assert steps in (47, 48) and refused == steps // 3
+    assert s[MC0 + MC_REFUSED] == refused and s[MC0 + MC_USED] >= 30.0
+
+
+def test_a_calibration_applied_while_running_restarts_the_references_from_its_field():
+    # Level and still, a raw field with an offset: the references are the
+    # raw field's norm and dip. A calibration loaded while running is
+    # applied at the next field (a calibration step): the references and
+    # the candidate are then the calibrated field's, the candidate's time
+    # 0, the refinement's time restarts (one field's dt after that field)
+    # and the heading's running mean is over (no mean: the refinement).
+    est = AhrsObserver(AhrsParams(), use_mag=True)
+    s = est.flat_state
+    field = world_field(NORM, DIP, 0.5)
+    offset = np.array([2e-5, -1.5e-5, 1e-5])
+    raw = tuple(np.asarray(body_field(field, 0.0)) + offset)
+    for _ in range(50):
+        est.update(STILL, LEVEL, raw, DT)
+    n_raw = float(np.linalg.norm(raw))
+    assert s[S_REF] == pytest.approx(n_raw, rel=1e-9)
+    est.load_calibration(tuple(offset), np.eye(3))
+    est.update(STILL, LEVEL, raw, DT)
+    assert list(s[S_REF:S_REF + 2]) == pytest.approx([NORM, DIP], rel=1e-9)
+    assert list(s[S_CAND:S_CAND + 2]) == pytest.approx([NORM, DIP], rel=1e-9)
+    assert s[S_CAND_TIME] == 0.0
+    assert s[S_CAL_SINCE] == DT and s[S_MAG_USED] == math.inf
+
+
+def test_a_heading_turn_turns_the_estimate_and_its_low_passed_vertical_alike():
+    # _turn_heading(r): q <- r ⊗ q for r = (rw, 0, 0, rz) of any norm, and
+    # the acceleration's low-pass states (world frame, two of three
+    # components each) turned by r's angle about the vertical, not scaled.
+    est = AhrsObserver(AhrsParams(), use_mag=False)
+    est.update(STILL, (1.2, -0.8, 9.7), None, DT)
+    s = est.flat_state
+    states = np.array([0.3, -0.2, 9.7, 0.1, 0.05, -0.4])
+    s[S_LP:S_LP + 6] = states
+    q0 = np.array(s[S_Q:S_Q + 4], dtype=float)
+    a = 0.7
+    rw, rz = 0.9 * math.cos(0.5 * a), 0.9 * math.sin(0.5 * a)
+    _turn_heading(s, rw, rz)
+    w, x, y, z = q0
+    assert list(s[S_Q:S_Q + 4]) == pytest.approx(
+        [rw * w - rz * z, rw * x - rz * y, rw * y + rz * x, rw * z + rz * w], abs=1e-15)
+    turn = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    expected = np.concatenate([turn @ states[0:2], states[2:3], turn @ states[3:5],
+                               states[5:6]])
+    assert np.allclose(s[S_LP:S_LP + 6], expected, rtol=0.0, atol=1e-14)
+
+
+def test_in_motion_the_steady_heading_correction_teaches_the_bias_through_the_low_passed_vertical():
+    # 9D without the calibration, tilted and turning (never at rest), a
+    # gyro bias: the heading is corrected by each field. R(q)'s z row is
+    # low-passed with k_mag at each field; once the heading's gain is the
+    # steady k_mag (after 1/k_mag fields) and the start is over, each
+    # correction is one measurement of the bias along that row: the rate
+    # -2 rz / (rw dt) of the correction r = (rw, rz), of noise density
+    # bias_r tau_mag / tau_acc (the bias filter's own update, tested in
+    # test_bias_kernel.py). Before that (1/k_mag fields: 2 s; the start:
+    # 2 tau_acc, 3 s, the later here), the field's step leaves the bias and
+    # its covariance alone.
+    params = AhrsParams(mag_cal=False, tau_mag=2.0, tau_acc=1.5)
+    est = AhrsObserver(params, use_mag=True)
+    s = est.flat_state
+    k_mag = 1.0 - math.exp(-DT / params.tau_mag)
+    field = world_field(NORM, DIP, 0.3)
+    truth = np.array([math.cos(0.3), math.sin(0.3) * 0.6, math.sin(0.3) * 0.8, 0.0])
+    bias = np.array([0.01, -0.02, 0.015])
+    z_row = None
+    learned = quiet = 0
+    for k in range(600):
+        rate = np.array([0.3 * math.sin(0.03 * k), 0.2 * math.cos(0.05 * k), 0.5])
+        t = np.linalg.norm(rate) * DT
+        e = np.concatenate(([math.cos(0.5 * t)], math.sin(0.5 * t) / t * rate * DT))
+        w, v = truth[0], truth[1:]
+        truth = np.concatenate(([w * e[0] - v @ e[1:]], w * e[1:] + e[0] * v + np.cross(v, e[1:])))
+        est.update(tuple(rate + bias), tuple(9.81 * up_of(truth)), None, DT)
+        if k == 0:   # the start: the low-passed row starts at R(q)'s
+            assert np.allclose(s[S_RZLP:S_RZLP + 3], up_of(est.q), rtol=0.0, atol=1e-14)
+        body = rotate(truth[0], -truth[1], -truth[2], -truth[3], *field)
+        before = np.array(s, dtype=float)
+        ahrs_update_mag(s, *body, DT)
+        q = np.array(s[S_Q:S_Q + 4], dtype=float)
+        row = up_of(q)      # R(q)'s z row is R(q)ᵀ e_z
+        z_row = before[S_RZLP:S_RZLP + 3] + k_mag * (row - before[S_RZLP:S_RZLP + 3])
+        assert np.allclose(s[S_RZLP:S_RZLP + 3], z_row, rtol=0.0, atol=1e-12), k
+        used = before[S_MAG_USED] + 1.0
+        kap = max(k_mag, 1.0 / used)
+        steady = (kap == k_mag and used * k_mag > 1.0 and before[S_REST] == 0.0
+                  and before[S_START] >= 2.0 * params.tau_acc)
+        shadow = before.copy()
+        if steady:
+            h = rotate(*before[S_Q:S_Q + 4], *body)
+            psi = math.atan2(h[0], h[1])
+            rw, rz = 1.0 - kap + kap * math.cos(0.5 * psi), kap * math.sin(0.5 * psi)
+            bias_measure(shadow, *z_row, -2.0 * rz / (rw * DT),
+                         before[C_BIAS_R] * params.tau_mag / (params.tau_acc * DT))
+            learned += 1
+        else:
+            quiet += 1
+        assert np.allclose(s[S_BIAS:S_BIAS + 3], shadow[S_BIAS:S_BIAS + 3], rtol=1e-9,
+                           atol=1e-15), k
+        assert np.allclose(s[S_BIAS_P:S_BIAS_P + 6], shadow[S_BIAS_P:S_BIAS_P + 6], rtol=1e-9,
+                           atol=0.0), k
+    assert learned > 250 and quiet > 250
+
+
+# --- after a clipped gyro or a hole ----------------------------------------------------
+
+RANGE = math.radians(250.0)
+
+
+def test_the_calibration_learns_nothing_from_a_clipped_stretch():
+    # A body turning about the vertical past the gyro's range for 0.3 s:
+    # the calibration sees no field of those samples (its field count
+    # stands), and learns again once the gyro is back in range.
+    est = AhrsObserver(AhrsParams(gyro_range=RANGE, mag_cal_rate=1e4), use_mag=True,
+                       compiled=False)
+    field = world_field(NORM, DIP)
+    yaw = 0.0
+    fields = MC0 + MAGCAL.offset('fields')
+
+    def step(rate):
+        nonlocal yaw
+        yaw += rate * DT
+        est.update((0.0, 0.0, max(-RANGE, min(RANGE, rate))), LEVEL, body_field(field, yaw), DT)
+
+    for _ in range(100):
+        step(0.5)
+    before = est.flat_state[fields]
+    assert before > 0.0
+    for _ in range(30):
+        step(1.5 * RANGE)
+    assert est.clipped == 30
+    assert est.flat_state[fields] == before
+    for _ in range(10):
+        step(0.5)
+    assert est.flat_state[fields] > before
+
+
+def test_after_a_hole_the_heading_comes_back_from_the_field_as_its_doubt_allows():
+    # A level body at rest, the field fixed; a 0.45 s hole hides a turn of
+    # 16° (40 °/s for 0.4 s) that the bridge between two still samples
+    # cannot see. The hole's variance (σ ≈ 6°) lets the field take most of
+    # the error back within 2 s, where tau_mag's gain alone gives back 12 %.
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    field = world_field(NORM, DIP)
+    for _ in range(300):
+        est.update(STILL, LEVEL, body_field(field, 0.0), DT)
+    turn = math.radians(40.0) * 0.4
+    est.update(STILL, LEVEL, body_field(field, turn), 0.45)
+    assert est.holes == 1
+    doubt = est.flat_state[S_HEAD_DOUBT]
+    assert doubt > math.radians(4.0) ** 2
+    lost = abs(wrap(yaw_of(est.q) - turn))
+    assert lost > math.radians(12.0)
+    for _ in range(200):
+        est.update(STILL, LEVEL, body_field(field, turn), DT)
+    assert abs(wrap(yaw_of(est.q) - turn)) < 0.4 * lost
+    assert est.flat_state[S_HEAD_DOUBT] < 0.5 * doubt
