@@ -19,16 +19,13 @@ from .magcal_layout import (GATE, MC_AH, MC_AI, MC_DELAY, MC_DRIFT, MC_FIELD_RW,
                             MC_PRIOR_SCALE, MC_PRIOR_X, MC_REFUSED_SHARE, MC_S, MC_SCALE,
                             MC_SI, MC_SOFT_IRON, MC_X, MC_YY, CAL_D, CAL_DIFFUSE,
                             CAL_LOADED_BIAS_STD, CAL_LOADED_SOFT_SHARE, CAL_N, CAL_NIS_CAP,
-                            CAL_NIS_RATE, CAL_S, CAL_SCALE_FLOOR, CAL_SYMMETRIZE_EVERY, CAL_TAU,
-                            CAL_Z)
+                            CAL_NIS_RATE, CAL_NY, CAL_S, CAL_SCALE_FLOOR, CAL_SYMMETRIZE_EVERY,
+                            CAL_TAU, CAL_Z)
 from .small_matrix import (add3, add_diagonal, add_scaled3, col3_at, cols, column3_into,
                            copy_into, cross3, diagonal_into, dot3, fill, identity_minus,
                            mat3_vec_at, mat3t_vec, matmul_acc_into, matmul_into, neg3, quad3_at,
                            rotation_of, rows, scale3, skew_into, store3, sub3, vec3_at,
                            vec_mat3_at)
-
-# Y(y), with D(d) y = Y(y) d, is 3 × 5.
-CAL_NY = 5
 
 
 # --- prediction ------------------------------------------------------------------

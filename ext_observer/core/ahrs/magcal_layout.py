@@ -60,6 +60,7 @@ CAL_Z = 3
 CAL_D = 6
 CAL_TAU = 11
 CAL_ZD = 8  # the calibration proper, (z, d)
+CAL_NY = 5  # d, and the columns of Y(y), with D(d) y = Y(y) d
 MC_X = MAGCAL.field('x', CAL_N)  # (s, z, d, τ): s at 0-2, z at 3-5, d at 6-10, τ at 11
 MC_P = MAGCAL.field('p', CAL_N * CAL_N)  # its covariance, 12 × 12 row-major
 # What a fresh start starts from: x[3:] (9), the scale, the covariance of

@@ -11,6 +11,18 @@ subset of Python as the kernels (:mod:`~ext_observer.core.ahrs.compiled`
 compiles them, and numba inlines them into their callers).
 """
 
+import math
+
+
+def max_of(a, b):
+    """``b`` where ``a < b``, else ``a`` (a NaN ``a`` kept, as the comparison written out)."""
+    return b if a < b else a
+
+
+def finite_or_zero(a):
+    """``a``, or 0.0 where it is not finite."""
+    return a if math.isfinite(a) else 0.0
+
 
 def rows(at, width):
     """The view of a row-major matrix ``width`` wide stored at ``at``."""
@@ -25,6 +37,11 @@ def cols(at, width):
 def vec3_at(s, at):
     """``s[at:at + 3]`` as a 3-vector."""
     return (s[at], s[at + 1], s[at + 2])
+
+
+def vec5_at(s, at, step):
+    """``s[at], s[at + step], …``: five of them, as a tuple."""
+    return (s[at], s[at + step], s[at + 2 * step], s[at + 3 * step], s[at + 4 * step])
 
 
 def store3(s, at, v):
