@@ -51,6 +51,9 @@ MODULES = {
     'ext_observer/core/ahrs/magcal_kernel.py': [
         'test/test_magcal_kernel.py', 'test/test_magcal_learn.py', 'test/test_magcal_gate.py',
         'test/test_core_magcal.py'],
+    # The kernels' vector and matrix helpers: their own tests, and the filter's.
+    'ext_observer/core/ahrs/small_matrix.py': [
+        'test/test_small_matrix.py', 'test/test_magcal_filter.py'],
     # (test_magcal_lag.py is the calibration's: 21 s of the kernel's 99 s
     # under mutmut's trampolines, measured)
     'ext_observer/core/ahrs/ahrs_kernel.py': [

@@ -193,14 +193,8 @@ def mc_start(s, o, y0, y1, y2, norm):
 
 def mc_prior_unknown(s, o, norm):
     """Nothing known: ``z`` diffuse, ``d`` and ``τ`` about 0 with their parameters' spread."""
-    p = o + MC_P
     s[o + MC_SCALE] = 1.0
-    big = CAL_DIFFUSE * norm
-    diagonal_into(s, p, CAL_N, CAL_Z, 3, big * big)
-    soft = s[o + MC_SOFT_IRON]
-    diagonal_into(s, p, CAL_N, CAL_D, CAL_NY, soft * soft)
-    delay = s[o + MC_DELAY]
-    s[p + (CAL_N + 1) * CAL_TAU] = delay * delay
+    mc_prior_spread(s, o, CAL_DIFFUSE * norm, s[o + MC_SOFT_IRON], s[o + MC_DELAY])
 
 
 def mc_prior_kept(s, o):
@@ -212,13 +206,16 @@ def mc_prior_kept(s, o):
 def mc_prior_loaded(s, o, norm):
     """A loaded calibration: ``(z, d, τ)`` as loaded, a tighter prior about it."""
     mc_prior_x(s, o)
+    soft = CAL_LOADED_SOFT_SHARE * s[o + MC_SOFT_IRON]
+    mc_prior_spread(s, o, CAL_LOADED_BIAS_STD * norm / s[o + MC_SCALE], soft, s[o + MC_DELAY])
+
+
+def mc_prior_spread(s, o, z_std, d_std, tau_std):
+    """``P[z d τ, z d τ]`` diagonal, with these standard deviations."""
     p = o + MC_P
-    std = CAL_LOADED_BIAS_STD * norm / s[o + MC_SCALE]
-    diagonal_into(s, p, CAL_N, CAL_Z, 3, std * std)
-    a = CAL_LOADED_SOFT_SHARE * s[o + MC_SOFT_IRON]
-    diagonal_into(s, p, CAL_N, CAL_D, CAL_NY, a * a)
-    delay = s[o + MC_DELAY]
-    s[p + (CAL_N + 1) * CAL_TAU] = delay * delay
+    diagonal_into(s, p, CAL_N, CAL_Z, 3, z_std * z_std)
+    diagonal_into(s, p, CAL_N, CAL_D, CAL_NY, d_std * d_std)
+    s[p + (CAL_N + 1) * CAL_TAU] = tau_std * tau_std
 
 
 def mc_prior_x(s, o):
