@@ -28,15 +28,15 @@ from .magcal_layout import (CAL_D, CAL_HOLD, CAL_HOLD_TURN, CAL_INF, CAL_N, CAL_
                             MC_SEEN_HAS_UP, MC_SEEN_LIVE, MC_SEEN_UP, MC_SEEN_Y, MC_SHIFT,
                             MC_SIZE, MC_SOFT_IRON, MC_STALE, MC_USED, MC_WATCHED, MC_WATCHING,
                             MC_X)
-from .small_matrix import (col3_at, column3_into, copy_into, cross3, dot3, finite_or_zero,
-                           max_of, quad3_at, rows, store3, vec3_at, vec5_at)
+from .small_matrix import (col3_at, column3_into, copy_into, cross3, dot3, fill,
+                           finite_or_zero, max_of, quad3_at, rows, store3, vec3_at, vec5_at)
 
 # The functions, for a caller that compiles them (each one, before any call).
-FUNCTIONS = ('mc_init', 'mc_reset', 'mc_restart', 'mc_load_state', 'mc_learn', 'mc_admit',
-             'mc_lost', 'mc_start_over', 'mc_remember', 'mc_predict', 'mc_start', 'mc_update',
-             'mc_assess', 'mc_field_covariance', 'mc_j_times', 'mc_heading_error', 'mc_hold',
-             'mc_watch', 'mc_reconsider', 'mc_cache', 'mc_apply', 'mc_quality', 'mc_field',
-             'mc_inv3', 'mc_heading_between', 'mc_calibrated', 'mc_symmetrize')
+FUNCTIONS = ('mc_init', 'mc_reset', 'mc_forget', 'mc_restart', 'mc_load_state', 'mc_learn',
+             'mc_admit', 'mc_lost', 'mc_start_over', 'mc_remember', 'mc_predict', 'mc_start',
+             'mc_update', 'mc_assess', 'mc_field_covariance', 'mc_j_times', 'mc_heading_error',
+             'mc_hold', 'mc_watch', 'mc_reconsider', 'mc_cache', 'mc_apply', 'mc_quality',
+             'mc_field', 'mc_inv3', 'mc_heading_between', 'mc_calibrated', 'mc_symmetrize')
 
 __all__ = ['FUNCTIONS', 'GATE'] + [name for name in dir() if name.startswith('MC_')] + list(
     FUNCTIONS)
@@ -61,37 +61,40 @@ def mc_init(s, o, enabled, noise, field_rw, soft_iron, delay, heading, deadband,
 
 def mc_reset(s, o):
     """Forget the calibration: learn from the next field on."""
-    for k in range(CAL_N + CAL_N * CAL_N):
-        s[o + MC_X + k] = 0.0
-    for k in range(9 + 1 + 81):
-        s[o + MC_PRIOR_X + k] = 0.0
-    s[o + MC_HAS_PRIOR] = 0.0
+    fill(s, o + MC_X, CAL_N + CAL_N * CAL_N, 0.0)
+    fill(s, o + MC_PRIOR_X, 9 + 1 + 81, 0.0)
+    mc_forget(s, o)
     s[o + MC_PRIOR_COV] = 0.0
     s[o + MC_SCALE] = 1.0
-    s[o + MC_FRESH] = 1.0
-    s[o + MC_LOADED] = 0.0
-    s[o + MC_CONVERGED] = 0.0
     s[o + MC_QUALITY] = CAL_INF
     s[o + MC_STALE] = 0.0
     s[o + MC_LEARNED] = 0.0
-    s[o + MC_REFUSED_SHARE] = 0.0
     s[o + MC_NIS] = CAL_NIS_EXPECTED
-    for k in range(CAL_ZD):
-        s[o + MC_CANDIDATE + k] = 0.0
+    fill(s, o + MC_CANDIDATE, CAL_ZD, 0.0)
     s[o + MC_HELD] = -1.0
-    # The field as given is applied until the learned calibration turns
-    # the heading by more than the deadband (mean square, rad²).
-    s[o + MC_IDENTITY] = 1.0
-    s[o + MC_SHIFT] = 0.0
-    s[o + MC_WATCHED] = 0.0
     s[o + MC_FIELD_SCALE] = 1.0
-    for k in range(6):
-        s[o + MC_COUNTS + k] = 0.0
-    for k in range(8):
-        s[o + MC_SEEN_Y + k] = 0.0
+    fill(s, o + MC_COUNTS, 6, 0.0)
+    fill(s, o + MC_SEEN_Y, 8, 0.0)
     s[o + MC_ASSESSED] = 0.0
     s[o + MC_WATCHING] = 0.0
     mc_cache(s, o)
+
+
+def mc_forget(s, o):
+    """
+    A fresh start at the next field, nothing learned kept (no prior), not applied.
+
+    The field as given is applied until the learned calibration turns the
+    heading by more than the deadband (mean square, rad²).
+    """
+    s[o + MC_FRESH] = 1.0
+    s[o + MC_LOADED] = 0.0
+    s[o + MC_CONVERGED] = 0.0
+    s[o + MC_IDENTITY] = 1.0
+    s[o + MC_SHIFT] = 0.0
+    s[o + MC_WATCHED] = 0.0
+    s[o + MC_REFUSED_SHARE] = 0.0
+    s[o + MC_HAS_PRIOR] = 0.0
 
 
 def mc_restart(s, o):
@@ -238,16 +241,9 @@ def mc_lost(s, o, watched, use, live, w, dt):
 
 
 def mc_start_over(s, o):
-    """Forget what was learned (not the counts): a fresh start at the next field, no prior."""
+    """The calibration no longer fits: forget it (the counts kept), one more reset counted."""
     s[o + MC_RESETS] += 1.0
-    s[o + MC_FRESH] = 1.0
-    s[o + MC_LOADED] = 0.0
-    s[o + MC_CONVERGED] = 0.0
-    s[o + MC_IDENTITY] = 1.0
-    s[o + MC_SHIFT] = 0.0
-    s[o + MC_WATCHED] = 0.0
-    s[o + MC_REFUSED_SHARE] = 0.0
-    s[o + MC_HAS_PRIOR] = 0.0
+    mc_forget(s, o)
 
 
 def mc_remember(s, o, y, has_up, u, take):
