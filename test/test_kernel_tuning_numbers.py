@@ -40,7 +40,7 @@ def kernel_sources():
 
 
 def bare_numbers(source):
-    """``[(line, number)]``: the numeric literals in functions that are neither plain nor structure."""
+    """``[(line, number)]``: the numbers in functions that are neither plain nor structure."""
     tree = ast.parse(source)
     structure = set()
     for node in ast.walk(tree):

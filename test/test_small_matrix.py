@@ -108,7 +108,7 @@ def test_a_skew_block_and_a_diagonal():
 
 
 @pytest.mark.parametrize('transposed', [False, True])
-def test_products_of_views_are_numpys_and_sum_left_to_right(transposed):
+def test_a_product_of_views_is_numpys_and_sums_left_to_right(transposed):
     n, k, m = 3, 4, 5
     s = state(n * k + k * m + n * m + 6)
     a_at, b_at, out_at = 3, 3 + n * k, 3 + n * k + k * m
@@ -116,14 +116,7 @@ def test_products_of_views_are_numpys_and_sum_left_to_right(transposed):
     b_stored = np.array(s[b_at:b_at + k * m]).reshape((m, k) if transposed else (k, m))
     b = b_stored.T if transposed else b_stored
     b_view = sm.cols(b_at, k) if transposed else sm.rows(b_at, m)
-    t = list(s)
-    sm.matmul_into(t, sm.rows(out_at, m), sm.rows(a_at, k), b_view, n, k, m)
-    got = np.array(t[out_at:out_at + n * m]).reshape(n, m)
-    np.testing.assert_allclose(got, a @ b, rtol=1e-12)
-    written = a[1, 0] * b[0, 2] + a[1, 1] * b[1, 2] + a[1, 2] * b[2, 2] + a[1, 3] * b[3, 2]
-    assert got[1, 2] == written
-    assert t[:out_at] == s[:out_at] and t[out_at + n * m:] == s[out_at + n * m:]
-    # OUT += A B, onto what is there: the product's first term added to it first
+    # OUT += A B onto what is there, product by product
     t = list(s)
     sm.matmul_acc_into(t, sm.rows(out_at, m), sm.rows(a_at, k), b_view, n, k, m)
     got = np.array(t[out_at:out_at + n * m]).reshape(n, m)
@@ -132,6 +125,31 @@ def test_products_of_views_are_numpys_and_sum_left_to_right(transposed):
     written = (before[2, 4] + a[2, 0] * b[0, 4] + a[2, 1] * b[1, 4] + a[2, 2] * b[2, 4]
                + a[2, 3] * b[3, 4])
     assert got[2, 4] == written
+    assert t[:out_at] == s[:out_at] and t[out_at + n * m:] == s[out_at + n * m:]
+
+
+def test_twelve_long_sums_and_combinations():
+    a, b, c, k = vec(12), vec(12), vec(12), vec()
+    written = a[0] * b[0]
+    for i in range(1, 12):
+        written += a[i] * b[i]
+    assert sm.dot12(a, b) == written
+    onto = 0.25
+    for i in range(12):
+        onto += a[i] * b[i]
+    assert sm.dot12_onto(0.25, a, b) == onto
+    assert sm.dot12(a, b) == pytest.approx(np.dot(a, b), rel=1e-13)
+    s = state(30)
+    assert sm.vec12_at(s, 4, 2) == tuple(s[4:28:2])
+    combination = k[0] * np.array(a) + k[1] * np.array(b) + k[2] * np.array(c)
+    t = list(s)
+    sm.combination12_into(t, 5, k, a, b, c)
+    np.testing.assert_allclose(t[5:17], combination, rtol=1e-13)
+    assert t[:5] == s[:5] and t[17:] == s[17:]
+    t = list(s)
+    sm.sub_combination12(t, 5, k, a, b, c)
+    np.testing.assert_allclose(t[5:17], np.array(s[5:17]) - combination, rtol=1e-12)
+    assert t[:5] == s[:5] and t[17:] == s[17:]
 
 
 def test_a_copy_and_a_transposed_copy():

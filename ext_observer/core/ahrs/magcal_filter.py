@@ -22,10 +22,10 @@ from .magcal_layout import (GATE, MC_AH, MC_AI, MC_DELAY, MC_DRIFT, MC_FIELD_RW,
                             CAL_NIS_RATE, CAL_NY, CAL_S, CAL_SCALE_FLOOR, CAL_SYMMETRIZE_EVERY,
                             CAL_TAU, CAL_Z)
 from .small_matrix import (add3, add_diagonal, add_scaled3, col3_at, cols, column3_into,
-                           copy_into, cross3, diagonal_into, dot3, fill, identity_minus,
-                           mat3_vec_at, mat3t_vec, matmul_acc_into, matmul_into, neg3, quad3_at,
-                           rotation_of, rows, scale3, skew_into, store3, sub3, vec3_at,
-                           vec_mat3_at)
+                           combination12_into, copy_into, cross3, diagonal_into, dot12,
+                           dot12_onto, dot3, fill, identity_minus, mat3_vec_at, mat3t_vec,
+                           matmul_acc_into, neg3, quad3_at, rotation_of, rows, scale3, skew_into,
+                           store3, sub3, sub_combination12, vec12_at, vec3_at, vec_mat3_at)
 
 
 # --- prediction ------------------------------------------------------------------
@@ -108,14 +108,14 @@ def mc_correct(s, o, y, w):
     pred = mat3_vec_at(s, ai, add_scaled3(sv, tau, c))  # ŷ = A⁻¹ (s + τ c)
     nu = sub3(y, pred)  # ν = y − ŷ
     mc_jacobian(s, o, scale3(tau, w), pred, c)
-    mc_innovation_covariance(s, o)
+    g0, g1, g2 = mc_innovation_covariance(s, o)
     nis = quad3_at(s, o + MC_SI, nu)  # NIS = νᵀ S⁻¹ ν
     capped = nis
     if CAL_NIS_CAP * GATE < nis:
         capped = CAL_NIS_CAP * GATE
     s[o + MC_NIS] = s[o + MC_NIS] + CAL_NIS_RATE * (capped - s[o + MC_NIS])
     if nis < GATE:
-        mc_gain_step(s, o, nu)
+        mc_gain_step(s, o, nu, g0, g1, g2)
         return True
     return False
 
@@ -137,31 +137,48 @@ def mc_jacobian(s, o, tw, pred, c):
     skew_into(s, h + CAL_Z, CAL_N, 0.0, neg3(tw))  # ∂/∂z = −τ[ω]×
     mc_regressor_into(s, h + CAL_D, CAL_N, neg3(pred))  # ∂/∂d = −Y(ŷ)
     column3_into(s, h + CAL_TAU, CAL_N, c)  # ∂/∂τ = ω × m
-    matmul_into(s, rows(o + MC_AH, CAL_N), rows(o + MC_AI, 3), rows(h, CAL_N), 3, 3, CAL_N)
+    h0, h1, h2 = vec12_at(s, h, 1), vec12_at(s, h + CAL_N, 1), vec12_at(s, h + 2 * CAL_N, 1)
+    for r in range(3):  # (A⁻¹ H)ᵣ = (A⁻¹)ᵣ H
+        combination12_into(s, o + MC_AH + CAL_N * r, vec3_at(s, o + MC_AI + 3 * r), h0, h1, h2)
 
 
 def mc_innovation_covariance(s, o):
-    """``P Hᵀ``, ``S = H P Hᵀ + R`` and ``S⁻¹``, ``H`` the measurement's (``A⁻¹ H``)."""
+    """
+    ``P Hᵀ``, ``S = H P Hᵀ + R`` and ``S⁻¹``, ``H`` the measurement's (``A⁻¹ H``).
+
+    Returns the columns of ``P Hᵀ`` (12-tuples), for the gain.
+    """
     ah, ph, sm = o + MC_AH, o + MC_PH, o + MC_S
-    matmul_into(s, rows(ph, 3), rows(o + MC_P, CAL_N), cols(ah, CAL_N), CAL_N, CAL_N, 3)  # P Hᵀ
-    fill(s, sm, 9, 0.0)
-    matmul_acc_into(s, rows(sm, 3), rows(ah, CAL_N), rows(ph, 3), 3, CAL_N, 3)  # H (P Hᵀ)
+    h0, h1, h2 = vec12_at(s, ah, 1), vec12_at(s, ah + CAL_N, 1), vec12_at(s, ah + 2 * CAL_N, 1)
+    for i in range(CAL_N):  # (P Hᵀ)ᵢ = Pᵢ Hᵀ
+        pi = vec12_at(s, o + MC_P + CAL_N * i, 1)
+        store3(s, ph + 3 * i, (dot12(pi, h0), dot12(pi, h1), dot12(pi, h2)))
+    g0, g1, g2 = vec12_at(s, ph, 3), vec12_at(s, ph + 1, 3), vec12_at(s, ph + 2, 3)
     noise = s[o + MC_NOISE] * s[o + MC_FIELD_SCALE]
-    add_diagonal(s, sm, 3, 0, 3, noise * noise)  # S = H P Hᵀ + (noise |m|)² I
+    r = noise * noise  # R = (noise |m|)² I
+    s[sm], s[sm + 1], s[sm + 2] = (dot12_onto(0.0, h0, g0) + r, dot12_onto(0.0, h0, g1),
+                                   dot12_onto(0.0, h0, g2))  # S = H (P Hᵀ) + R
+    s[sm + 3], s[sm + 4], s[sm + 5] = (dot12_onto(0.0, h1, g0), dot12_onto(0.0, h1, g1) + r,
+                                       dot12_onto(0.0, h1, g2))
+    s[sm + 6], s[sm + 7], s[sm + 8] = (dot12_onto(0.0, h2, g0), dot12_onto(0.0, h2, g1),
+                                       dot12_onto(0.0, h2, g2) + r)
     mc_inv3(s, o + MC_SI, s[sm], s[sm + 1], s[sm + 2], s[sm + 3], s[sm + 4], s[sm + 5],
             s[sm + 6], s[sm + 7], s[sm + 8])
+    return g0, g1, g2
 
 
-def mc_gain_step(s, o, nu):
-    """``K = P Hᵀ S⁻¹``, ``x += K ν``, ``P −= K (P Hᵀ)ᵀ``: a row of ``K`` at a time."""
-    x, p, ph, kk = o + MC_X, o + MC_P, o + MC_PH, o + MC_K
+def mc_gain_step(s, o, nu, g0, g1, g2):
+    """
+    ``K = P Hᵀ S⁻¹``, ``x += K ν``, ``P −= K (P Hᵀ)ᵀ``: a row of ``K`` at a time.
+
+    ``g0, g1, g2``: the columns of ``P Hᵀ``.
+    """
+    x, ph, kk = o + MC_X, o + MC_PH, o + MC_K
     for i in range(CAL_N):
         k = vec_mat3_at(vec3_at(s, ph + 3 * i), s, o + MC_SI)  # Kᵢ = (P Hᵀ)ᵢ S⁻¹
         store3(s, kk + 3 * i, k)
         s[x + i] += dot3(k, nu)  # xᵢ += Kᵢ ν
-        row = p + CAL_N * i
-        for j in range(CAL_N):
-            s[row + j] -= dot3(k, vec3_at(s, ph + 3 * j))  # Pᵢⱼ −= Kᵢ (P Hᵀ)ⱼ
+        sub_combination12(s, o + MC_P + CAL_N * i, k, g0, g1, g2)  # Pᵢ −= Kᵢ (P Hᵀ)ᵀ
 
 
 def mc_field_scale(s, o, norm):

@@ -44,6 +44,59 @@ def vec5_at(s, at, step):
     return (s[at], s[at + step], s[at + 2 * step], s[at + 3 * step], s[at + 4 * step])
 
 
+def vec12_at(s, at, step):
+    """``s[at], s[at + step], …``: twelve of them, as a tuple (held in registers, compiled)."""
+    return (s[at], s[at + step], s[at + 2 * step], s[at + 3 * step], s[at + 4 * step],
+            s[at + 5 * step], s[at + 6 * step], s[at + 7 * step], s[at + 8 * step],
+            s[at + 9 * step], s[at + 10 * step], s[at + 11 * step])
+
+
+def dot12(a, b):
+    """``a · b`` for 12-tuples, from the first product on."""
+    return (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
+            + a[6] * b[6] + a[7] * b[7] + a[8] * b[8] + a[9] * b[9] + a[10] * b[10]
+            + a[11] * b[11])
+
+
+def dot12_onto(acc, a, b):
+    """``acc + a · b`` for 12-tuples, product by product onto ``acc``."""
+    return (acc + a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4]
+            + a[5] * b[5] + a[6] * b[6] + a[7] * b[7] + a[8] * b[8] + a[9] * b[9]
+            + a[10] * b[10] + a[11] * b[11])
+
+
+def combination12_into(s, at, k, a, b, c):
+    """``s[at:at + 12] = k₀ a + k₁ b + k₂ c`` (12-tuples), written out: held in registers."""
+    s[at] = k[0] * a[0] + k[1] * b[0] + k[2] * c[0]
+    s[at + 1] = k[0] * a[1] + k[1] * b[1] + k[2] * c[1]
+    s[at + 2] = k[0] * a[2] + k[1] * b[2] + k[2] * c[2]
+    s[at + 3] = k[0] * a[3] + k[1] * b[3] + k[2] * c[3]
+    s[at + 4] = k[0] * a[4] + k[1] * b[4] + k[2] * c[4]
+    s[at + 5] = k[0] * a[5] + k[1] * b[5] + k[2] * c[5]
+    s[at + 6] = k[0] * a[6] + k[1] * b[6] + k[2] * c[6]
+    s[at + 7] = k[0] * a[7] + k[1] * b[7] + k[2] * c[7]
+    s[at + 8] = k[0] * a[8] + k[1] * b[8] + k[2] * c[8]
+    s[at + 9] = k[0] * a[9] + k[1] * b[9] + k[2] * c[9]
+    s[at + 10] = k[0] * a[10] + k[1] * b[10] + k[2] * c[10]
+    s[at + 11] = k[0] * a[11] + k[1] * b[11] + k[2] * c[11]
+
+
+def sub_combination12(s, at, k, a, b, c):
+    """``s[at:at + 12] −= k₀ a + k₁ b + k₂ c`` (12-tuples), written out: held in registers."""
+    s[at] -= k[0] * a[0] + k[1] * b[0] + k[2] * c[0]
+    s[at + 1] -= k[0] * a[1] + k[1] * b[1] + k[2] * c[1]
+    s[at + 2] -= k[0] * a[2] + k[1] * b[2] + k[2] * c[2]
+    s[at + 3] -= k[0] * a[3] + k[1] * b[3] + k[2] * c[3]
+    s[at + 4] -= k[0] * a[4] + k[1] * b[4] + k[2] * c[4]
+    s[at + 5] -= k[0] * a[5] + k[1] * b[5] + k[2] * c[5]
+    s[at + 6] -= k[0] * a[6] + k[1] * b[6] + k[2] * c[6]
+    s[at + 7] -= k[0] * a[7] + k[1] * b[7] + k[2] * c[7]
+    s[at + 8] -= k[0] * a[8] + k[1] * b[8] + k[2] * c[8]
+    s[at + 9] -= k[0] * a[9] + k[1] * b[9] + k[2] * c[9]
+    s[at + 10] -= k[0] * a[10] + k[1] * b[10] + k[2] * c[10]
+    s[at + 11] -= k[0] * a[11] + k[1] * b[11] + k[2] * c[11]
+
+
 def store3(s, at, v):
     """``s[at:at + 3] = v``."""
     s[at] = v[0]
@@ -150,22 +203,6 @@ def column3_into(s, at, width, v):
     s[at] = v[0]
     s[at + width] = v[1]
     s[at + 2 * width] = v[2]
-
-
-def matmul_into(s, out, a, b, n, k, m):
-    """
-    ``OUT = A B`` (``n × k`` times ``k × m``), views on ``s``.
-
-    Each entry summed from its first product on, as ``a0 b0 + a1 b1 + …`` written out.
-    """
-    for i in range(n):
-        for j in range(m):
-            ai = a[0] + a[1] * i
-            bj = b[0] + b[2] * j
-            acc = s[ai] * s[bj]
-            for t in range(1, k):
-                acc += s[ai + a[2] * t] * s[bj + b[1] * t]
-            s[out[0] + out[1] * i + out[2] * j] = acc
 
 
 def matmul_acc_into(s, out, a, b, n, k, m):
