@@ -50,6 +50,9 @@ MODULES = {
     # their known-answer tests, and the calibration's fast ones.
     'ext_observer/core/ahrs/magcal_kernel.py': [
         'test/core/ahrs/test_magcal_kernel.py', 'test/core/ahrs/test_magcal.py'],
+    # The kernels' vector and matrix helpers: their own tests, and the filter's.
+    'ext_observer/core/ahrs/small_matrix.py': [
+        'test/core/ahrs/test_small_matrix.py', 'test/core/ahrs/test_magcal_filter.py'],
     # (the calibration's learned lag, in test_magcal.py, is left out: 21 s of
     # the kernel's 99 s under mutmut's trampolines, measured)
     'ext_observer/core/ahrs/ahrs_kernel.py': [

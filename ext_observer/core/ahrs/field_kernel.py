@@ -55,6 +55,8 @@ HEADING_LOST = math.radians(20.0) ** 2
 # σ: a field whose heading is further from the estimate than this many of
 # the doubt's and its own does not correct it (a disturbance).
 FIELD_GATE = 3.0
+# Where the Butterworth's two states (x, y, z each) start in S_LP.
+LP_STATES = (0, 3)
 
 
 def ahrs_mag_coefficients(s, dt):
@@ -374,7 +376,7 @@ def _turn_heading(s, rw, rz):
     # The filter's states turn with it about the vertical: (c, s) of 2θ.
     n2 = rw * rw + rz * rz
     c, sn = (rw * rw - rz * rz) / n2, 2.0 * rw * rz / n2
-    for i in (0, 3):
+    for i in LP_STATES:
         a, b = s[S_LP + i], s[S_LP + i + 1]
         s[S_LP + i] = c * a - sn * b
         s[S_LP + i + 1] = sn * a + c * b

@@ -2,12 +2,13 @@
 The magnetometer calibration's Kalman filter: its three steps, on the flat state.
 
 Part of the calibration's kernel (:mod:`~ext_observer.core.ahrs.magcal_kernel`,
-whose docstring gives the model): :func:`mc_predict` turns the field with
-the gyro's rotation and lets it walk, :func:`mc_update` is one gated update
+whose docstring gives the model; the derivations: docs/calibration.md,
+"The filter, in equations"): :func:`mc_predict` turns the field with the
+gyro's rotation and lets it walk, :func:`mc_update` is one gated update
 with a field, :func:`mc_start` starts the filter from a field (a prior, a
-loaded calibration or nothing), with the written-out 3 × 3 inverse and the
-symmetrization they use. The same subset of Python as the kernel's, so
-numba compiles it (:mod:`~ext_observer.core.ahrs.compiled`).
+loaded calibration or nothing). Each line names its equation; the algebra
+is :mod:`~ext_observer.core.ahrs.small_matrix`'s. The same subset of Python
+as the kernel's, so numba compiles it (:mod:`~ext_observer.core.ahrs.compiled`).
 """
 
 import math
@@ -16,9 +17,18 @@ from .magcal_layout import (GATE, MC_AH, MC_AI, MC_DELAY, MC_DRIFT, MC_FIELD_RW,
                             MC_FIELD_SCALE, MC_FRESH, MC_H, MC_HAS_PRIOR, MC_K, MC_LEARNED,
                             MC_NIS, MC_NOISE, MC_P, MC_PH, MC_PRIOR_COV, MC_PRIOR_P,
                             MC_PRIOR_SCALE, MC_PRIOR_X, MC_REFUSED_SHARE, MC_S, MC_SCALE,
-                            MC_SI, MC_SOFT_IRON, MC_X, MC_YY, CAL_DIFFUSE, CAL_LOADED_BIAS_STD,
-                            CAL_N)
+                            MC_SI, MC_SOFT_IRON, MC_X, MC_YY, CAL_D, CAL_DIFFUSE,
+                            CAL_LOADED_BIAS_STD, CAL_LOADED_SOFT_SHARE, CAL_N, CAL_NIS_CAP,
+                            CAL_NIS_RATE, CAL_NY, CAL_S, CAL_SCALE_FLOOR, CAL_SYMMETRIZE_EVERY,
+                            CAL_TAU, CAL_Z)
+from .small_matrix import (add3, add_diagonal, add_scaled3, col3_at, cols, column3_into,
+                           combination12_into, copy_into, cross3, diagonal_into, dot12,
+                           dot12_onto, dot3, fill, identity_minus, mat3_vec_at, mat3t_vec,
+                           matmul_acc_into, neg3, quad3_at, rotation_of, rows, scale3, skew_into,
+                           store3, sub3, sub_combination12, vec12_at, vec3_at, vec_mat3_at)
 
+
+# --- prediction ------------------------------------------------------------------
 
 def mc_predict(s, o, rw, rx, ry, rz, dt):
     """
@@ -29,74 +39,41 @@ def mc_predict(s, o, rw, rx, ry, rz, dt):
     ties ``s`` to ``z``, which keeps the covariance well conditioned while
     nothing can be learned.
     """
-    q2 = 2.0 / (rw * rw + rx * rx + ry * ry + rz * rz)
-    r00 = 1.0 - q2 * (ry * ry + rz * rz)
-    r01 = q2 * (rx * ry - rw * rz)
-    r02 = q2 * (rx * rz + rw * ry)
-    r10 = q2 * (rx * ry + rw * rz)
-    r11 = 1.0 - q2 * (rx * rx + rz * rz)
-    r12 = q2 * (ry * rz - rw * rx)
-    r20 = q2 * (rx * rz - rw * ry)
-    r21 = q2 * (ry * rz + rw * rx)
-    r22 = 1.0 - q2 * (rx * rx + ry * ry)
-    # I − R
-    e00 = 1.0 - r00
-    e11 = 1.0 - r11
-    e22 = 1.0 - r22
+    r = rotation_of(rw, rx, ry, rz)
+    e = identity_minus(r)
     x = o + MC_X
-    z0 = s[x + 3]
-    z1 = s[x + 4]
-    z2 = s[x + 5]
-    v0 = s[x] - z0
-    v1 = s[x + 1] - z1
-    v2 = s[x + 2] - z2
-    s[x] = r00 * v0 + r10 * v1 + r20 * v2 + z0
-    s[x + 1] = r01 * v0 + r11 * v1 + r21 * v2 + z1
-    s[x + 2] = r02 * v0 + r12 * v1 + r22 * v2 + z2
+    z = vec3_at(s, x + CAL_Z)
+    m = sub3(vec3_at(s, x + CAL_S), z)
+    store3(s, x + CAL_S, add3(mat3t_vec(r, m), z))  # s ← Rᵀ m + z, m = s − z
     p = o + MC_P
-    # P[s, :] ← Rᵀ P[s, :] + (I − Rᵀ) P[z, :]
-    for c in range(CAL_N):
-        a0 = s[p + c]
-        a1 = s[p + CAL_N + c]
-        a2 = s[p + 2 * CAL_N + c]
-        b0 = s[p + 3 * CAL_N + c]
-        b1 = s[p + 4 * CAL_N + c]
-        b2 = s[p + 5 * CAL_N + c]
-        s[p + c] = (r00 * a0 + r10 * a1 + r20 * a2) + (e00 * b0 - r10 * b1 - r20 * b2)
-        s[p + CAL_N + c] = (r01 * a0 + r11 * a1 + r21 * a2) + (-r01 * b0 + e11 * b1 - r21 * b2)
-        s[p + 2 * CAL_N + c] = (r02 * a0 + r12 * a1 + r22 * a2) + (-r02 * b0 - r12 * b1
-                                                                + e22 * b2)
-    # P[:, s] ← P[:, s] R + P[:, z] (I − R)
-    for i in range(CAL_N):
+    for c in range(CAL_N):  # P[s, :] ← Rᵀ P[s, :] + (I − R)ᵀ P[z, :]
+        ps = col3_at(s, p + CAL_N * CAL_S + c, CAL_N)
+        pz = col3_at(s, p + CAL_N * CAL_Z + c, CAL_N)
+        column3_into(s, p + CAL_N * CAL_S + c, CAL_N, add3(mat3t_vec(r, ps), mat3t_vec(e, pz)))
+    for i in range(CAL_N):  # P[:, s] ← P[:, s] R + P[:, z] (I − R)
         row = p + CAL_N * i
-        a0 = s[row]
-        a1 = s[row + 1]
-        a2 = s[row + 2]
-        b0 = s[row + 3]
-        b1 = s[row + 4]
-        b2 = s[row + 5]
-        s[row] = (a0 * r00 + a1 * r10 + a2 * r20) + (b0 * e00 - b1 * r10 - b2 * r20)
-        s[row + 1] = (a0 * r01 + a1 * r11 + a2 * r21) + (-b0 * r01 + b1 * e11 - b2 * r21)
-        s[row + 2] = (a0 * r02 + a1 * r12 + a2 * r22) + (-b0 * r02 - b1 * r12 + b2 * e22)
-    a = s[o + MC_FIELD_RW] * s[o + MC_FIELD_SCALE]
-    q = a * a * dt
-    for i in range(3):
-        s[p + (CAL_N + 1) * i] += q
+        ps = vec3_at(s, row + CAL_S)
+        pz = vec3_at(s, row + CAL_Z)
+        store3(s, row + CAL_S, add3(mat3t_vec(r, ps), mat3t_vec(e, pz)))
+    walk = s[o + MC_FIELD_RW] * s[o + MC_FIELD_SCALE]
+    add_diagonal(s, p, CAL_N, CAL_S, 3, walk * walk * dt)  # P[s, s] += (rw |m|)² dt
     drift = s[o + MC_DRIFT]
     if drift != 0.0:
         # The offset drifts (temperature, a payload moved): never quite
         # frozen. s = m + z drifts with it.
         a = drift * s[o + MC_FIELD_SCALE]
-        q = a * a * dt
-        for i in range(3):
-            s[p + (CAL_N + 1) * i] += q
-        for i in range(3):
-            s[p + CAL_N * i + 3 + i] += q
-        for i in range(3):
-            s[p + CAL_N * (3 + i) + i] += q
-        for i in range(3):
-            s[p + (CAL_N + 1) * (3 + i)] += q
+        mc_drift(s, p, a * a * dt)
 
+
+def mc_drift(s, p, q):
+    """``P[(s, z), (s, z)] += q [[I, I], [I, I]]``: the offset's walk, ``s`` with it."""
+    add_diagonal(s, p, CAL_N, CAL_S, 3, q)
+    add_diagonal(s, p + CAL_Z, CAL_N, CAL_S, 3, q)
+    add_diagonal(s, p + CAL_N * CAL_Z, CAL_N, CAL_S, 3, q)
+    add_diagonal(s, p, CAL_N, CAL_Z, 3, q)
+
+
+# --- update --------------------------------------------------------------------------
 
 def mc_update(s, o, y0, y1, y2, w0, w1, w2, live, norm):
     """
@@ -109,292 +86,192 @@ def mc_update(s, o, y0, y1, y2, w0, w1, w2, live, norm):
     only the step is counted.
     """
     use = False
-    x = o + MC_X
-    p = o + MC_P
     if live:
-        s0 = s[x]
-        s1 = s[x + 1]
-        s2 = s[x + 2]
-        z0 = s[x + 3]
-        z1 = s[x + 4]
-        z2 = s[x + 5]
-        d0 = s[x + 6]
-        d1 = s[x + 7]
-        d2 = s[x + 8]
-        d3 = s[x + 9]
-        d4 = s[x + 10]
-        tau = s[x + 11]
-        m0 = s0 - z0
-        m1 = s1 - z1
-        m2 = s2 - z2
-        c0 = w1 * m2 - w2 * m1
-        c1 = w2 * m0 - w0 * m2
-        c2 = w0 * m1 - w1 * m0
-        ai = o + MC_AI
-        mc_inv3(s, ai, 1.0 + d0, d2, d3, d2, 1.0 + d1, d4, d3, d4, 1.0 - d0 - d1)
-        v0 = s0 + tau * c0
-        v1 = s1 + tau * c1
-        v2 = s2 + tau * c2
-        p0 = s[ai] * v0 + s[ai + 1] * v1 + s[ai + 2] * v2
-        p1 = s[ai + 3] * v0 + s[ai + 4] * v1 + s[ai + 5] * v2
-        p2 = s[ai + 6] * v0 + s[ai + 7] * v1 + s[ai + 8] * v2
-        nu0 = y0 - p0
-        nu1 = y1 - p1
-        nu2 = y2 - p2
-        tw0 = tau * w0
-        tw1 = tau * w1
-        tw2 = tau * w2
-        # H: I + τ[ω]× for s, −τ[ω]× for z, −Y(pred) for d, ω × m for τ;
-        # then A⁻¹ H.
-        h = o + MC_H
-        for k in range(36):
-            s[h + k] = 0.0
-        s[h] = 1.0
-        s[h + 1] = -tw2
-        s[h + 2] = tw1
-        s[h + 4] = tw2
-        s[h + 5] = -tw1
-        s[h + 6] = -p0
-        s[h + 8] = -p1
-        s[h + 9] = -p2
-        s[h + 11] = c0
-        s[h + 12] = tw2
-        s[h + 13] = 1.0
-        s[h + 14] = -tw0
-        s[h + 15] = -tw2
-        s[h + 17] = tw0
-        s[h + 19] = -p1
-        s[h + 20] = -p0
-        s[h + 22] = -p2
-        s[h + 23] = c1
-        s[h + 24] = -tw1
-        s[h + 25] = tw0
-        s[h + 26] = 1.0
-        s[h + 27] = tw1
-        s[h + 28] = -tw0
-        s[h + 30] = p2
-        s[h + 31] = p2
-        s[h + 33] = -p0
-        s[h + 34] = -p1
-        s[h + 35] = c2
-        ah = o + MC_AH
-        for r in range(3):
-            a0 = s[ai + 3 * r]
-            a1 = s[ai + 3 * r + 1]
-            a2 = s[ai + 3 * r + 2]
-            for c in range(CAL_N):
-                s[ah + CAL_N * r + c] = (a0 * s[h + c] + a1 * s[h + CAL_N + c]
-                                         + a2 * s[h + 2 * CAL_N + c])
-        # P Hᵀ, and S = H P Hᵀ + R summed along (the rows of P Hᵀ in order).
-        # Written out, with the rows of A⁻¹ H held: the hot loop.
-        a0, a1, a2, a3, a4, a5 = s[ah], s[ah + 1], s[ah + 2], s[ah + 3], s[ah + 4], s[ah + 5]
-        a6, a7, a8, a9, a10, a11 = (s[ah + 6], s[ah + 7], s[ah + 8], s[ah + 9], s[ah + 10],
-                                    s[ah + 11])
-        b = ah + CAL_N
-        b0, b1, b2, b3, b4, b5 = s[b], s[b + 1], s[b + 2], s[b + 3], s[b + 4], s[b + 5]
-        b6, b7, b8, b9, b10, b11 = s[b + 6], s[b + 7], s[b + 8], s[b + 9], s[b + 10], s[b + 11]
-        e = ah + 2 * CAL_N
-        e0, e1, e2, e3, e4, e5 = s[e], s[e + 1], s[e + 2], s[e + 3], s[e + 4], s[e + 5]
-        e6, e7, e8, e9, e10, e11 = s[e + 6], s[e + 7], s[e + 8], s[e + 9], s[e + 10], s[e + 11]
-        ph = o + MC_PH
-        s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
-        for i in range(CAL_N):
-            row = p + CAL_N * i
-            q0, q1, q2, q3, q4, q5 = (s[row], s[row + 1], s[row + 2], s[row + 3], s[row + 4],
-                                      s[row + 5])
-            q6, q7, q8, q9, q10, q11 = (s[row + 6], s[row + 7], s[row + 8], s[row + 9],
-                                        s[row + 10], s[row + 11])
-            v0 = (q0 * a0 + q1 * a1 + q2 * a2 + q3 * a3 + q4 * a4 + q5 * a5 + q6 * a6 + q7 * a7
-                  + q8 * a8 + q9 * a9 + q10 * a10 + q11 * a11)
-            v1 = (q0 * b0 + q1 * b1 + q2 * b2 + q3 * b3 + q4 * b4 + q5 * b5 + q6 * b6 + q7 * b7
-                  + q8 * b8 + q9 * b9 + q10 * b10 + q11 * b11)
-            v2 = (q0 * e0 + q1 * e1 + q2 * e2 + q3 * e3 + q4 * e4 + q5 * e5 + q6 * e6 + q7 * e7
-                  + q8 * e8 + q9 * e9 + q10 * e10 + q11 * e11)
-            s[ph + 3 * i] = v0
-            s[ph + 3 * i + 1] = v1
-            s[ph + 3 * i + 2] = v2
-            f0 = s[ah + i]
-            f1 = s[b + i]
-            f2 = s[e + i]
-            s00 += f0 * v0
-            s01 += f0 * v1
-            s02 += f0 * v2
-            s10 += f1 * v0
-            s11 += f1 * v1
-            s12 += f1 * v2
-            s20 += f2 * v0
-            s21 += f2 * v1
-            s22 += f2 * v2
-        a = s[o + MC_NOISE] * s[o + MC_FIELD_SCALE]
-        a = a * a
-        s00 += a
-        s11 += a
-        s22 += a
-        sm = o + MC_S
-        s[sm] = s00
-        s[sm + 1] = s01
-        s[sm + 2] = s02
-        s[sm + 3] = s10
-        s[sm + 4] = s11
-        s[sm + 5] = s12
-        s[sm + 6] = s20
-        s[sm + 7] = s21
-        s[sm + 8] = s22
-        si = o + MC_SI
-        mc_inv3(s, si, s00, s01, s02, s10, s11, s12, s20, s21, s22)
-        i00, i01, i02, i10, i11, i12 = s[si], s[si + 1], s[si + 2], s[si + 3], s[si + 4], s[si + 5]
-        i20, i21, i22 = s[si + 6], s[si + 7], s[si + 8]
-        nis = (nu0 * i00 * nu0 + nu0 * i01 * nu1 + nu0 * i02 * nu2
-               + nu1 * i10 * nu0 + nu1 * i11 * nu1 + nu1 * i12 * nu2
-               + nu2 * i20 * nu0 + nu2 * i21 * nu1 + nu2 * i22 * nu2)
-        use = nis < GATE
-        capped = nis
-        if 3.0 * GATE < nis:
-            capped = 3.0 * GATE
-        s[o + MC_NIS] = s[o + MC_NIS] + 0.02 * (capped - s[o + MC_NIS])
-        if use:
-            # K = P Hᵀ S⁻¹, x += K ν, P −= K (P Hᵀ)ᵀ, a row of K at a time.
-            g0a, g0b, g0c = s[ph], s[ph + 1], s[ph + 2]
-            g1a, g1b, g1c = s[ph + 3], s[ph + 4], s[ph + 5]
-            g2a, g2b, g2c = s[ph + 6], s[ph + 7], s[ph + 8]
-            g3a, g3b, g3c = s[ph + 9], s[ph + 10], s[ph + 11]
-            g4a, g4b, g4c = s[ph + 12], s[ph + 13], s[ph + 14]
-            g5a, g5b, g5c = s[ph + 15], s[ph + 16], s[ph + 17]
-            g6a, g6b, g6c = s[ph + 18], s[ph + 19], s[ph + 20]
-            g7a, g7b, g7c = s[ph + 21], s[ph + 22], s[ph + 23]
-            g8a, g8b, g8c = s[ph + 24], s[ph + 25], s[ph + 26]
-            g9a, g9b, g9c = s[ph + 27], s[ph + 28], s[ph + 29]
-            g10a, g10b, g10c = s[ph + 30], s[ph + 31], s[ph + 32]
-            g11a, g11b, g11c = s[ph + 33], s[ph + 34], s[ph + 35]
-            kk = o + MC_K
-            for i in range(CAL_N):
-                f0 = s[ph + 3 * i]
-                f1 = s[ph + 3 * i + 1]
-                f2 = s[ph + 3 * i + 2]
-                k0 = f0 * i00 + f1 * i10 + f2 * i20
-                k1 = f0 * i01 + f1 * i11 + f2 * i21
-                k2 = f0 * i02 + f1 * i12 + f2 * i22
-                s[kk + 3 * i] = k0
-                s[kk + 3 * i + 1] = k1
-                s[kk + 3 * i + 2] = k2
-                s[x + i] += k0 * nu0 + k1 * nu1 + k2 * nu2
-                row = p + CAL_N * i
-                s[row] -= k0 * g0a + k1 * g0b + k2 * g0c
-                s[row + 1] -= k0 * g1a + k1 * g1b + k2 * g1c
-                s[row + 2] -= k0 * g2a + k1 * g2b + k2 * g2c
-                s[row + 3] -= k0 * g3a + k1 * g3b + k2 * g3c
-                s[row + 4] -= k0 * g4a + k1 * g4b + k2 * g4c
-                s[row + 5] -= k0 * g5a + k1 * g5b + k2 * g5c
-                s[row + 6] -= k0 * g6a + k1 * g6b + k2 * g6c
-                s[row + 7] -= k0 * g7a + k1 * g7b + k2 * g7c
-                s[row + 8] -= k0 * g8a + k1 * g8b + k2 * g8c
-                s[row + 9] -= k0 * g9a + k1 * g9b + k2 * g9c
-                s[row + 10] -= k0 * g10a + k1 * g10b + k2 * g10c
-                s[row + 11] -= k0 * g11a + k1 * g11b + k2 * g11c
+        use = mc_correct(s, o, (y0, y1, y2), (w0, w1, w2))
     learned = s[o + MC_LEARNED] + 1.0
     s[o + MC_LEARNED] = learned
-    if learned % 64.0 == 0.0:  # rounding makes P drift from symmetric, slowly
-        mc_symmetrize(s, p)
+    if learned % CAL_SYMMETRIZE_EVERY == 0.0:
+        mc_symmetrize(s, o + MC_P)
     if use:
-        m0 = s[x] - s[x + 3]
-        m1 = s[x + 1] - s[x + 4]
-        m2 = s[x + 2] - s[x + 5]
-        scale = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
-        if 0.25 * norm > scale:
-            scale = 0.25 * norm
-        s[o + MC_FIELD_SCALE] = scale
+        mc_field_scale(s, o, norm)
     return use
 
 
+def mc_correct(s, o, y, w):
+    """The update proper: the innovation, its covariance and gate, then the gain; True if used."""
+    x = o + MC_X
+    sv = vec3_at(s, x + CAL_S)
+    tau = s[x + CAL_TAU]
+    c = cross3(w, sub3(sv, vec3_at(s, x + CAL_Z)))  # c = ω × m, m = s − z
+    ai = o + MC_AI
+    mc_inverse_a(s, ai, x + CAL_D)  # A⁻¹ = (I + D(d))⁻¹
+    pred = mat3_vec_at(s, ai, add_scaled3(sv, tau, c))  # ŷ = A⁻¹ (s + τ c)
+    nu = sub3(y, pred)  # ν = y − ŷ
+    mc_jacobian(s, o, scale3(tau, w), pred, c)
+    g0, g1, g2 = mc_innovation_covariance(s, o)
+    nis = quad3_at(s, o + MC_SI, nu)  # NIS = νᵀ S⁻¹ ν
+    capped = nis
+    if CAL_NIS_CAP * GATE < nis:
+        capped = CAL_NIS_CAP * GATE
+    s[o + MC_NIS] = s[o + MC_NIS] + CAL_NIS_RATE * (capped - s[o + MC_NIS])
+    if nis < GATE:
+        mc_gain_step(s, o, nu, g0, g1, g2)
+        return True
+    return False
+
+
+def mc_inverse_a(s, out, d):
+    """``A⁻¹ = (I + D(d))⁻¹`` into ``s[out:out + 9]``, ``d`` at ``s[d:d + 5]``."""
+    d0, d1, d2, d3, d4 = s[d], s[d + 1], s[d + 2], s[d + 3], s[d + 4]
+    mc_inv3(s, out, 1.0 + d0, d2, d3, d2, 1.0 + d1, d4, d3, d4, 1.0 - d0 - d1)
+
+
+def mc_jacobian(s, o, tw, pred, c):
+    """
+    ``H``, the Jacobian of ``A ŷ = s + τ ω × (s − z)``, then the measurement's, ``A⁻¹ H``.
+
+    ``tw = τ ω``, ``pred = ŷ``, ``c = ω × (s − z)``.
+    """
+    h = o + MC_H
+    skew_into(s, h + CAL_S, CAL_N, 1.0, tw)  # ∂/∂s = I + τ[ω]×
+    skew_into(s, h + CAL_Z, CAL_N, 0.0, neg3(tw))  # ∂/∂z = −τ[ω]×
+    mc_regressor_into(s, h + CAL_D, CAL_N, neg3(pred))  # ∂/∂d = −Y(ŷ)
+    column3_into(s, h + CAL_TAU, CAL_N, c)  # ∂/∂τ = ω × m
+    h0, h1, h2 = vec12_at(s, h, 1), vec12_at(s, h + CAL_N, 1), vec12_at(s, h + 2 * CAL_N, 1)
+    for r in range(3):  # (A⁻¹ H)ᵣ = (A⁻¹)ᵣ H
+        combination12_into(s, o + MC_AH + CAL_N * r, vec3_at(s, o + MC_AI + 3 * r), h0, h1, h2)
+
+
+def mc_innovation_covariance(s, o):
+    """
+    ``P Hᵀ``, ``S = H P Hᵀ + R`` and ``S⁻¹``, ``H`` the measurement's (``A⁻¹ H``).
+
+    Returns the columns of ``P Hᵀ`` (12-tuples), for the gain.
+    """
+    ah, ph, sm = o + MC_AH, o + MC_PH, o + MC_S
+    h0, h1, h2 = vec12_at(s, ah, 1), vec12_at(s, ah + CAL_N, 1), vec12_at(s, ah + 2 * CAL_N, 1)
+    for i in range(CAL_N):  # (P Hᵀ)ᵢ = Pᵢ Hᵀ
+        pi = vec12_at(s, o + MC_P + CAL_N * i, 1)
+        store3(s, ph + 3 * i, (dot12(pi, h0), dot12(pi, h1), dot12(pi, h2)))
+    g0, g1, g2 = vec12_at(s, ph, 3), vec12_at(s, ph + 1, 3), vec12_at(s, ph + 2, 3)
+    noise = s[o + MC_NOISE] * s[o + MC_FIELD_SCALE]
+    r = noise * noise  # R = (noise |m|)² I
+    s[sm], s[sm + 1], s[sm + 2] = (dot12_onto(0.0, h0, g0) + r, dot12_onto(0.0, h0, g1),
+                                   dot12_onto(0.0, h0, g2))  # S = H (P Hᵀ) + R
+    s[sm + 3], s[sm + 4], s[sm + 5] = (dot12_onto(0.0, h1, g0), dot12_onto(0.0, h1, g1) + r,
+                                       dot12_onto(0.0, h1, g2))
+    s[sm + 6], s[sm + 7], s[sm + 8] = (dot12_onto(0.0, h2, g0), dot12_onto(0.0, h2, g1),
+                                       dot12_onto(0.0, h2, g2) + r)
+    mc_inv3(s, o + MC_SI, s[sm], s[sm + 1], s[sm + 2], s[sm + 3], s[sm + 4], s[sm + 5],
+            s[sm + 6], s[sm + 7], s[sm + 8])
+    return g0, g1, g2
+
+
+def mc_gain_step(s, o, nu, g0, g1, g2):
+    """
+    ``K = P Hᵀ S⁻¹``, ``x += K ν``, ``P −= K (P Hᵀ)ᵀ``: a row of ``K`` at a time.
+
+    ``g0, g1, g2``: the columns of ``P Hᵀ``.
+    """
+    x, ph, kk = o + MC_X, o + MC_PH, o + MC_K
+    for i in range(CAL_N):
+        k = vec_mat3_at(vec3_at(s, ph + 3 * i), s, o + MC_SI)  # Kᵢ = (P Hᵀ)ᵢ S⁻¹
+        store3(s, kk + 3 * i, k)
+        s[x + i] += dot3(k, nu)  # xᵢ += Kᵢ ν
+        sub_combination12(s, o + MC_P + CAL_N * i, k, g0, g1, g2)  # Pᵢ −= Kᵢ (P Hᵀ)ᵀ
+
+
+def mc_field_scale(s, o, norm):
+    """The field's norm the noises scale with: ``|s − z|``, at least a share of ``norm``."""
+    x = o + MC_X
+    m = sub3(vec3_at(s, x + CAL_S), vec3_at(s, x + CAL_Z))
+    scale = math.sqrt(dot3(m, m))
+    if CAL_SCALE_FLOOR * norm > scale:
+        scale = CAL_SCALE_FLOOR * norm
+    s[o + MC_FIELD_SCALE] = scale
+
+
+# --- start -----------------------------------------------------------------------------
+
 def mc_start(s, o, y0, y1, y2, norm):
     """Initialize the filter from the field ``y`` (of norm ``norm``)."""
-    x = o + MC_X
-    p = o + MC_P
-    for k in range(CAL_N + CAL_N * CAL_N):
-        s[x + k] = 0.0
-    soft = s[o + MC_SOFT_IRON]
-    delay = s[o + MC_DELAY]
+    fill(s, o + MC_X, CAL_N + CAL_N * CAL_N, 0.0)
     if s[o + MC_HAS_PRIOR] == 0.0:
-        s[o + MC_SCALE] = 1.0
-        big = CAL_DIFFUSE * norm
-        big = big * big
-        for i in range(3, 6):
-            s[p + (CAL_N + 1) * i] = big
-        for i in range(6, 11):
-            s[p + (CAL_N + 1) * i] = soft * soft
-        s[p + (CAL_N + 1) * 11] = delay * delay
+        mc_prior_unknown(s, o, norm)
+    elif s[o + MC_PRIOR_COV] != 0.0:
+        mc_prior_kept(s, o)
     else:
-        for k in range(9):
-            s[x + 3 + k] = s[o + MC_PRIOR_X + k]
-        s[o + MC_SCALE] = s[o + MC_PRIOR_SCALE]
-        if s[o + MC_PRIOR_COV] != 0.0:
-            for i in range(9):
-                for j in range(9):
-                    s[p + CAL_N * (3 + i) + 3 + j] = s[o + MC_PRIOR_P + 9 * i + j]
-        else:  # loaded: a tighter prior about it
-            std = CAL_LOADED_BIAS_STD * norm / s[o + MC_SCALE]
-            for i in range(3, 6):
-                s[p + (CAL_N + 1) * i] = std * std
-            a = 0.2 * soft
-            for i in range(6, 11):
-                s[p + (CAL_N + 1) * i] = a * a
-            s[p + (CAL_N + 1) * 11] = delay * delay
-    # s = A y = y + Y(y) d: as uncertain as d (and correlated with it),
-    # plus the noise; independent of the offset.
-    yy = o + MC_YY
-    for k in range(15):
-        s[yy + k] = 0.0
-    s[yy] = y0
-    s[yy + 2] = y1
-    s[yy + 3] = y2
-    s[yy + 6] = y1
-    s[yy + 7] = y0
-    s[yy + 9] = y2
-    s[yy + 10] = -y2
-    s[yy + 11] = -y2
-    s[yy + 13] = y0
-    s[yy + 14] = y1
-    for r in range(3):
-        acc = 0.0
-        for k in range(5):
-            acc += s[yy + 5 * r + k] * s[x + 6 + k]
-        s[x + r] = (y0 if r == 0 else y1 if r == 1 else y2) + acc
-    # P[s, 3:] = Y P[d, 3:], and its transpose
-    for r in range(3):
-        for c in range(3, CAL_N):
-            acc = 0.0
-            for k in range(5):
-                acc += s[yy + 5 * r + k] * s[p + CAL_N * (6 + k) + c]
-            s[p + CAL_N * r + c] = acc
-    for r in range(3):
-        for c in range(3, CAL_N):
-            s[p + CAL_N * c + r] = s[p + CAL_N * r + c]
-    # P[s, s] = Y P[d, d] Yᵀ + noise² I; Y P[d, d] into the scratch of K
-    t = o + MC_K
-    for r in range(3):
-        for c in range(5):
-            acc = 0.0
-            for k in range(5):
-                acc += s[yy + 5 * r + k] * s[p + CAL_N * (6 + k) + 6 + c]
-            s[t + 5 * r + c] = acc
-    noise = s[o + MC_NOISE] * norm
-    for r in range(3):
-        for c in range(3):
-            acc = 0.0
-            for k in range(5):
-                acc += s[t + 5 * r + k] * s[yy + 5 * c + k]
-            if r == c:
-                acc += noise * noise
-            s[p + CAL_N * r + c] = acc
-    m0 = s[x] - s[x + 3]
-    m1 = s[x + 1] - s[x + 4]
-    m2 = s[x + 2] - s[x + 5]
-    scale = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
-    if 0.25 * norm > scale:
-        scale = 0.25 * norm
-    s[o + MC_FIELD_SCALE] = scale
+        mc_prior_loaded(s, o, norm)
+    mc_start_field(s, o, (y0, y1, y2), norm)
+    mc_field_scale(s, o, norm)
     s[o + MC_REFUSED_SHARE] = 0.0
     s[o + MC_FRESH] = 0.0
+
+
+def mc_prior_unknown(s, o, norm):
+    """Nothing known: ``z`` diffuse, ``d`` and ``τ`` about 0 with their parameters' spread."""
+    s[o + MC_SCALE] = 1.0
+    mc_prior_spread(s, o, CAL_DIFFUSE * norm, s[o + MC_SOFT_IRON], s[o + MC_DELAY])
+
+
+def mc_prior_kept(s, o):
+    """A restart: ``(z, d, τ)`` and their covariance as learned before."""
+    mc_prior_x(s, o)
+    copy_into(s, rows(o + MC_P + (CAL_N + 1) * CAL_Z, CAL_N), rows(o + MC_PRIOR_P, 9), 9, 9)
+
+
+def mc_prior_loaded(s, o, norm):
+    """A loaded calibration: ``(z, d, τ)`` as loaded, a tighter prior about it."""
+    mc_prior_x(s, o)
+    soft = CAL_LOADED_SOFT_SHARE * s[o + MC_SOFT_IRON]
+    mc_prior_spread(s, o, CAL_LOADED_BIAS_STD * norm / s[o + MC_SCALE], soft, s[o + MC_DELAY])
+
+
+def mc_prior_spread(s, o, z_std, d_std, tau_std):
+    """``P[z d τ, z d τ]`` diagonal, with these standard deviations."""
+    p = o + MC_P
+    diagonal_into(s, p, CAL_N, CAL_Z, 3, z_std * z_std)
+    diagonal_into(s, p, CAL_N, CAL_D, CAL_NY, d_std * d_std)
+    s[p + (CAL_N + 1) * CAL_TAU] = tau_std * tau_std
+
+
+def mc_prior_x(s, o):
+    """``x[3:]`` and the scale from the prior."""
+    copy_into(s, rows(o + MC_X + CAL_Z, 1), rows(o + MC_PRIOR_X, 1), 9, 1)
+    s[o + MC_SCALE] = s[o + MC_PRIOR_SCALE]
+
+
+def mc_start_field(s, o, y, norm):
+    """
+    ``s = A y = y + Y(y) d``: as uncertain as ``d`` (and correlated with it), plus the noise.
+
+    Independent of the offset.
+    """
+    x, p, yy, t = o + MC_X, o + MC_P, o + MC_YY, o + MC_K
+    mc_regressor_into(s, yy, CAL_NY, y)
+    matmul_acc_into(s, rows(x, 1), rows(yy, CAL_NY), rows(x + CAL_D, 1), 3, CAL_NY, 1)
+    store3(s, x + CAL_S, add3(y, vec3_at(s, x + CAL_S)))  # s = y + Y d
+    pd = rows(p + CAL_N * CAL_D + CAL_Z, CAL_N)  # P[d, 3:]
+    matmul_acc_into(s, rows(p + CAL_Z, CAL_N), rows(yy, CAL_NY), pd, 3, CAL_NY, CAL_N - CAL_Z)
+    copy_into(s, cols(p + CAL_N * CAL_Z, CAL_N), rows(p + CAL_Z, CAL_N), 3, CAL_N - CAL_Z)
+    # P[s, s] = Y P[d, d] Yᵀ + noise² I, Y P[d, d] in the scratch of K
+    fill(s, t, 3 * CAL_NY, 0.0)
+    pdd = rows(p + (CAL_N + 1) * CAL_D, CAL_N)
+    matmul_acc_into(s, rows(t, CAL_NY), rows(yy, CAL_NY), pdd, 3, CAL_NY, CAL_NY)
+    matmul_acc_into(s, rows(p, CAL_N), rows(t, CAL_NY), cols(yy, CAL_NY), 3, CAL_NY, 3)
+    noise = s[o + MC_NOISE] * norm
+    add_diagonal(s, p, CAL_N, CAL_S, 3, noise * noise)
+
+
+# --- helpers ----------------------------------------------------------------------------
+
+def mc_regressor_into(s, at, width, y):
+    """``Y(y)`` (3 × 5, ``D(d) y = Y(y) d``) into ``s[at:]``, its rows ``width`` apart."""
+    s[at], s[at + 1], s[at + 2], s[at + 3], s[at + 4] = y[0], 0.0, y[1], y[2], 0.0
+    r = at + width
+    s[r], s[r + 1], s[r + 2], s[r + 3], s[r + 4] = 0.0, y[1], y[0], 0.0, y[2]
+    r = at + 2 * width
+    s[r], s[r + 1], s[r + 2], s[r + 3], s[r + 4] = -y[2], -y[2], 0.0, y[0], y[1]
 
 
 def mc_inv3(s, out, a, b, c, d, e, f, g, h, i):

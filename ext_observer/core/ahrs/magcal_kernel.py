@@ -15,24 +15,28 @@ docs/calibration.md ("The filter, in equations").
 import math
 
 from .magcal_filter import mc_inv3, mc_predict, mc_start, mc_symmetrize, mc_update
-from .magcal_layout import (CAL_HOLD, CAL_HOLD_TURN, CAL_INF, CAL_N, CAL_REFUSED_SHARE,
-                            CAL_REFUSED_TAU, CAL_SHIFT_SAMPLES, CAL_SIGNIFICANT, CAL_TINY,
-                            CAL_TURNING2, CAL_WATCH, CAL_WILD, GATE, MC_AI, MC_APPLIED,
-                            MC_ASSESSED, MC_C, MC_CANDIDATE, MC_COEF, MC_CONVERGED, MC_COUNTS,
-                            MC_DEADBAND, MC_DELAY, MC_DRIFT, MC_ENABLED, MC_FIELDS, MC_FIELD_RW,
-                            MC_FIELD_SCALE, MC_FRESH, MC_GATED, MC_HAS_PRIOR, MC_HEADING,
-                            MC_HELD, MC_IDENTITY, MC_INVALID, MC_JP, MC_LEARNED, MC_LOADED,
-                            MC_NIS, MC_NOISE, MC_P, MC_PRIOR_COV, MC_PRIOR_P, MC_PRIOR_SCALE,
-                            MC_PRIOR_X, MC_QUALITY, MC_READY, MC_REFUSED, MC_REFUSED_SHARE,
-                            MC_RESETS, MC_SCALE, MC_SEEN_HAS_UP, MC_SEEN_LIVE, MC_SEEN_UP,
-                            MC_SEEN_Y, MC_SHIFT, MC_SIZE, MC_SOFT_IRON, MC_STALE, MC_USED,
-                            MC_WATCHED, MC_WATCHING, MC_X)
+from .magcal_layout import (CAL_D, CAL_HOLD, CAL_HOLD_TURN, CAL_INF, CAL_N, CAL_NIS_EXPECTED,
+                            CAL_NY, CAL_REFUSED_SHARE, CAL_REFUSED_TAU, CAL_SHIFT_SAMPLES,
+                            CAL_SIGNIFICANT, CAL_TINY, CAL_TURNING2, CAL_WATCH, CAL_WILD, CAL_Z,
+                            CAL_ZD, GATE, MC_AI, MC_APPLIED, MC_ASSESSED, MC_C, MC_CANDIDATE,
+                            MC_COEF, MC_CONVERGED, MC_COUNTS, MC_DEADBAND, MC_DELAY, MC_DRIFT,
+                            MC_ENABLED, MC_FIELDS, MC_FIELD_RW, MC_FIELD_SCALE, MC_FRESH,
+                            MC_GATED, MC_HAS_PRIOR, MC_HEADING, MC_HELD, MC_IDENTITY,
+                            MC_INVALID, MC_JP, MC_LEARNED, MC_LOADED, MC_NIS, MC_NOISE, MC_P,
+                            MC_PRIOR_COV, MC_PRIOR_P, MC_PRIOR_SCALE, MC_PRIOR_X, MC_QUALITY,
+                            MC_READY, MC_REFUSED, MC_REFUSED_SHARE, MC_RESETS, MC_SCALE,
+                            MC_SEEN_HAS_UP, MC_SEEN_LIVE, MC_SEEN_UP, MC_SEEN_Y, MC_SHIFT,
+                            MC_SIZE, MC_SOFT_IRON, MC_STALE, MC_USED, MC_WATCHED, MC_WATCHING,
+                            MC_X)
+from .small_matrix import (col3_at, column3_into, copy_into, cross3, dot3, fill,
+                           finite_or_zero, max_of, quad3_at, rows, store3, vec3_at, vec5_at)
 
 # The functions, for a caller that compiles them (each one, before any call).
-FUNCTIONS = ('mc_init', 'mc_reset', 'mc_restart', 'mc_load_state', 'mc_learn', 'mc_predict',
-             'mc_start', 'mc_update', 'mc_assess', 'mc_watch', 'mc_reconsider', 'mc_cache',
-             'mc_apply', 'mc_quality', 'mc_field', 'mc_inv3', 'mc_heading_between',
-             'mc_calibrated', 'mc_symmetrize')
+FUNCTIONS = ('mc_init', 'mc_reset', 'mc_forget', 'mc_restart', 'mc_load_state', 'mc_learn',
+             'mc_admit', 'mc_lost', 'mc_start_over', 'mc_remember', 'mc_predict', 'mc_start',
+             'mc_update', 'mc_assess', 'mc_field_covariance', 'mc_j_times', 'mc_heading_error',
+             'mc_hold', 'mc_watch', 'mc_reconsider', 'mc_cache', 'mc_apply', 'mc_quality',
+             'mc_field', 'mc_inv3', 'mc_heading_between', 'mc_calibrated', 'mc_symmetrize')
 
 __all__ = ['FUNCTIONS', 'GATE'] + [name for name in dir() if name.startswith('MC_')] + list(
     FUNCTIONS)
@@ -57,37 +61,40 @@ def mc_init(s, o, enabled, noise, field_rw, soft_iron, delay, heading, deadband,
 
 def mc_reset(s, o):
     """Forget the calibration: learn from the next field on."""
-    for k in range(CAL_N + CAL_N * CAL_N):
-        s[o + MC_X + k] = 0.0
-    for k in range(9 + 1 + 81):
-        s[o + MC_PRIOR_X + k] = 0.0
-    s[o + MC_HAS_PRIOR] = 0.0
+    fill(s, o + MC_X, CAL_N + CAL_N * CAL_N, 0.0)
+    fill(s, o + MC_PRIOR_X, 9 + 1 + 81, 0.0)
+    mc_forget(s, o)
     s[o + MC_PRIOR_COV] = 0.0
     s[o + MC_SCALE] = 1.0
-    s[o + MC_FRESH] = 1.0
-    s[o + MC_LOADED] = 0.0
-    s[o + MC_CONVERGED] = 0.0
     s[o + MC_QUALITY] = CAL_INF
     s[o + MC_STALE] = 0.0
     s[o + MC_LEARNED] = 0.0
-    s[o + MC_REFUSED_SHARE] = 0.0
-    s[o + MC_NIS] = 3.0
-    for k in range(8):
-        s[o + MC_CANDIDATE + k] = 0.0
+    s[o + MC_NIS] = CAL_NIS_EXPECTED
+    fill(s, o + MC_CANDIDATE, CAL_ZD, 0.0)
     s[o + MC_HELD] = -1.0
-    # The field as given is applied until the learned calibration turns
-    # the heading by more than the deadband (mean square, rad²).
-    s[o + MC_IDENTITY] = 1.0
-    s[o + MC_SHIFT] = 0.0
-    s[o + MC_WATCHED] = 0.0
     s[o + MC_FIELD_SCALE] = 1.0
-    for k in range(6):
-        s[o + MC_COUNTS + k] = 0.0
-    for k in range(8):
-        s[o + MC_SEEN_Y + k] = 0.0
+    fill(s, o + MC_COUNTS, 6, 0.0)
+    fill(s, o + MC_SEEN_Y, 8, 0.0)
     s[o + MC_ASSESSED] = 0.0
     s[o + MC_WATCHING] = 0.0
     mc_cache(s, o)
+
+
+def mc_forget(s, o):
+    """
+    A fresh start at the next field, nothing learned kept (no prior), not applied.
+
+    The field as given is applied until the learned calibration turns the
+    heading by more than the deadband (mean square, rad²).
+    """
+    s[o + MC_FRESH] = 1.0
+    s[o + MC_LOADED] = 0.0
+    s[o + MC_CONVERGED] = 0.0
+    s[o + MC_IDENTITY] = 1.0
+    s[o + MC_SHIFT] = 0.0
+    s[o + MC_WATCHED] = 0.0
+    s[o + MC_REFUSED_SHARE] = 0.0
+    s[o + MC_HAS_PRIOR] = 0.0
 
 
 def mc_restart(s, o):
@@ -149,82 +156,26 @@ def mc_learn(s, o, y0, y1, y2, rw, rx, ry, rz, dt, w0, w1, w2, has_up, u0, u1, u
     ``has_up``; without it the error of the whole calibrated field counts.
     ``allow`` false: the caller refuses this sample (counted as refused).
     """
-    on = s[o + MC_ENABLED] != 0.0
     fresh = s[o + MC_FRESH] != 0.0
     norm = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-    if on:
-        s[o + MC_FIELDS] += 1.0
-    take = on and math.isfinite(norm) and norm > 0.0
-    if on and not take:
-        s[o + MC_INVALID] += 1.0
-    valid = take and not fresh
-    if not allow:
-        if take:
-            s[o + MC_REFUSED] += 1.0
-        take = False
-    if not take:
-        y0 = 0.0
-        y1 = 0.0
-        y2 = 0.0
-    if not math.isfinite(w0):
-        w0 = 0.0
-    if not math.isfinite(w1):
-        w1 = 0.0
-    if not math.isfinite(w2):
-        w2 = 0.0
+    valid, take = mc_admit(s, o, norm, allow)
+    valid = valid and not fresh
+    y = (y0, y1, y2) if take else (0.0, 0.0, 0.0)
+    w = (finite_or_zero(w0), finite_or_zero(w1), finite_or_zero(w2))
     if not fresh:
         mc_predict(s, o, rw, rx, ry, rz, dt)
     start = take and fresh
     if start:
-        mc_start(s, o, y0, y1, y2, norm)
+        mc_start(s, o, y[0], y[1], y[2], norm)
     live = take and not start
-    use = mc_update(s, o, y0, y1, y2, w0, w1, w2, live, norm)
+    use = mc_update(s, o, y[0], y[1], y[2], w[0], w[1], w[2], live, norm)
     if use or start:
         s[o + MC_USED] += 1.0
     if live and not use:
         s[o + MC_GATED] += 1.0
-    # Most fields refused while the body turns, by the gate or (where the
-    # calibration is applied, so that the caller tests calibrated fields)
-    # by the caller: the calibration no longer fits (the offset changed, or
-    # it was learned wrong); start over.
-    watched = (valid and w0 * w0 + w1 * w1 + w2 * w2 > CAL_TURNING2
-               and (take or s[o + MC_APPLIED] != 0.0))
-    k_share = 1.0 - math.exp(-dt / CAL_REFUSED_TAU)
-    share = s[o + MC_REFUSED_SHARE]
-    if watched:
-        share = share + k_share * ((0.0 if use else 1.0) - share)
-        s[o + MC_REFUSED_SHARE] = share
-    lost = watched and share > CAL_REFUSED_SHARE
-    # A soft iron far outside its prior: the filter has gone astray (a
-    # field that changed while it could not yet tell); start over.
-    if live:
-        wild = CAL_WILD * s[o + MC_SOFT_IRON]
-        for k in range(5):
-            if abs(s[o + MC_X + 6 + k]) > wild:
-                lost = True
-    if lost:
-        s[o + MC_RESETS] += 1.0
-        s[o + MC_FRESH] = 1.0
-        s[o + MC_LOADED] = 0.0
-        s[o + MC_CONVERGED] = 0.0
-        s[o + MC_IDENTITY] = 1.0
-        s[o + MC_SHIFT] = 0.0
-        s[o + MC_WATCHED] = 0.0
-        s[o + MC_REFUSED_SHARE] = 0.0
-        s[o + MC_HAS_PRIOR] = 0.0
-    fresh = s[o + MC_FRESH] != 0.0
-    s[o + MC_SEEN_Y] = y0
-    s[o + MC_SEEN_Y + 1] = y1
-    s[o + MC_SEEN_Y + 2] = y2
-    if has_up:
-        s[o + MC_SEEN_UP] = u0
-        s[o + MC_SEEN_UP + 1] = u1
-        s[o + MC_SEEN_UP + 2] = u2
-        s[o + MC_SEEN_HAS_UP] = 1.0
-    else:
-        s[o + MC_SEEN_HAS_UP] = 0.0
-    seen = take and not fresh
-    s[o + MC_SEEN_LIVE] = 1.0 if seen else 0.0
+    if mc_lost(s, o, valid and (take or s[o + MC_APPLIED] != 0.0), use, live, w, dt):
+        mc_start_over(s, o)
+    seen = mc_remember(s, o, y, has_up, (u0, u1, u2), take)
     if seen and s[o + MC_LOADED] == 0.0 and (s[o + MC_CONVERGED] == 0.0
                                              or s[o + MC_IDENTITY] != 0.0):
         # The convergence test, and the watch of a calibration not applied,
@@ -238,10 +189,74 @@ def mc_learn(s, o, y0, y1, y2, rw, rx, ry, rz, dt, w0, w1, w2, has_up, u0, u1, u
     # Watched once the calibration is nearly good enough to be used.
     if (has_up and seen and s[o + MC_IDENTITY] != 0.0
             and s[o + MC_QUALITY] < CAL_WATCH * s[o + MC_HEADING]):
-        mc_watch(s, o, y0, y1, y2, u0, u1, u2)
+        mc_watch(s, o, y[0], y[1], y[2], u0, u1, u2)
         s[o + MC_WATCHING] = 1.0
     mc_cache(s, o)
     return 1.0 if (use or start) else 0.0
+
+
+def mc_admit(s, o, norm, allow):
+    """
+    Count the field (given, invalid, refused): ``(valid, take)``.
+
+    Valid: on, finite and nonzero; taken: valid and not refused by the caller.
+    """
+    on = s[o + MC_ENABLED] != 0.0
+    if on:
+        s[o + MC_FIELDS] += 1.0
+    take = on and math.isfinite(norm) and norm > 0.0
+    if on and not take:
+        s[o + MC_INVALID] += 1.0
+    valid = take
+    if not allow:
+        if take:
+            s[o + MC_REFUSED] += 1.0
+        take = False
+    return valid, take
+
+
+def mc_lost(s, o, watched, use, live, w, dt):
+    """
+    Whether the calibration no longer fits and must start over.
+
+    Most fields refused while the body turns, by the gate or (where the
+    calibration is applied, so that the caller tests calibrated fields) by
+    the caller: the offset changed, or it was learned wrong. Or a soft iron
+    far outside its prior: the filter has gone astray (a field that changed
+    while it could not yet tell).
+    """
+    watched = watched and dot3(w, w) > CAL_TURNING2
+    k_share = 1.0 - math.exp(-dt / CAL_REFUSED_TAU)
+    share = s[o + MC_REFUSED_SHARE]
+    if watched:
+        share = share + k_share * ((0.0 if use else 1.0) - share)  # a low-pass of "refused"
+        s[o + MC_REFUSED_SHARE] = share
+    lost = watched and share > CAL_REFUSED_SHARE
+    if live:
+        wild = CAL_WILD * s[o + MC_SOFT_IRON]
+        for k in range(CAL_NY):
+            if abs(s[o + MC_X + CAL_D + k]) > wild:
+                lost = True
+    return lost
+
+
+def mc_start_over(s, o):
+    """The calibration no longer fits: forget it (the counts kept), one more reset counted."""
+    s[o + MC_RESETS] += 1.0
+    mc_forget(s, o)
+
+
+def mc_remember(s, o, y, has_up, u, take):
+    """The sample learned from, for the quality assessed lazily; whether it counts (seen)."""
+    store3(s, o + MC_SEEN_Y, y)
+    if has_up:
+        store3(s, o + MC_SEEN_UP, u)
+        s[o + MC_SEEN_HAS_UP] = 1.0
+    else:
+        s[o + MC_SEEN_HAS_UP] = 0.0
+    seen = take and s[o + MC_FRESH] == 0.0
+    s[o + MC_SEEN_LIVE] = 1.0 if seen else 0.0
+    return seen
 
 
 def mc_watch(s, o, y0, y1, y2, u0, u1, u2):
@@ -281,91 +296,90 @@ def mc_assess(s, o, dt):
     s[o + MC_STALE] = 0.0
     if s[o + MC_SEEN_LIVE] == 0.0:
         return
-    y0 = s[o + MC_SEEN_Y]
-    y1 = s[o + MC_SEEN_Y + 1]
-    y2 = s[o + MC_SEEN_Y + 2]
-    # The covariance of the calibrated field, J P[3:11, 3:11] Jᵀ with
-    # J = [−I, Y(y)].
-    p = o + MC_P + CAL_N * 3 + 3
-    jp = o + MC_JP
-    for c in range(8):
-        s[jp + c] = (-s[p + c] + y0 * s[p + CAL_N * 3 + c] + y1 * s[p + CAL_N * 5 + c]
-                     + y2 * s[p + CAL_N * 6 + c])
-        s[jp + 8 + c] = (-s[p + CAL_N + c] + y1 * s[p + CAL_N * 4 + c] + y0 * s[p + CAL_N * 5 + c]
-                         + y2 * s[p + CAL_N * 7 + c])
-        s[jp + 16 + c] = (-s[p + 2 * CAL_N + c] - y2 * s[p + CAL_N * 3 + c]
-                          - y2 * s[p + CAL_N * 4 + c] + y0 * s[p + CAL_N * 6 + c]
-                          + y1 * s[p + CAL_N * 7 + c])
-    cc = o + MC_C
-    for r in range(3):
-        a = jp + 8 * r
-        s[cc + 3 * r] = -s[a] + y0 * s[a + 3] + y1 * s[a + 5] + y2 * s[a + 6]
-        s[cc + 3 * r + 1] = -s[a + 1] + y1 * s[a + 4] + y0 * s[a + 5] + y2 * s[a + 7]
-        s[cc + 3 * r + 2] = (-s[a + 2] - y2 * s[a + 3] - y2 * s[a + 4] + y0 * s[a + 6]
-                             + y1 * s[a + 7])
-    f0, f1, f2 = mc_calibrated(s, o + MC_X + 3, y0, y1, y2)
+    y = vec3_at(s, o + MC_SEEN_Y)
+    mc_field_covariance(s, o, y)
+    f = mc_calibrated(s, o + MC_X + CAL_Z, y[0], y[1], y[2])
     has_up = s[o + MC_SEEN_HAS_UP] != 0.0
-    u0 = s[o + MC_SEEN_UP]
-    u1 = s[o + MC_SEEN_UP + 1]
-    u2 = s[o + MC_SEEN_UP + 2]
-    if not has_up:
-        across = math.sqrt(s[cc] + s[cc + 4] + s[cc + 8])
-        horizontal = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
-    else:
-        e0 = u1 * f2 - u2 * f1
-        e1 = u2 * f0 - u0 * f2
-        e2 = u0 * f1 - u1 * f0
-        horizontal = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-        h = horizontal
-        if h < CAL_TINY:
-            h = CAL_TINY
-        e0 = e0 / h
-        e1 = e1 / h
-        e2 = e2 / h
-        v = (e0 * s[cc] * e0 + e0 * s[cc + 1] * e1 + e0 * s[cc + 2] * e2
-             + e1 * s[cc + 3] * e0 + e1 * s[cc + 4] * e1 + e1 * s[cc + 5] * e2
-             + e2 * s[cc + 6] * e0 + e2 * s[cc + 7] * e1 + e2 * s[cc + 8] * e2)
-        if v < 0.0:
-            v = 0.0
-        across = math.sqrt(v)
-    h = horizontal
-    if h < CAL_TINY:
-        h = CAL_TINY
-    quality = across / h
+    u = vec3_at(s, o + MC_SEEN_UP)
+    quality = mc_heading_error(s, o + MC_C, f, has_up, u)
     s[o + MC_QUALITY] = quality
     # Converged once the quality has stayed below the threshold for CAL_HOLD s
-    # of learning and the calibration has not turned the heading by more
-    # than the threshold meanwhile (a filter misled by a field that changes
-    # keeps moving; a settled one does not).
+    # of learning without the calibration turning the heading by more than
+    # that meanwhile (a filter misled by a field that changes keeps moving).
     heading = s[o + MC_HEADING]
     learning = s[o + MC_LOADED] == 0.0 and s[o + MC_CONVERGED] == 0.0
     if learning and quality < heading:
-        x = o + MC_X
-        cand = o + MC_CANDIDATE
-        if s[o + MC_HELD] < 0.0:
-            for k in range(8):
-                s[cand + k] = s[x + 3 + k]
-        g0, g1, g2 = mc_calibrated(s, cand, y0, y1, y2)
-        if has_up:
-            turned = abs(mc_heading_between(u0, u1, u2, f0, f1, f2, g0, g1, g2))
-        else:  # about the field as given, made unit (it has the field's unit)
-            n = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-            turned = abs(mc_heading_between(y0 / n, y1 / n, y2 / n, f0, f1, f2, g0, g1, g2))
-        if turned > CAL_HOLD_TURN * heading:
-            for k in range(8):
-                s[cand + k] = s[x + 3 + k]
-            s[o + MC_HELD] = 0.0
-        else:
-            held = s[o + MC_HELD]
-            if held < 0.0:
-                held = 0.0
-            s[o + MC_HELD] = held + dt
-        if s[o + MC_HELD] >= CAL_HOLD:
-            s[o + MC_CONVERGED] = 1.0
+        mc_hold(s, o, y, f, has_up, u, dt)
     # The hold pauses while the quality is a little above the threshold (it
     # changes with the attitude), and ends well above it.
     if learning and quality > CAL_HOLD_TURN * heading:
         s[o + MC_HELD] = -1.0
+
+
+def mc_field_covariance(s, o, y):
+    """``C = J P[z d, z d] Jᵀ``, the calibrated field's covariance, ``J = [−I, Y(y)]``."""
+    p = o + MC_P + (CAL_N + 1) * CAL_Z
+    jp = o + MC_JP
+    for c in range(CAL_ZD):  # J P
+        z = col3_at(s, p + c, CAL_N)
+        d = vec5_at(s, p + CAL_N * (CAL_D - CAL_Z) + c, CAL_N)
+        column3_into(s, jp + c, CAL_ZD, mc_j_times(y, z, d))
+    for r in range(3):  # (J P) Jᵀ, a row at a time
+        a = jp + CAL_ZD * r
+        store3(s, o + MC_C + 3 * r, mc_j_times(y, vec3_at(s, a), vec5_at(s, a + 3, 1)))
+
+
+def mc_j_times(y, z, d):
+    """``J (z, d) = −z + Y(y) d``, the zeros of ``Y`` skipped."""
+    return (-z[0] + y[0] * d[0] + y[1] * d[2] + y[2] * d[3],
+            -z[1] + y[1] * d[1] + y[0] * d[2] + y[2] * d[4],
+            -z[2] - y[2] * d[0] - y[2] * d[1] + y[0] * d[3] + y[1] * d[4])
+
+
+def mc_heading_error(s, cc, f, has_up, u):
+    """
+    The quality: the calibrated field ``f``'s standard deviation across it, over its norm (rad).
+
+    Across in the horizontal plane where the vertical ``u`` is known (the
+    heading's error), else the whole field's (``C`` at ``s[cc:]``).
+    """
+    if not has_up:
+        across = math.sqrt(s[cc] + s[cc + 4] + s[cc + 8])
+        horizontal = math.sqrt(dot3(f, f))
+    else:
+        e = cross3(u, f)  # horizontal, across the field
+        horizontal = math.sqrt(dot3(e, e))
+        h = max_of(horizontal, CAL_TINY)
+        v = quad3_at(s, cc, (e[0] / h, e[1] / h, e[2] / h))  # eᵀ C e, e made unit
+        across = math.sqrt(max_of(v, 0.0))
+    return across / max_of(horizontal, CAL_TINY)
+
+
+def mc_hold(s, o, y, f, has_up, u, dt):
+    """
+    The quality is below the threshold: hold the calibration as it is, or start holding anew.
+
+    Converged after ``CAL_HOLD`` s held; a calibration that turned the heading
+    by more than ``CAL_HOLD_TURN`` thresholds since it was first held is held anew.
+    """
+    x = o + MC_X
+    cand = o + MC_CANDIDATE
+    if s[o + MC_HELD] < 0.0:
+        copy_into(s, rows(cand, 1), rows(x + CAL_Z, 1), CAL_ZD, 1)
+    g = mc_calibrated(s, cand, y[0], y[1], y[2])
+    if has_up:
+        turned = abs(mc_heading_between(u[0], u[1], u[2], f[0], f[1], f[2], g[0], g[1], g[2]))
+    else:  # about the field as given, made unit (it has the field's unit)
+        n = math.sqrt(dot3(y, y))
+        turned = abs(mc_heading_between(y[0] / n, y[1] / n, y[2] / n, f[0], f[1], f[2],
+                                        g[0], g[1], g[2]))
+    if turned > CAL_HOLD_TURN * s[o + MC_HEADING]:
+        copy_into(s, rows(cand, 1), rows(x + CAL_Z, 1), CAL_ZD, 1)
+        s[o + MC_HELD] = 0.0
+    else:
+        s[o + MC_HELD] = max_of(s[o + MC_HELD], 0.0) + dt
+    if s[o + MC_HELD] >= CAL_HOLD:
+        s[o + MC_CONVERGED] = 1.0
 
 
 # --- outputs -----------------------------------------------------------------------

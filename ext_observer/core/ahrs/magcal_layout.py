@@ -37,11 +37,30 @@ CAL_DIFFUSE = 4.0
 CAL_LOADED_BIAS_STD = 0.05
 CAL_INF = float('inf')
 CAL_TINY = 1e-300
+# The mean NIS: smoothed by this share per update (about the last 50), each
+# NIS counted at most CAL_NIS_CAP times the gate (a passing magnet weighs no
+# more), started at its expected value (3 degrees of freedom).
+CAL_NIS_RATE = 0.02
+CAL_NIS_CAP = 3.0
+CAL_NIS_EXPECTED = 3.0
+# Learning steps between symmetrizations of P (rounding makes it drift, slowly).
+CAL_SYMMETRIZE_EVERY = 64.0
+# The field's norm the noises scale with: at least this share of the raw field's.
+CAL_SCALE_FLOOR = 0.25
+# Prior standard deviation of a loaded soft iron, times the soft-iron parameter.
+CAL_LOADED_SOFT_SHARE = 0.2
 
 # --- the state block (offsets from o) ------------------------------------------
 
 MAGCAL = Layout()
 CAL_N = 12  # the filter's state: s = m + z (3), z (3), d (5), τ
+# Where each part of the filter's state starts (in x, and as rows of P).
+CAL_S = 0
+CAL_Z = 3
+CAL_D = 6
+CAL_TAU = 11
+CAL_ZD = 8  # the calibration proper, (z, d)
+CAL_NY = 5  # d, and the columns of Y(y), with D(d) y = Y(y) d
 MC_X = MAGCAL.field('x', CAL_N)  # (s, z, d, τ): s at 0-2, z at 3-5, d at 6-10, τ at 11
 MC_P = MAGCAL.field('p', CAL_N * CAL_N)  # its covariance, 12 × 12 row-major
 # What a fresh start starts from: x[3:] (9), the scale, the covariance of

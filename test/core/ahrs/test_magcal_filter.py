@@ -1,8 +1,9 @@
 """
 The calibration's Kalman filter against its documented model, in matrix form (no ROS).
 
-``magcal_filter.py`` writes the filter out slot by slot on the flat state
-(the model: magcal_kernel.py's docstring, docs/calibration.md); here the
+``magcal_filter.py`` writes the filter on the flat state, in named steps
+over small_matrix.py's helpers (the model: magcal_kernel.py's docstring,
+docs/calibration.md); here the
 same steps are written with numpy matrices: the prediction ``s ← Rᵀ s +
 (I − Rᵀ) z``, ``P ← F P Fᵀ + Q``; the update with ``h(x) = A⁻¹ (s + τ ω ×
 (s − z))``, its Jacobian by complex steps (exact to rounding, and not the
