@@ -12,7 +12,7 @@ Each place, and the test that runs it in every frame:
   published one) and the debug topics ``imu/rpy/filtered`` and ``imu/rpy/raw``:
   ``test_imu_tools_dropin.py::test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest``;
 - the estimated orientation covariance (its heading axis is the vertical in
-  each): ``test_covariance.py::test_the_covariance_is_the_same_in_every_world_frame``;
+  each): ``test_orientation_covariance.py::test_the_covariance_is_the_same_in_every_world_frame``;
 - the fixed orientation covariance (``orientation_stddev``) and the batch
   API's output (``attitude_from_imu``, the ``csv`` and ``bag`` commands): here.
 
