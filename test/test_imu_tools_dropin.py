@@ -17,8 +17,7 @@ import pytest
 from sensor_msgs.msg import Imu
 
 from ext_observer.nodes.conversions import nanoseconds_from_stamp
-from ext_observer.pipeline.imu_filter_parameters import (covariance_estimated,
-                                                         IMU_FILTER_PARAMETERS)
+from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS
 from ros_helpers import installed, SECOND
 from test_raw_imu import Driver
 
@@ -61,19 +60,6 @@ def send_each(spinner, driver, filtered, samples, field=(2e-5, 1e-5, -4e-5)):
         driver.send_imu(stamp, gyr, acc)
         if k:
             spinner.spin_until(lambda: stamp in filtered, 10.0, f'estimate {k}')
-
-
-def test_orientation_stddev_zero_means_not_given():
-    # imu_tools' default, 0.0, is "not given": the estimate's own covariance.
-    assert covariance_estimated(defaults(orientation_stddev=0.0))
-    assert covariance_estimated(defaults())
-    # A positive value other than ours is a user's number: fixed.
-    assert not covariance_estimated(defaults(orientation_stddev=0.2))
-    # Asked for outright, either way.
-    assert not covariance_estimated(defaults(orientation_stddev=0.0,
-                                             orientation_covariance_mode='fixed'))
-    assert covariance_estimated(defaults(orientation_stddev=0.2,
-                                         orientation_covariance_mode='estimate'))
 
 
 def test_imu_filter_madgwick_own_file_starts_with_a_covariance_and_names_publish_tf(
