@@ -38,6 +38,7 @@ def test_row_names_and_the_table_of_one_observer():
     assert ObserverSpec('projected', 'scheduled').name == 'projected-scheduled'
     k = np.arange(6, dtype=float)[:, None] * np.ones((1, 4))
     k[-1] = [1.0, 2.0, 3.0, 6.0]
+    k[2] = 50.0  # epoch `after` itself: not in Max and Min
     histories = {'error': k, 'residual': 2 * k, 'distance': -k, 'angle': k + 1}
     table = error_table(histories, after=2)
     assert table['error'] == {'mean': 3.0, 'std': pytest.approx(math.sqrt(3.5)),
