@@ -22,7 +22,7 @@ from broad_replay import fields_tesla, load, stamps, TRIALS
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.recordings import cdr
 from ros_helpers import overrides
-from test_raw_imu import BEST_EFFORT
+from test_raw_imu_through_dds import BEST_EFFORT
 
 SAMPLES = 400
 MAG_EVERY = 4

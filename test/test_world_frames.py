@@ -28,7 +28,7 @@ import pytest
 from ext_observer.core.ahrs.estimator import world_from_enu
 from ext_observer.recordings.recording import attitude_from_imu
 from ros_helpers import overrides, SECOND
-from test_raw_imu import connect, Driver
+from test_raw_imu_through_dds import connect, Driver
 
 RATE = 100.0
 FIELD = (2e-5, 1e-5, -4e-5)  # T, as the sensor reads it at the start

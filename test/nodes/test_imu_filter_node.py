@@ -30,7 +30,7 @@ from ext_observer.pipeline.raw_imu import heading_factor, RawImuPipeline
 from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
 from imu_filter_runs import replay, run_node, samples, turning
 from ros_helpers import installed, overrides, SECOND, values_of
-from test_raw_imu import (connect, Driver, MAG_EVERY, published, replay_lockstep,
+from test_raw_imu_through_dds import (connect, Driver, MAG_EVERY, published, replay_lockstep,
                           TOLERANCE)
 
 # imu_filter_madgwick's own params file (imu_tools, ROS 2: config/imu_filter.yaml),

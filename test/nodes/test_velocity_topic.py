@@ -25,7 +25,7 @@ from ext_observer.nodes.conversions import quaternion_from_msg, stamp_from_nanos
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.nodes.velocity_topic import VELOCITY_DROP_REASONS, VELOCITY_TOPICS, VelocityTopic
 from ros_helpers import overrides, SECOND, values_of
-from test_raw_imu import BEST_EFFORT, connect, Driver
+from test_raw_imu_through_dds import BEST_EFFORT, connect, Driver
 
 RATE = 100
 SPEED = 15.0        # m/s at cruise

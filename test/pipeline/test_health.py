@@ -20,7 +20,7 @@ from ext_observer.recordings.recording import attitude_from_imu
 from conftest import REPO
 from imu_filter_runs import replay, samples
 from ros_helpers import overrides, values_of
-from test_raw_imu import connect, Driver
+from test_raw_imu_through_dds import connect, Driver
 
 DATA = os.path.join(REPO, 'test', 'data')
 SLOW = '01_undisturbed_slow_rotation_A'
