@@ -5,7 +5,7 @@ The estimator runs in ENU; the frame is applied where an estimate leaves it.
 Each place, and the test that runs it in every frame:
 
 - the published orientation (``imu/data``, ``attitude_estimate``):
-  ``test_raw_imu.py::test_world_frames_rotate_the_enu_estimate``;
+  ``test_raw_imu_through_dds.py::test_world_frames_rotate_the_enu_estimate``;
 - ``declination`` and ``yaw_offset`` (their sign about the frame's own z):
   ``test_imu_filter_node.py::test_declination_turns_the_heading_to_true_north_in_every_frame``;
 - ``remove_gravity_vector`` (gravity from the estimator's ENU attitude, not the
@@ -27,8 +27,8 @@ import pytest
 
 from ext_observer.core.ahrs.estimator import world_from_enu
 from ext_observer.recordings.recording import attitude_from_imu
+from imu_driver import connect, Driver
 from ros_helpers import overrides, SECOND
-from test_raw_imu_through_dds import connect, Driver
 
 RATE = 100.0
 FIELD = (2e-5, 1e-5, -4e-5)  # T, as the sensor reads it at the start

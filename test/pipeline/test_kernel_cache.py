@@ -2,7 +2,7 @@
 How a node gets its kernels (``pipeline/kernel_cache.py``): the start plan
 from ``EXT_OBSERVER_COMPILED`` and what this process has, the kernels a
 process will run. (A node starting plain and switching mid-run, through
-DDS: ``test_raw_imu.py``.)
+DDS: ``test_raw_imu_through_dds.py``.)
 """
 
 import pytest

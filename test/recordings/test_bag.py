@@ -2,7 +2,7 @@
 The bag command (``recordings/bag.py``) on a bag written from a shipped BROAD
 excerpt, in both storage formats: its ``attitude_estimate`` and ``imu/data``,
 read back with ``rosbags``' own deserializer, equal the Python call and
-``test/broad_replay.py``'s offline run (which ``test_raw_imu.py`` proves equal
+``test/broad_replay.py``'s offline run (which ``test_raw_imu_through_dds.py`` proves equal
 to the node through DDS); ``--compare`` against the optical reference as a
 topic gives the scores :mod:`ext_observer.broad` computes for the same
 samples; bad input: missing topics, a topic of another type, truncated bags
