@@ -1,4 +1,7 @@
-"""Synthetic rotations, a sensor's view of world vectors and BROAD's trial names, for the benchmark's tests."""
+"""
+Synthetic rotations, a sensor's view of world vectors and BROAD's trial
+names, for the benchmark's tests.
+"""
 
 import math
 

@@ -1,4 +1,7 @@
-"""The benchmark's text report and JSON (``broad/report.py``): figures as printed, NaN as null, the details beside the scores."""
+"""
+The benchmark's text report and JSON (``broad/report.py``): figures as
+printed, NaN as null, the details beside the scores.
+"""
 
 import json
 import math

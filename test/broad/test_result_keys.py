@@ -1,4 +1,7 @@
-"""The names the benchmark's results are keyed by (``broad/result_keys.py``): the algorithms a result holds, in table order."""
+"""
+The names the benchmark's results are keyed by (``broad/result_keys.py``):
+the algorithms a result holds, in table order.
+"""
 
 from ext_observer.broad.result_keys import ALGORITHMS, algorithms_in, ANCHORS, OURS, OURS_PLAIN
 

@@ -1,4 +1,7 @@
-"""The simulated gyro's node (``nodes/gyro_node.py``) through real topics: it publishes its steps and stops."""
+"""
+The simulated gyro's node (``nodes/gyro_node.py``) through real topics: it
+publishes its steps and stops.
+"""
 
 from ext_observer.nodes.gyro_node import GyroNode
 from ros_helpers import overrides, Probe, values_of

@@ -1,4 +1,7 @@
-"""The monitor node (``nodes/monitor_node.py``) through real topics: its levels (STALE, OK, WARN, ERROR) and keys."""
+"""
+The monitor node (``nodes/monitor_node.py``) through real topics: its levels
+(STALE, OK, WARN, ERROR) and keys.
+"""
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np

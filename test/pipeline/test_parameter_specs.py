@@ -1,4 +1,7 @@
-"""The parameter rows as plain data (``pipeline/parameter_specs.py``): ROS type names, defaults as written, a row from a core table's, the common checks."""
+"""
+The parameter rows as plain data (``pipeline/parameter_specs.py``): ROS type
+names, defaults as written, a row from a core table's, the common checks.
+"""
 
 import pytest
 

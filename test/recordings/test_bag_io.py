@@ -1,4 +1,7 @@
-"""The batched bag writer (``recordings/bag_io.py``) against ``rosbags``' ``Writer.write``: the same files."""
+"""
+The batched bag writer (``recordings/bag_io.py``) against ``rosbags``'
+``Writer.write``: the same files.
+"""
 
 import numpy as np
 import pytest

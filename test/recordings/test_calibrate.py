@@ -47,5 +47,5 @@ def test_recordings_are_read_by_their_extension(tmp_path):
     np.savez(tmp_path / 'bad.npz', gyr=gyr, acc=acc)
     with pytest.raises(ValueError, match=r"missing \['mag', 'rate'\]"):
         calibrate.read_recording(str(tmp_path / 'bad.npz'))
-    with pytest.raises(ValueError, match=r"no reader for '.txt' files \(known: .hdf5, .h5, .npz\)"):
+    with pytest.raises(ValueError, match=r"no reader for '.txt' files \(known: .hdf5"):
         calibrate.read_recording(str(tmp_path / 'r.txt'))

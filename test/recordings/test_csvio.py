@@ -1,4 +1,7 @@
-"""The CSV command (``recordings/csvio.py``): the round trip on a BROAD excerpt, errors that name the column and the line."""
+"""
+The CSV command (``recordings/csvio.py``): the round trip on a BROAD
+excerpt, errors that name the column and the line.
+"""
 
 import io
 

@@ -1,4 +1,7 @@
-"""The example-data command (``recordings/example_data.py``): a bag and a CSV from a shipped excerpt, and the speed measure."""
+"""
+The example-data command (``recordings/example_data.py``): a bag and a CSV
+from a shipped excerpt, and the speed measure.
+"""
 
 import io
 import shutil

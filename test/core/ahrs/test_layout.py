@@ -1,4 +1,7 @@
-"""A flat state's fields declared once (`core/ahrs/layout.py`): offsets computed, a field twice or empty refused."""
+"""
+A flat state's fields declared once (`core/ahrs/layout.py`): offsets
+computed, a field twice or empty refused.
+"""
 
 import pytest
 

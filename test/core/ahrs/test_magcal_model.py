@@ -1,4 +1,7 @@
-"""A saved magnetometer calibration checked (``core/ahrs/magcal_model.py``): what it returns and what it refuses, by name."""
+"""
+A saved magnetometer calibration checked (``core/ahrs/magcal_model.py``):
+what it returns and what it refuses, by name.
+"""
 
 import math
 

@@ -1,4 +1,7 @@
-"""A parameter row and a table of them (``core/ahrs/tunables.py``): the range in words and in checks, a flag, defaults, unknown names."""
+"""
+A parameter row and a table of them (``core/ahrs/tunables.py``): the range
+in words and in checks, a flag, defaults, unknown names.
+"""
 
 import math
 
