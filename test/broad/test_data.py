@@ -11,8 +11,8 @@ import sys
 import pytest
 
 from broad_synthetic import NAMES
+from broad_synthetic import tree  # noqa: F401 (a fixture)
 from ext_observer import broad
-from ext_observer.broad import data
 
 
 def test_groups_from_file_names():
@@ -59,16 +59,6 @@ def test_missing_h5py_names_the_fix(monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, 'h5py', None)
     with pytest.raises(RuntimeError, match=r'pip install h5py.*make test'):
         broad.load_trial(str(tmp_path / 'x.hdf5'))
-
-
-@pytest.fixture
-def tree(tmp_path, monkeypatch):
-    """A source tree of its own, without BROAD beside it nor in the environment."""
-    folder = tmp_path / 'work' / 'main'
-    folder.mkdir(parents=True)
-    monkeypatch.setattr(data, 'TREE', str(folder))
-    monkeypatch.delenv(broad.ENV_VAR, raising=False)
-    return folder
 
 
 def _put_trial(folder, name=NAMES[0]):
