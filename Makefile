@@ -52,13 +52,13 @@ demo: $(RUNTIME_STAMP)
 TEST_WORKERS ?= auto
 PLAIN_TESTS := test/core/ahrs/test_estimator.py test/core/ahrs/test_ahrs_params.py \
 	test/core/ahrs/test_estimator_robust.py test/core/ahrs/test_magcal.py \
-	test/test_covariance.py \
+	test/test_orientation_covariance.py test/core/ahrs/test_uncertainty.py test/broad/test_covariance.py \
 	test/core/ahrs/test_compiled.py::test_the_whole_recording_loop_gives_the_per_sample_estimates \
-	test/test_raw_imu.py::test_drop_in_for_imu_filter_madgwick_as_a_process
-PLAIN_DESELECT := $(foreach t,test_the_benchmark_writes_its_page_and_figures \
-	test_fixed_mode_reproduces_todays_imu_data_bit_for_bit \
+	test/test_raw_imu_through_dds.py::test_drop_in_for_imu_filter_madgwick_as_a_process
+PLAIN_DESELECT := $(foreach t,test_fixed_mode_reproduces_todays_imu_data_bit_for_bit \
 	test_estimate_mode_publishes_the_pipelines_covariance_and_diagnostics \
-	test_diagnostics_before_the_first_step_say_nan,--deselect test/test_covariance.py::$(t)) \
+	test_diagnostics_before_the_first_step_say_nan,--deselect test/test_orientation_covariance.py::$(t)) \
+	--deselect test/broad/test_covariance.py::test_the_benchmark_writes_its_page_and_figures \
 	--deselect test/core/ahrs/test_magcal.py::test_a_csv_and_a_bag_with_an_offset_calibrate_as_the_node_would
 
 test: $(TEST_STAMP)

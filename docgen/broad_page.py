@@ -378,7 +378,7 @@ def _anchor_frames():
             'NWU→ENU, NED→ENU; also the conjugate and the scalar-last reading) was '
             'scored on a trial and the chosen one is the only one with a small '
             'inclination and, in 9D, a small total error; '
-            '`test_broad.py::test_anchor_frames_on_a_static_sensor` keeps it so.', ''] + _table(
+            '`test_anchors.py::test_anchor_frames_on_a_static_sensor` keeps it so.', ''] + _table(
         ['anchor', 'output', 'to ENU'], [
             ['VQF, BasicVQF', 'sensor → ENU', 'identity'],
             ['Madgwick (`ahrs`)', 'sensor → NWU', 'R_z(+90°) ⊗ q'],

@@ -390,7 +390,7 @@ _MODEL = [
     '`tau_acc` + `tau_acc_gain`, R the accelerometer\'s direction noise. For a process '
     'noise density q and a correction of time constant τ this settles at '
     'q τ / 2 + R dt / (2 τ), the complementary filter\'s trade-off in closed form '
-    '(`test_covariance.py::test_steady_state_is_the_closed_form_of_a_first_order_correction`). '
+    '(`test_uncertainty.py::test_steady_state_is_the_closed_form_of_a_first_order_correction`). '
     'Heading: only with a field that corrected it, with the gain the estimator applied '
     '(a running mean of the first fields, then `tau_mag`).',
     '- In 9D the heading\'s error is that drift plus the error U of the field the '
@@ -402,7 +402,7 @@ _MODEL = [
     'heading and quality its own heading σ (infinite before it has learned anything). '
     'A sensor calibrated already gets a σ of a few degrees before the calibration has '
     'converged; one with a hard iron, a σ as large as its heading\'s error '
-    '(`test_covariance.py::test_while_the_calibration_learns_the_heading_sigma_says_what_it_has_learned`).',
+    '(`test_orientation_covariance.py::test_while_the_calibration_learns_the_heading_sigma_says_what_it_has_learned`).',
     '- A start in motion: for its first `tau_acc` seconds the inclination is the running '
     'mean of the specific force, and one sample of a moving body can be off by '
     '`atan(|d| / g)` (`d` its translational acceleration): the tilt variance gains what '
@@ -421,7 +421,7 @@ _MODEL = [
     '',
 ] + _EQUATIONS.rstrip('\n').split('\n') + ['',
     'Every update is a congruence plus a positive term, so the covariance stays symmetric '
-    'and positive definite; `test_covariance.py` checks that for every input the node '
+    'and positive definite; `test_orientation_covariance.py` checks that for every input the node '
     'takes, and that the heading σ grows in 6D and while fields are rejected. The '
     'parameters are the node\'s `covariance.*` (start-up only), the rows of '
     '`UNCERTAINTY_TABLE` in `ext_observer/core/ahrs/uncertainty.py`: defaults, units and '

@@ -39,7 +39,8 @@ OUT = os.path.join(REPO, 'out', 'mutmut')
 # Module: the tests that check it, fast ones (seconds to a minute, no ROS).
 MODULES = {
     'ext_observer/core/ahrs/uncertainty_kernel.py': [
-        'test/test_covariance.py', 'test/core/ahrs/test_uncertainty_kernel.py'],
+        'test/test_orientation_covariance.py', 'test/core/ahrs/test_uncertainty.py',
+        'test/core/ahrs/test_uncertainty_kernel.py'],
     'ext_observer/pipeline/pairing.py': [
         'test/pipeline/test_pairing.py'],
     # The calibration's filter (its state, prediction and update): its

@@ -14,8 +14,8 @@ import numpy as np
 
 from broad_replay import START
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
+from imu_driver import connect, Driver
 from ros_helpers import overrides, SECOND
-from test_raw_imu import connect, Driver
 
 
 def samples(count, gyr=(0.0, 0.0, 0.2), acc=(0.5, -0.3, 9.7), field=(2e-5, 1e-5, -4e-5)):

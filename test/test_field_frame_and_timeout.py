@@ -19,8 +19,8 @@ from ext_observer.core.quaternion import conjugate, multiply
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.pipeline.imu_filter_outputs import mounting_matrix
 from ext_observer.recordings.recording import attitude_from_imu
+from imu_driver import connect, Driver
 from ros_helpers import overrides, values_of
-from test_raw_imu import connect, Driver
 
 TRIAL = '01_undisturbed_slow_rotation_A'
 MOUNTING = (0.3, -1.1, 2.4)  # roll, pitch, yaw, rad: far from any axis

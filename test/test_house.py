@@ -7,7 +7,6 @@ import pytest
 
 from ext_observer.core.ahrs import ahrs_kernel, ahrs_layout, magcal_layout, uncertainty_kernel
 from ext_observer.core.ahrs.estimator import AhrsObserver
-from ext_observer.core.ahrs.layout import Layout
 
 PACKAGE = pathlib.Path(__file__).resolve().parent.parent / 'ext_observer'
 # Flat-state slot names: parameters, coefficients, state, uncertainty, calibration, sizes.
@@ -56,15 +55,6 @@ def test_the_kernels_slots_come_from_their_layout_tables():
     # The estimator's parameters are the first slots, in AhrsParams's names.
     assert ahrs_kernel.PARAMETERS == tuple(ahrs_kernel.AHRS.parameters)
     assert ahrs_kernel.AHRS.offset('alpha') == ahrs_kernel.P_ALPHA
-
-
-def test_a_layout_refuses_a_field_declared_twice_or_empty():
-    layout = Layout()
-    assert layout.field('q', 4) == 0 and layout.field('bias', 3) == 4 and layout.size == 7
-    with pytest.raises(ValueError, match='twice'):
-        layout.field('q')
-    with pytest.raises(ValueError, match='at least 1'):
-        layout.field('none', 0)
 
 
 def test_the_estimators_fields_are_read_by_name():

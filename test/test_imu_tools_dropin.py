@@ -17,10 +17,9 @@ import pytest
 from sensor_msgs.msg import Imu
 
 from ext_observer.nodes.conversions import nanoseconds_from_stamp
-from ext_observer.pipeline.imu_filter_parameters import (covariance_estimated,
-                                                         IMU_FILTER_PARAMETERS)
+from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS
+from imu_driver import Driver
 from ros_helpers import installed, SECOND
-from test_raw_imu import Driver
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data', 'imu_tools')
 MADGWICK_FILE = os.path.join(DATA, 'imu_filter.yaml')
@@ -61,19 +60,6 @@ def send_each(spinner, driver, filtered, samples, field=(2e-5, 1e-5, -4e-5)):
         driver.send_imu(stamp, gyr, acc)
         if k:
             spinner.spin_until(lambda: stamp in filtered, 10.0, f'estimate {k}')
-
-
-def test_orientation_stddev_zero_means_not_given():
-    # imu_tools' default, 0.0, is "not given": the estimate's own covariance.
-    assert covariance_estimated(defaults(orientation_stddev=0.0))
-    assert covariance_estimated(defaults())
-    # A positive value other than ours is a user's number: fixed.
-    assert not covariance_estimated(defaults(orientation_stddev=0.2))
-    # Asked for outright, either way.
-    assert not covariance_estimated(defaults(orientation_stddev=0.0,
-                                             orientation_covariance_mode='fixed'))
-    assert covariance_estimated(defaults(orientation_stddev=0.2,
-                                         orientation_covariance_mode='estimate'))
 
 
 def test_imu_filter_madgwick_own_file_starts_with_a_covariance_and_names_publish_tf(
@@ -159,8 +145,8 @@ def yaw_of(q):
 def test_constant_dt_integrates_every_sample_of_same_stamp_pairs_over_dds(
         ros_context, spinner):
     from ext_observer.nodes.imu_filter_node import ImuFilterNode
+    from imu_driver import connect
     from ros_helpers import overrides
-    from test_raw_imu import connect
 
     node = spinner.add(ImuFilterNode(
         node_name='bursts', context=ros_context,
@@ -199,8 +185,8 @@ def test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest(
     from ext_observer.core.quaternion import multiply_floats
     from ext_observer.nodes.imu_filter_node import ImuFilterNode
     from ext_observer.pipeline.imu_filter_outputs import gravity_in_sensor, rpy_from_quaternion
+    from imu_driver import connect
     from ros_helpers import overrides
-    from test_raw_imu import connect
 
     node = spinner.add(ImuFilterNode(
         node_name='debugged', context=ros_context, parameter_overrides=overrides(
@@ -322,8 +308,8 @@ def test_a_saved_gyro_bias_reloads_and_applies_from_the_first_sample(
     from ext_observer.nodes.imu_filter_node import ImuFilterNode
     from ext_observer.pipeline.imu_filter_parameters import imu_filter_settings
     from ext_observer.pipeline.raw_imu import RawImuPipeline
+    from imu_driver import connect
     from ros_helpers import overrides
-    from test_raw_imu import connect
 
     bias = (0.01, -0.015, 0.02)  # rad/s
     path = tmp_path / 'calibration.yaml'
@@ -423,8 +409,8 @@ def test_publish_tf_broadcasts_the_orientation_where_tf2_ros_imports(ros_context
         'tf2_ros', reason='tf2_ros is not on PyPI: the TF broadcast needs a ROS installation')
     from ext_observer.nodes.imu_filter_node import ImuFilterNode
     from ext_observer.pipeline.imu_filter_outputs import transform_from_estimate
+    from imu_driver import connect
     from ros_helpers import overrides
-    from test_raw_imu import connect
 
     node = spinner.add(ImuFilterNode(node_name='tf', context=ros_context,
                                      parameter_overrides=overrides(

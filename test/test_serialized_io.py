@@ -21,8 +21,8 @@ from sensor_msgs.msg import Imu, MagneticField
 from broad_replay import fields_tesla, load, stamps, TRIALS
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.recordings import cdr
+from imu_driver import BEST_EFFORT
 from ros_helpers import overrides
-from test_raw_imu import BEST_EFFORT
 
 SAMPLES = 400
 MAG_EVERY = 4

@@ -5,14 +5,14 @@ The estimator runs in ENU; the frame is applied where an estimate leaves it.
 Each place, and the test that runs it in every frame:
 
 - the published orientation (``imu/data``, ``attitude_estimate``):
-  ``test_raw_imu.py::test_world_frames_rotate_the_enu_estimate``;
+  ``test_raw_imu_through_dds.py::test_world_frames_rotate_the_enu_estimate``;
 - ``declination`` and ``yaw_offset`` (their sign about the frame's own z):
   ``test_imu_filter_node.py::test_declination_turns_the_heading_to_true_north_in_every_frame``;
 - ``remove_gravity_vector`` (gravity from the estimator's ENU attitude, not the
   published one) and the debug topics ``imu/rpy/filtered`` and ``imu/rpy/raw``:
   ``test_imu_tools_dropin.py::test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest``;
 - the estimated orientation covariance (its heading axis is the vertical in
-  each): ``test_covariance.py::test_the_covariance_is_the_same_in_every_world_frame``;
+  each): ``test_orientation_covariance.py::test_the_covariance_is_the_same_in_every_world_frame``;
 - the fixed orientation covariance (``orientation_stddev``) and the batch
   API's output (``attitude_from_imu``, the ``csv`` and ``bag`` commands): here.
 
@@ -27,8 +27,8 @@ import pytest
 
 from ext_observer.core.ahrs.estimator import world_from_enu
 from ext_observer.recordings.recording import attitude_from_imu
+from imu_driver import connect, Driver
 from ros_helpers import overrides, SECOND
-from test_raw_imu import connect, Driver
 
 RATE = 100.0
 FIELD = (2e-5, 1e-5, -4e-5)  # T, as the sensor reads it at the start

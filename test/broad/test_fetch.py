@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import broad_data
+from broad_synthetic import tree  # noqa: F401 (a fixture)
 from conftest import REPO
 from ext_observer import broad
 from ext_observer.broad import data, fetch
@@ -121,17 +122,6 @@ def test_fetch_failure_is_one_error_and_no_folder(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith('error: cannot fetch BROAD from ') and err.count('\n') == 1
     assert not dest.exists()
-
-
-@pytest.fixture
-def tree(tmp_path, monkeypatch):
-    """A source tree of its own, with no BROAD beside it nor named in the environment."""
-    folder = tmp_path / 'work' / 'main'
-    folder.mkdir(parents=True)
-    monkeypatch.setattr(data, 'TREE', str(folder))
-    monkeypatch.delenv(broad.ENV_VAR, raising=False)
-    monkeypatch.delenv(broad_data.ALLOW_NO_DATA, raising=False)
-    return folder
 
 
 def test_make_test_fetches_what_the_tests_read_from_the_url_it_is_given(

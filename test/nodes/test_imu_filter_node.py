@@ -28,10 +28,10 @@ from ext_observer.nodes.stream_watch import StreamWatch
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
 from ext_observer.pipeline.raw_imu import heading_factor, RawImuPipeline
 from ext_observer.pipeline.units import ACC_WINDOW, UnitCheck
+from imu_driver import (connect, Driver, MAG_EVERY, published, replay_lockstep,
+                          TOLERANCE)
 from imu_filter_runs import replay, run_node, samples, turning
 from ros_helpers import installed, overrides, SECOND, values_of
-from test_raw_imu import (connect, Driver, MAG_EVERY, published, replay_lockstep,
-                          TOLERANCE)
 
 # imu_filter_madgwick's own params file (imu_tools, ROS 2: config/imu_filter.yaml),
 # with three values changed as a user would.

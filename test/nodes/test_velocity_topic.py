@@ -24,8 +24,8 @@ from conftest import REPO
 from ext_observer.nodes.conversions import quaternion_from_msg, stamp_from_nanoseconds
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.nodes.velocity_topic import VELOCITY_DROP_REASONS, VELOCITY_TOPICS, VelocityTopic
+from imu_driver import BEST_EFFORT, connect, Driver
 from ros_helpers import overrides, SECOND, values_of
-from test_raw_imu import BEST_EFFORT, connect, Driver
 
 RATE = 100
 SPEED = 15.0        # m/s at cruise

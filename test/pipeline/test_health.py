@@ -18,9 +18,9 @@ from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.pipeline.health import HEALTH_STATES, health_text, NO_STATE
 from ext_observer.recordings.recording import attitude_from_imu
 from conftest import REPO
+from imu_driver import connect, Driver
 from imu_filter_runs import replay, samples
 from ros_helpers import overrides, values_of
-from test_raw_imu import connect, Driver
 
 DATA = os.path.join(REPO, 'test', 'data')
 SLOW = '01_undisturbed_slow_rotation_A'

@@ -198,7 +198,7 @@ def test_the_one_call_sample_gives_what_the_steps_one_by_one_give(compiled, mode
     # sample_step (the core's step, the guard and the covariance's step in
     # one call) against the three calls it replaces, and the covariance
     # written into the caller's array against the tuple.
-    from test_covariance import node_settings
+    from node_settings import node_settings
     from ext_observer.pipeline.raw_imu import RawImuPipeline
     gyr, acc, mag, rate = _excerpt(EXCERPTS[0])
     gyr, acc, mag = gyr[:4000], acc[:4000], mag[:4000]
@@ -218,7 +218,7 @@ def test_the_covariance_goes_along_when_the_kernels_change_mid_run():
     # The node starts plain and switches to the compiled kernels between two
     # samples: the covariance's state goes along (the same figures as a
     # pipeline that ran plain throughout).
-    from test_covariance import node_settings
+    from node_settings import node_settings
     from ext_observer.pipeline.raw_imu import RawImuPipeline
     gyr, acc, mag, rate = _excerpt(EXCERPTS[1])
     gyr, acc, mag = gyr[:3000], acc[:3000], mag[:3000]
@@ -246,7 +246,7 @@ def test_the_covariance_goes_along_when_the_kernels_change_mid_run():
 def test_a_covariance_array_the_kernels_cannot_write_is_refused(compiled):
     # The compiled kernels write into the array's memory as 9 contiguous
     # float64, unchecked: anything else is refused before a step runs.
-    from test_covariance import node_settings
+    from node_settings import node_settings
     from ext_observer.pipeline.raw_imu import RawImuPipeline
     pipeline = RawImuPipeline(node_settings(), compiled=compiled)
     for k in range(3):
@@ -309,7 +309,7 @@ def test_compiled_and_plain_agree_to_the_bit_across_holes(mode):
     # Samples lost at random and in bursts (holes bridged, means restarted,
     # the covariance grown and restarted): the same estimates and
     # covariances, bit for bit.
-    from test_covariance import node_settings
+    from node_settings import node_settings
     from ext_observer.pipeline.raw_imu import RawImuPipeline
     gyr, acc, mag, rate = _excerpt(EXCERPTS[0])
     rng = np.random.default_rng(7)

@@ -218,3 +218,16 @@ def test_the_published_variances_are_the_sum_of_their_parts_and_b_the_larger():
         u[K.U_B] = before
         K.uncertainty_bias(u, var)
         assert u[K.U_B] == after
+
+
+def test_a_holes_step_corrects_the_inclination_variance_as_the_steps_it_missed():
+    uk = uncertainty_kernel
+    tracker = AttitudeUncertainty(use_mag=False)
+    u = tracker._u
+    uk.uncertainty_coefficients(u, 0.01)
+    u[uk.U_PT], u[uk.U_CT], u[uk.U_B] = 1e-3, 1e-5, 0.0
+    uk.uncertainty_hole(u, 0.02, 0.0, True)  # two steps missed: three in all
+    a = (1.0 - u[uk.U_K_ACC]) ** 2
+    g = u[uk.U_GYRO_NOISE]
+    assert u[uk.U_PT] == pytest.approx(a * a * 1e-3 + g * g * 0.02)
+    assert u[uk.U_CT] == pytest.approx(a * 1e-5)

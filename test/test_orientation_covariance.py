@@ -1,8 +1,7 @@
 """
 The orientation covariance of imu_filter_node and its coverage bounds.
 
-The uncertainty model alone (``core/ahrs/uncertainty.py``): its steady state is
-the closed form of a first-order correction, rest teaches the bias. Through
+Through
 ``RawImuPipeline`` (the node's steps without ROS): the covariance of every
 estimate is symmetric, positive definite and finite for any input the node
 takes (hypothesis: drops, gaps, jumps back, resets, rest, 6D, every world
@@ -10,9 +9,10 @@ frame); the heading σ grows in 6D and while the field is rejected, and
 shrinks again once it is used. Through the node:
 ``orientation_covariance_mode`` ``fixed`` gives today's ``imu/data`` bit for
 bit, ``estimate`` the pipeline's covariance, and ``/diagnostics`` carries
-``inclination_std_deg`` and ``heading_std_deg``. The benchmark (``broad
---covariance``): its figures on known distributions, its replay equal to the
-pipeline, its page and figures.
+``inclination_std_deg`` and ``heading_std_deg``. While the calibration
+learns, the heading σ says what it has learned. The model alone:
+``core/ahrs/test_uncertainty.py``; the benchmark (``broad --covariance``):
+``broad/test_covariance.py``.
 """
 
 import math
@@ -22,10 +22,9 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs.estimator import AhrsParams
-from ext_observer.core.ahrs.uncertainty import (AttitudeUncertainty, HEADING_UNKNOWN,
-                                           UncertaintyParams)
-from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, HEADING_UNKNOWN
 from ext_observer.pipeline.raw_imu import RawImuPipeline
+from node_settings import node_settings
 
 SECOND = 1_000_000_000
 START = 1000 * SECOND
@@ -33,12 +32,6 @@ FIELD = (2e-5, 1e-5, -4e-5)  # T, dip about 60°
 # The online magnetometer calibration, where the core has it: off
 # where a test needs fields used at once.
 HAS_CALIBRATION = 'mag_cal' in AhrsParams.DEFAULTS
-
-
-def node_settings(**changes):
-    values = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
-    values.update(changes)
-    return imu_filter_settings(values)
 
 
 def plain_fields(**changes):
@@ -59,52 +52,6 @@ def stds(pipeline):
     """(inclination σ, heading σ) of the pipeline now, degrees."""
     values = dict(pipeline.estimator.key_values())
     return values['inclination_std_deg'], values['heading_std_deg']
-
-
-# --- the model alone ----------------------------------------------------------
-
-def test_steady_state_is_the_closed_form_of_a_first_order_correction():
-    # White gyro noise only, an accelerometer correction every sample: the
-    # tilt variance settles where growth and shrinkage balance.
-    params = UncertaintyParams(bias_std=0.0, bias_init=0.0, gyro_rate_noise=0.0,
-                               inclination_floor=0.0, stamp_error=0.0)
-    tau, dt = 2.0, 0.01
-    tracker = AttitudeUncertainty(params, tau_acc=tau)
-    tracker.start(dt)
-    for _ in range(20000):
-        tracker.step(dt, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), False)
-    k = 1.0 - math.exp(-dt / tau)
-    q = params.gyro_noise ** 2 * dt
-    r = (params.acc_noise / 9.80665) ** 2 / dt
-    exact = ((1 - k) ** 2 * q + k * k * r) / (1 - (1 - k) ** 2)
-    assert tracker.tilt_variance == pytest.approx(exact, rel=1e-9)
-    # ... which is q τ / 2 + r dt / (2 τ) to first order in dt / τ.
-    assert exact == pytest.approx(q * tau / (2 * dt) + r * dt / (2 * tau), rel=0.01)
-
-
-def test_rest_teaches_the_bias_and_slows_the_heading_drift():
-    def drift(rest_first):
-        tracker = AttitudeUncertainty(use_mag=False)
-        tracker.start(0.01)
-        for _ in range(300):
-            tracker.step(0.01, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), rest_first)
-        before = tracker.heading_variance
-        for _ in range(3000):
-            tracker.step(0.01, (0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), False)
-        return tracker.heading_variance - before
-
-    assert drift(True) < 0.1 * drift(False)
-
-
-def test_parameters_are_refused_with_their_name():
-    with pytest.raises(ValueError, match='acc_noise must be positive'):
-        UncertaintyParams(acc_noise=0.0)
-    with pytest.raises(ValueError, match='stamp_error must be >= 0'):
-        UncertaintyParams(stamp_error=-1.0)
-    with pytest.raises(ValueError, match='unknown parameters'):
-        UncertaintyParams(gain=1.0)
-    with pytest.raises(ValueError, match=r'covariance\.\*: heading_floor must be finite'):
-        node_settings(**{'covariance.heading_floor': math.nan})
 
 
 # --- every input the node takes -----------------------------------------------
@@ -392,81 +339,7 @@ def test_diagnostics_before_the_first_step_say_nan(ros_context):
         node.destroy_node()
 
 
-# --- the benchmark ------------------------------------------------------------
-
-def synthetic_trial(name, seconds=20.0, rate=100.0, turn=0.4):
-    """A BROAD-like trial: a level body turning about the vertical, its exact reference."""
-    from ext_observer.broad.data import Trial
-
-    t = np.arange(int(seconds * rate)) / rate
-    angle = turn * t
-    world = np.array([0.0, 20.0, -40.0])  # µT, north and down
-    c, s = np.cos(angle), np.sin(angle)
-    # The body's view of the world field: R_z(angle)ᵀ m.
-    mag = np.stack([c * world[0] + s * world[1], -s * world[0] + c * world[1],
-                    np.full_like(t, world[2])], axis=1)
-    rng = np.random.default_rng(7)
-    gyr = np.tile([0.0, 0.0, turn], (len(t), 1)) + rng.normal(0.0, 0.002, (len(t), 3))
-    acc = np.tile([0.0, 0.0, 9.81], (len(t), 1)) + rng.normal(0.0, 0.05, (len(t), 3))
-    quat = np.stack([np.cos(angle / 2), 0 * t, 0 * t, np.sin(angle / 2)], axis=1)
-    movement = t > 2.0
-    return Trial(name, gyr, acc, mag, quat, movement, rate)
-
-
-def test_figures_of_known_distributions():
-    from ext_observer.broad.covariance import calibration_figures
-
-    rng = np.random.default_rng(3)
-    sigma = np.full(200000, 0.01)
-    heading = calibration_figures([(np.abs(rng.normal(0.0, 0.01, sigma.size)), sigma)])
-    assert heading['within_2sigma'] == pytest.approx(0.954, abs=0.003)
-    assert heading['mean_z2'] == pytest.approx(1.0, abs=0.01)
-    # A tilt of two axes of variance σ²/2 each: its angle is within 2σ 98 % of the time.
-    tilt = np.hypot(*rng.normal(0.0, 0.01 / math.sqrt(2.0), (2, sigma.size)))
-    inclination = calibration_figures([(tilt, sigma)])
-    assert inclination['within_2sigma'] == pytest.approx(1 - math.exp(-4.0), abs=0.003)
-    assert inclination['unknown'] == 0.0
-
-
-def test_replay_reproduces_the_pipelines_covariance():
-    from ext_observer.broad import covariance
-
-    trials = [synthetic_trial('02_undisturbed_a'), synthetic_trial('03_undisturbed_b', 15.0)]
-    for mode in ('9D', '6D'):
-        runs = [covariance.run_trial(t, mode, {'ahrs.mag_cal': False} if HAS_CALIBRATION
-                                     else None) for t in trials]
-        for run, trial in zip(runs, trials):
-            run.update({f'gyr{j}': trial.gyr[:, j] for j in range(3)})
-            run.update({f'acc{j}': trial.acc[:, j] for j in range(3)})
-        ahrs = AhrsParams(mag_cal=False) if HAS_CALIBRATION else None
-        for run, (tilt, heading) in zip(runs, covariance.replay(runs, ahrs_params=ahrs)):
-            scored = np.isfinite(run['tilt'])
-            assert np.array_equal(tilt[scored], run['tilt'][scored])
-            assert np.array_equal(heading[scored], run['heading'][scored])
-
-
-def test_the_benchmark_writes_its_page_and_figures(tmp_path, capsys):
-    from docgen.covariance_page import write_page
-    from ext_observer.broad.covariance import report
-
-    trials = [synthetic_trial('02_undisturbed_a'),
-              synthetic_trial('32_disturbed_attached_magnet_1cm'),
-              synthetic_trial('29_disturbed_b')]
-    groups = {'members': {'undisturbed': [trials[0].name],
-                          'disturbed': [trials[1].name, trials[2].name]}}
-    meta = dict(command='test', commit='abc', dirty=False, date='today', machine='here',
-                data='synthetic')
-    summary, runs = report(trials, groups, meta, json_path=str(tmp_path / 'c.json'))
-    write_page(trials, runs, groups, summary, meta, str(tmp_path))
-    assert ('9D', 'dev', 'undisturbed', 'heading') in summary
-    assert ('6D', 'held-out', 'disturbed', 'inclination') in summary
-    assert 'within the coverage bounds' in capsys.readouterr().out
-    page = (tmp_path / 'covariance.md').read_text()
-    assert page.startswith('# The orientation covariance')
-    for figure in ('covariance_reliability.png', 'covariance_magnet.png'):
-        assert (tmp_path / 'figures' / figure).stat().st_size > 10000
-        assert f'figures/{figure}' in page
-
+# --- while the calibration learns ----------------------------------------------
 
 def learning_run(level, seed=3):
     """
@@ -525,26 +398,3 @@ def test_while_the_calibration_learns_the_heading_sigma_says_what_it_has_learned
     else:
         # The held heading is the distorted field's, far off: σ stays large.
         assert np.abs(heading[learning]).max() > 20.0
-
-
-def test_the_bound_margin_is_a_share_of_each_range_and_the_smaller_counts():
-    from ext_observer.broad.covariance import bound_margin
-    centre = {'within_2sigma': 0.945, 'mean_z2': 1.0}
-    assert bound_margin(centre) == pytest.approx(0.5)
-    # On a bound: 0; outside: negative; the figure nearer its bound decides.
-    assert bound_margin({'within_2sigma': 0.90, 'mean_z2': 1.0}) == pytest.approx(0.0)
-    assert bound_margin({'within_2sigma': 0.945, 'mean_z2': 0.25}) == pytest.approx(-0.5)
-    assert bound_margin({'within_2sigma': 0.981, 'mean_z2': 1.0}) == pytest.approx(0.1)
-
-
-def test_a_holes_step_corrects_the_inclination_variance_as_the_steps_it_missed():
-    from ext_observer.core.ahrs import uncertainty_kernel as uk
-    tracker = AttitudeUncertainty(use_mag=False)
-    u = tracker._u
-    uk.uncertainty_coefficients(u, 0.01)
-    u[uk.U_PT], u[uk.U_CT], u[uk.U_B] = 1e-3, 1e-5, 0.0
-    uk.uncertainty_hole(u, 0.02, 0.0, True)  # two steps missed: three in all
-    a = (1.0 - u[uk.U_K_ACC]) ** 2
-    g = u[uk.U_GYRO_NOISE]
-    assert u[uk.U_PT] == pytest.approx(a * a * 1e-3 + g * g * 0.02)
-    assert u[uk.U_CT] == pytest.approx(a * 1e-5)

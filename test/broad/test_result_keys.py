@@ -1,0 +1,13 @@
+"""
+The names the benchmark's results are keyed by (``broad/result_keys.py``):
+the algorithms a result holds, in table order.
+"""
+
+from ext_observer.broad.result_keys import ALGORITHMS, algorithms_in, ANCHORS, OURS, OURS_PLAIN
+
+
+def test_the_algorithms_of_a_result_come_in_table_order():
+    assert ALGORITHMS[:2] == (OURS, OURS_PLAIN) and ALGORITHMS[2:] == ANCHORS
+    scores = {'Madgwick': {}, 'unknown': {}, OURS: {}, 'VQF': {}}
+    assert algorithms_in({'scores': scores}) == [OURS, 'VQF', 'Madgwick']
+    assert algorithms_in({'scores': {}}) == []

@@ -1,0 +1,90 @@
+"""
+The raw-IMU estimator as imu_filter_node runs it, without ROS
+(``pipeline/raw_imu.py``): the divergence guard reinitializing from the
+sample, the first sample of a time line, resets counted by cause, a jump
+back, a forward gap's action, fields and the silence since the last. (The
+same through DDS against the offline run: ``test_raw_imu_through_dds.py``.)
+"""
+
+import math
+
+import pytest
+
+from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS
+from ext_observer.pipeline.raw_imu import RawImuEstimator, RawImuPipeline
+from ros_helpers import SECOND
+
+
+def test_raw_imu_divergence_guard_reinitializes_from_the_sample():
+    settings = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
+    estimator = RawImuEstimator(settings)
+    sample = ((0.0, 0.0, 0.1), (1.0, 0.0, 9.7))
+    estimator.field((2e-5, 0.0, -4e-5))
+    state, reason = estimator.step(*sample, 0.01)
+    assert reason is None and abs(math.hypot(*state) - 1.0) < 1e-9
+    for poison, expected in (((10.0, 0.0, 0.0, 0.0), 'residual_too_large'),
+                             ((math.nan, 0.0, 0.0, 0.0), 'state_non_finite')):
+        estimator.core.q = poison
+        state, reason = estimator.step(*sample, 0.01)
+        assert reason == expected
+        # From gravity and the latest field again: unit, finite.
+        assert abs(math.hypot(*state) - 1.0) < 1e-9
+
+
+GYR, ACC, FIELD = (0.0, 0.0, 0.1), (0.1, 0.0, 9.8), (2e-5, 0.0, -4e-5)
+
+
+def pipeline(**changes):
+    values = {spec.name: spec.default for spec in IMU_FILTER_PARAMETERS}
+    values.update(changes)
+    return RawImuPipeline(values)
+
+
+def test_the_first_sample_initializes_and_the_next_one_steps():
+    p = pipeline()
+    assert p.imu(1 * SECOND, GYR, ACC) == (None, None)
+    outcome, estimate = p.imu(1 * SECOND + 10_000_000, GYR, ACC)
+    assert outcome is None and estimate.stamp == 1 * SECOND + 10_000_000
+    assert abs(math.hypot(*estimate.state) - 1.0) < 1e-9 and estimate.reason is None
+    assert len(estimate.covariance) == 9
+
+
+def test_with_a_constant_dt_the_first_sample_answers_too():
+    p = pipeline(constant_dt=0.01)
+    outcome, estimate = p.imu(1 * SECOND, GYR, ACC)
+    assert outcome is None and estimate.stamp == 1 * SECOND
+
+
+def test_a_jump_back_resets_and_a_reset_is_counted_by_its_cause():
+    p = pipeline()
+    for k in range(3):
+        p.imu(10 * SECOND + k * 10_000_000, GYR, ACC)
+    outcome, _ = p.imu(1 * SECOND, GYR, ACC)
+    assert outcome == 'backward_jump' and p.resets['backward_jump'] == 1
+    p.reset('service')
+    assert p.resets == {'backward_jump': 1, 'clock_jump': 0, 'forward_gap': 0, 'service': 1}
+
+
+@pytest.mark.parametrize('action, resets', [('propagate', 0), ('reset', 1)])
+def test_a_forward_gap_resets_only_when_asked(action, resets):
+    p = pipeline(forward_gap_action=action, forward_gap_threshold=0.5, max_dt=5.0)
+    p.imu(1 * SECOND, GYR, ACC)
+    p.imu(1 * SECOND + 10_000_000, GYR, ACC)
+    p.imu(3 * SECOND, GYR, ACC)
+    # The step after the 2 s without samples is the one flagged.
+    _, estimate = p.imu(3 * SECOND + 10_000_000, GYR, ACC)
+    assert estimate is not None and estimate.step.gap
+    assert p.resets['forward_gap'] == resets
+
+
+def test_the_field_silence_is_the_time_since_the_last_field():
+    p = pipeline()
+    assert p.field_silence() is None
+    p.imu(1 * SECOND, GYR, ACC)
+    assert p.field(1 * SECOND, FIELD) is None
+    p.imu(1 * SECOND + 10_000_000, GYR, ACC)
+    p.imu(1 * SECOND + 250_000_000, GYR, ACC)
+    p.imu(1 * SECOND + 260_000_000, GYR, ACC)
+    # From the latest released step's start.
+    assert p.field_silence() == pytest.approx(0.25)
+    assert p.field(1 * SECOND, (math.nan, 0.0, 0.0)) is not None
