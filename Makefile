@@ -50,8 +50,8 @@ demo: $(RUNTIME_STAMP)
 # covariance on edge inputs, the plain batch in workers, one node process
 # on plain kernels end to end (docs/tests.md says what is left out and why).
 TEST_WORKERS ?= auto
-PLAIN_TESTS := test/core/ahrs/test_estimator.py test/core/ahrs/test_ahrs_params.py \
-	test/core/ahrs/test_estimator_robust.py test/core/ahrs/test_magcal.py \
+PLAIN_TESTS := test/core/ahrs/test_ahrs_observer.py test/core/ahrs/test_ahrs_params.py \
+	test/core/ahrs/test_ahrs_observer_robust.py test/core/ahrs/test_magcal.py \
 	test/test_orientation_covariance.py test/core/ahrs/test_uncertainty.py test/broad/test_covariance.py \
 	test/core/ahrs/test_compiled.py::test_the_whole_recording_loop_gives_the_per_sample_estimates \
 	test/test_raw_imu_through_dds.py::test_drop_in_for_imu_filter_madgwick_as_a_process
@@ -71,7 +71,7 @@ test: $(TEST_STAMP)
 # tests start are not traced), then the report of core/ahrs.py and raw_imu.py.
 coverage: $(TEST_STAMP)
 	$(PY) -m coverage run --source=ext_observer -m pytest -q -p no:cacheprovider $(PYTEST_ARGS) test
-	$(PY) -m coverage report -m --include='ext_observer/core/ahrs/estimator.py,ext_observer/core/ahrs/magcal.py,ext_observer/core/ahrs/uncertainty.py,ext_observer/pipeline/raw_imu.py'
+	$(PY) -m coverage report -m --include='ext_observer/core/ahrs/ahrs_observer.py,ext_observer/core/ahrs/magcal.py,ext_observer/core/ahrs/uncertainty.py,ext_observer/pipeline/raw_imu.py'
 
 # The paper's figures and Table 1, regenerated into docs/reproduction.md.
 reproduce: $(RUNTIME_STAMP)

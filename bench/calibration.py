@@ -8,7 +8,7 @@ magnetometer would be, ``m_raw = S m + b``: a hard-iron offset ``b`` of 0.5,
 a soft-iron ``S = I + E``, ``E`` symmetric with elements uniform in ±10 %
 (seeded by the trial's name and the level). On each, 9D:
 
-- the estimator of :mod:`ext_observer.core.ahrs.estimator` with its defaults
+- the estimator of :mod:`ext_observer.core.ahrs.ahrs_observer` with its defaults
   (calibration on), and the time from the first movement sample to the
   calibration's convergence;
 - VQF and Madgwick (packages ``vqf`` and ``ahrs``, run as
@@ -73,7 +73,7 @@ def _samples(name, level, seed):
 
 def _ours(task):
     """Our estimator on floats: estimates, convergence, the offset over time."""
-    from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+    from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
     name, level, mode, seed = task
     trial = _TRIALS[name]
     mag, _, _ = _samples(name, level, seed)
@@ -137,7 +137,7 @@ def oracle_calibration(quat, raw):
 
 def _oracle(task):
     """The estimator (calibration off) on the field calibrated by :func:`oracle_calibration`."""
-    from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+    from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
     name, level, _, seed = task
     trial = _TRIALS[name]
     mag, _, _ = _samples(name, level, seed)

@@ -114,7 +114,7 @@ def broad_figures(trials, progress=print):
 
 def step_figures():
     """µs per sample of ``update`` (compiled, plain) and of the compiled loop."""
-    from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+    from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
     d = np.load(EXCERPT)
     gyr, acc, mag, dt = d['gyr'], d['acc'], d['mag'], 1.0 / float(d['rate'])
     g, a, m = gyr.tolist(), acc.tolist(), mag.tolist()

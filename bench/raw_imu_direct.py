@@ -11,7 +11,7 @@ outputs per sample and send none: what is timed is each node's own Python
 work. Beside them, each part timed alone: the node's ROS-free pipeline
 (:class:`~ext_observer.pipeline.raw_imu.RawImuPipeline`: input checks, stamps, the
 estimator), the core's float step
-(:class:`~ext_observer.core.ahrs.estimator.AhrsObserver`), one real ``publish`` of
+(:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`), one real ``publish`` of
 each output with no subscriber; and the functions on the callbacks' path
 that use numpy (:mod:`bench.numpy_use`). Each figure is the best of a few
 passes, µs per IMU sample. Run in a child process by ``python -m bench``.
@@ -133,7 +133,7 @@ def direct(count=SAMPLES):
     import rclpy
     from rclpy.context import Context
 
-    from ext_observer.core.ahrs.estimator import AhrsObserver
+    from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
     from ext_observer.nodes.imu_filter_node import ImuFilterNode
     from ext_observer.pipeline.raw_imu import RawImuPipeline
     samples = load_samples()

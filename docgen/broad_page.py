@@ -19,7 +19,7 @@ from ext_observer.broad.scoring import criteria, group_means, summary, VQF_RATIO
 
 # The estimator's source, linked from the opening sentence.
 _AHRS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                     'core', 'ahrs', 'estimator.py')
+                     'core', 'ahrs', 'ahrs_observer.py')
 BROAD_URL = 'https://github.com/dlaidig/broad'
 
 

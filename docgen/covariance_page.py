@@ -333,7 +333,7 @@ each axis alike), never below the first sample's, the tilt variance gains
 direction): what the running mean of `t` seconds still owes to the motion. After
 `tau_acc` the low-pass forgets it as it forgets any error, `S ← (1 − k)² S`. A start
 at rest keeps the accelerometer's own deviation (its noise and scale error): a small
-σ (`test_estimator_robust.py::test_the_covariance_says_how_unsure_a_start_in_motion_is`).
+σ (`test_ahrs_observer_robust.py::test_the_covariance_says_how_unsure_a_start_in_motion_is`).
 The estimate itself is not touched. Replays of logged runs (the tuning below) count
 it only where the run logged the specific force.
 
@@ -347,7 +347,7 @@ each correcting field brings the tilt error of its own time, `r ← (1 − κ) r
 |tan(dip)| √S`. The heading's variance gains `(w₀ |tan(dip)| atan(√m) + r)²`, with
 `atan(√m)` one sample's tilt σ as the motion since the start shows it: the two are the
 same motion's error, added as σ
-(`test_estimator_robust.py::test_the_covariance_says_how_unsure_the_heading_of_a_start_in_motion_is`).
+(`test_ahrs_observer_robust.py::test_the_covariance_says_how_unsure_the_heading_of_a_start_in_motion_is`).
 A start at rest gains next to nothing.
 
 **What is published.** The variances plus what the propagation does not model, each in

@@ -58,20 +58,20 @@ MODULES = {
     # the kernel's 99 s under mutmut's trampolines, measured)
     'ext_observer/core/ahrs/ahrs_kernel.py': [
         'test/core/ahrs/test_ahrs_filters.py', 'test/core/ahrs/test_ahrs_kernel.py',
-        'test/core/ahrs/test_ahrs_math.py', 'test/core/ahrs/test_estimator.py',
-        'test/core/ahrs/test_ahrs_params.py', 'test/core/ahrs/test_estimator_robust.py'],
+        'test/core/ahrs/test_frames.py', 'test/core/ahrs/test_ahrs_observer.py',
+        'test/core/ahrs/test_ahrs_params.py', 'test/core/ahrs/test_ahrs_observer_robust.py'],
     # The kernel's shared arithmetic and its bias in motion (split from it).
     'ext_observer/core/ahrs/ahrs_filters.py': [
-        'test/core/ahrs/test_ahrs_filters.py', 'test/core/ahrs/test_ahrs_math.py',
-        'test/core/ahrs/test_estimator.py', 'test/core/ahrs/test_ahrs_params.py'],
+        'test/core/ahrs/test_ahrs_filters.py', 'test/core/ahrs/test_frames.py',
+        'test/core/ahrs/test_ahrs_observer.py', 'test/core/ahrs/test_ahrs_params.py'],
     'ext_observer/core/ahrs/bias_kernel.py': [
-        'test/core/ahrs/test_bias_kernel.py', 'test/core/ahrs/test_estimator_robust.py',
+        'test/core/ahrs/test_bias_kernel.py', 'test/core/ahrs/test_ahrs_observer_robust.py',
         'test/core/ahrs/test_ahrs_params.py'],
     # Its clipping and rest detection (split from it): the kernel's subset.
-    'ext_observer/core/ahrs/gyro_watch.py': [
-        'test/core/ahrs/test_gyro_watch.py', 'test/core/ahrs/test_ahrs_kernel.py',
-        'test/core/ahrs/test_estimator.py', 'test/core/ahrs/test_ahrs_params.py',
-        'test/core/ahrs/test_estimator_robust.py'],
+    'ext_observer/core/ahrs/clip_and_rest.py': [
+        'test/core/ahrs/test_clip_and_rest.py', 'test/core/ahrs/test_ahrs_kernel.py',
+        'test/core/ahrs/test_ahrs_observer.py', 'test/core/ahrs/test_ahrs_params.py',
+        'test/core/ahrs/test_ahrs_observer_robust.py'],
 }
 # Tests that start ROS nodes or need numba, BROAD or the benchmark's
 # packages are left out of the subsets (minutes each, or not about the
@@ -108,7 +108,7 @@ MAGCAL_KERNEL_SLOW = ('an_offset_that_changes_for_good or a_csv_and_a_bag'
 SLOW_OF = {
     'ext_observer/core/ahrs/ahrs_kernel.py': SLOW,
     'ext_observer/core/ahrs/ahrs_filters.py': SLOW,
-    'ext_observer/core/ahrs/gyro_watch.py': SLOW,
+    'ext_observer/core/ahrs/clip_and_rest.py': SLOW,
     'ext_observer/core/ahrs/magcal_filter.py': MAGCAL_FILTER_SLOW,
     'ext_observer/core/ahrs/magcal_kernel.py': MAGCAL_KERNEL_SLOW,
 }

@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams, world_from_enu
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams, world_from_enu
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data')
 TRIALS = ('01_undisturbed_slow_rotation_A', '28_disturbed_stationary_magnet_A')

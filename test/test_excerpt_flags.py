@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 
 from ext_observer.core import quaternion as quat
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data')
 UNDISTURBED = '01_undisturbed_slow_rotation_A'

@@ -21,7 +21,7 @@ from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 
-from ext_observer.core.ahrs.estimator import AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsParams
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, HEADING_UNKNOWN
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 from node_settings import node_settings

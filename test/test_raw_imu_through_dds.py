@@ -29,7 +29,7 @@ from broad_replay import (errors_deg, fields_tesla, load, offline, rmse, stamps,
                           TRIALS)
 from conftest import REPO, Spinner
 from ext_observer.nodes.conversions import quaternion_from_msg
-from ext_observer.core.ahrs.estimator import AhrsParams, world_from_enu
+from ext_observer.core.ahrs.ahrs_observer import AhrsParams, world_from_enu
 from ext_observer.core.ahrs.compiled import compiled_available
 from ext_observer.nodes.node_common import ParameterError
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
@@ -42,7 +42,7 @@ from ros_helpers import installed, overrides, SECOND, values_of
 
 # Total attitude error against the optical reference over the movement
 # samples, deg. The core offline on these excerpts (the defaults of
-# core/ahrs/estimator.py chosen on the even-numbered BROAD trials; the field every
+# core/ahrs/ahrs_observer.py chosen on the even-numbered BROAD trials; the field every
 # third sample, as here): RMSE 1.19 and 1.60, max 2.27 and 3.94 (undisturbed,
 # disturbed); 6D would give RMSE 2.53 and 3.50. The bounds leave about 2×.
 RMSE_BOUND = 3.0

@@ -25,7 +25,7 @@ its broadcaster needs tf2_ros, which pip does not install.
 import numpy as np
 import pytest
 
-from ext_observer.core.ahrs.estimator import world_from_enu
+from ext_observer.core.ahrs.ahrs_observer import world_from_enu
 from ext_observer.recordings.recording import attitude_from_imu
 from imu_driver import connect, Driver
 from ros_helpers import overrides, SECOND

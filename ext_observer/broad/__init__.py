@@ -1,7 +1,7 @@
 """
 The BROAD benchmark: ``python -m ext_observer broad [--data DIR]``.
 
-Runs the raw-IMU estimator of :mod:`ext_observer.core.ahrs.estimator` on the recordings
+Runs the raw-IMU estimator of :mod:`ext_observer.core.ahrs.ahrs_observer` on the recordings
 of BROAD (D. Laidig, M. Caruso, A. Cereatti, T. Seel, "BROAD — A Benchmark
 for Robust Inertial Orientation Estimation", Data 6(7):72, 2021,
 doi:10.3390/data6070072, CC BY 4.0), scores it the way BROAD does, and runs

@@ -34,7 +34,7 @@ from ext_observer.source_tree import docgen
 # Trial shown over time in the report: magnetically disturbed.
 PLOT_TRIAL = '28_disturbed_stationary_magnet_A'
 # What the figures depend on, for the "uncommitted changes" note.
-_ESTIMATOR_FILES = ('ext_observer/core/ahrs/estimator.py', 'ext_observer/broad')
+_ESTIMATOR_FILES = ('ext_observer/core/ahrs/ahrs_observer.py', 'ext_observer/broad')
 
 
 def build_parser():
@@ -214,7 +214,7 @@ def _params(settings):
     """``AhrsParams`` from ``NAME=VALUE`` settings, or None for the shipped defaults."""
     if not settings:
         return None
-    from ext_observer.core.ahrs.estimator import AhrsParams
+    from ext_observer.core.ahrs.ahrs_observer import AhrsParams
     values = {}
     for setting in settings:
         name, sep, value = setting.partition('=')
@@ -253,7 +253,7 @@ def _check(args, anchors):
 
 def _source():
     """The commit, whether the estimator has uncommitted changes, the date, the params."""
-    from ext_observer.core.ahrs.estimator import AhrsParams
+    from ext_observer.core.ahrs.ahrs_observer import AhrsParams
     return {
         'commit': _git('rev-parse', '--short', 'HEAD') or 'unknown',
         'dirty': bool(_git('status', '--porcelain', '--', *_ESTIMATOR_FILES)),

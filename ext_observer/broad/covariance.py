@@ -140,7 +140,7 @@ def replay(runs, params=None, ahrs_params=None):
     runs : list of dict
         :func:`run_trial`'s outputs, one mode each; all with the same ``dt``.
     params : UncertaintyParams, optional
-    ahrs_params : ext_observer.core.ahrs.estimator.AhrsParams, optional
+    ahrs_params : ext_observer.core.ahrs.ahrs_observer.AhrsParams, optional
         The estimator's (its time constants); default its defaults.
 
     Returns
@@ -149,7 +149,7 @@ def replay(runs, params=None, ahrs_params=None):
         The variances each run would publish with ``params``.
 
     """
-    from ext_observer.core.ahrs.estimator import AhrsParams
+    from ext_observer.core.ahrs.ahrs_observer import AhrsParams
     dt = runs[0]['dt']
     lengths = [len(r['tilt']) for r in runs]
     n = max(lengths)

@@ -2,7 +2,7 @@
 The run: our estimator and the anchors on the trials, each estimate scored.
 
 Our estimator runs as one batched call over every trial and mode
-(``estimate_batch`` of :mod:`ext_observer.core.ahrs.estimator`, with its shipped
+(``estimate_batch`` of :mod:`ext_observer.core.ahrs.ahrs_observer`, with its shipped
 defaults); the anchors run one recording per task, in processes when
 ``jobs > 1``. Only the scores, the norms of our raw estimates, the times and
 the per-sample errors of one trial (for the figure) are kept.

@@ -24,7 +24,7 @@ to S³ is what the extension term holds small; only while subscribed too); ``/di
 the magnetometer calibration as a params file).
 
 The estimator is :class:`~ext_observer.pipeline.raw_imu.RawImuPipeline` (validation,
-stamps, the core's :class:`~ext_observer.core.ahrs.estimator.AhrsObserver`); this node
+stamps, the core's :class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`); this node
 turns messages into its inputs and its estimates into messages, and says
 what went wrong: drops, resets, a silent IMU, a missing magnetometer, and
 values that only a wrong unit explains (:mod:`ext_observer.pipeline.units`). The
@@ -187,7 +187,7 @@ class ImuFilterNode(EstimatorNode):
 
     @property
     def observer(self):
-        """The core's estimator, :class:`~ext_observer.core.ahrs.estimator.AhrsObserver`."""
+        """The core's estimator, :class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`."""
         return self.pipeline.estimator.core
 
     @property

@@ -2,7 +2,7 @@
 Many recordings through the raw-IMU estimator (:func:`estimate_batch`).
 
 Each recording runs whole through one
-:class:`~ext_observer.core.ahrs.estimator.AhrsObserver` (:meth:`~ext_observer.core.ahrs.estimator.AhrsObserver.run`:
+:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver` (:meth:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver.run`:
 compiled by numba where it is installed, plain Python otherwise), in this
 process or shared among forked workers: the same estimator, the same results.
 """
@@ -14,7 +14,7 @@ import numpy as np
 
 from ext_observer.core.ahrs.ahrs_params import AhrsParams
 from ext_observer.core.ahrs.compiled import kernels
-from ext_observer.core.ahrs.estimator import AhrsObserver
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
 
 __all__ = ['estimate_batch', 'hold_finite', 'shared_arrays']
 
@@ -25,7 +25,7 @@ def estimate_batch(gyr, acc, mag, rate_hz, use_mag, params=None, variant='extend
     Run many recordings (one estimator each, same parameters).
 
     Each recording runs whole, on floats (:meth:`AhrsObserver.run
-    <ext_observer.core.ahrs.estimator.AhrsObserver.run>`); ``workers > 1`` shares them
+    <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.run>`); ``workers > 1`` shares them
     among forked processes, longest first, which takes the total work over
     ``workers``. The results do not depend on ``workers``.
 

@@ -12,8 +12,8 @@ only puts the numbers into messages. Quaternions scalar first
 
 import math
 
-from ext_observer.core.ahrs.ahrs_math import initial_attitude
-from ext_observer.core.ahrs.estimator import WORLD_FRAMES
+from ext_observer.core.ahrs.frames import initial_attitude
+from ext_observer.core.ahrs.ahrs_observer import WORLD_FRAMES
 from ext_observer.core.quaternion import multiply_floats
 
 __all__ = ['STANDARD_GRAVITY', 'gravity_in_sensor', 'heading_factor', 'mounting_matrix', 'raw_attitude',
@@ -167,7 +167,7 @@ def heading_factor(world_frame, declination=0.0, yaw_offset=0.0):
     Return the left factor from the core's ENU estimate to the published one.
 
     ``R_z(yaw_offset) ⊗ C ⊗ R_up(−declination)``, with ``C`` the frame's
-    factor of :data:`~ext_observer.core.ahrs.estimator.WORLD_FRAMES`.
+    factor of :data:`~ext_observer.core.ahrs.ahrs_observer.WORLD_FRAMES`.
 
     Returns
     -------

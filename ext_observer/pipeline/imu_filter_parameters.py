@@ -20,7 +20,7 @@ all. Plain data, no ROS: :mod:`ext_observer.nodes.imu_filter_node` declares them
 import math
 
 from ext_observer.core.ahrs.ahrs_params import AHRS_TABLE, AhrsParams
-from ext_observer.core.ahrs.estimator import WORLD_FRAMES
+from ext_observer.core.ahrs.ahrs_observer import WORLD_FRAMES
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.ahrs.uncertainty import UNCERTAINTY_TABLE, UncertaintyParams
 from ext_observer.core.ahrs.velocity_kernel import VELOCITY_TIMEOUT
@@ -63,7 +63,7 @@ def ahrs_params(values):
 
     Returns
     -------
-    params : ext_observer.core.ahrs.estimator.AhrsParams
+    params : ext_observer.core.ahrs.ahrs_observer.AhrsParams
 
     Raises
     ------

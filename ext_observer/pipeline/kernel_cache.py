@@ -27,7 +27,7 @@ import numpy as np
 
 from ext_observer.core.ahrs import compiled
 from ext_observer.core.ahrs.ahrs_params import AhrsParams
-from ext_observer.core.ahrs.estimator import AhrsObserver
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty
 
 __all__ = ['BackgroundCompile', 'cache_ready', 'load', 'main', 'preload', 'start_plan']

@@ -11,7 +11,7 @@ The node, the CSV and bag commands, calibrate and
 are the node's to the bit. How samples, fields and faults are used:
 docs/raw_imu.md ("How samples are used"); the covariance: docs/covariance.md.
 The output's frame: the core's sensor → ENU estimate turned to true north,
-into ``world_frame`` (``C`` of :data:`~ext_observer.core.ahrs.estimator.WORLD_FRAMES`),
+into ``world_frame`` (``C`` of :data:`~ext_observer.core.ahrs.ahrs_observer.WORLD_FRAMES`),
 then about that frame's z axis:
 ``q = R_z(yaw_offset) ⊗ C ⊗ R_up(−declination) ⊗ q_enu``.
 """
@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from ext_observer.core.ahrs.estimator import AhrsObserver
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, covariance_out
@@ -82,12 +82,12 @@ class RawImuEstimator:
         ``use_mag``, ``world_frame``, ``declination``, ``yaw_offset``,
         ``mag_bias_*``, ``divergence_max_residual``.
     compiled : bool, optional
-        The core's kernels (:class:`~ext_observer.core.ahrs.estimator.AhrsObserver`'s
+        The core's kernels (:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`'s
         ``compiled``): default, compiled where numba is installed.
 
     Attributes
     ----------
-    core : ext_observer.core.ahrs.estimator.AhrsObserver
+    core : ext_observer.core.ahrs.ahrs_observer.AhrsObserver
     uncertainty : ext_observer.core.ahrs.uncertainty.AttitudeUncertainty
         The variance of the estimate's inclination and heading.
     latest_field : tuple of 3 float or None

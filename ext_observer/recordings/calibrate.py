@@ -1,7 +1,7 @@
 """
 Offline magnetometer calibration: ``python -m ext_observer calibrate``.
 
-Runs the raw-IMU estimator of :mod:`ext_observer.core.ahrs.estimator` in 9D over a
+Runs the raw-IMU estimator of :mod:`ext_observer.core.ahrs.ahrs_observer` in 9D over a
 recording, with the online calibration of :mod:`ext_observer.core.ahrs.magcal`,
 and writes what it learned as a ROS 2 params file for ``imu_filter_node``::
 
@@ -38,7 +38,7 @@ import sys
 
 import numpy as np
 
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.magcal import check_calibration
 
 __all__ = ['Calibration', 'NODE', 'READERS', 'UNITS', 'calibration_from_recording',

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from ext_observer.core.ahrs.estimator import AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsParams
 
 
 # The online magnetometer calibration, where the core has it: off

@@ -21,7 +21,7 @@ from sensor_msgs.msg import Imu
 from conftest import REPO
 from broad_replay import errors_deg, load, offline as core_offline, rmse, START, TRIALS
 from ext_observer.nodes.conversions import nanoseconds_from_stamp, quaternion_from_msg
-from ext_observer.core.ahrs.estimator import world_from_enu
+from ext_observer.core.ahrs.ahrs_observer import world_from_enu
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.nodes.stream_watch import StreamWatch

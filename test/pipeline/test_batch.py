@@ -2,7 +2,7 @@
 Many recordings at once (``pipeline/batch.py``): a non-finite sample held at
 the last finite one, inputs refused by what is wrong, each recording equal
 to it run alone, what ``then`` returns. (The estimates in workers against this
-process: ``core/ahrs/test_estimator.py``.)
+process: ``core/ahrs/test_ahrs_observer.py``.)
 """
 
 import math
@@ -11,7 +11,7 @@ import numpy as np
 from numpy.testing import assert_array_equal
 import pytest
 
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.pipeline.batch import estimate_batch, hold_finite
 
 RATE = 100.0

@@ -5,7 +5,7 @@ names, defaults as written, a row from a core table's, the common checks.
 
 import pytest
 
-from ext_observer.core.ahrs.tunables import Tunable
+from ext_observer.core.ahrs.parameter_rows import Tunable
 from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_settings,
                                                    ParameterSpec, ros_type_name,
                                                    spec_from_tunable)

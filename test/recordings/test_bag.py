@@ -17,7 +17,7 @@ import pytest
 from rosbags.rosbag2 import Reader
 
 from broad_replay import fields_tesla, load, offline, TRIALS
-from ext_observer.core.ahrs.estimator import AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsParams
 from ext_observer.recordings import bag_io
 from ext_observer.recordings import cdr
 from ext_observer.recordings.bag import _Progress, compare, main as bag_main, run_bag

@@ -4,8 +4,8 @@ The raw-IMU estimator: numpy only (numba where installed), no ROS.
 ``estimator`` (AhrsObserver) wraps the steps of ``ahrs_kernel`` on a flat
 state whose fields ``ahrs_layout`` declares once (``layout`` the table
 type), with ``ahrs_filters`` the arithmetic they share, ``bias_kernel``
-the bias learned in motion and ``gyro_watch`` a clipped gyro and rest; ``ahrs_params`` the parameter
-table (rows of ``tunables``), ``ahrs_math`` frames and first attitude.
+the bias learned in motion and ``clip_and_rest`` a clipped gyro and rest; ``ahrs_params`` the parameter
+table (rows of ``parameter_rows``), ``frames`` frames and first attitude.
 ``magcal*`` the online calibration,
 ``uncertainty*`` the covariance, ``compiled`` the kernels compiled by numba.
 """

@@ -1,7 +1,7 @@
 """
 The raw-IMU estimator's steps as functions on one flat state: the one source.
 
-:class:`~ext_observer.core.ahrs.estimator.AhrsObserver` keeps the state of one
+:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver` keeps the state of one
 estimate in a flat container ``s`` (the slots below, then the magnetometer
 calibration's block, :mod:`~ext_observer.core.ahrs.magcal_kernel`) and runs the
 functions of this module on it. They are written in the part of Python that
@@ -43,7 +43,7 @@ from .ahrs_layout import (  # noqa: F401
                           S_START_N, S_REF_REST, S_ACC_DEV, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR,
                           S_HOLES, S_INC_SIGMA, S_CLIP_LEFT, S_STUCK, S_WAIT_N, S_ACC_REJ, S_WAIT_TURN)
 from .accel_rejection import acc_rejection_reset
-from .gyro_watch import clipped_variance, detect_rest
+from .clip_and_rest import clipped_variance, detect_rest
 from .gravity_kernel import ahrs_update_acc  # noqa: F401 (the steps' module serves it)
 from .hole_kernel import (calibration_restart, clip_after, forget_wait, hole_after,
                           hole_end_fix, hole_ends, hole_rate, hole_slope, hole_starts,

@@ -2,7 +2,7 @@
 The raw-IMU estimator's parameters (:class:`AhrsParams`), in physical units.
 
 What a user tunes: time constants in seconds, thresholds in rad/s and m/s²
-(VQF's way; see :mod:`ext_observer.core.ahrs.estimator`). :data:`AHRS_TABLE`
+(VQF's way; see :mod:`ext_observer.core.ahrs.ahrs_observer`). :data:`AHRS_TABLE`
 declares each once (name, default, unit, range, one line); the node's
 ``ahrs.*`` parameters, docs/parameters.md and config/imu_filter.yaml come
 from it. A bad value raises ``ValueError`` naming the parameter.
@@ -10,7 +10,7 @@ from it. A bad value raises ``ValueError`` naming the parameter.
 
 import math
 
-from .tunables import Tunable, Tunables
+from .parameter_rows import Tunable, Tunables
 
 __all__ = ['AHRS_TABLE', 'AhrsParams']
 

@@ -43,7 +43,7 @@ __all__ = ['CompiledUnavailable', 'ENV', 'Kernels', 'PLAIN_COST', 'cache_folder'
 # In this order: each file's names are defined before the next one's functions use them.
 _SOURCES = ('layout.py', 'small_matrix.py',
             'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
-            'ahrs_layout.py', 'ahrs_filters.py', 'bias_kernel.py', 'gyro_watch.py',
+            'ahrs_layout.py', 'ahrs_filters.py', 'bias_kernel.py', 'clip_and_rest.py',
             'hole_kernel.py', 'velocity_kernel.py', 'accel_rejection.py', 'field_kernel.py',
             'gravity_kernel.py', 'ahrs_kernel.py', 'uncertainty_kernel.py')
 ENV = 'EXT_OBSERVER_COMPILED'

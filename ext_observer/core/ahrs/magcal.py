@@ -13,7 +13,7 @@ state, plain or compiled), described in docs/calibration.md.
 (:mod:`~ext_observer.core.ahrs.magcal_model`) checks a saved calibration.
 
 The caller may refuse a sample (``allow``): :class:`AhrsObserver
-<ext_observer.core.ahrs.estimator.AhrsObserver>` does for a field its norm/dip test
+<ext_observer.core.ahrs.ahrs_observer.AhrsObserver>` does for a field its norm/dip test
 rejects once calibrated.
 
 One code path serves one calibrator and a batch: one state block per element

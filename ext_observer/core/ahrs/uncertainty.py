@@ -2,7 +2,7 @@
 How good the raw-IMU estimate is now: a variance for its inclination and one for its heading.
 
 :class:`AttitudeUncertainty` runs beside
-:class:`~ext_observer.core.ahrs.estimator.AhrsObserver` and is told, after
+:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver` and is told, after
 each step, what the estimator did (interval, rate, rest, the heading gain
 of a field); from that alone it propagates the variance of the attitude
 error, as an error-state Kalman filter's covariance step does, with the
@@ -19,7 +19,7 @@ import numpy as np
 
 from . import uncertainty_kernel as _plain
 from .ahrs_filters import rotate
-from .tunables import Tunable, Tunables
+from .parameter_rows import Tunable, Tunables
 from .uncertainty_kernel import (
     GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,
     U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_HS, U_HS_REST, U_HS_TAN,
@@ -145,7 +145,7 @@ class AttitudeUncertainty:
     params : UncertaintyParams, optional
     tau_acc, tau_mag, tau_rest : float
         The estimator's time constants (s): the inclination correction
-        (``tau_acc + tau_acc_gain`` of :class:`~ext_observer.core.ahrs.estimator.AhrsParams`),
+        (``tau_acc + tau_acc_gain`` of :class:`~ext_observer.core.ahrs.ahrs_observer.AhrsParams`),
         the heading correction and the bias learned at rest.
     use_mag : bool or ndarray of bool
         9D (the heading is unknown until a field sets it) or 6D (the heading
@@ -218,7 +218,7 @@ class AttitudeUncertainty:
         Go on with other kernels (plain or compiled) from the same state.
 
         As :meth:`AhrsObserver.use_kernels
-        <ext_observer.core.ahrs.estimator.AhrsObserver.use_kernels>`: the state is
+        <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.use_kernels>`: the state is
         copied into the new kernels' container; the variances go on as they
         would have. The compiled kernels take one estimate (floats), not
         arrays ``(B,)``.
@@ -351,12 +351,12 @@ class AttitudeUncertainty:
         bias_var : float or ndarray, optional
             The estimator's own bias variance, (rad/s)² per axis (its
             Kalman filter's, :attr:`AhrsObserver.bias_std
-            <ext_observer.core.ahrs.estimator.AhrsObserver.bias_std>`): the
+            <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.bias_std>`): the
             model's is at least that. None: the model's alone.
         clip_var : float or ndarray, optional
             What a sample at the gyro's range adds to the angle's variances,
             rad² (:attr:`AhrsObserver.clip_variance
-            <ext_observer.core.ahrs.estimator.AhrsObserver.clip_variance>`).
+            <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.clip_variance>`).
         acc : sequence of 3, optional
             The specific force, m/s², body: how unsure the start still is
             (one estimate, floats). None: nothing of the start is counted
@@ -518,7 +518,7 @@ class AttitudeUncertainty:
 
         ``max(1 − exp(−dt / tau_mag), 1 / count)``: a running mean of the
         first fields, then the first-order correction (as
-        :class:`~ext_observer.core.ahrs.estimator.AhrsObserver` does).
+        :class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver` does).
         """
         dt = self._dt if dt is None else dt
         if dt != self._gain_dt:

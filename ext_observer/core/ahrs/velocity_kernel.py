@@ -61,7 +61,7 @@ def velocity_step(s, gx, gy, gz, dt):
     wx, wy, wz = gx - s[S_BIAS], gy - s[S_BIAS + 1], gz - s[S_BIAS + 2]
     vx, vy, vz = s[S_VEL], s[S_VEL + 1], s[S_VEL + 2]
     if vx * vx + vy * vy + vz * vz > MOVING_SPEED * MOVING_SPEED:
-        s[S_ACC_STILL] = 0.0  # read by this sample's rest detection (gyro_watch)
+        s[S_ACC_STILL] = 0.0  # read by this sample's rest detection (clip_and_rest)
     s[S_VEL_ACC] = s[S_VEL_DV] + wy * vz - wz * vy
     s[S_VEL_ACC + 1] = s[S_VEL_DV + 1] + wz * vx - wx * vz
     s[S_VEL_ACC + 2] = s[S_VEL_DV + 2] + wx * vy - wy * vx

@@ -16,8 +16,8 @@ import pytest
 from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs.ahrs_layout import S_ACC_REJ, S_ACC_STILL, S_BIAS, S_REST
 from ext_observer.core.ahrs.ahrs_params import AhrsParams
-from ext_observer.core.ahrs.estimator import AhrsObserver
-from ext_observer.core.ahrs.gyro_watch import detect_rest
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
+from ext_observer.core.ahrs.clip_and_rest import detect_rest
 
 G = 9.81
 RATE = 100.0

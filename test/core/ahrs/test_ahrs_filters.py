@@ -18,7 +18,7 @@ import pytest
 from ext_observer.core import quaternion as quat
 from ext_observer.core.ahrs import ahrs_filters as f
 from ext_observer.core.ahrs.ahrs_layout import C_BW, S_LP, S_Q, S_RLP
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 
 
 def rotated(q, v):

@@ -30,8 +30,8 @@ from ext_observer.core.ahrs.ahrs_layout import (C_K_ACC, MC0, S_BIAS, S_BIAS_P, 
                                                 S_HAS_REF, S_LP, S_MAG_DIST, S_MAG_USED, S_Q,
                                                 S_REF, S_REJECTED, S_REST, S_REST_GYR, S_REST_TIME,
                                                 S_RLP, S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
-from ext_observer.core.ahrs.gyro_watch import _REST_BIAS_SIGMA, detect_rest
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.clip_and_rest import _REST_BIAS_SIGMA, detect_rest
 
 DT = 0.01
 TILTED = (1.2, -0.8, 9.7)

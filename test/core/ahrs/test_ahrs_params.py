@@ -1,5 +1,5 @@
 """
-Known answers for the raw-IMU estimator's parameters (core/ahrs/estimator.py), no ROS.
+Known answers for the raw-IMU estimator's parameters (core/ahrs/ahrs_observer.py), no ROS.
 
 Each test builds synthetic samples with a known truth (noise-free, or with a
 seeded rng), runs :class:`AhrsObserver` on floats with explicit parameters,
@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 
 G = 9.81
 RATE = 100.0

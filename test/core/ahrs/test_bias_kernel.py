@@ -19,7 +19,7 @@ from ext_observer.core.ahrs.ahrs_filters import lowpass
 from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_Q, C_BIAS_R, C_BW, P_BIAS_MAX,
                                                 P_BIAS_SIGMA_INIT, S_BIAS, S_BIAS_P, S_Q,
                                                 S_REST, S_RLP)
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 
 # Element (i, j) of the covariance -> its slot among the six (xx xy xz yy yz zz).
 SLOT = {(0, 0): 0, (0, 1): 1, (0, 2): 2, (1, 1): 3, (1, 2): 4, (2, 2): 5}

@@ -18,7 +18,7 @@ import pytest
 
 from conftest import REPO
 from ext_observer.core.ahrs import compiled as compiled_module
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.pipeline.batch import estimate_batch
 
 DATA = os.path.join(REPO, 'test', 'data')
@@ -102,7 +102,7 @@ def test_without_numba_the_estimator_runs_plain():
     code = '\n'.join([
         'import sys',
         "sys.modules['numba'] = None",
-        'from ext_observer.core.ahrs.estimator import AhrsObserver',
+        'from ext_observer.core.ahrs.ahrs_observer import AhrsObserver',
         'from ext_observer.core.ahrs.compiled import CompiledUnavailable, compiled_available',
         'assert not compiled_available()',
         'est = AhrsObserver()',

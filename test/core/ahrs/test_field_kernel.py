@@ -30,7 +30,7 @@ from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_R, MC0, S_BIAS, S_BIAS_P,
                                                 S_Q, S_REF, S_REF_AGE, S_REF_REST, S_REJECTED,
                                                 S_REST, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN,
                                                 S_HEAD_DOUBT)
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.magcal_layout import MAGCAL, MC_READY, MC_REFUSED, MC_USED
 
 DT = 0.01

@@ -21,7 +21,7 @@ from ext_observer.core.ahrs.ahrs_layout import (C_BW, C_DT, C_K_ACC, P_TAU_ACC, 
                                                 S_HOLE_END, S_HOLE_RUN, S_HOLE_VAR, S_HOLES,
                                                 S_INC_SIGMA, S_INIT, S_LP, S_MAG_USED, S_Q,
                                                 S_START, S_START_N, S_STEPS)
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.hole_kernel import (HOLE_CALIBRATION, HOLE_CORRELATION, HOLE_FACTOR,
                                                 HOLE_RATE_CHANGE, HOLE_RATE_WALK,
                                                 HOLE_END_SHARE, HOLE_END_TIME, HOLE_RUN_TIME,

@@ -19,7 +19,7 @@ from conftest import REPO
 from ext_observer.recordings import calibrate
 from ext_observer.core import quaternion as quat
 from ext_observer.pipeline.batch import estimate_batch
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.magcal import check_calibration, MagCalibrator
 from synthetic_motion import errors_deg, FIELD, RATE, rotate, synthetic
 

@@ -2,7 +2,7 @@
 The calibration's steps around its filter (core/ahrs/magcal_kernel.py), against independent forms.
 
 Each step is called on the calibration's block of an estimator's flat state
-(at ``MC0``, as :class:`~ext_observer.core.ahrs.estimator.AhrsObserver`
+(at ``MC0``, as :class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`
 allocates it) and the whole block is compared with what the step must
 leave: the quality from the covariance of the calibrated field ``J P Jᵀ``
 in numpy matrix form (``J = [−I, ∂(D(d) y)/∂d]``, its columns from ``D`` of
@@ -24,7 +24,7 @@ import pytest
 from ext_observer.core.ahrs import magcal_filter as mf
 from ext_observer.core.ahrs import magcal_kernel as mk
 from ext_observer.core.ahrs.ahrs_layout import MC0
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.magcal_layout import (
     CAL_HOLD, CAL_N, CAL_REFUSED_TAU, CAL_SHIFT_SAMPLES, MC_APPLIED, MC_ASSESSED, MC_C,
     MC_CANDIDATE, MC_COEF, MC_CONVERGED, MC_DEADBAND, MC_DELAY, MC_DRIFT, MC_ENABLED,

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs import uncertainty_kernel
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, GRAVITY, UncertaintyParams
 
 

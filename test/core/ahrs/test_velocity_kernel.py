@@ -20,7 +20,7 @@ from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs import velocity_kernel as vk
 from ext_observer.core.ahrs.ahrs_layout import S_VEL_N, S_VEL_USED
 from ext_observer.core.ahrs.ahrs_params import AhrsParams
-from ext_observer.core.ahrs.estimator import AhrsObserver
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
 
 G = 9.81
 RATE = 100.0

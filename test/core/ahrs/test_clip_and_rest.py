@@ -1,5 +1,5 @@
 """
-What the gyro's own samples say (``gyro_watch.py``): a rate at the sensor's range, a body at rest.
+What the gyro's own samples say (``clip_and_rest.py``): a rate at the sensor's range, a body at rest.
 
 Each function is called on an estimator's flat state (plain kernels, one
 sample of a level body first, so that the coefficients are set) and its
@@ -18,8 +18,8 @@ import pytest
 from ext_observer.core.ahrs.ahrs_layout import (C_DT, C_K_REST, S_ACC_STILL, S_BIAS, S_CLIPPED,
                                                 S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_GYR_PREV,
                                                 S_REST, S_REST_GYR, S_REST_TIME, S_STUCK)
-from ext_observer.core.ahrs.estimator import AhrsObserver, AhrsParams
-from ext_observer.core.ahrs.gyro_watch import clipped_variance, detect_rest
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.clip_and_rest import clipped_variance, detect_rest
 
 DT = 0.01
 LEVEL = (0.0, 0.0, 9.81)

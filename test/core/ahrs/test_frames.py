@@ -1,5 +1,5 @@
 """
-The estimator's world frames and first attitude (``ahrs_math.py``), no ROS.
+The estimator's world frames and first attitude (``frames.py``), no ROS.
 
 :func:`initial_attitude` from gravity and the field (the heading from the
 field, or the smallest rotation without one), :func:`world_from_enu` and
@@ -13,7 +13,7 @@ from numpy.testing import assert_allclose
 import pytest
 
 from ext_observer.core import quaternion as quat
-from ext_observer.core.ahrs.ahrs_math import (check_dt, initial_attitude, WORLD_FRAMES,
+from ext_observer.core.ahrs.frames import (check_dt, initial_attitude, WORLD_FRAMES,
                                               world_from_enu)
 from synthetic_motion import errors_deg, FIELD, rotate, synthetic
 

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from .ahrs_math import check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
+from .frames import check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
 from .ahrs_params import AhrsParams
 from .compiled import kernels
 from .magcal import MagCalibrator

@@ -1,5 +1,5 @@
 """
-A parameter row and a table of them (``core/ahrs/tunables.py``): the range
+A parameter row and a table of them (``core/ahrs/parameter_rows.py``): the range
 in words and in checks, a flag, defaults, unknown names.
 """
 
@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from ext_observer.core.ahrs.tunables import Tunable, Tunables
+from ext_observer.core.ahrs.parameter_rows import Tunable, Tunables
 
 TAU = Tunable('tau', 3.0, 's', 0.0, 100.0, 'time constant of the correction')
 SHARE = Tunable('share', 0.5, '', 0.0, 1.0, 'share of the samples', low_closed=True,

@@ -1,4 +1,4 @@
-"""The raw-IMU estimator (core/ahrs/estimator.py) on synthetic motion with known truth."""
+"""The raw-IMU estimator (core/ahrs/ahrs_observer.py) on synthetic motion with known truth."""
 
 import math
 
@@ -9,7 +9,7 @@ import pytest
 from ext_observer.core import quaternion as quat
 from ext_observer.core.ahrs.compiled import kernels
 from ext_observer.pipeline.batch import estimate_batch
-from ext_observer.core.ahrs.estimator import (AhrsObserver, AhrsParams,
+from ext_observer.core.ahrs.ahrs_observer import (AhrsObserver, AhrsParams,
                                     initial_attitude, world_from_enu)
 from synthetic_motion import errors_deg, FIELD, G, RATE, rotate, synthetic
 
