@@ -58,6 +58,9 @@ from .velocity_kernel import velocity_sample, velocity_step  # noqa: F401
 
 _TINY = 1e-300
 _SQRT2 = math.sqrt(2.0)
+# The extended step's pull back to the unit sphere descends V(p) = (p̄p − 1)²,
+# whose gradient is NORM_GRADIENT p (p̄p − 1): the derivative's factor, not a tuning.
+NORM_GRADIENT = 4.0
 
 
 # --- state -----------------------------------------------------------------------
@@ -256,8 +259,8 @@ def _propagate(s, rx, ry, rz, gx, gy, gz, dt):
         if lx * lx + ly * ly + lz * lz >= s[P_REST_GYR] ** 2:
             s[S_CAL_MOVED] = 1.0
     if s[P_EXTENDED] != 0.0:
-        # p − α ∇V(p), ∇V(p) = 4 p (p̄p − 1).
-        f = 1.0 - 4.0 * s[P_ALPHA] * (pw * pw + px * px + py * py + pz * pz - 1.0)
+        # p − α ∇V(p), ∇V(p) = 4 p (p̄p − 1) (NORM_GRADIENT).
+        f = 1.0 - NORM_GRADIENT * s[P_ALPHA] * (pw * pw + px * px + py * py + pz * pz - 1.0)
         pw, px, py, pz = pw * f, px * f, py * f, pz * f
     s[S_Q] = pw
     s[S_Q + 1] = px
