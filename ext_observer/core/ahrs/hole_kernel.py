@@ -46,6 +46,11 @@ HOLE_RUN_TIME = 0.5
 # (docs/raw_imu.md#holes-in-the-stream).
 HOLE_RATE_CHANGE = 0.26
 HOLE_RATE_WALK = 1.0
+# The walk's Brownian bridge: the integral over T of a rate pinned at both ends
+# has the variance q T³ / HOLE_BRIDGE_DIVISOR (a property of the bridge, not a tuning).
+HOLE_BRIDGE_DIVISOR = 12.0
+# The cubic Hermite bridge's rotation beyond the chord's: T² (m₀ − m₁) / HOLE_HERMITE_DIVISOR.
+HOLE_HERMITE_DIVISOR = 12.0
 # rad²: above this hole variance the magnetometer calibration follows the
 # field afresh (learns nothing across the hole).
 HOLE_CALIBRATION = math.radians(0.5) ** 2
@@ -143,7 +148,7 @@ def hole_rate(s, gx, gy, gz, dt):
 def hole_variance(dx, dy, dz, dt):
     """The trapezoid's error variance per axis (rad²) over ``dt`` s, the rate changing by ``d``."""
     return (HOLE_RATE_CHANGE * HOLE_RATE_CHANGE * (dx * dx + dy * dy + dz * dz) * dt * dt
-            + HOLE_RATE_WALK * dt * dt * dt / 12.0)
+            + HOLE_RATE_WALK * dt * dt * dt / HOLE_BRIDGE_DIVISOR)
 
 
 def acc_deviation(s, vx, vy, vz, dt):
@@ -241,7 +246,7 @@ def hole_slope(s, dt):
     """
     f = 0.0
     if s[S_HOLE_RUN] == dt and dt <= HOLE_END_TIME:
-        f = dt * dt / (12.0 * s[C_DT])
+        f = dt * dt / (HOLE_HERMITE_DIVISOR * s[C_DT])
         for i in range(3):
             s[S_HOLE_END + 1 + i] = s[S_GYR_LAST + i] - s[S_GYR_PREV + i]
     s[S_HOLE_END] = f
