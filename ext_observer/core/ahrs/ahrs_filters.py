@@ -12,6 +12,10 @@ import math
 
 from .ahrs_layout import C_BW, S_Q
 
+# Below this |(1 + a_z, a_y, −a_x)| (about the angle, rad, from upside down) the
+# half-way rotation is rounding: the first attitude turns half a turn about x instead.
+ATTITUDE_FLIP_NORM = 1e-9
+
 
 def rotate(w, x, y, z, vx, vy, vz):
     """``q v q̄ / |q|²``: vector ``v`` rotated by the rotation of ``q ≠ 0``."""
@@ -49,7 +53,7 @@ def first_attitude(ax, ay, az, has_mag, mx, my, mz, use_mag):
     ax, ay, az = ax / n, ay / n, az / n
     w, x, y = 1.0 + az, ay, -ax
     d = math.sqrt(w * w + x * x + y * y)
-    flip = d < 1e-9
+    flip = d < ATTITUDE_FLIP_NORM
     d = 1.0 if flip else d
     w, x, y = (0.0, 1.0, 0.0) if flip else (w / d, x / d, y / d)
     z = 0.0 * w
