@@ -72,6 +72,11 @@ P_GYRO_RANGE = AHRS.parameter('gyro_range')  # rad/s: the gyro's range (0: unkno
 C_BIAS_Q = AHRS.field('bias_q')  # rad²/s²: the bias's random walk per sample
 C_BIAS_R = AHRS.field('bias_r')  # (rad/s)²·s: noise density of a correction rate
 S_BIAS_P = AHRS.field('bias_p', 6)  # the bias's covariance, xx xy xz yy yz zz
+# The per-axis variances' offsets in S_BIAS_P (the upper triangle, packed by rows).
+BIAS_P_XX = 0
+BIAS_P_YY = 3
+BIAS_P_ZZ = 5
+BIAS_P_DIAGONAL = (BIAS_P_XX, BIAS_P_YY, BIAS_P_ZZ)
 S_RLP = AHRS.field('r_lp', 18)  # Butterworth states of R(q̂) (s1 9, s2 9), rows x, y, z
 S_RZLP = AHRS.field('rz_lp', 3)  # R(q̂)'s z row low-passed by the heading correction
 S_START = AHRS.field('start')  # s since the start (or a clipped stretch)

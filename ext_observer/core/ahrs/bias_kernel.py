@@ -9,8 +9,8 @@ the robot starts"). Called by :mod:`~ext_observer.core.ahrs.ahrs_kernel`.
 """
 
 from .ahrs_filters import clip, lowpass, rotation_matrix, steady
-from .ahrs_layout import (C_BIAS_Q, C_BIAS_R, P_BIAS_MAX, P_BIAS_SIGMA_INIT, S_BIAS, S_BIAS_P,
-                          S_REST, S_RLP)
+from .ahrs_layout import (BIAS_P_DIAGONAL, C_BIAS_Q, C_BIAS_R, P_BIAS_MAX, P_BIAS_SIGMA_INIT,
+                          S_BIAS, S_BIAS_P, S_REST, S_RLP)
 
 # A correction rate further than 3 σ from what the bias predicts teaches nothing.
 _GATE = 9.0
@@ -44,7 +44,7 @@ def _bias_grow(s):
     """The bias may have wandered: its variance grows, up to bias_sigma_init² per axis."""
     p0 = s[P_BIAS_SIGMA_INIT] * s[P_BIAS_SIGMA_INIT]
     q = s[C_BIAS_Q]
-    for d in (0, 3, 5):
+    for d in BIAS_P_DIAGONAL:
         v = s[S_BIAS_P + d] + q
         s[S_BIAS_P + d] = v if v < p0 else max(s[S_BIAS_P + d], p0)
 
