@@ -13,8 +13,9 @@ sample stays in the kernel.
 import math
 
 from .ahrs_filters import clip
-from .ahrs_layout import (C_DT, C_K_REST, P_BIAS_MAX, P_GYRO_RANGE, P_REST_GYR, P_REST_TIME,
-                          P_TAU_REST, S_ACC_STILL, S_BIAS, S_BIAS_P, S_CLIPPED, S_CLIPS,
+from .ahrs_layout import (BIAS_P_XX, BIAS_P_YY, BIAS_P_ZZ, C_DT, C_K_REST, P_BIAS_MAX,
+                          P_GYRO_RANGE, P_REST_GYR, P_REST_TIME, P_TAU_REST, S_ACC_STILL,
+                          S_BIAS, S_BIAS_P, S_CLIPPED, S_CLIPS,
                           S_GYR_LAST, S_GYR_PREV, S_GYR_PEAK, S_REST, S_REST_GYR, S_REST_TIME,
                           S_STUCK)
 
@@ -118,4 +119,5 @@ def detect_rest(s, gx, gy, gz):
         a = (1.0 - k) * (1.0 - k)
         add = 2.0 * k * _REST_BIAS_SIGMA * _REST_BIAS_SIGMA
         for i in range(6):
-            s[S_BIAS_P + i] = a * s[S_BIAS_P + i] + (add if i == 0 or i == 3 or i == 5 else 0.0)
+            diagonal = i == BIAS_P_XX or i == BIAS_P_YY or i == BIAS_P_ZZ
+            s[S_BIAS_P + i] = a * s[S_BIAS_P + i] + (add if diagonal else 0.0)
