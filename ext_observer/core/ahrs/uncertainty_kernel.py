@@ -112,6 +112,9 @@ _START_FORGOTTEN = 1e-16
 # turns ten times one way without one and drifts 0.33 % of it; MEMS
 # datasheets give 0.1 to 1 %).
 GYRO_SCALE_SIGMA = 0.003
+# The model's one bias variance per axis is the mean of the bias filter's three
+# (its covariance's trace over the axes it sums).
+BIAS_TRACE_AXES = 3.0
 # s: no field for this long is a field lost (mag_timeout's default), not the
 # interval of a slower magnetometer.
 FIELD_SILENT = 1.0
@@ -335,7 +338,7 @@ def sample_step(s, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
         uncertainty_start(u, step_dt, fx, fy, fz)
     if s[P_MOTION_BIAS] != 0.0:
         uncertainty_bias(u, (bias_variance(s, 0, 0) + bias_variance(s, 1, 1)
-                             + bias_variance(s, 2, 2)) / 3.0)
+                             + bias_variance(s, 2, 2)) / BIAS_TRACE_AXES)
     if s[S_CLIPPED] != 0.0:
         uncertainty_clipped(u, s[S_CLIPPED])
     if hole != 0.0:
