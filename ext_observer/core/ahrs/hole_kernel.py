@@ -227,8 +227,11 @@ def clip_after(s, var):
     lasts ``tau_acc`` after the last clipped sample.
     """
     if var == 0.0:
-        s[S_INC_SIGMA] *= 1.0 - s[C_DT] / s[P_TAU_ACC]
-        s[S_CLIP_LEFT] = max(s[S_CLIP_LEFT] - s[C_DT], 0.0)
+        # (Most samples: nothing to forget, and the division skipped.)
+        if s[S_INC_SIGMA] != 0.0:
+            s[S_INC_SIGMA] *= 1.0 - s[C_DT] / s[P_TAU_ACC]
+        if s[S_CLIP_LEFT] != 0.0:
+            s[S_CLIP_LEFT] = max(s[S_CLIP_LEFT] - s[C_DT], 0.0)
         return
     s[S_CLIP_LEFT] = s[P_TAU_ACC]
     sigma = s[S_INC_SIGMA] + CLIP_SHARE * math.sqrt(var)
