@@ -65,6 +65,25 @@ def broad_data_dir(trials):
                 pytrace=False)
 
 
+
+def run_against_page(trials, page, page_figures):
+    """
+    The page's per-trial figures, our run of ``trials`` (both modes, no anchors), the trials.
+
+    Fails when the page lacks a trial or the data lacks one.
+    """
+    folder = broad_data_dir(trials)
+    with open(page, encoding='utf-8') as f:
+        reported = page_figures(f.read())
+    missing = [t for t in trials if t not in reported]
+    assert not missing, (f'{page} has no per-trial figures for {missing}: '
+                         'regenerate it with make broad (all trials)')
+    loaded = [broad.load_trial(path, name) for name, path in broad.find_trials(folder, trials)]
+    assert [t.name for t in loaded] == list(trials), f'{folder} lacks some of {trials}'
+    result = broad.run(loaded, broad.MODES, anchors=(), workers=min(2, os.cpu_count() or 1),
+                       progress=lambda text: None)
+    return reported, result, loaded
+
 def ensure(trials=TRIALS, dest=None):
     """
     Fetch ``trials`` into ``dest`` (``data/broad``) where no folder holds them; return the folder.

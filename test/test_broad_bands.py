@@ -20,7 +20,7 @@ import os
 
 import pytest
 
-from broad_data import broad_data_dir
+from broad_data import run_against_page
 from conftest import REPO
 from ext_observer import broad
 from test_broad_whole_trials import COLUMNS, page_figures
@@ -66,16 +66,7 @@ def test_the_band_is_five_percent_of_the_pages_figure():
 
 @pytest.mark.timeout(300)
 def test_the_discriminating_trials_are_within_five_percent_of_the_page():
-    folder = broad_data_dir(TRIALS)
-    with open(PAGE, encoding='utf-8') as f:
-        reported = page_figures(f.read())
-    missing = [t for t in TRIALS if t not in reported]
-    assert not missing, (f'docs/broad.md has no per-trial figures for {missing}: '
-                         'regenerate it with make broad (all trials)')
-    trials = [broad.load_trial(path, name) for name, path in broad.find_trials(folder, TRIALS)]
-    assert [t.name for t in trials] == list(TRIALS), f'{folder} lacks some of {TRIALS}'
-    result = broad.run(trials, broad.MODES, anchors=(), workers=min(2, os.cpu_count() or 1),
-                       progress=lambda text: None)
+    reported, result, _ = run_against_page(TRIALS, PAGE, page_figures)
     ours = result['scores'][broad.OURS]
     measured = {name: {mode: ours[mode][name] for mode in broad.MODES} for name in TRIALS}
     off = outside(measured, reported)

@@ -21,7 +21,7 @@ import os
 import numpy as np
 import pytest
 
-from broad_data import broad_data_dir
+from broad_data import broad_data_dir, run_against_page
 from conftest import REPO
 from ext_observer import broad
 
@@ -56,17 +56,7 @@ def test_page_figures_are_read_from_the_per_trial_table():
 
 @pytest.mark.timeout(120)
 def test_estimator_on_two_whole_trials_matches_the_page():
-    folder = broad_data_dir(TRIALS)
-    with open(PAGE, encoding='utf-8') as f:
-        reported = page_figures(f.read())
-    missing = [t for t in TRIALS if t not in reported]
-    assert not missing, (f'docs/broad.md has no per-trial figures for {missing}: '
-                         'regenerate it with make broad (all trials)')
-    trials = [broad.load_trial(path, name) for name, path in broad.find_trials(folder, TRIALS)]
-    assert [t.name for t in trials] == list(TRIALS), f'{folder} lacks some of {TRIALS}'
-
-    result = broad.run(trials, broad.MODES, anchors=(), workers=min(2, os.cpu_count() or 1),
-                       progress=lambda text: None)
+    reported, result, trials = run_against_page(TRIALS, PAGE, page_figures)
 
     off = []
     for (mode, key), column in COLUMNS.items():
