@@ -1,17 +1,22 @@
 """
-The calibrate command's reading and writing (``recordings/calibrate.py``):
-the params file of a calibration and of a gyro bias, read back or refused
-by what is missing, recordings read by their extension. (The calibration
-learned from a recording, offline and as the node would:
-``core/ahrs/test_magcal.py``.)
+The calibrate command (``recordings/calibrate.py``): the params file of a
+calibration and of a gyro bias, read back or refused by what is missing,
+recordings read by their extension, the calibration learned offline from
+the BROAD excerpt and written, what the command refuses. (The calibration
+itself: ``core/ahrs/test_magcal.py``.)
 """
 
+import os
+
 import numpy as np
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
 import pytest
 import yaml
 
+from conftest import REPO
 from ext_observer.recordings import calibrate
+
+DATA = os.path.join(REPO, 'test', 'data')
 
 
 def test_the_params_file_says_what_it_holds_and_reads_back(tmp_path):
@@ -49,3 +54,40 @@ def test_recordings_are_read_by_their_extension(tmp_path):
         calibrate.read_recording(str(tmp_path / 'bad.npz'))
     with pytest.raises(ValueError, match=r"no reader for '.txt' files \(known: .hdf5"):
         calibrate.read_recording(str(tmp_path / 'r.txt'))
+
+
+def test_the_broad_excerpt_with_an_offset_calibrates_offline(tmp_path):
+    with np.load(os.path.join(DATA, 'broad_01_undisturbed_slow_rotation_A.npz')) as f:
+        gyr, acc, mag, rate = f['gyr'], f['acc'], f['mag'], float(f['rate'])
+    norm = float(np.mean(np.linalg.norm(mag, axis=1)))
+    b = 1.5 * norm * np.array([0.6, -0.48, 0.64])
+    result = calibrate.estimate_calibration(gyr, acc, mag + b, rate)
+    assert result.state == 'converged' and result.applied
+    assert result.converged_at < 40.0  # of 60 s; the body moves from 10 s on
+    assert np.linalg.norm(result.bias - b) < 0.05 * norm
+    # The command writes it, in T.
+    src = str(tmp_path / 'excerpt.npz')
+    np.savez(src, gyr=gyr, acc=acc, mag=mag + b, rate=rate)
+    out = str(tmp_path / 'cal.yaml')
+    assert calibrate.main(['--data', src, '--out', out]) == 0
+    bias, soft_iron = calibrate.read_params(out)
+    assert_allclose(bias, result.bias * 1e-6, rtol=1e-12)
+    assert_allclose(soft_iron, result.soft_iron, rtol=1e-12)
+
+
+def test_the_command_refuses_what_it_cannot_use(tmp_path, capsys):
+    src = str(tmp_path / 'still.npz')
+    n = 2000
+    np.savez(src, gyr=np.zeros((n, 3)), acc=np.tile([0.0, 0.0, 9.81], (n, 1)),
+             mag=np.tile([20.0, 0.0, -40.0], (n, 1)), rate=100.0)
+    out = str(tmp_path / 'cal.yaml')
+    # At rest nothing is learned: not converged, no file.
+    assert calibrate.main(['--data', src, '--out', out]) == 1
+    assert 'not converged' in capsys.readouterr().err and not os.path.exists(out)
+    assert calibrate.main(['--data', str(tmp_path / 'x.csv'), '--out', out]) == 2
+    assert 'x.csv' in capsys.readouterr().err
+    assert calibrate.main(['--data', str(tmp_path / 'x.txt'), '--out', out]) == 2
+    assert "no reader for '.txt'" in capsys.readouterr().err
+    with pytest.raises(ValueError, match=r'shape \(N, 3\)'):
+        calibrate.estimate_calibration(np.zeros((5, 2)), np.zeros((5, 3)), np.zeros((5, 3)),
+                                       100.0)
