@@ -12,7 +12,7 @@ import os
 import numpy as np
 
 from ext_observer.broad import covariance as cv
-from ext_observer.core.ahrs.uncertainty import UncertaintyParams
+from ext_observer.core.ahrs.ahrs_params import UncertaintyParams
 
 # A trial whose field is rejected for long stretches (a magnet on the sensor).
 MAGNET_TRIALS = ('32_disturbed_attached_magnet_1cm', '28_disturbed_stationary_magnet_A')

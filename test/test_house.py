@@ -73,7 +73,7 @@ def test_the_estimators_fields_are_read_by_name():
 
 def _raw_imu_rows():
     from ext_observer.core.ahrs.ahrs_params import AHRS_TABLE
-    from ext_observer.core.ahrs.uncertainty import UNCERTAINTY_TABLE
+    from ext_observer.core.ahrs.ahrs_params import UNCERTAINTY_TABLE
     from ext_observer.pipeline.imu_filter_parameters import AHRS_PREFIX, COVARIANCE_PREFIX
     return ([(AHRS_PREFIX, row) for row in AHRS_TABLE]
             + [(COVARIANCE_PREFIX, row) for row in UNCERTAINTY_TABLE])
@@ -81,7 +81,7 @@ def _raw_imu_rows():
 
 def test_every_raw_imu_parameter_comes_from_the_one_table():
     from ext_observer.core.ahrs.ahrs_params import AhrsParams
-    from ext_observer.core.ahrs.uncertainty import UncertaintyParams
+    from ext_observer.core.ahrs.ahrs_params import UncertaintyParams
     from ext_observer.nodes.ros_parameters import descriptor
     from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS,
                                                              imu_filter_settings)

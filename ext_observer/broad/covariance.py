@@ -14,7 +14,7 @@ sample), keeps each estimate and its covariance, and compares the claimed
 
 for each component (inclination; heading in 9D), per group (undisturbed,
 disturbed) and per split: the even-numbered trials chose the defaults of
-:class:`~ext_observer.core.ahrs.uncertainty.UncertaintyParams` (``dev``), the
+:class:`~ext_observer.core.ahrs.ahrs_params.UncertaintyParams` (``dev``), the
 odd-numbered ones did not (``held-out``). The coverage bounds: 90–99 % and
 0.5–2.
 
@@ -31,7 +31,8 @@ import multiprocessing
 import numpy as np
 
 from ext_observer.broad.scoring import error_angles
-from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, UncertaintyParams
+from ext_observer.core.ahrs.ahrs_params import UncertaintyParams
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty
 
 MODES = ('9D', '6D')
 GROUPS = ('undisturbed', 'disturbed')

@@ -13,16 +13,16 @@ with what replaces each (:func:`unused_text`). The estimator's own gains are the
 noise of the model behind the published covariance the ``covariance.*``
 ones: each a row of the core's table
 (:data:`~ext_observer.core.ahrs.ahrs_params.AHRS_TABLE`,
-:data:`~ext_observer.core.ahrs.uncertainty.UNCERTAINTY_TABLE`), range and
+:data:`~ext_observer.core.ahrs.ahrs_params.UNCERTAINTY_TABLE`), range and
 all. Plain data, no ROS: :mod:`ext_observer.nodes.imu_filter_node` declares them.
 """
 
 import math
 
-from ext_observer.core.ahrs.ahrs_params import AHRS_TABLE, AhrsParams
 from ext_observer.core.ahrs.ahrs_observer import WORLD_FRAMES
 from ext_observer.core.ahrs.magcal import check_calibration
-from ext_observer.core.ahrs.uncertainty import UNCERTAINTY_TABLE, UncertaintyParams
+from ext_observer.core.ahrs.ahrs_params import (AHRS_TABLE, AhrsParams, UNCERTAINTY_TABLE,
+                                                UncertaintyParams)
 from ext_observer.core.ahrs.velocity_kernel import VELOCITY_TIMEOUT
 from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_settings,
                                                    ParameterSpec, spec_from_tunable)
@@ -80,7 +80,7 @@ def uncertainty_params(values):
 
     Returns
     -------
-    params : ext_observer.core.ahrs.uncertainty.UncertaintyParams
+    params : ext_observer.core.ahrs.ahrs_params.UncertaintyParams
 
     Raises
     ------

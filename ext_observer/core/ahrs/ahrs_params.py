@@ -1,5 +1,5 @@
 """
-The raw-IMU estimator's parameters (:class:`AhrsParams`), in physical units.
+The raw-IMU estimator's parameters (:class:`AhrsParams`) and its covariance's (:class:`UncertaintyParams`).
 
 What a user tunes: time constants in seconds, thresholds in rad/s and m/s²
 (VQF's way; see :mod:`ext_observer.core.ahrs.ahrs_observer`). :data:`AHRS_TABLE`
@@ -12,7 +12,7 @@ import math
 
 from .parameter_rows import Tunable, Tunables
 
-__all__ = ['AHRS_TABLE', 'AhrsParams']
+__all__ = ['AHRS_TABLE', 'AhrsParams', 'UNCERTAINTY_TABLE', 'UncertaintyParams']
 
 # Time constants above this are "forever" (s).
 _LONG = 1e4
@@ -125,3 +125,57 @@ class AhrsParams(Tunables):
     """
 
     TABLE = AHRS_TABLE
+
+
+# The defaults were chosen on the even-numbered BROAD trials (docs/covariance.md
+# says how, and what they give on the odd ones). Those > 0 keep every
+# variance positive; the others may be 0 (off).
+UNCERTAINTY_TABLE = (
+    # Angle random walk, measured at rest (0.006 °/s/√Hz).
+    _T('gyro_noise', 1.0e-4, 'rad/s/√Hz', 0.0, 1.0, 'white noise density of the gyro'),
+    _T('gyro_rate_noise', 1.3e-3, '(rad/s per rad/s)/√Hz', 0.0, 1.0,
+       'noise density of the gyro error proportional to the rate (scale factor, '
+       'misalignment, vibration)', low_closed=True, zero_off=True),
+    # Steady-state σ of a first-order Gauss-Markov process (0.08 °/s).
+    _T('bias_std', 1.4e-3, 'rad/s', 0.0, 1.0,
+       'how far the gyro bias wanders from the learned one (σ)', low_closed=True,
+       zero_off=True),
+    _T('bias_time', 250.0, 's', 0.0, 1e6, 'correlation time of that wander'),
+    # 0.24 °/s: the biases learned at the first rest.
+    _T('bias_init', 4.1e-3, 'rad/s', 0.0, 1.0,
+       'gyro bias uncertainty per axis before the first rest', low_closed=True,
+       zero_off=True),
+    _T('acc_noise', 3.2e-3, 'm/s²/√Hz', 0.0, 10.0,
+       'accelerometer noise density (measured at rest)'),
+    # 1.25° per sample at 286 Hz.
+    _T('mag_noise', 1.3e-3, 'rad·√s', 0.0, 10.0,
+       "noise density of the field's horizontal direction (measured at rest)"),
+    # 0.46°.
+    _T('inclination_floor', 8.0e-3, 'rad', 0.0, 1.0,
+       'smallest inclination σ (translational acceleration, accelerometer calibration, '
+       'mounting)', low_closed=True, zero_off=True),
+    # 1.20°.
+    _T('heading_floor', 2.1e-2, 'rad', 0.0, 1.0,
+       'smallest heading σ once a field has set the heading (a bent but accepted field)',
+       low_closed=True, zero_off=True),
+    _T('stamp_error', 7.0e-4, 's', 0.0, 1.0,
+       "timing error of a sample's stamp: the orientation is off by |ω| times it",
+       low_closed=True, zero_off=True),
+)
+
+
+class UncertaintyParams(Tunables):
+    """
+    The noise of the sensors and of what the estimator does not model: :data:`UNCERTAINTY_TABLE`.
+
+    ``UncertaintyParams(acc_noise=1e-2)``: the defaults, ``acc_noise`` in
+    its place; each field an attribute, ``DEFAULTS`` ``{name: default}``.
+
+    Raises
+    ------
+    ValueError
+        With the name and the reason, for any invalid value.
+
+    """
+
+    TABLE = UNCERTAINTY_TABLE

@@ -2,7 +2,7 @@
 A parameter declared once: :class:`Tunable` (name, default, unit, range, one line).
 
 :class:`~ext_observer.core.ahrs.ahrs_params.AhrsParams` and
-:class:`~ext_observer.core.ahrs.uncertainty.UncertaintyParams` are
+:class:`~ext_observer.core.ahrs.ahrs_params.UncertaintyParams` are
 :class:`Tunables`: their fields, defaults and checks come from a table of
 rows, and so do the node's declarations (ranges included), the generated
 docs and the YAML (:mod:`ext_observer.pipeline.raw_imu_parameters`). The

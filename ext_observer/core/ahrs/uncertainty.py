@@ -7,7 +7,7 @@ each step, what the estimator did (interval, rate, rest, the heading gain
 of a field); from that alone it propagates the variance of the attitude
 error, as an error-state Kalman filter's covariance step does, with the
 estimator's fixed gains. The model and its equations: docs/covariance.md
-("The model"). :data:`UNCERTAINTY_TABLE` its parameters; the per-sample
+("The model"). :data:`~ext_observer.core.ahrs.ahrs_params.UNCERTAINTY_TABLE` its parameters; the per-sample
 arithmetic is :mod:`~ext_observer.core.ahrs.uncertainty_kernel`'s. Units
 rad, s, rad/s, m/s²; every quantity a float, or an array ``(B,)`` for many
 recordings at once.
@@ -19,7 +19,7 @@ import numpy as np
 
 from . import uncertainty_kernel as _plain
 from .ahrs_filters import rotate
-from .parameter_rows import Tunable, Tunables
+from .ahrs_params import UncertaintyParams
 from .uncertainty_kernel import (
     GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,
     U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_HS, U_HS_REST, U_HS_TAN,
@@ -32,8 +32,6 @@ __all__ = [
     'AttitudeUncertainty',
     'GRAVITY',
     'HEADING_UNKNOWN',
-    'UNCERTAINTY_TABLE',
-    'UncertaintyParams',
     'covariance_out',
 ]
 
@@ -59,62 +57,6 @@ def covariance_out(array):
         raise ValueError('a covariance is written into a writable C-contiguous float64 '
                          f'array of 9, got {array!r}')
     return array
-
-
-_T = Tunable
-
-# The defaults were chosen on the even-numbered BROAD trials (docs/covariance.md
-# says how, and what they give on the odd ones). Those > 0 keep every
-# variance positive; the others may be 0 (off).
-UNCERTAINTY_TABLE = (
-    # Angle random walk, measured at rest (0.006 °/s/√Hz).
-    _T('gyro_noise', 1.0e-4, 'rad/s/√Hz', 0.0, 1.0, 'white noise density of the gyro'),
-    _T('gyro_rate_noise', 1.3e-3, '(rad/s per rad/s)/√Hz', 0.0, 1.0,
-       'noise density of the gyro error proportional to the rate (scale factor, '
-       'misalignment, vibration)', low_closed=True, zero_off=True),
-    # Steady-state σ of a first-order Gauss-Markov process (0.08 °/s).
-    _T('bias_std', 1.4e-3, 'rad/s', 0.0, 1.0,
-       'how far the gyro bias wanders from the learned one (σ)', low_closed=True,
-       zero_off=True),
-    _T('bias_time', 250.0, 's', 0.0, 1e6, 'correlation time of that wander'),
-    # 0.24 °/s: the biases learned at the first rest.
-    _T('bias_init', 4.1e-3, 'rad/s', 0.0, 1.0,
-       'gyro bias uncertainty per axis before the first rest', low_closed=True,
-       zero_off=True),
-    _T('acc_noise', 3.2e-3, 'm/s²/√Hz', 0.0, 10.0,
-       'accelerometer noise density (measured at rest)'),
-    # 1.25° per sample at 286 Hz.
-    _T('mag_noise', 1.3e-3, 'rad·√s', 0.0, 10.0,
-       "noise density of the field's horizontal direction (measured at rest)"),
-    # 0.46°.
-    _T('inclination_floor', 8.0e-3, 'rad', 0.0, 1.0,
-       'smallest inclination σ (translational acceleration, accelerometer calibration, '
-       'mounting)', low_closed=True, zero_off=True),
-    # 1.20°.
-    _T('heading_floor', 2.1e-2, 'rad', 0.0, 1.0,
-       'smallest heading σ once a field has set the heading (a bent but accepted field)',
-       low_closed=True, zero_off=True),
-    _T('stamp_error', 7.0e-4, 's', 0.0, 1.0,
-       "timing error of a sample's stamp: the orientation is off by |ω| times it",
-       low_closed=True, zero_off=True),
-)
-
-
-class UncertaintyParams(Tunables):
-    """
-    The noise of the sensors and of what the estimator does not model: :data:`UNCERTAINTY_TABLE`.
-
-    ``UncertaintyParams(acc_noise=1e-2)``: the defaults, ``acc_noise`` in
-    its place; each field an attribute, ``DEFAULTS`` ``{name: default}``.
-
-    Raises
-    ------
-    ValueError
-        With the name and the reason, for any invalid value.
-
-    """
-
-    TABLE = UNCERTAINTY_TABLE
 
 
 class _Slot:

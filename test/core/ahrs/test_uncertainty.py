@@ -8,7 +8,8 @@ import math
 
 import pytest
 
-from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, UncertaintyParams
+from ext_observer.core.ahrs.ahrs_params import UncertaintyParams
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty
 from node_settings import node_settings
 
 

@@ -17,7 +17,8 @@ import pytest
 
 from ext_observer.core.ahrs import uncertainty_kernel
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
-from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, GRAVITY, UncertaintyParams
+from ext_observer.core.ahrs.ahrs_params import UncertaintyParams
+from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, GRAVITY
 
 
 @pytest.mark.parametrize('rate', [(0.0, 0.0, 0.0), (0.3, -0.4, 1.2)])
