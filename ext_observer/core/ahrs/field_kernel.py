@@ -26,6 +26,7 @@ from .ahrs_layout import (C_BIAS_R, C_K_MAG, C_K_REF, C_MAG_DT, MC0, P_CAL_PERIO
 from .bias_kernel import bias_measure
 from .hole_kernel import forget_wait
 from .magcal_kernel import MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn
+from .small_matrix import vec3_at
 
 # After a calibration is applied, the heading's time constant is this share
 # of the time since, and at least this (s), until it reaches tau_mag.
@@ -400,10 +401,11 @@ def field_calibrate(s, mx, my, mz, dt):
     w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
     n2 = w * w + x * x + y * y + z * z
     # The world's vertical in the body frame: R(q̂)ᵀ e_z / |q̂|².
-    mc_learn(s, MC0, mx, my, mz, s[S_CAL_TURN], s[S_CAL_TURN + 1], s[S_CAL_TURN + 2],
-             s[S_CAL_TURN + 3], s[S_CAL_WAIT], s[S_CAL_RATE], s[S_CAL_RATE + 1],
-             s[S_CAL_RATE + 2], 1.0, 2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
-             (w * w - x * x - y * y + z * z) / n2, 1.0 if allow else 0.0)
+    up = (2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
+          (w * w - x * x - y * y + z * z) / n2)
+    turn = (s[S_CAL_TURN], s[S_CAL_TURN + 1], s[S_CAL_TURN + 2], s[S_CAL_TURN + 3])
+    mc_learn(s, MC0, (mx, my, mz), turn, s[S_CAL_WAIT], vec3_at(s, S_CAL_RATE), 1.0, up,
+             1.0 if allow else 0.0)
     s[S_CAL_TURN] = 1.0
     for i in range(1, 4):
         s[S_CAL_TURN + i] = 0.0

@@ -41,6 +41,11 @@ _COUNTS = ('fields', 'used', 'gated', 'refused', 'invalid', 'resets')
 _S, _Z, _D, _T = slice(0, 3), slice(3, 6), slice(6, 11), 11
 
 
+def _tuples(columns):
+    """The columns of a ``(k, n)`` array as ``n`` k-tuples of floats (the kernel's vectors)."""
+    return [tuple(v) for v in columns.T.tolist()]
+
+
 class MagCalibrator:
     """
     Learns ``b`` and ``S`` of ``y = S m + b`` from fields and gyro rotations.
@@ -233,19 +238,18 @@ class MagCalibrator:
             u0, u1, u2 = (0.0, 0.0, 0.0) if up is None else up
             if allow is not True:
                 allow = np.asarray(allow, dtype=bool).reshape(-1)[0]
-            return k.mc_learn(self._s, self._o, float(y0), float(y1), float(y2), float(rw),
-                              float(rx), float(ry), float(rz), dt, float(w0), float(w1),
-                              float(w2), 0.0 if up is None else 1.0, float(u0), float(u1),
-                              float(u2), 1.0 if allow else 0.0) != 0.0
+            return k.mc_learn(self._s, self._o, (float(y0), float(y1), float(y2)),
+                              (float(rw), float(rx), float(ry), float(rz)), dt,
+                              (float(w0), float(w1), float(w2)), 0.0 if up is None else 1.0,
+                              (float(u0), float(u1), float(u2)), 1.0 if allow else 0.0) != 0.0
         n, blocks = self._n, self._blocks
-        y = np.array(mag, dtype=float).reshape(3, n).T.tolist()
+        y = _tuples(np.array(mag, dtype=float).reshape(3, n))
         r = np.empty((4, n))
         for i, v in enumerate(rotation):
             r[i] = v
-        r = r.T.tolist()
-        w = np.array(rate, dtype=float).reshape(3, n).T.tolist()
-        u = np.zeros((3, n)) if up is None else np.array(up, dtype=float).reshape(3, n)
-        u = u.T.tolist()
+        r = _tuples(r)
+        w = _tuples(np.array(rate, dtype=float).reshape(3, n))
+        u = _tuples(np.zeros((3, n)) if up is None else np.array(up, dtype=float).reshape(3, n))
         has_up = 0.0 if up is None else 1.0
         allow = (np.ones(n, dtype=bool) if allow is True
                  else np.broadcast_to(np.asarray(allow, dtype=bool).reshape(-1), (n,)))
@@ -261,7 +265,7 @@ class MagCalibrator:
                     k.mc_predict(s, o, *r[i], dt)
         used = np.empty(n, dtype=bool)
         for i, (s, o) in enumerate(blocks):
-            used[i] = k.mc_learn(s, o, *y[i], *r[i], dt, *w[i], has_up, *u[i],
+            used[i] = k.mc_learn(s, o, y[i], r[i], dt, w[i], has_up, u[i],
                                  1.0 if allow[i] else 0.0) != 0.0
         assessed = [s[o + MC_ASSESSED] != 0.0 for s, o in blocks]
         if any(assessed):

@@ -144,26 +144,28 @@ def mc_load_state(s, o, x3, x4, x5, x6, x7, x8, x9, x10, x11, scale):
 
 # --- learning ------------------------------------------------------------------
 
-def mc_learn(s, o, y0, y1, y2, rw, rx, ry, rz, dt, w0, w1, w2, has_up, u0, u1, u2, allow):
+def mc_learn(s, o, y, r, dt, w, has_up, u, allow):
     """
     Learn from one field sample; 1.0 if it was used, else 0.0.
 
-    ``y``: the raw field, body frame. ``r = (rw, rx, ry, rz)``: the body's
-    rotation since the previous sample learned from, previous body frame →
-    current one (any nonzero norm). ``dt``: seconds since that sample.
-    ``w``: the angular rate now (rad/s, bias removed), for the lag. ``u``:
-    the world's vertical in the body frame (unit), for the quality, where
-    ``has_up``; without it the error of the whole calibrated field counts.
-    ``allow`` false: the caller refuses this sample (counted as refused).
+    ``y``: the raw field, body frame (a 3-tuple). ``r = (rw, rx, ry, rz)``:
+    the body's rotation since the previous sample learned from, previous
+    body frame → current one (any nonzero norm). ``dt``: seconds since that
+    sample. ``w``: the angular rate now (a 3-tuple, rad/s, bias removed), for
+    the lag. ``u``: the world's vertical in the body frame (a unit 3-tuple),
+    for the quality, where ``has_up`` (nonzero); without it the error of the
+    whole calibrated field counts. ``allow`` false: the caller refuses this
+    sample (counted as refused).
     """
     fresh = s[o + MC_FRESH] != 0.0
-    norm = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+    norm = math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2])
     valid, take = mc_admit(s, o, norm, allow)
     valid = valid and not fresh
-    y = (y0, y1, y2) if take else (0.0, 0.0, 0.0)
-    w = (finite_or_zero(w0), finite_or_zero(w1), finite_or_zero(w2))
+    if not take:
+        y = (0.0, 0.0, 0.0)
+    w = (finite_or_zero(w[0]), finite_or_zero(w[1]), finite_or_zero(w[2]))
     if not fresh:
-        mc_predict(s, o, rw, rx, ry, rz, dt)
+        mc_predict(s, o, r[0], r[1], r[2], r[3], dt)
     start = take and fresh
     if start:
         mc_start(s, o, y[0], y[1], y[2], norm)
@@ -175,7 +177,7 @@ def mc_learn(s, o, y0, y1, y2, rw, rx, ry, rz, dt, w0, w1, w2, has_up, u0, u1, u
         s[o + MC_GATED] += 1.0
     if mc_lost(s, o, valid and (take or s[o + MC_APPLIED] != 0.0), use, live, w, dt):
         mc_start_over(s, o)
-    seen = mc_remember(s, o, y, has_up, (u0, u1, u2), take)
+    seen = mc_remember(s, o, y, has_up, u, take)
     if seen and s[o + MC_LOADED] == 0.0 and (s[o + MC_CONVERGED] == 0.0
                                              or s[o + MC_IDENTITY] != 0.0):
         # The convergence test, and the watch of a calibration not applied,
@@ -189,7 +191,7 @@ def mc_learn(s, o, y0, y1, y2, rw, rx, ry, rz, dt, w0, w1, w2, has_up, u0, u1, u
     # Watched once the calibration is nearly good enough to be used.
     if (has_up and seen and s[o + MC_IDENTITY] != 0.0
             and s[o + MC_QUALITY] < CAL_WATCH * s[o + MC_HEADING]):
-        mc_watch(s, o, y[0], y[1], y[2], u0, u1, u2)
+        mc_watch(s, o, y[0], y[1], y[2], u[0], u[1], u[2])
         s[o + MC_WATCHING] = 1.0
     mc_cache(s, o)
     return 1.0 if (use or start) else 0.0

@@ -284,9 +284,9 @@ def test_each_calibration_step_hands_the_calibration_its_turn_time_rate_vertical
         allow = before[S_HAS_REF] == 0.0 or (abs(norm - ref_n) <= params.mag_norm_th * ref_n
                                              and abs(dip - ref_d) <= params.mag_dip_th)
         assert allow != strong, (k, norm / ref_n, dip - ref_d)
-        magcal_kernel.mc_learn(shadow, MC0, *raw, *before[S_CAL_TURN:S_CAL_TURN + 4], wait,
-                               *before[S_CAL_RATE:S_CAL_RATE + 3], 1.0,
-                               *up_of(before[S_Q:S_Q + 4]), 1.0 if allow else 0.0)
+        magcal_kernel.mc_learn(shadow, MC0, tuple(raw), tuple(before[S_CAL_TURN:S_CAL_TURN + 4]),
+                               wait, tuple(before[S_CAL_RATE:S_CAL_RATE + 3]), 1.0,
+                               tuple(up_of(before[S_Q:S_Q + 4])), 1.0 if allow else 0.0)
         a, b = s[MC0:MC0 + MAGCAL.size], shadow[MC0:MC0 + MAGCAL.size]
         bad = ~np.isclose(a, b, rtol=1e-9, atol=0.0)
         assert not bad.any(), (k, np.flatnonzero(bad), a[bad], b[bad])

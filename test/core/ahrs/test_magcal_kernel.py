@@ -570,8 +570,13 @@ def test_a_converged_calibration_is_applied_once_it_turns_the_heading_significan
 # --- learning -------------------------------------------------------------------
 
 def learn(s, y, r=(1.0, 0.0, 0.0, 0.0), dt=0.01, w=(0.0, 0.0, 0.0), up=UP, allow=True):
-    return mk.mc_learn(s, OFF, *y, *r, dt, *w, 0.0 if up is None else 1.0,
-                       *((7.0, 8.0, 9.0) if up is None else up), 1.0 if allow else 0.0)
+    return mk.mc_learn(s, OFF, floats(y), floats(r), dt, floats(w), 0.0 if up is None else 1.0,
+                       floats((7.0, 8.0, 9.0) if up is None else up), 1.0 if allow else 0.0)
+
+
+def floats(v):
+    """A vector as the kernel takes it: a tuple of floats."""
+    return tuple(float(x) for x in v)
 
 
 def turn(angle, axis):
