@@ -36,9 +36,11 @@ sys.path.insert(0, HERE)
 from run_mutants import files  # noqa: E402
 
 OUT = os.path.join(REPO, 'out', 'mutmut')
-# The raw-IMU kernel's subset: its steps' tests and the observer's.
+# The raw-IMU kernel's subset: its steps' tests and the observer's (the
+# hole's reach its bridge step).
 KERNEL_TESTS = [
     'test/core/ahrs/test_ahrs_filters.py', 'test/core/ahrs/test_ahrs_kernel.py',
+    'test/core/ahrs/test_hole_kernel.py',
     'test/core/ahrs/test_frames.py', 'test/core/ahrs/test_ahrs_observer.py',
     'test/core/ahrs/test_ahrs_params.py', 'test/core/ahrs/test_ahrs_observer_robust.py']
 # Module: the tests that check it, fast ones (seconds to a minute, no ROS).
