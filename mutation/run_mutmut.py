@@ -69,10 +69,9 @@ MODULES = {
     'ext_observer/core/ahrs/field_kernel.py': [
         'test/core/ahrs/test_field_kernel.py', *KERNEL_TESTS],
     'ext_observer/core/ahrs/gravity_kernel.py': [
-        'test/core/ahrs/test_gravity_kernel.py', 'test/core/ahrs/test_hole_kernel.py', 'test/core/ahrs/test_accel_rejection.py',
+        'test/core/ahrs/test_gravity_kernel.py', 'test/core/ahrs/test_accel_rejection.py',
         *KERNEL_TESTS],
-    'ext_observer/core/ahrs/hole_kernel.py': [
-        'test/core/ahrs/test_hole_kernel.py', *KERNEL_TESTS],
+    'ext_observer/core/ahrs/hole_kernel.py': KERNEL_TESTS,
     'ext_observer/core/ahrs/accel_rejection.py': [
         'test/core/ahrs/test_accel_rejection.py', *KERNEL_TESTS],
     'ext_observer/core/ahrs/velocity_kernel.py': [
