@@ -357,3 +357,28 @@ def test_the_recovery_from_a_clip_lasts_tau_acc_after_the_last_clipped_sample():
         clip_after(s, 0.0)
         left.append(s[S_CLIP_LEFT])
     assert left == [0.75, 0.5, 0.25, 0.0, 0.0]
+
+
+def test_a_mean_worth_more_than_tau_acc_is_kept_and_reported_kept():
+    # t0 = c (m / var − 1) ≥ tau_acc: nothing restarts, and −1.0 tells the
+    # uncertainty's hole step that the mean was kept (t0 ≥ 0 restarts it).
+    s = [0.0] * len(_started().flat_state)
+    s[C_DT], s[P_TAU_ACC], s[S_START], s[S_START_N] = DT, 3.0, 10.0, 1000.0
+    var = 1e-6
+    s[S_ACC_DEV] = var * (1.0 + 2.0 * 3.0 / HOLE_CORRELATION)
+    assert hole_kernel.restart_weighted(s, var) == -1.0
+    assert (s[S_START], s[S_START_N]) == (10.0, 1000.0)
+
+
+def test_a_holes_variance_is_the_rate_change_across_it_on_every_axis():
+    # var from the change of the rate across the hole, (ω₁ − ω₀) per axis.
+    est = _started(AhrsParams(tau_bias=0.0))
+    before, rate = (0.01, -0.02, 0.03), (0.03, -0.05, 0.08)
+    for _ in range(10):
+        est.update(before, UP, None, DT)
+    s = est.flat_state
+    est.update(rate, UP, None, 0.04)
+    assert est.holes == 1
+    share = HOLE_END_SHARE * HOLE_END_SHARE if s[S_HOLE_END] != 0.0 else 1.0
+    change = [b - a for a, b in zip(before, rate)]
+    assert s[S_HOLE_VAR] == pytest.approx(hole_variance(*change, 0.04) * share, rel=1e-12)
