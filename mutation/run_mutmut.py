@@ -36,6 +36,13 @@ sys.path.insert(0, HERE)
 from run_mutants import files  # noqa: E402
 
 OUT = os.path.join(REPO, 'out', 'mutmut')
+# The raw-IMU kernel's subset: its steps' tests and the observer's (the
+# hole's reach its bridge step).
+KERNEL_TESTS = [
+    'test/core/ahrs/test_ahrs_filters.py', 'test/core/ahrs/test_ahrs_kernel.py',
+    'test/core/ahrs/test_hole_kernel.py',
+    'test/core/ahrs/test_frames.py', 'test/core/ahrs/test_ahrs_observer.py',
+    'test/core/ahrs/test_ahrs_params.py', 'test/core/ahrs/test_ahrs_observer_robust.py']
 # Module: the tests that check it, fast ones (seconds to a minute, no ROS).
 MODULES = {
     'ext_observer/core/ahrs/uncertainty_kernel.py': [
@@ -56,10 +63,19 @@ MODULES = {
         'test/core/ahrs/test_small_matrix.py', 'test/core/ahrs/test_magcal_filter.py'],
     # (the calibration's learned lag, in test_magcal.py, is left out: 21 s of
     # the kernel's 99 s under mutmut's trampolines, measured)
-    'ext_observer/core/ahrs/ahrs_kernel.py': [
-        'test/core/ahrs/test_ahrs_filters.py', 'test/core/ahrs/test_ahrs_kernel.py',
-        'test/core/ahrs/test_frames.py', 'test/core/ahrs/test_ahrs_observer.py',
-        'test/core/ahrs/test_ahrs_params.py', 'test/core/ahrs/test_ahrs_observer_robust.py'],
+    'ext_observer/core/ahrs/ahrs_kernel.py': KERNEL_TESTS,
+    # The kernel's steps in their own modules, each with its tests and the
+    # kernel's subset, which reaches the steps through the kernel.
+    'ext_observer/core/ahrs/field_kernel.py': [
+        'test/core/ahrs/test_field_kernel.py', *KERNEL_TESTS],
+    'ext_observer/core/ahrs/gravity_kernel.py': [
+        'test/core/ahrs/test_gravity_kernel.py', 'test/core/ahrs/test_accel_rejection.py',
+        *KERNEL_TESTS],
+    'ext_observer/core/ahrs/hole_kernel.py': KERNEL_TESTS,
+    'ext_observer/core/ahrs/accel_rejection.py': [
+        'test/core/ahrs/test_accel_rejection.py', *KERNEL_TESTS],
+    'ext_observer/core/ahrs/velocity_kernel.py': [
+        'test/core/ahrs/test_velocity_kernel.py', 'test/core/ahrs/test_accel_rejection.py'],
     # The kernel's shared arithmetic and its bias in motion (split from it).
     'ext_observer/core/ahrs/ahrs_filters.py': [
         'test/core/ahrs/test_ahrs_filters.py', 'test/core/ahrs/test_frames.py',
@@ -89,7 +105,9 @@ SLOW = ('the_same_defaults_at_25_and_1000_hz or a_constant_bias_is_learned_in_mo
         ' or 9d_tracks_the_truth_and_learns_the_bias or translation_is_filtered_out'
         ' or float_and_batch_paths_agree or non_finite_samples_of_a_recording_are_held'
         ' or the_extension_term_holds_the_estimate_near_s3 or workers_give_the_vectorized'
-        ' or a_lagging_field_is_learned_with_its_delay')
+        ' or a_lagging_field_is_learned_with_its_delay'
+        # numba would compile mutmut's rewritten source; reading files is not the kernel's
+        ' or plain_and_compiled_agree or a_bag_with_a_velocity or a_csv_with_velocity')
 # (the bias's own module keeps them: its tests in motion are the slow ones)
 # The calibration's slow tests (seconds each plain) left out of its modules'
 # runs, where faster tests of the same functions stand for them.
@@ -109,6 +127,11 @@ SLOW_OF = {
     'ext_observer/core/ahrs/ahrs_kernel.py': SLOW,
     'ext_observer/core/ahrs/ahrs_filters.py': SLOW,
     'ext_observer/core/ahrs/clip_and_rest.py': SLOW,
+    'ext_observer/core/ahrs/field_kernel.py': SLOW,
+    'ext_observer/core/ahrs/gravity_kernel.py': SLOW,
+    'ext_observer/core/ahrs/hole_kernel.py': SLOW,
+    'ext_observer/core/ahrs/accel_rejection.py': SLOW,
+    'ext_observer/core/ahrs/velocity_kernel.py': SLOW,
     'ext_observer/core/ahrs/magcal_filter.py': MAGCAL_FILTER_SLOW,
     'ext_observer/core/ahrs/magcal_kernel.py': MAGCAL_KERNEL_SLOW,
 }

@@ -29,7 +29,8 @@ from ext_observer.core.ahrs.ahrs_layout import (C_K_ACC, MC0, S_BIAS, S_BIAS_P, 
                                                 S_CAL_WAIT, S_CAND_TIME, S_CLIPPED, S_CLIPS,
                                                 S_HAS_REF, S_LP, S_MAG_DIST, S_MAG_USED, S_Q,
                                                 S_REF, S_REJECTED, S_REST, S_REST_GYR, S_REST_TIME,
-                                                S_RLP, S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
+                                                S_RLP, S_START, S_START_N, S_WAIT_N, S_WAIT_TURN,
+                                                S_CLIP_LEFT, S_RZLP)
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.clip_and_rest import _REST_BIAS_SIGMA, detect_rest
 
@@ -259,11 +260,13 @@ def test_a_new_estimator_has_counted_nothing_and_its_calibration_turn_is_none():
     # start time, no field used or waited for, no bias, no reference; with
     # the calibration, no turn or rate since a field, the first field
     # learned from at once (its wait infinite), the body not moved, no
-    # calibration applied (its time infinite) and none loaded.
+    # calibration applied (its time infinite) and none loaded; no clip to
+    # recover from (the health's recovering state).
     est = AhrsObserver(AhrsParams(), use_mag=True)
     s = np.array(est.flat_state, dtype=float)
     zero = [S_REJECTED, S_CAND_TIME, S_REST_TIME, S_MAG_USED, S_WAIT_N, S_WAIT_TURN, S_START,
-            S_START_N, S_CLIPPED, S_HAS_REF, S_MAG_DIST, S_REST, S_CAL_MOVED, S_CAL_LOADED]
+            S_START_N, S_CLIPPED, S_HAS_REF, S_MAG_DIST, S_REST, S_CAL_MOVED, S_CAL_LOADED,
+            S_CLIP_LEFT]
     assert [s[i] for i in zero] == [0.0] * len(zero)
     assert list(s[S_BIAS:S_BIAS + 3]) == [0.0] * 3
     assert list(s[S_CAL_TURN:S_CAL_TURN + 4]) == [1.0, 0.0, 0.0, 0.0]
@@ -585,3 +588,18 @@ def test_the_first_field_of_a_start_is_calibrated_once():
         assert est.calibration.applied
         assert got == pytest.approx(want, abs=1e-9)
         est.reset()
+
+
+def test_the_first_sample_starts_the_low_passed_vertical_at_the_estimates():
+    # The heading's bias measurement low-passes R(q)'s z row (the world's
+    # vertical in the body frame); it starts at the first attitude's, here
+    # tilted and turned (6D: no field step moves it).
+    est = AhrsObserver(AhrsParams(), use_mag=False)
+    est.update(STILL, TILTED, None, DT)
+    s = est.flat_state
+    w, x, y, z = (float(v) for v in s[S_Q:S_Q + 4])
+    n2 = w * w + x * x + y * y + z * z
+    row = [2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
+           (w * w - x * x - y * y + z * z) / n2]
+    assert abs(row[0]) > 0.05 and abs(row[1]) > 0.05
+    assert list(s[S_RZLP:S_RZLP + 3]) == pytest.approx(row, abs=1e-12)

@@ -22,14 +22,16 @@ import pytest
 
 from ext_observer.core.ahrs import magcal_kernel
 from ext_observer.core.ahrs.ahrs_filters import rotate
-from ext_observer.core.ahrs.field_kernel import _turn_heading, ahrs_update_mag
+from ext_observer.core.ahrs.field_kernel import (HEADING_LOST, _doubt_gain, _turn_heading,
+                                                ahrs_update_mag, field_doubt)
 from ext_observer.core.ahrs.bias_kernel import bias_measure
 from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_R, MC0, S_BIAS, S_BIAS_P, S_CAL_MOVED,
                                                 S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN, S_CAL_WAIT,
                                                 S_CAND, S_CAND_TIME, S_HAS_REF, S_LP, S_MAG_USED,
                                                 S_Q, S_REF, S_REF_AGE, S_REF_REST, S_REJECTED,
                                                 S_REST, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN,
-                                                S_HEAD_DOUBT)
+                                                S_HEAD_DOUBT, S_TILT_DOUBT, P_TAU_ACC,
+                                                P_TAU_ACC_GAIN)
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.magcal_layout import MAGCAL, MC_READY, MC_REFUSED, MC_USED
 
@@ -454,3 +456,34 @@ def test_after_a_hole_the_heading_comes_back_from_the_field_as_its_doubt_allows(
         est.update(STILL, LEVEL, body_field(field, turn), DT)
     assert abs(wrap(yaw_of(est.q) - turn)) < 0.4 * lost
     assert est.flat_state[S_HEAD_DOUBT] < 0.5 * doubt
+
+
+def test_the_gyros_losses_add_up_as_the_fields_doubt_until_the_heading_is_lost():
+    # Each loss adds its variance to the heading's doubt and to its tilt
+    # share; the loss that takes the doubt to HEADING_LOST clears both and
+    # the heading starts again from the running mean of the next fields.
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = est.flat_state
+    assert s[S_HEAD_DOUBT] == 0.0 and s[S_TILT_DOUBT] == 0.0 and s[S_MAG_USED] == 20.0
+    field_doubt(s, 0.25 * HEADING_LOST)
+    field_doubt(s, 0.5 * HEADING_LOST)
+    assert s[S_HEAD_DOUBT] == pytest.approx(0.75 * HEADING_LOST, rel=1e-12)
+    assert s[S_TILT_DOUBT] == pytest.approx(0.75 * HEADING_LOST, rel=1e-12)
+    field_doubt(s, 0.25 * HEADING_LOST)
+    assert (s[S_HEAD_DOUBT], s[S_TILT_DOUBT], s[S_MAG_USED]) == (0.0, 0.0, 0.0)
+
+
+def test_the_tilts_doubt_is_forgotten_at_the_inclinations_pace():
+    # T <- T exp(-2 dt / (tau_acc + tau_acc_gain)) at each field, also one
+    # whose norm is off the references (its gain then the usual one).
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = est.flat_state
+    s[S_HEAD_DOUBT] = s[S_TILT_DOUBT] = 0.01
+    dt = 0.05
+    assert _doubt_gain(s, 0.125, 2.0 * NORM, DIP, 0.0, dt) == 0.125
+    tau = s[P_TAU_ACC] + s[P_TAU_ACC_GAIN]
+    assert s[S_TILT_DOUBT] == pytest.approx(0.01 * math.exp(-2.0 * dt / tau), rel=1e-12)

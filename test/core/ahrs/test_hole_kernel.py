@@ -293,3 +293,92 @@ def test_no_acceleration_rejection_while_the_vertical_is_unsure():
         return s[S_ACC_REJ] > 0.0
     assert rejected(0.0)
     assert not rejected(RECOVERING * AhrsParams().acc_reject * 1.01)
+
+
+def test_the_end_correction_is_a_body_frame_turn_of_any_axis():
+    # q <- q ⊗ exp(c / 2), c = T² (m₀ − m₁) / 12 per axis, the attitude tilted
+    # and turned (every term of the product matters).
+    s = [0.0] * len(_started().flat_state)
+    length = HOLE_END_TIME
+    s[C_DT], s[S_HOLE_RUN] = DT, length
+    q = np.array([0.8, 0.3, -0.4, 0.2])
+    q /= np.linalg.norm(q)
+    s[S_Q:S_Q + 4] = list(q)
+    before, last, after = [0.1, -0.3, 0.2], [0.5, -0.1, -0.4], [0.2, 0.6, -0.3]
+    s[S_GYR_PREV:S_GYR_PREV + 3] = before
+    s[S_GYR_LAST:S_GYR_LAST + 3] = last
+    hole_slope(s, length)
+    s[S_GYR_LAST:S_GYR_LAST + 3] = [1.0, 0.4, 0.7]  # the sample that closes the hole
+    hole_end_fix(s, *after)
+    f = length * length / (12.0 * DT)
+    c = np.array([f * ((b - a) - (g - h)) for a, b, h, g in zip(
+        before, last, [1.0, 0.4, 0.7], after)])
+    n = np.linalg.norm(c)
+    e = np.concatenate([[math.cos(0.5 * n)], math.sin(0.5 * n) * c / n])
+    w, x, y, z = q
+    want = [w * e[0] - x * e[1] - y * e[2] - z * e[3], w * e[1] + x * e[0] + y * e[3] - z * e[2],
+            w * e[2] - x * e[3] + y * e[0] + z * e[1], w * e[3] + x * e[2] - y * e[1] + z * e[0]]
+    assert n > 0.01
+    assert s[S_Q:S_Q + 4] == pytest.approx(want, abs=1e-15)
+
+
+def test_the_deviation_from_gravity_is_a_low_pass_of_the_larger_share():
+    # d <- d + k (e - d), k = dt / HOLE_DEVIATION_TIME, e the larger of the
+    # vertical deviation² and half the horizontal², over g².
+    s = [0.0] * len(_started().flat_state)
+    g = hole_kernel.GRAVITY
+    s[S_ACC_DEV] = 0.02
+    hole_kernel.acc_deviation(s, 0.3, -0.4, g + 0.1, 0.25)
+    k = 0.25 / hole_kernel.HOLE_DEVIATION_TIME
+    assert s[S_ACC_DEV] == pytest.approx(0.02 + k * (0.5 * 0.25 / (g * g) - 0.02), rel=1e-12)
+    hole_kernel.acc_deviation(s, 0.0, 0.1, g - 2.0, 0.25)
+    d = 0.02 + k * (0.5 * 0.25 / (g * g) - 0.02)
+    assert s[S_ACC_DEV] == pytest.approx(d + k * (4.0 / (g * g) - d), rel=1e-12)
+
+
+def test_a_hole_with_its_end_correction_counts_the_share_it_leaves():
+    s = [0.0] * len(_started().flat_state)
+    s[C_DT], s[P_TAU_ACC], s[S_ACC_DEV] = DT, 3.0, 1e-3
+    s[S_HOLE_END] = 0.01
+    hole_after(s, 4e-6)
+    assert s[S_HOLE_VAR] == pytest.approx(4e-6 * HOLE_END_SHARE * HOLE_END_SHARE, rel=1e-12)
+    s[S_HOLE_END] = 0.0
+    hole_after(s, 4e-6)
+    assert s[S_HOLE_VAR] == 4e-6
+
+
+def test_the_recovery_from_a_clip_lasts_tau_acc_after_the_last_clipped_sample():
+    s = [0.0] * len(_started().flat_state)
+    s[C_DT], s[P_TAU_ACC], s[S_ACC_DEV] = 0.25, 1.0, 1e-3
+    clip_after(s, 1e-4)
+    assert s[S_CLIP_LEFT] == 1.0
+    left = []
+    for _ in range(5):
+        clip_after(s, 0.0)
+        left.append(s[S_CLIP_LEFT])
+    assert left == [0.75, 0.5, 0.25, 0.0, 0.0]
+
+
+def test_a_mean_worth_more_than_tau_acc_is_kept_and_reported_kept():
+    # t0 = c (m / var − 1) ≥ tau_acc: nothing restarts, and −1.0 tells the
+    # uncertainty's hole step that the mean was kept (t0 ≥ 0 restarts it).
+    s = [0.0] * len(_started().flat_state)
+    s[C_DT], s[P_TAU_ACC], s[S_START], s[S_START_N] = DT, 3.0, 10.0, 1000.0
+    var = 1e-6
+    s[S_ACC_DEV] = var * (1.0 + 2.0 * 3.0 / HOLE_CORRELATION)
+    assert hole_kernel.restart_weighted(s, var) == -1.0
+    assert (s[S_START], s[S_START_N]) == (10.0, 1000.0)
+
+
+def test_a_holes_variance_is_the_rate_change_across_it_on_every_axis():
+    # var from the change of the rate across the hole, (ω₁ − ω₀) per axis.
+    est = _started(AhrsParams(tau_bias=0.0))
+    before, rate = (0.01, -0.02, 0.03), (0.03, -0.05, 0.08)
+    for _ in range(10):
+        est.update(before, UP, None, DT)
+    s = est.flat_state
+    est.update(rate, UP, None, 0.04)
+    assert est.holes == 1
+    share = HOLE_END_SHARE * HOLE_END_SHARE if s[S_HOLE_END] != 0.0 else 1.0
+    change = [b - a for a, b in zip(before, rate)]
+    assert s[S_HOLE_VAR] == pytest.approx(hole_variance(*change, 0.04) * share, rel=1e-12)
