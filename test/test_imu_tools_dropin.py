@@ -176,9 +176,11 @@ def test_constant_dt_integrates_every_sample_of_same_stamp_pairs_over_dds(
 
 # Every world frame: in NED the published orientation's z points down, so
 # gravity removed with it instead of the estimator's own (ENU) would be added.
-@pytest.mark.parametrize('frame', ['enu', 'nwu', 'ned'])
+# NED on the typed path too (serialized_io false): it removes gravity apart.
+@pytest.mark.parametrize('frame, serialized', [('enu', True), ('nwu', True), ('ned', True),
+                                               ('ned', False)])
 def test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest(
-        ros_context, spinner, frame):
+        ros_context, spinner, frame, serialized):
     from geometry_msgs.msg import Vector3Stamped
     from std_msgs.msg import Bool
 
@@ -191,7 +193,7 @@ def test_debug_topics_are_imu_datas_rpy_and_gravity_is_removed_at_rest(
     node = spinner.add(ImuFilterNode(
         node_name='debugged', context=ros_context, parameter_overrides=overrides(
             publish_debug_topics=True, remove_gravity_vector=True, yaw_offset=0.3,
-            world_frame=frame)))
+            world_frame=frame, serialized_io=serialized)))
     driver = spinner.add(Driver(ros_context))
     out = {'imu': {}, 'filtered': {}, 'raw': {}, 'steady': []}
 
