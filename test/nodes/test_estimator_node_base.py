@@ -5,9 +5,7 @@ clock jump counted by cause, the fault counters by their keys, times never
 rounded up. (Through topics, with bad inputs and jumps: ``test_faults.py``.)
 """
 
-from types import SimpleNamespace
-
-from rclpy.clock import ClockChange
+from rclpy.clock import ClockChange, TimeJump
 from rclpy.duration import Duration
 from std_srvs.srv import Trigger
 
@@ -25,10 +23,9 @@ def test_a_reset_and_a_clock_jump_back_are_counted_by_cause(ros_context):
     try:
         response = node.reset_callback(Trigger.Request(), Trigger.Response())
         assert response.success and response.message
-        back = SimpleNamespace(clock_change=ClockChange.ROS_TIME_NO_CHANGE,
-                               delta=Duration(nanoseconds=-2_000_000_000))
-        ahead = SimpleNamespace(clock_change=ClockChange.ROS_TIME_NO_CHANGE,
-                                delta=Duration(nanoseconds=2_000_000_000))
+        # rclpy's own jump record, as the clock hands it to the callback.
+        back = TimeJump(ClockChange.ROS_TIME_NO_CHANGE, Duration(nanoseconds=-2_000_000_000))
+        ahead = TimeJump(ClockChange.ROS_TIME_NO_CHANGE, Duration(nanoseconds=2_000_000_000))
         node.clock_jump_callback(back)
         node.clock_jump_callback(ahead)
         faults = node.faults()
