@@ -41,6 +41,16 @@ def gain(tau, dt):
     return 1.0 - math.exp(-dt / tau)
 
 
+def first_order_step(s, i, k, vx, vy, vz):
+    """One step of the first-order low-pass (gain ``k``) of a 3-vector kept at ``s[i:i+3]``."""
+    lx, ly, lz = s[i], s[i + 1], s[i + 2]
+    lx, ly, lz = lx + k * (vx - lx), ly + k * (vy - ly), lz + k * (vz - lz)
+    s[i] = lx
+    s[i + 1] = ly
+    s[i + 2] = lz
+    return lx, ly, lz
+
+
 def first_attitude(ax, ay, az, has_mag, mx, my, mz, use_mag):
     """
     A first attitude from gravity (and the field's heading), ENU: a unit quaternion.

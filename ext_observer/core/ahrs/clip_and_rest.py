@@ -12,7 +12,7 @@ sample stays in the kernel.
 
 import math
 
-from .ahrs_filters import clip
+from .ahrs_filters import clip, first_order_step
 from .ahrs_layout import (BIAS_P_XX, BIAS_P_YY, BIAS_P_ZZ, C_DT, C_K_REST, P_BIAS_MAX,
                           P_GYRO_RANGE, P_REST_GYR, P_REST_TIME, P_TAU_REST, S_ACC_STILL,
                           S_BIAS, S_BIAS_P, S_CLIPPED, S_CLIPS,
@@ -87,11 +87,7 @@ def detect_rest(s, gx, gy, gz):
     Rest (gyro and specific force still for ``rest_time``); at rest the bias is the low-passed rate.
     """
     k = s[C_K_REST]
-    lx, ly, lz = s[S_REST_GYR], s[S_REST_GYR + 1], s[S_REST_GYR + 2]
-    lx, ly, lz = lx + k * (gx - lx), ly + k * (gy - ly), lz + k * (gz - lz)
-    s[S_REST_GYR] = lx
-    s[S_REST_GYR + 1] = ly
-    s[S_REST_GYR + 2] = lz
+    lx, ly, lz = first_order_step(s, S_REST_GYR, k, gx, gy, gz)
     bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
     ex, ey, ez = gx - lx, gy - ly, gz - lz
     dev = ex * ex + ey * ey + ez * ez

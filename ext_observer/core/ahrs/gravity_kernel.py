@@ -12,7 +12,7 @@ Python that numba compiles, as :mod:`~ext_observer.core.ahrs.ahrs_kernel`
 """
 
 from .accel_rejection import acc_rotation
-from .ahrs_filters import rotate, steady
+from .ahrs_filters import first_order_step, rotate, steady
 from .ahrs_layout import (C_BW, C_DT, C_K_ACC, C_K_REST, P_ACC_REJECT, P_MOTION_BIAS, P_REST_ACC,
                           P_TAU_ACC, S_ACC_REJ, S_ACC_STILL, S_INC_SIGMA, S_LP, S_Q, S_REST_ACC,
                           S_START, S_START_N, S_STEPS)
@@ -24,12 +24,7 @@ from .velocity_kernel import velocity_removed
 def ahrs_update_acc(s, ax, ay, az):
     """Correct the inclination from the world-frame filtered specific force."""
     # Rest detection needs the accelerometer's deviation from its mean.
-    k = s[C_K_REST]
-    rx, ry, rz = s[S_REST_ACC], s[S_REST_ACC + 1], s[S_REST_ACC + 2]
-    rx, ry, rz = rx + k * (ax - rx), ry + k * (ay - ry), rz + k * (az - rz)
-    s[S_REST_ACC] = rx
-    s[S_REST_ACC + 1] = ry
-    s[S_REST_ACC + 2] = rz
+    rx, ry, rz = first_order_step(s, S_REST_ACC, s[C_K_REST], ax, ay, az)
     ex, ey, ez = ax - rx, ay - ry, az - rz
     s[S_ACC_STILL] = 1.0 if (ex * ex + ey * ey + ez * ez) < s[P_REST_ACC] * s[P_REST_ACC] else 0.0
     # Gravity from the specific force less the body's own acceleration (rest sees it all).
