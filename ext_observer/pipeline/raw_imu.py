@@ -218,6 +218,16 @@ class RawImuEstimator:
                  else 0.0)
         # The references' dip: how far the start's tilt error turns a field's heading.
         dip = core.field('ref')[1] if core.use_mag else math.nan
+        # After a hole or a clipped gyro the field may have corrected the
+        # heading with the Kalman gain of the doubt the gyro left, above
+        # the usual one (also a field judged disturbed or a calibration
+        # still waiting): the covariance follows the gain applied.
+        doubt = float(core.field('doubt_gain'))
+        if doubt > 0.0:
+            self._fields_used += calibrated
+            self.uncertainty.field(dt, max(doubt, self.uncertainty.heading_gain(
+                self._fields_used, dt)), sigma, math.nan, dip)
+            return
         if not (core.use_mag and calibrated and not core.mag_disturbed):
             reference = math.nan
             if not calibrated and core.use_mag and not core.mag_disturbed:

@@ -128,6 +128,7 @@ S_ACC_TILT = AHRS.field('acc_tilt')  # rad/s: the recent rate of tilting rotatio
 S_HEAD_DOUBT = AHRS.field('head_doubt')  # rad²: heading variance no field has corrected yet
 S_TILT_DOUBT = AHRS.field('tilt_doubt')  # rad²: its share of tilt, as the accelerometer forgets it
 S_FIELD_CLIPPED = AHRS.field('field_clipped')  # 1: the gyro clipped since the latest field
+S_DOUBT_GAIN = AHRS.field('doubt_gain')  # the latest field's gain where the doubt raised it, else 0
 A_SIZE = AHRS.size
 MC0 = A_SIZE  # the calibration's block starts here
 

@@ -21,7 +21,7 @@ from .ahrs_layout import (C_BIAS_R, C_K_MAG, C_K_REF, C_MAG_DT, MC0, P_CAL_PERIO
                           S_CAL_WAIT, S_CAND, S_CAND_TIME, S_HAS_REF, S_LP, S_MAG_DIST,
                           S_MAG_USED, S_Q, S_REF, S_REF_AGE, S_REF_REST, S_REJECTED, S_REST,
                           S_REST_GYR, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN,
-                          S_FIELD_CLIPPED, S_HEAD_DOUBT, S_TILT_DOUBT,
+                          S_DOUBT_GAIN, S_FIELD_CLIPPED, S_HEAD_DOUBT, S_TILT_DOUBT,
                           P_TAU_ACC_GAIN)
 from .bias_kernel import bias_measure
 from .hole_kernel import forget_wait
@@ -86,6 +86,7 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     if has_cal:
         use, psi = _calibration_wait(s, psi, use)
     kap = _heading_gain(s, use, has_cal, dt)
+    s[S_DOUBT_GAIN] = 0.0
     if s[S_HEAD_DOUBT] != 0.0 and valid and s[P_USE_MAG] != 0.0:
         kap = _doubt_gain(s, kap, norm, dip, psi, dt)
     # y = R_z(ψ) ⊗ q̂; q̂ ← (1 − κ) q̂ + κ y, r = (1 − κ + κ cos(ψ/2), 0, 0, κ sin(ψ/2)).
@@ -326,6 +327,7 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
     s[S_HEAD_DOUBT] = p
     if k > kap:
         forget_wait(s)
+        s[S_DOUBT_GAIN] = k
     return k
 
 
