@@ -256,7 +256,8 @@ IMU_FILTER_OWN = (
                   'Longest hole between two IMU samples that the estimator bridges, s (the '
                   'rotation across it from the samples on both sides, its covariance grown: '
                   'docs/raw_imu.md#holes-in-the-stream); after a longer one it goes on from '
-                  'the new sample (dropped: dt_too_large).',
+                  'the new sample (dropped: dt_too_large), the estimate held and its '
+                  'covariance grown by the rotation the hole may have hidden.',
                   (0.0001, 10.0)),
     ParameterSpec('frame_id', 'world', 'frame_id of attitude_estimate (imu/data keeps the '
                   "sample's frame_id)."),

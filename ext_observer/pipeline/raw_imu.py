@@ -251,6 +251,21 @@ class RawImuEstimator:
         self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma,
                                math.nan, dip)
 
+    def unbridged(self, gyr, dt):
+        """
+        A hole of ``dt`` s too long to bridge (over ``max_dt``), closed by a sample of rate ``gyr``.
+
+        The estimate holds and its covariance grows by the rotation the hole
+        may have hidden (:meth:`AhrsObserver.unbridged
+        <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.unbridged>`); a
+        heading that lost too much is taken afresh from the next fields, as
+        at a start (the covariance counts their gains from one again).
+        """
+        var, t0 = self.core.unbridged(gyr, dt)
+        self.uncertainty.unbridged(dt, var, t0)
+        if self.core.field('mag_used') == 0.0:
+            self._fields_used = 0
+
     def velocity(self, velocity, dt=None):
         """The body's velocity (m/s, IMU frame), ``dt`` s after the previous one (the velocity aid)."""
         self.core.velocity(velocity, dt)
@@ -532,7 +547,11 @@ class RawImuPipeline:
         """
         self.units.imu(gyr, acc)
         pairer = self.pairer
+        start = pairer.pending_stamp
         outcome, steps = pairer.add_sample(stamp, gyr, acc)
+        if outcome == 'dt_too_large' and self.estimator.core.initialized:
+            # The hole is not bridged: the sample after it starts the next step.
+            self.estimator.unbridged(gyr, (stamp - start) * 1e-9)
         if outcome == BACKWARD_JUMP:
             self.reset('backward_jump')
         estimate = None

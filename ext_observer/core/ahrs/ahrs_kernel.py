@@ -45,9 +45,9 @@ from .ahrs_layout import (  # noqa: F401
 from .accel_rejection import acc_rejection_reset
 from .clip_and_rest import clipped_variance, detect_rest
 from .gravity_kernel import ahrs_update_acc  # noqa: F401 (the steps' module serves it)
-from .hole_kernel import (calibration_restart, clip_after, forget_wait, hole_after,
-                          hole_end_fix, hole_ends, hole_rate, hole_slope, hole_starts,
-                          hole_variance, restart_mean)
+from .hole_kernel import (HOLE_CALIBRATION, calibration_restart, clip_after, forget_wait,
+                          hole_after, hole_end_fix, hole_ends, hole_rate, hole_slope,
+                          hole_starts, hole_variance, restart_mean, restart_weighted)
 from .bias_kernel import bias_forget, bias_measure, bias_variance  # noqa: F401
 from .magcal_kernel import mc_apply
 # The field step (read from this module too: the wrapper and the tests see one module).
@@ -227,6 +227,47 @@ def ahrs_bridge(s, gx, gy, gz, dt):
     detect_rest(s, gx, gy, gz)
     hole_after(s, var)
     field_doubt(s, s[S_HOLE_VAR])
+
+
+# rad² per axis: the most a rotation nobody saw can leave, that of an angle
+# uniform on (−π, π] (σ 104°).
+UNSEEN_ROTATION = math.pi * math.pi / 3.0
+# An unseen rotation's square, shared alike by the three axes.
+UNSEEN_AXES = 3.0
+
+
+def ahrs_unbridged(s, gx, gy, gz, dt):
+    """
+    A hole of ``dt`` s too long to bridge (over ``max_dt``): the estimate holds, its doubt grows.
+
+    The rotation across it is not integrated (past about 2 s the straight
+    line between the rates beside it is worse than nothing); what it may
+    have been is the variance the hole leaves per axis: the mean of the two
+    rates (less the bias) over ``dt``, a third per axis, and the bridge's own
+    error, at most :data:`UNSEEN_ROTATION`. As after a bridged hole, the
+    inclination's mean restarts weighed against it, the field gets it as its
+    doubt, the calibration learns nothing across it. The sample after the
+    hole is the next step's start: its rate is the last one. Returns the
+    variance and the weight ``t0`` the inclination's mean restarted with
+    (−1.0: kept).
+    """
+    lx, ly, lz = s[S_GYR_LAST], s[S_GYR_LAST + 1], s[S_GYR_LAST + 2]
+    mx = 0.5 * (lx + gx) - s[S_BIAS]
+    my = 0.5 * (ly + gy) - s[S_BIAS + 1]
+    mz = 0.5 * (lz + gz) - s[S_BIAS + 2]
+    var = (mx * mx + my * my + mz * mz) * dt * dt / UNSEEN_AXES
+    var = min(var + hole_variance(gx - lx, gy - ly, gz - lz, dt), UNSEEN_ROTATION)
+    for i in range(3):
+        g = gx if i == 0 else (gy if i == 1 else gz)
+        s[S_GYR_PREV + i] = g
+        s[S_GYR_LAST + i] = g
+    s[S_HOLE_END] = 0.0
+    if var > HOLE_CALIBRATION:
+        calibration_restart(s)
+    s[S_INC_SIGMA] = math.sqrt(s[S_INC_SIGMA] * s[S_INC_SIGMA] + var)
+    t0 = restart_weighted(s, var)
+    field_doubt(s, var)
+    return var, t0
 
 
 def _propagate(s, rx, ry, rz, gx, gy, gz, dt):

@@ -509,6 +509,20 @@ class AhrsObserver:
         out[...] = np.array(rows).reshape(count, 4)
         return out
 
+    def unbridged(self, gyr, dt):
+        """
+        A hole of ``dt`` s too long to bridge, closed by a sample of rate ``gyr`` (rad/s).
+
+        The estimate holds; the doubt the hole leaves restarts the means
+        (:func:`~ext_observer.core.ahrs.ahrs_kernel.ahrs_unbridged`). One
+        estimate only. Returns the variance per axis (rad²) and the weight
+        (s) the inclination's mean restarted with (−1.0: kept).
+        """
+        if self.batch is not None:
+            raise ValueError('unbridged takes one estimate, not a batch')
+        return self._kernels.ahrs.ahrs_unbridged(self._states[0], float(gyr[0]), float(gyr[1]),
+                                                 float(gyr[2]), float(dt))
+
     def _each(self, func, vector, *extra):
         if self.batch is None:
             func(self._states[0], *vector, *extra)

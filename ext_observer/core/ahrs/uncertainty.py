@@ -337,6 +337,30 @@ class AttitudeUncertainty:
         if acc is not None:
             self._start_sample(dt, rotate(w, x, y, z, *acc))
 
+    def unbridged(self, dt, var, t0):
+        """
+        A hole of ``dt`` s the estimator did not bridge (over ``max_dt``): what it leaves.
+
+        ``var`` the rotation it may have hidden (rad² per axis) and ``t0``
+        the weight the inclination's mean restarted with (negative: kept),
+        :meth:`AhrsObserver.unbridged
+        <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.unbridged>`'s. The
+        angles' variances grow by it and by the gyro's noise and bias over
+        the hole, the inclination's only where its mean was kept (else it
+        restarts as after a bridged hole); the heading's up to that of an
+        unknown heading. The hole counts as time without a field. One
+        estimate (floats).
+        """
+        st = self._u
+        if t0 >= 0.0:
+            self._kernel.uncertainty_restart(st, float(t0))
+        g = st[U_GYRO_NOISE]
+        grow = g * g * dt + st[U_B] * dt * dt + var
+        if t0 < 0.0:
+            st[U_PT] = st[U_PT] + grow
+        st[U_PH] = min(st[U_PH] + grow, HEADING_UNKNOWN)
+        st[U_FIELD_AGE] = st[U_FIELD_AGE] + dt
+
     def field(self, dt, gain, calibration=0.0, reference=math.nan, dip=math.nan):
         """
         A field, and the gain with which it corrected the heading.

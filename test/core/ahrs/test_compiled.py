@@ -307,7 +307,7 @@ def test_without_numba_the_node_warns_once_with_the_cost(ros_processes):
 @pytest.mark.parametrize('mode', ['9D', '6D'])
 def test_compiled_and_plain_agree_to_the_bit_across_holes(mode):
     # Samples lost at random and in bursts (holes bridged, means restarted,
-    # the covariance grown and restarted): the same estimates and
+    # the covariance grown and restarted; one hole not bridged): the same estimates and
     # covariances, bit for bit.
     from node_settings import node_settings
     from ext_observer.pipeline.raw_imu import RawImuPipeline
@@ -315,6 +315,9 @@ def test_compiled_and_plain_agree_to_the_bit_across_holes(mode):
     rng = np.random.default_rng(7)
     keep = rng.random(len(gyr)) >= 0.3
     keep &= np.mod(np.arange(len(gyr)) / rate, 2.0) >= 0.15
+    # And one hole too long to bridge (over max_dt): the estimate holds, its doubt grows.
+    seconds = np.arange(len(gyr)) / rate
+    keep &= (seconds < 8.0) | (seconds >= 9.5)
     keep[:2] = True
     index = np.flatnonzero(keep)[:5000]
     period = round(1e9 / rate)
@@ -330,7 +333,8 @@ def test_compiled_and_plain_agree_to_the_bit_across_holes(mode):
                 states.append(estimate.state)
                 covariances.append(tuple(estimate.covariance))
         runs.append((np.array(states), np.array(covariances),
-                     pipeline.estimator.core.holes))
+                     pipeline.estimator.core.holes, pipeline.pairer.drops['dt_too_large']))
     assert runs[0][2] == runs[1][2] > 100
+    assert runs[0][3] == runs[1][3] == 1
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
