@@ -95,7 +95,7 @@ def hermite_turn(q, g, i0, i1, period):
 
 
 def gyro_through(q0, gyr, period):
-    """Usual steps from ``q0`` with each closing sample's rate ``gyr`` (k, 3): the last attitude."""
+    """The attitude after usual steps from ``q0``, each with its closing sample's rate ``gyr``."""
     from ext_observer.core.quaternion import multiply, quaternion_from_rotation_vector
     q = q0
     for g in gyr:
@@ -104,7 +104,7 @@ def gyro_through(q0, gyr, period):
 
 
 def window_sums(vectors, start, count):
-    """Sums of ``vectors[start : start + k + 1]`` for k < ``count``, samples without a reference skipped."""
+    """Sums of ``vectors[start : start + k + 1]``, k < ``count``; samples without a truth skipped."""
     v = vectors[start:start + count]
     return np.cumsum(np.where(np.isfinite(v), v, 0.0), axis=0)
 
@@ -143,7 +143,8 @@ def trial_holes(trial, case):
     q = trial.quat / np.linalg.norm(trial.quat, axis=1, keepdims=True)
     acc_w = rotate(q, trial.acc)
     field_ref, field_w = _field_reference(trial, q)
-    out = {k: [] for k in ('bridge', 'hermite', 'floor', 'prior_up', 'acc_up', 'scored', 'heading')}
+    out = {k: [] for k in ('bridge', 'hermite', 'floor', 'prior_up', 'acc_up', 'scored',
+                           'heading')}
     for i0, i1 in zip(before, after):
         last = i1 + steps[-1]
         if not trial.movement[i1] or last >= len(trial) or not np.isfinite(q[[i0, i1]]).all():
@@ -165,7 +166,7 @@ def trial_holes(trial, case):
 
 
 def _field_reference(trial, q):
-    """The field in the world and its mean horizontal direction (NaN where the field is disturbed)."""
+    """The field in the world, and its mean horizontal direction (NaN in a disturbed trial)."""
     from ext_observer.broad.data import groups_from_name
     field_w = rotate(q, trial.mag)
     if 'undisturbed' not in groups_from_name(trial.name):
@@ -213,7 +214,7 @@ def rms_deg(angles, mask=None):
 
 def budget_tau(e0s, e_full, ratio, kept):
     """
-    Largest ``τ`` (s) of an ``e0 exp(−t/τ)`` recovery that keeps the trials' mean error ≤ ``ratio e_full``.
+    Largest ``τ`` (s) of a recovery ``e0 exp(−t/τ)`` keeping the trials' mean ≤ ``ratio e_full``.
 
     Per trial (its bridge error ``e0`` in ``e0s``), the RMS over ``kept`` s is
     ``√(e_full² + e0² τ (1 − exp(−2 kept / τ)) / (2 kept))``, which grows
@@ -296,14 +297,16 @@ def markdown(figures, count):
     """The tables of :func:`case_figures` for each case."""
     titles = {'burst50ms': '50 ms', 'burst200ms': '200 ms'}
     lines = [f'{count} BROAD trials, bursts every {BURST_PERIOD:g} s (`bench.load_batch`\'s mask); '
-             'degrees RMS over the holes the body moves after. Command: `python -m bench.hole_bound`.',
+             'each trial\'s RMS over the holes the body moves after, then the mean over the trials, '
+             'degrees. Command: `python -m bench.hole_bound`.',
              '', '| bursts | holes | oracle bridge: total / heading / incl. '
              '| with the cubic end turn | the lost samples\' own gyro |', '|---|---|---|---|---|']
     for f in figures:
         b, h, g = (' / '.join(f'{v:.2f}' for v in f[k]) for k in ('bridge', 'hermite', 'floor'))
         lines.append(f'| {titles[f["case"]]} | {f["holes"]} | {b} | {h} | {g} |')
     lines += ['', '| bursts | window after the hole, true attitude | '
-              + ' | '.join(f'{t:g} s' for t in WINDOWS) + ' |', '|---|---|' + '---|' * len(WINDOWS)]
+              + ' | '.join(f'{t:g} s' for t in WINDOWS) + ' |',
+              '|---|---|' + '---|' * len(WINDOWS)]
     rows = (('acc_window', 'accelerometer: vertical'),
             ('field_window', 'field: heading (undisturbed trials)'),
             ('blend_weight', 'oracle blend: the bridge\'s weight'))
@@ -312,12 +315,14 @@ def markdown(figures, count):
             lines.append(f'| {titles[f["case"]]} | {title} | '
                          + ' | '.join(_deg(f[key][t]) for t in WINDOWS) + ' |')
     lines += ['', '| bursts | mode | full data | bound | e0 (bridge) | largest τ | '
-              'accelerometer window of τ | field window of τ |', '|---|---|---|---|---|---|---|---|']
+              'accelerometer window of τ | field window of τ |',
+              '|---|---|---|---|---|---|---|---|']
     for f in figures:
         for mode, b in f['budget'].items():
             lines.append(f'| {titles[f["case"]]} | {mode} | {FULL_ERROR[mode]:.2f} '
                          f'| {RATIO_BOUND[f["case"]] * FULL_ERROR[mode]:.2f} | {b["e0"]:.2f} '
-                         f'| {_ms(b["tau"])} | {_deg(b["acc_at_tau"])} | {_deg(b["field_at_tau"])} |')
+                         f'| {_ms(b["tau"])} | {_deg(b["acc_at_tau"])} '
+                         f'| {_deg(b["field_at_tau"])} |')
     lines += ['', '| bursts | 6D bound | over the kept movement samples, the hole\'s error alone: '
               'bridge kept | window alone | oracle blend | blend, weights per trial '
               '| √(full² + blend²) |', '|---|---|---|---|---|---|---|']
@@ -325,7 +330,8 @@ def markdown(figures, count):
         k = f['kept_rms_6d']
         lines.append(f'| {titles[f["case"]]} | {RATIO_BOUND[f["case"]] * FULL_ERROR["6D"]:.2f} '
                      f'| {k["prior"]:.2f} | {k["window"]:.2f} | {k["blend"]:.2f} '
-                     f'| {k["blend_per_trial"]:.2f} | {math.hypot(FULL_ERROR["6D"], k["blend"]):.2f} |')
+                     f'| {k["blend_per_trial"]:.2f} '
+                     f'| {math.hypot(FULL_ERROR["6D"], k["blend"]):.2f} |')
     return '\n'.join(lines)
 
 
