@@ -9,9 +9,10 @@ field lost together) on every trial and measures, with the optical reference
 - the **oracle bridge**: each hole bridged as the estimator does
   (:func:`~ext_observer.core.ahrs.hole_kernel.hole_rate`, one step on the
   straight-line rate, no bias removed) but from the TRUE attitude at the last
-  sample before it; its error at the first sample after. Beside it the
-  usual steps through the lost samples themselves (what the gyro alone
-  would have given: the floor the reference and the gyro allow);
+  sample before it; its error at the first sample after. Beside it the same
+  with the kernel's cubic end turn (:func:`hermite_turn`), and the usual
+  steps through the lost samples themselves (what the gyro alone would have
+  given: the floor the reference and the gyro allow);
 - the **accelerometer window**: the mean over ``[end, end + T]`` of the
   specific force rotated into the world with the TRUE attitude (relative
   rotation perfect): its angle from the true vertical. In 9D, the same for
@@ -104,7 +105,7 @@ def gyro_through(q0, gyr, period):
 
 
 def window_sums(vectors, start, count):
-    """Sums of ``vectors[start : start + k + 1]``, k < ``count``; samples without a truth skipped."""
+    """Running sums of ``vectors[start : start + count]`` (samples without truth skipped)."""
     v = vectors[start:start + count]
     return np.cumsum(np.where(np.isfinite(v), v, 0.0), axis=0)
 
@@ -125,9 +126,9 @@ def trial_holes(trial, case):
     """
     Per hole after which the body moves: the bridge's errors and the windows' verticals.
 
-    Returns a dict of arrays over the holes: ``bridge`` and ``floor`` (total,
-    heading, inclination, rad: the oracle bridge and the lost samples'
-    own gyro), ``prior_up`` (3: the bridged vertical in true world
+    Returns a dict of arrays over the holes: ``bridge``, ``hermite`` and
+    ``floor`` (total, heading, inclination, rad: the oracle bridge, it with
+    the cubic end turn, the lost samples' own gyro), ``prior_up`` (3: the bridged vertical in true world
     coordinates), ``acc_up`` (holes, bins, 3: the window's vertical per
     :data:`BIN`), ``scored`` (holes, bins: a kept movement sample),
     ``heading`` (holes, bins: the field window's heading error, NaN where
@@ -296,9 +297,10 @@ def _ms(tau):
 def markdown(figures, count):
     """The tables of :func:`case_figures` for each case."""
     titles = {'burst50ms': '50 ms', 'burst200ms': '200 ms'}
-    lines = [f'{count} BROAD trials, bursts every {BURST_PERIOD:g} s (`bench.load_batch`\'s mask); '
-             'each trial\'s RMS over the holes the body moves after, then the mean over the trials, '
-             'degrees. Command: `python -m bench.hole_bound`.',
+    lines = [f'{count} BROAD trials, bursts every {BURST_PERIOD:g} s '
+             '(`bench.load_batch`\'s mask); each trial\'s RMS over the holes the body moves '
+             'after, then the mean over the trials, degrees. '
+             'Command: `python -m bench.hole_bound`.',
              '', '| bursts | holes | oracle bridge: total / heading / incl. '
              '| with the cubic end turn | the lost samples\' own gyro |', '|---|---|---|---|---|']
     for f in figures:
