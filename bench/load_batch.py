@@ -80,6 +80,11 @@ def kept_samples(count, rate, case, seed):
     return keep
 
 
+def trial_kept(trial, case):
+    """Which of ``trial``'s samples are kept in ``case``, with the trial's and case's fixed seed."""
+    return kept_samples(len(trial), trial.rate, case, _seed(trial.name, case))
+
+
 def _case(name):
     for case in CASES:
         if case[0] == name:
@@ -151,7 +156,7 @@ def _task(task):
     from ext_observer.broad.scoring import error_angles, score
     path, name, mode, case, algorithm, parameters = task
     trial = _trial(path, name)
-    keep = kept_samples(len(trial), trial.rate, case, _seed(name, case))
+    keep = trial_kept(trial, case)
     movement, ref = trial.movement[keep], trial.quat[keep]
     row = {'trial': name, 'split': 'dev' if split_of(name) == 'dev' else 'held-out',
            'mode': mode, 'case': case, 'algorithm': algorithm,
