@@ -420,15 +420,16 @@ class AttitudeUncertainty:
         The heading's lag behind the fields, for a field that kept ``a = 1 − κ`` of the error.
 
         A field's innovation is the heading error it shows plus its own
-        noise; averaged over a second the noise goes and a lag stays: an
-        error the propagation does not explain (the correction's ``tau_mag``
-        lets a drift of ``r`` rad/s stand at ``r tau_mag``). The correction
-        shrinks the lag as it shrinks the error; a field not used, or one
-        whose innovation is not given, teaches nothing. The lag is held
+        noise; averaged over seconds the noise goes and a lag stays: an
+        error the propagation does not explain (a drift of ``r`` rad/s
+        stands at about ``r tau_mag`` under the correction, which the
+        innovations after each correction still show). A full correction
+        (the heading taken from a field) clears it; a field not used, or
+        one whose innovation is not given, teaches nothing. The lag is held
         while no field comes: the heading keeps the error it had.
         """
         st, k = self._u, self._k_lag
-        lag = a * st[U_LAG]
+        lag = (a > 0.0) * st[U_LAG]
         # l ← (1 − k) l + k ψ, where a used field gave ψ
         if isinstance(lag, float) and not np.ndim(innovation):
             if used and innovation == innovation:

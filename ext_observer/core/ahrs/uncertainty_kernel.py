@@ -92,7 +92,7 @@ U_FIELD_AGE = UNCERTAINTY.field('field_age')
 U_YAW_HELD = UNCERTAINTY.field('yaw_held')
 # The heading's lag behind the fields (rad, signed): the innovation of the
 # fields that corrected the heading (their heading in the estimate's frame),
-# low-passed over INNOVATION_TIME; a correction shrinks it as it does the error.
+# low-passed over INNOVATION_TIME; a full correction (gain 1) clears it.
 U_LAG = UNCERTAINTY.field('lag')
 U_SIZE = UNCERTAINTY.size
 
@@ -123,11 +123,11 @@ BIAS_TRACE_AXES = 3.0
 # interval of a slower magnetometer.
 FIELD_SILENT = 1.0
 # s: the fields' innovation is averaged over this long before its square is
-# counted in the heading's variance: long enough to average one field's noise,
-# short enough to follow a lag that builds up within seconds (dev trial 08's
-# fast turns: 8° in 30 s while the model claimed 2°). Chosen on the even
-# trials among 2, 3 and 5 s: the one whose heading rows keep both bounds best.
-INNOVATION_TIME = 3.0
+# counted in the heading's variance: long enough to average the fields' noise
+# and their calibration's orientation-dependent error, short enough to follow
+# a lag that builds up within seconds (dev trial 08's fast turns: 8° in 30 s
+# while the model claimed 2°). Chosen on the even trials among 3 to 8 s.
+INNOVATION_TIME = 5.0
 
 
 def uncertainty_coefficients(u, dt):
