@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from ext_observer.core.ahrs.ahrs_filters import rotate
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
@@ -223,10 +224,16 @@ class RawImuEstimator:
         # the usual one (also a field judged disturbed or a calibration
         # still waiting): the covariance follows the gain applied.
         doubt = float(core.field('doubt_gain'))
+        # Where the field corrects the heading: the heading of the field used
+        # (calibrated: as given until a calibration is applied) in the corrected
+        # estimate's frame, whose recent mean is the heading's lag behind the fields.
+        used = calibration.apply(field) if calibration is not None else field
+        mx, my, _ = rotate(*core.q, *used)
+        innovation = math.atan2(mx, my)
         if doubt > 0.0:
             self._fields_used += calibrated
             self.uncertainty.field(dt, max(doubt, self.uncertainty.heading_gain(
-                self._fields_used, dt)), sigma, math.nan, dip)
+                self._fields_used, dt)), sigma, math.nan, dip, innovation)
             return
         if not (core.use_mag and calibrated and not core.mag_disturbed):
             reference = math.nan
@@ -249,7 +256,7 @@ class RawImuEstimator:
         # 1 − exp(−dt / tau_mag).
         self._fields_used += 1
         self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma,
-                               math.nan, dip)
+                               math.nan, dip, innovation)
 
     def unbridged(self, gyr, dt):
         """

@@ -23,10 +23,11 @@ from .ahrs_params import UncertaintyParams
 from .uncertainty_kernel import (
     GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,
     U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_HS, U_HS_REST, U_HS_TAN,
-    U_HS_W0, U_K_ACC, U_K_REST, U_PH,
+    U_HS_W0, U_K_ACC, U_K_REST, U_LAG, U_PH,
     U_PHI, U_PT, U_Q_BIAS, U_Q_GYRO, U_Q_RATE, U_R_ACC, U_R_GYRO, U_SIZE, U_STAMP2,
     U_START_F, U_START_M, U_START_N, U_START_T, U_START_V, U_TAU_ACC,
-    U_TAU_REST, U_TILT_FLOOR, U_UNKNOWN, U_WH2, U_WZ2, U_FIELD_AGE, U_YAW_HELD)
+    U_TAU_REST, U_TILT_FLOOR, U_UNKNOWN, U_WH2, U_WZ2, U_FIELD_AGE, U_YAW_HELD,
+    INNOVATION_TIME)
 
 __all__ = [
     'AttitudeUncertainty',
@@ -205,7 +206,7 @@ class AttitudeUncertainty:
     def _clear_start(self):
         u = self._u
         u[U_START_T] = u[U_START_N] = u[U_START_M] = u[U_START_F] = u[U_START_V] = 0.0 * u[U_PT]
-        u[U_YAW_HELD] = u[U_FIELD_AGE] = 0.0 * u[U_PT]
+        u[U_YAW_HELD] = u[U_FIELD_AGE] = u[U_LAG] = 0.0 * u[U_PT]
         for i in _HS_SLOTS:
             u[i] = 0.0 * u[U_PT]
 
@@ -361,7 +362,8 @@ class AttitudeUncertainty:
         st[U_PH] = min(st[U_PH] + grow, HEADING_UNKNOWN)
         st[U_FIELD_AGE] = st[U_FIELD_AGE] + dt
 
-    def field(self, dt, gain, calibration=0.0, reference=math.nan, dip=math.nan):
+    def field(self, dt, gain, calibration=0.0, reference=math.nan, dip=math.nan,
+              innovation=math.nan):
         """
         A field, and the gain with which it corrected the heading.
 
@@ -388,6 +390,15 @@ class AttitudeUncertainty:
             The dip of the estimator's field references, rad (NaN: none,
             the default): how far the start's inclination error turns the
             heading taken from a field (:meth:`_heading_start`).
+        innovation : float or ndarray
+            Where the field corrected the heading: its heading in the
+            corrected estimate's frame, rad (what is left of the correction;
+            NaN: not given, the default). Its mean over the last
+            :data:`~ext_observer.core.ahrs.uncertainty_kernel.INNOVATION_TIME`
+            is the heading's lag behind the fields, whatever its cause (a
+            gyro's scale error in fast turns, a bias not yet learned), and
+            its square is published (:meth:`_lag`). Not part of
+            :attr:`last_field`.
 
         """
         dt = self._dt if dt is None else dt
@@ -397,6 +408,7 @@ class AttitudeUncertainty:
                 raise ValueError(f'dt must be positive and finite, got {dt}')
             self._field_dt = dt
             self._r_mag = self.params.mag_noise ** 2 / dt
+            self._k_lag = 1.0 - math.exp(-dt / INNOVATION_TIME)
         used = gain > 0.0
         a = 1.0 - gain
         # Each slot read and written once (a compiled state is an array).
@@ -424,7 +436,32 @@ class AttitudeUncertainty:
             unknown = np.where(given, np.minimum(ref, HEADING_UNKNOWN), unknown)
         st[U_UNKNOWN] = unknown
         st[U_CALIBRATION] = used * c2 + (1 - used) * st[U_CALIBRATION]
+        self._lag(a, used, innovation)
         self._heading_start(gain, dip)
+
+    def _lag(self, a, used, innovation):
+        """
+        The heading's lag behind the fields, for a field that kept ``a = 1 − κ`` of the error.
+
+        A field's innovation is the heading error it shows plus its own
+        noise; averaged over seconds the noise goes and a lag stays: an
+        error the propagation does not explain (a drift of ``r`` rad/s
+        stands at about ``r tau_mag`` under the correction, which the
+        innovations after each correction still show). A full correction
+        (the heading taken from a field) clears it; a field not used, or
+        one whose innovation is not given, teaches nothing. The lag is held
+        while no field comes: the heading keeps the error it had.
+        """
+        st, k = self._u, self._k_lag
+        lag = (a > 0.0) * st[U_LAG]
+        # l ← (1 − k) l + k ψ, where a used field gave ψ
+        if isinstance(lag, float) and not np.ndim(innovation):
+            if used and innovation == innovation:
+                lag = lag + k * (innovation - lag)
+        else:
+            given = np.asarray(used) & np.isfinite(innovation)
+            lag = np.where(given, lag + k * (np.nan_to_num(innovation) - lag), lag)
+        st[U_LAG] = float(lag) if self._compiled else lag
 
     def _heading_start(self, gain, dip):
         """

@@ -1,15 +1,18 @@
 """
 The uncertainty model alone (``core/ahrs/uncertainty.py``): its steady state is
-the closed form of a first-order correction, rest teaches the bias, its
-parameters refused with their name.
+the closed form of a first-order correction, rest teaches the bias, a lasting
+innovation of the fields is counted as the heading's lag, its parameters
+refused with their name.
 """
 
 import math
 
 import pytest
 
+from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs.ahrs_params import UncertaintyParams
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty
+from ext_observer.core.ahrs.uncertainty_kernel import INNOVATION_TIME
 from node_settings import node_settings
 
 
@@ -44,6 +47,34 @@ def test_rest_teaches_the_bias_and_slows_the_heading_drift():
         return tracker.heading_variance - before
 
     assert drift(True) < 0.1 * drift(False)
+
+
+@pytest.mark.parametrize('compiled', [False, pytest.param(True, marks=pytest.mark.skipif(
+    not compiled_module.compiled_available(), reason='numba is not installed'))])
+def test_a_lasting_innovation_is_a_lag_and_a_changing_one_is_noise(compiled):
+    # The fields' heading in the estimate's frame: 10° one way for
+    # INNOVATION_TIME × 5 is the heading's lag (its square is published);
+    # ±10° in turn averages out; a correction of gain 1 clears the lag.
+    def run(signs, gain=0.001):
+        tracker = AttitudeUncertainty()
+        if compiled:
+            tracker.use_kernels(compiled_module.kernels(True))
+        tracker.start(0.01)
+        tracker.field(0.01, 1.0)
+        for k in range(int(5 * INNOVATION_TIME / 0.01)):
+            tracker.step(0.01, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), False)
+            tracker.field(0.01, gain, innovation=signs[k % len(signs)] * math.radians(10.0))
+        return tracker
+
+    lag, noise, none = run([1.0]), run([1.0, -1.0]), run([0.0])
+    # l ← (1 − k) l + k ψ settles at ψ; counted beyond the field's own error.
+    floor = lag.params.heading_floor
+    assert lag.heading_variance == pytest.approx(math.radians(10.0) ** 2 - floor ** 2,
+                                                 rel=0.02)
+    assert noise.heading_std < 1.01 * none.heading_std < 0.5 * lag.heading_std
+    before = lag.heading_std
+    lag.field(0.01, 1.0, innovation=0.0)
+    assert lag.heading_std < 0.2 * before
 
 
 def test_parameters_are_refused_with_their_name():

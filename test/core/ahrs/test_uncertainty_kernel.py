@@ -215,6 +215,15 @@ def test_the_published_variances_are_the_sum_of_their_parts_and_b_the_larger():
     t, h = K.uncertainty_variances(u)
     assert t == 1.0 + 2.0 + 4.0 + 0.5 * 8.0 * 16.0
     assert h == 32.0 + 64.0 + 1.0 * (128.0 + 256.0) + 8.0 * 512.0 + 3.0 * 3.0
+    # The fields' lag: counted where its square beyond the field's own error
+    # (floor and calibration) says more; a lost field's scale term then adds as σ.
+    u[K.U_YAW_HELD] = -1000.0
+    held = K.GYRO_SCALE_SIGMA * 1000.0
+    u[K.U_LAG] = 60.0  # 3600 − 384 < 4489: nothing
+    assert K.uncertainty_variances(u)[1] == h + held * held
+    u[K.U_LAG] = -100.0
+    assert K.uncertainty_variances(u)[1] == pytest.approx(
+        (math.sqrt(10000.0 - 384.0) + held) ** 2, rel=1e-15)
     for before, var, after in ((2e-6, 1e-6, 2e-6), (1e-6, 2e-6, 2e-6), (1e-6, 1e-6, 1e-6)):
         u[K.U_B] = before
         K.uncertainty_bias(u, var)
