@@ -74,6 +74,8 @@ QOS_GAP_SECONDS = 2.0
 OUT = os.path.join(REPO, 'out', 'hosts.json')
 RECORDER = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'hosts_recorder.py')
 OBSERVER_STATUS = 'observer: inputs'
+# s: the longest wait, once the gyro stopped, for the inputs still on their way to drain.
+DRAIN_S = 10.0
 MONITOR_STATUS = 'monitor: attitude estimate'
 GYRO_STATUS = 'gyro: outputs'
 STALE, WARN, OK = 3, 1, 0
@@ -287,6 +289,15 @@ class Pipeline:
         self.gyro_outputs.append(gyro.output)
         self.hold(1.0)
         self.update()
+        # Inputs a lossy phase delayed (reliable repairs) may still come in for
+        # seconds: wait, bounded, for a status that has nothing waiting.
+        deadline = time.monotonic() + DRAIN_S
+        while time.monotonic() < deadline:
+            last = self.local.last_status(OBSERVER_STATUS)
+            if last is not None and last[4].get('inputs_waiting') == '0':
+                break
+            self.hold(0.25)
+            self.update()
         for name, process in list(self.processes.items()):
             code = process.interrupt(10.0)
             assert code == 0, f'{name}: exit {code}\n{process.output[-3000:]}'
