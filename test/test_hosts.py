@@ -74,8 +74,6 @@ QOS_GAP_SECONDS = 2.0
 OUT = os.path.join(REPO, 'out', 'hosts.json')
 RECORDER = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'hosts_recorder.py')
 OBSERVER_STATUS = 'observer: inputs'
-# s: the longest wait, once the gyro stopped, for the inputs still on their way to drain.
-DRAIN_S = 10.0
 MONITOR_STATUS = 'monitor: attitude estimate'
 GYRO_STATUS = 'gyro: outputs'
 STALE, WARN, OK = 3, 1, 0
@@ -289,15 +287,6 @@ class Pipeline:
         self.gyro_outputs.append(gyro.output)
         self.hold(1.0)
         self.update()
-        # Inputs a lossy phase delayed (reliable repairs) may still come in for
-        # seconds: wait, bounded, for a status that has nothing waiting.
-        deadline = time.monotonic() + DRAIN_S
-        while time.monotonic() < deadline:
-            last = self.local.last_status(OBSERVER_STATUS)
-            if last is not None and last[4].get('inputs_waiting') == '0':
-                break
-            self.hold(0.25)
-            self.update()
         for name, process in list(self.processes.items()):
             code = process.interrupt(10.0)
             assert code == 0, f'{name}: exit {code}\n{process.output[-3000:]}'
@@ -663,7 +652,13 @@ def test_faults(bed, ros_domain_id, tmp_path, layout):
     # Every input accounted for in every status of every incarnation; nothing
     # waits once the gyro stopped.
     check_accounting(pipeline.local.status_list(OBSERVER_STATUS), steps_published(pipeline))
-    assert final['inputs_waiting'] == '0', final
+    # Nothing waits once the gyro stopped, but the measurement of a step whose
+    # increment never came (the gyro publishes the measurement first and was
+    # stopped before its last increment got out): a measurement waits for a step
+    # as new as it, where an increment is released at its deadline.
+    assert int(final['inputs_waiting']) <= 1, final
+    if final['inputs_waiting'] != '0':
+        assert int(final['steps']) == int(final['increments']), final
     phases = {p['name']: p for p in result['phases']}
     for name, kind, loss, seconds, _ in FAULTS:
         phase = phases[name]
