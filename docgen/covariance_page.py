@@ -399,7 +399,8 @@ with the linear one's, with 40 % lost and 50 ms bursts, 0.70 and 1.24 with half)
 (`uncertainty_hole`, `uncertainty_restart`), called by `sample_step`. The fields after a
 hole or a clipped gyro correct the heading with at least the Kalman gain of the doubt the
 gyro left (raw_imu.md); the heading's variance takes the gain each field applied
-(`S_DOUBT_GAIN`, read by `RawImuEstimator._track_field`), not the usual one: with 200 ms
+(`S_DOUBT_GAIN`, read by `FieldTracker.track`,
+`pipeline/field_tracking.py`), not the usual one: with 200 ms
 bursts its e²/σ² went from 0.29 to 0.72 over the 22 trials (0.68 with the fields' lag,
 above). A hole too long to bridge (over `max_dt`) grows both variances by the rotation it
 may have hidden, as `AttitudeUncertainty.unbridged` says (the heading's at most an

@@ -21,13 +21,13 @@ import math
 
 import numpy as np
 
-from ext_observer.core.ahrs.ahrs_filters import rotate
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.quaternion import multiply_floats
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, covariance_out
 from ext_observer.core.ahrs.uncertainty_kernel import SAMPLE_NON_FINITE, SAMPLE_OK, SAMPLE_RESIDUAL
 from ext_observer.core.validation import check_state
+from ext_observer.pipeline.field_tracking import FieldTracker
 from ext_observer.pipeline.guard import GUARD_REASONS
 from ext_observer.pipeline.imu_filter_parameters import ahrs_params, uncertainty_params
 from ext_observer.pipeline.imu_filter_outputs import heading_factor, mounting_matrix
@@ -107,8 +107,7 @@ class RawImuEstimator:
         self.world_frame = settings['world_frame']
         self.latest_field = None
         self._field_dt = None  # the last regular interval between fields, s
-        self._fields_used = 0
-        self._calibrated = True
+        self.fields = FieldTracker(self.core, self.uncertainty)
         self._gyro_bias = None
         self._held_bias = None
         self.configure(settings)
@@ -198,65 +197,7 @@ class RawImuEstimator:
         self.latest_field = field
         if self.core.initialized:
             self.core.update_mag(field, dt)
-            self._track_field(dt, field)
-
-    def _track_field(self, dt, field):
-        """Tell the uncertainty what the core's last field did to the heading."""
-        core = self.core
-        # The online magnetometer calibration, where the core has one: until it is ready the
-        # heading does not follow the field, and once ready the next used
-        # field sets it again (a running mean from 1).
-        calibration = getattr(core, 'calibration', None)
-        calibrated = calibration is None or bool(calibration.ready)
-        if calibrated and not self._calibrated:
-            self._fields_used = 0
-        self._calibrated = calibrated
-        # The calibration's own heading σ counts where the heading follows
-        # the calibrated field; a calibration not applied (the sensor looked
-        # calibrated, the field is used as given) does not move the heading,
-        # and the field's own error is heading_floor's.
-        sigma = (float(calibration.quality) if calibration is not None and calibration.applied
-                 else 0.0)
-        # The references' dip: how far the start's tilt error turns a field's heading.
-        dip = core.field('ref')[1] if core.use_mag else math.nan
-        # After a hole or a clipped gyro the field may have corrected the
-        # heading with the Kalman gain of the doubt the gyro left, above
-        # the usual one (also a field judged disturbed or a calibration
-        # still waiting): the covariance follows the gain applied.
-        doubt = float(core.field('doubt_gain'))
-        # Where the field corrects the heading: the heading of the field used
-        # (calibrated: as given until a calibration is applied) in the corrected
-        # estimate's frame, whose recent mean is the heading's lag behind the fields.
-        used = calibration.apply(field) if calibration is not None else field
-        mx, my, _ = rotate(*core.q, *used)
-        innovation = math.atan2(mx, my)
-        if doubt > 0.0:
-            self._fields_used += calibrated
-            self.uncertainty.field(dt, max(doubt, self.uncertainty.heading_gain(
-                self._fields_used, dt)), sigma, math.nan, dip, innovation)
-            return
-        if not (core.use_mag and calibrated and not core.mag_disturbed):
-            reference = math.nan
-            if not calibrated and core.use_mag and not core.mag_disturbed:
-                # Learning: the heading rests on the field as given; how far
-                # the calibration learned so far turns this field's heading
-                # says how wrong that may be (a disturbed field says nothing).
-                quality = float(calibration.quality)
-                if math.isfinite(quality):
-                    w, x, y, z = core.q
-                    turn = calibration.heading_turn(field, (
-                        2.0 * (x * z - w * y), 2.0 * (y * z + w * x),
-                        w * w - x * x - y * y + z * z))
-                    reference = turn * turn + quality * quality
-                else:
-                    reference = math.inf
-            self.uncertainty.field(dt, 0.0, 0.0, reference, dip)
-            return
-        # AhrsObserver.update_mag: a running mean of the first fields, then
-        # 1 − exp(−dt / tau_mag).
-        self._fields_used += 1
-        self.uncertainty.field(dt, self.uncertainty.heading_gain(self._fields_used, dt), sigma,
-                               math.nan, dip, innovation)
+            self.fields.track(dt, field)
 
     def unbridged(self, gyr, dt):
         """
@@ -271,7 +212,7 @@ class RawImuEstimator:
         var, t0 = self.core.unbridged(gyr, dt)
         self.uncertainty.unbridged(dt, var, t0)
         if self.core.field('mag_used') == 0.0:
-            self._fields_used = 0
+            self.fields.restart()
 
     def velocity(self, velocity, dt=None):
         """The body's velocity (m/s, IMU frame), ``dt`` s after the previous one (the velocity aid)."""
@@ -360,10 +301,9 @@ class RawImuEstimator:
     def _start(self, dt, acc=None):
         """The core has just initialized (and used the latest field, if any)."""
         self.uncertainty.start(dt, acc)
-        self._fields_used = 0
-        self._calibrated = True
+        self.fields.restart()
         if self.latest_field is not None and self.core.use_mag:
-            self._track_field(None, self.latest_field)
+            self.fields.track(None, self.latest_field)
 
     @property
     def frame(self):
