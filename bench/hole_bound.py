@@ -22,7 +22,13 @@ field lost together) on every trial and measures, with the optical reference
   from the bridge's error ``e0`` that keeps the RMS over the kept samples
   within the done-when's bound, and an **oracle blend** (6D): per 10 ms since
   the hole, the best affine blend (weights summing to one, fitted on the truth
-  over all holes) of the bridged vertical and the window's vertical.
+  over all holes) of the bridged vertical and the window's vertical;
+- the **motion model** (:mod:`bench.hole_predictor`): the lost rates
+  predicted by a linear map of the rates beside the hole, fitted on the
+  even-numbered trials' gyro and scored on the odd-numbered trials' holes
+  (out of sample), integrated by usual steps from the TRUE attitude; its
+  error at the first sample after, and the oracle blend with its vertical
+  in place of the bridge's.
 
 Holes count where the sample after them is in ``movement``; the blend's RMS
 runs over the kept ``movement`` samples, the hole's own error alone (no other
@@ -36,6 +42,7 @@ import sys
 
 import numpy as np
 
+from bench.hole_predictor import split_even_odd
 from bench.load_batch import BURST_PERIOD, CASES as LOSS_CASES, RATIO_BOUND, trial_kept
 
 CASES = ('burst50ms', 'burst200ms')
@@ -122,7 +129,7 @@ def angle_from_up(v):
     return np.arctan2(np.linalg.norm(v[..., :2], axis=-1), v[..., 2])
 
 
-def trial_holes(trial, case):
+def trial_holes(trial, case, models=()):
     """
     Per hole after which the body moves: the bridge's errors and the windows' verticals.
 
@@ -132,7 +139,11 @@ def trial_holes(trial, case):
     coordinates), ``acc_up`` (holes, bins, 3: the window's vertical per
     :data:`BIN`), ``scored`` (holes, bins: a kept movement sample),
     ``heading`` (holes, bins: the field window's heading error, NaN where
-    the field has no clean reference).
+    the field has no clean reference). With ``models``
+    (:class:`~bench.hole_predictor.MotionModel`, by name): each one's errors
+    (its predicted rates through the hole) under its name, and ``model_up``
+    (holes, bins, 3): per bin the vertical of the last model whose input has
+    come by then.
     """
     from ext_observer.broad.scoring import error_angles
     from ext_observer.core.quaternion import conjugate
@@ -145,7 +156,8 @@ def trial_holes(trial, case):
     acc_w = rotate(q, trial.acc)
     field_ref, field_w = _field_reference(trial, q)
     out = {k: [] for k in ('bridge', 'hermite', 'floor', 'prior_up', 'acc_up', 'scored',
-                           'heading')}
+                           'heading', 'model_up')}
+    out.update({name: [] for name in models})
     for i0, i1 in zip(before, after):
         last = i1 + steps[-1]
         if not trial.movement[i1] or last >= len(trial) or not np.isfinite(q[[i0, i1]]).all():
@@ -163,7 +175,22 @@ def trial_holes(trial, case):
                    else np.ones(bins, dtype=bool))
         out['scored'].append(stretch & trial.movement[i1 + steps] & np.isfinite(q[i1 + steps, 0]))
         out['heading'].append(_field_heading(field_w, field_ref, i1, steps))
+        if models:
+            _model_holes(out, models, trial.gyr, q, i0, i1, steps, period)
     return {k: np.array(v) for k, v in out.items()}
+
+
+def _model_holes(out, models, gyr, q, i0, i1, steps, period):
+    """Each motion model's error at ``i1`` and its vertical per bin, as ``prior_up``."""
+    from ext_observer.broad.scoring import error_angles
+    from ext_observer.core.quaternion import conjugate
+    up = np.full((len(steps), 3), math.nan)
+    for name, model in models.items():
+        lost = model.predict(gyr, i0, i1)
+        qm = gyro_through(q[i0], np.concatenate([lost, gyr[i1:i1 + 1]]), period)
+        out[name].append(error_angles(qm, q[i1]))
+        up[steps >= model.reach(int(i1 - i0 - 1)) - 1] = rotate(q[i1], rotate(conjugate(qm), UP))
+    out['model_up'].append(up)
 
 
 def _field_reference(trial, q):
@@ -190,7 +217,8 @@ def blend_weights(prior_up, acc_up, scored):
     ``h = a h_p + (1 − a) h_a`` of the horizontal parts (small angles) at
     its least squares in each bin (NaN in a bin without a scored hole).
     """
-    d = prior_up[:, None, :2] - acc_up[..., :2]
+    prior = prior_up if prior_up.ndim == 3 else prior_up[:, None, :]  # (per bin or per hole)
+    d = prior[..., :2] - acc_up[..., :2]
     w = (scored & np.isfinite(acc_up[..., 0]))[..., None]
     ha = np.where(w, acc_up[..., :2], 0.0)
     d = np.where(w, d, 0.0)
@@ -201,7 +229,8 @@ def blend_weights(prior_up, acc_up, scored):
 
 def blended_angles(prior_up, acc_up, a):
     """The angles (rad) from the vertical of the blend with the bridge's weights ``a`` per bin."""
-    mixed = a[None, :, None] * prior_up[:, None, :] + (1.0 - a[None, :, None]) * acc_up
+    prior = prior_up if prior_up.ndim == 3 else prior_up[:, None, :]
+    mixed = a[None, :, None] * prior + (1.0 - a[None, :, None]) * acc_up
     return angle_from_up(mixed / np.linalg.norm(mixed, axis=-1, keepdims=True))
 
 
@@ -242,15 +271,26 @@ def trial_mean(parts, figure):
     return float(np.nanmean(values)) if np.isfinite(values).any() else math.nan
 
 
-def case_figures(trials, case):
-    """All the figures of one case: per trial over its holes, then the mean over the trials."""
-    parts = [trial_holes(t, case) for t in trials]
+def pooled_weights(parts, key):
+    """The oracle blend's weights per bin of the vertical ``key`` of all the ``parts``' holes."""
+    pool = {k: np.concatenate([p[k] for p in parts]) for k in (key, 'acc_up', 'scored')}
+    return blend_weights(pool[key], pool['acc_up'], pool['scored'])
+
+
+def scored_parts(trials, case, models=()):
+    """:func:`trial_holes` of each trial with a hole, with the angles of its windows' verticals."""
+    parts = [trial_holes(t, case, models) for t in trials]
     parts = [p for p in parts if len(p['bridge'])]
     for p in parts:
         p['acc'] = angle_from_up(p['acc_up'])
         p['prior'] = np.broadcast_to(angle_from_up(p['prior_up'])[:, None], p['acc'].shape)
-    pool = {k: np.concatenate([p[k] for p in parts]) for k in ('prior_up', 'acc_up', 'scored')}
-    weights = blend_weights(pool['prior_up'], pool['acc_up'], pool['scored'])
+    return parts
+
+
+def case_figures(trials, case):
+    """All the figures of one case: per trial over its holes, then the mean over the trials."""
+    parts = scored_parts(trials, case)
+    weights = pooled_weights(parts, 'prior_up')
     kept = BURST_PERIOD - BURST[case]
     bins_at = {t: int(round(t / BIN)) for t in WINDOWS}
 
@@ -283,6 +323,48 @@ def case_figures(trials, case):
                 parts, lambda p: rms_deg(p['acc'][:, at])),
             'field_at_tau': math.nan if at is None else trial_mean(
                 parts, lambda p: rms_deg(p['heading'][:, at]))}
+    return fig
+
+
+def held_out_figures(train, test, case):
+    """
+    The motion models fitted on ``train``'s gyro, scored on ``test``'s holes beside the bridge.
+
+    Per shape (:data:`~bench.hole_predictor.SHAPES`) its error at the first
+    sample after (total, heading, inclination) with the ``K`` and ridge the
+    training trials chose, and with each ``K`` alone; the 6D oracle blends
+    (fitted on ``test``'s truth) of the bridge's and the models' verticals
+    with the accelerometer's window, over the kept movement samples.
+    """
+    from bench.hole_predictor import KS, MotionModel, SHAPES
+    models = {shape: MotionModel(train, shape) for shape in SHAPES}
+    parts = scored_parts(test, case, models)
+    kept = BURST_PERIOD - BURST[case]
+
+    def errors(ps, key):
+        return [trial_mean(ps, lambda p: rms_deg(p[key][:, k])) for k in range(3)]
+    fig = {'case': case, 'trials': len(test), 'holes': int(sum(len(p['bridge']) for p in parts)),
+           'chosen': {s: {n: c for n, c in m.chosen.items()} for s, m in models.items()},
+           'per_k': {}, 'kept_rms_6d': {}, 'tau': {}}
+    fig.update({key: errors(parts, key) for key in ('bridge', 'hermite', 'floor') + SHAPES})
+    for k in KS:
+        alone = {shape: MotionModel(train, shape, ks=(k,)) for shape in SHAPES}
+        ps = scored_parts(test, case, alone)
+        fig['per_k'][k] = {shape: errors(ps, shape) for shape in SHAPES}
+    # In sample: fitted on the scored trials themselves, what a linear map could do at best.
+    ps = scored_parts(test, case, {shape: MotionModel(test, shape) for shape in SHAPES})
+    fig['per_k']['in sample'] = {shape: errors(ps, shape) for shape in SHAPES}
+    for key, name in (('prior_up', 'bridge'), ('model_up', 'model')):
+        w = pooled_weights(parts, key)
+        fig['kept_rms_6d'][name] = trial_mean(parts, lambda p: rms_deg(np.broadcast_to(
+            angle_from_up(p[key]).reshape(len(p['acc']), -1), p['acc'].shape), p['scored']))
+        fig['kept_rms_6d'][name + '_blend'] = trial_mean(
+            parts, lambda p: rms_deg(blended_angles(p[key], p['acc_up'], w), p['scored']))
+        fig['kept_rms_6d'][name + '_weight'] = {t: float(w[int(round(t / BIN))]) for t in WINDOWS}
+    for mode, k in (('9D', 0), ('6D', 2)):
+        fig['tau'][mode] = {key: budget_tau([rms_deg(p[key][:, k]) for p in parts],
+                                            FULL_ERROR[mode], RATIO_BOUND[case], kept)
+                            for key in ('bridge',) + SHAPES}
     return fig
 
 
@@ -337,6 +419,48 @@ def markdown(figures, count):
     return '\n'.join(lines)
 
 
+def held_out_markdown(figures, count):
+    """The tables of :func:`held_out_figures` for each case."""
+    from bench.hole_predictor import KS, SHAPES
+    titles = {'burst50ms': '50 ms', 'burst200ms': '200 ms'}
+    lines = [f'Motion models fitted on the {count[0]} even-numbered trials\' gyro, scored on the '
+             f'{count[1]} odd-numbered trials\' holes (the same mask); total / heading / '
+             'inclination at the first sample after, degrees.',
+             '', '| bursts | holes | straight-line bridge | cubic end turn | motion model, causal '
+             '| motion model, two-sided | the lost samples\' own gyro '
+             '| K, ridge (causal; two-sided) |',
+             '|---|---|---|---|---|---|---|---|']
+    for f in figures:
+        cells = [' / '.join(f'{v:.2f}' for v in f[k])
+                 for k in ('bridge', 'hermite') + SHAPES + ('floor',)]
+        chosen = '; '.join(' or '.join(sorted({f'{k}, {r:g}'
+                                               for k, r, _ in f['chosen'][s].values()}))
+                           for s in SHAPES)
+        lines.append(f'| {titles[f["case"]]} | {f["holes"]} | ' + ' | '.join(cells)
+                     + f' | {chosen} |')
+    lines += ['', '| bursts | K | causal: total / incl. | two-sided: total / incl. |',
+              '|---|---|---|---|']
+    for f in figures:
+        for k in KS + ('in sample',):
+            lines.append(f'| {titles[f["case"]]} | {k} | ' + ' | '.join(
+                f'{f["per_k"][k][s][0]:.2f} / {f["per_k"][k][s][2]:.2f}' for s in SHAPES) + ' |')
+    lines += ['', '| bursts | 6D bound | over the kept movement samples, the hole\'s error alone: '
+              'bridge kept | oracle blend with the bridge | motion model kept '
+              '| oracle blend with the motion model | √(full² + blend²): bridge; model '
+              '| largest τ, 9D; 6D: bridge, two-sided model |',
+              '|---|---|---|---|---|---|---|---|']
+    for f in figures:
+        k, tau = f['kept_rms_6d'], f['tau']
+        lines.append(
+            f'| {titles[f["case"]]} | {RATIO_BOUND[f["case"]] * FULL_ERROR["6D"]:.2f} '
+            f'| {k["bridge"]:.2f} | {k["bridge_blend"]:.2f} | {k["model"]:.2f} '
+            f'| {k["model_blend"]:.2f} | {math.hypot(FULL_ERROR["6D"], k["bridge_blend"]):.2f}; '
+            f'{math.hypot(FULL_ERROR["6D"], k["model_blend"]):.2f} | '
+            + '; '.join(f'{_ms(t["bridge"])}, {_ms(t["two-sided"])}' for t in tau.values())
+            + ' |')
+    return '\n'.join(lines)
+
+
 def main(argv=None):
     """Measure; print the Markdown; return 0 (2 without data)."""
     from ext_observer.broad import data_dir, find_trials, load_trial
@@ -353,9 +477,13 @@ def main(argv=None):
     trials = [load_trial(path, name) for name, path in found]
     figures = [case_figures(trials, case) for case in CASES]
     print(markdown(figures, len(trials)))
+    train, test = split_even_odd(trials)
+    held_out = [held_out_figures(train, test, case) for case in CASES] if train and test else []
+    if held_out:
+        print('\n' + held_out_markdown(held_out, (len(train), len(test))))
     if args.json:
         with open(args.json, 'w') as out:
-            json.dump(figures, out, indent=1, default=str)
+            json.dump({'all': figures, 'held_out': held_out}, out, indent=1, default=str)
     return 0
 
 
