@@ -19,7 +19,7 @@ import numpy as np
 
 KS = (3, 10, 30, 100)  # samples on each side tried
 RIDGES = (1e-8, 1e-5, 1e-3, 1e-1)  # × the inputs' mean power
-STRIDE = 10  # samples between training windows (about 3,000 windows a minute, per axis)
+STRIDE = 10  # samples between training windows (a 60 s trial at 286 Hz gives 1,700)
 SHAPES = ('causal', 'two-sided')
 
 
@@ -118,7 +118,7 @@ class MotionModel:
                     whole = [a + b for a, b in zip(sums[0][:2], sums[1][:2])]
                     best = (k, ridge, mse, _solve(whole[0], whole[1], ridge))
         k, ridge, mse, weights = best
-        self.chosen[lost] = (k, ridge, math.sqrt(mse))
+        self.chosen[lost] = (k, ridge, math.sqrt(max(mse, 0.0)))  # (rounding: from sums)
         self.fits[lost] = (k, _after(self.shape, k), weights)
 
     def reach(self, lost):
