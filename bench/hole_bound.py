@@ -181,7 +181,7 @@ def trial_holes(trial, case, models=()):
 
 
 def _model_holes(out, models, gyr, q, i0, i1, steps, period):
-    """Each motion model's error at ``i1`` and its vertical per bin, as ``prior_up``."""
+    """Each motion model's error at ``i1``, and their vertical per bin (like ``prior_up``)."""
     from ext_observer.broad.scoring import error_angles
     from ext_observer.core.quaternion import conjugate
     up = np.full((len(steps), 3), math.nan)

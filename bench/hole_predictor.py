@@ -96,7 +96,8 @@ class MotionModel:
 
     ``MotionModel(train, shape)``; ``predict(gyr, i0, i1)`` gives the rates
     lost between the kept samples ``i0`` and ``i1`` (``(i1 − i0 − 1, 3)``);
-    ``chosen[lost]`` the ``(K, ridge, validation RMS)`` of each length and
+    ``chosen[lost]`` the ``(K, ridge, validation RMS)`` of each length (the
+    error of the lost rates' sum, rad/s, per axis) and
     ``ks`` restricts the ``K`` tried (one ``K``: that ``K``'s best ridge).
     """
 
