@@ -309,9 +309,13 @@ magnetometer still being calibrated) nothing shrinks `P_h`: it grows
 without bound. A field lost (none for `FIELD_SILENT`, 1 s, `mag_timeout`'s
 default) adds the gyro's scale error to a heading a field set:
 `(GYRO_SCALE_SIGMA ψ)²`, `ψ` the net turn about the vertical since (0.3 %,
-the drift of dev trial 08 without its field, [raw_imu.md](raw_imu.md#the-magnetometers-frame-and-a-lost-field));
-each field back shrinks `ψ` by `1 − κ` as it corrects the heading. Fields
-that come, used or rejected, add nothing to it.
+the drift of dev trial 08 without its field, [raw_imu.md](raw_imu.md#the-magnetometers-frame-and-a-lost-field)),
+and its axes' errors: `(GYRO_MOTION_SIGMA ρ)²`, `ρ` the whole rotation since,
+about any axis (0.05 %: a body turning back and forth rectifies them into a
+drift with no net turn, 0.085 % of dev trial 34's rotation); the two in
+quadrature are the held term `h`. Each field back shrinks `ψ` and `ρ` by
+`1 − κ` as it corrects the heading. Fields that come, used or rejected, add
+nothing to them.
 
 **The heading's lag behind the fields.** What the model propagates is the error its
 noises explain; a drift it does not model (a gyro's scale error in fast turns, a
@@ -326,7 +330,7 @@ the correction works on it; a full correction, the heading taken from a field,
 clears it), `l²` beyond the field's own error (`heading_floor² + quality²`) is an
 error of the heading: where it is larger than the model's `V_h`, it is `V_h`. It
 is held while no field comes, and a lost field's scale term then adds to it as σ,
-`(√(l² − floor²) + GYRO_SCALE_SIGMA |ψ|)²`: the drift that made the lag goes on,
+`(√(l² − floor²) + h)²`: the drift that made the lag goes on,
 the same turn's error. On dev trial 08 the heading falls 8° behind its fields in
 30 s of fast turns while the model claims 2°; from 60 s on 96 % of the samples are
 within 2σ with it (79 % without). The time was chosen on the even trials among 3,

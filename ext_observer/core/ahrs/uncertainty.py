@@ -27,7 +27,7 @@ from .uncertainty_kernel import (
     U_PHI, U_PT, U_Q_BIAS, U_Q_GYRO, U_Q_RATE, U_R_ACC, U_R_GYRO, U_SIZE, U_STAMP2,
     U_START_F, U_START_M, U_START_N, U_START_T, U_START_V, U_TAU_ACC,
     U_TAU_REST, U_TILT_FLOOR, U_UNKNOWN, U_WH2, U_WZ2, U_FIELD_AGE, U_YAW_HELD,
-    INNOVATION_TIME)
+    U_ROTATION_HELD, INNOVATION_TIME)
 
 __all__ = [
     'AttitudeUncertainty',
@@ -206,7 +206,7 @@ class AttitudeUncertainty:
     def _clear_start(self):
         u = self._u
         u[U_START_T] = u[U_START_N] = u[U_START_M] = u[U_START_F] = u[U_START_V] = 0.0 * u[U_PT]
-        u[U_YAW_HELD] = u[U_FIELD_AGE] = u[U_LAG] = 0.0 * u[U_PT]
+        u[U_YAW_HELD] = u[U_ROTATION_HELD] = u[U_FIELD_AGE] = u[U_LAG] = 0.0 * u[U_PT]
         for i in _HS_SLOTS:
             u[i] = 0.0 * u[U_PT]
 
@@ -419,6 +419,7 @@ class AttitudeUncertainty:
         st[U_PH] = a * a * (st[U_PH] + used * unknown) + gain * gain * self._r_mag
         st[U_CH] = a * st[U_CH]
         st[U_YAW_HELD] = a * st[U_YAW_HELD]
+        st[U_ROTATION_HELD] = a * st[U_ROTATION_HELD]
         st[U_FIELD_AGE] = 0.0 * st[U_FIELD_AGE]
         unknown = (1 - used) * unknown
         self.heading_set = self.heading_set | used

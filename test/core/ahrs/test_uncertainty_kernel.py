@@ -216,9 +216,11 @@ def test_the_published_variances_are_the_sum_of_their_parts_and_b_the_larger():
     assert t == 1.0 + 2.0 + 4.0 + 0.5 * 8.0 * 16.0
     assert h == 32.0 + 64.0 + 1.0 * (128.0 + 256.0) + 8.0 * 512.0 + 3.0 * 3.0
     # The fields' lag: counted where its square beyond the field's own error
-    # (floor and calibration) says more; a lost field's scale term then adds as σ.
+    # (floor and calibration) says more; a lost field's scale and axes terms
+    # (in quadrature) then add as σ.
     u[K.U_YAW_HELD] = -1000.0
-    held = K.GYRO_SCALE_SIGMA * 1000.0
+    u[K.U_ROTATION_HELD] = 3000.0
+    held = math.hypot(K.GYRO_SCALE_SIGMA * 1000.0, K.GYRO_MOTION_SIGMA * 3000.0)
     u[K.U_LAG] = 60.0  # 3600 − 384 < 4489: nothing
     assert K.uncertainty_variances(u)[1] == h + held * held
     u[K.U_LAG] = -100.0
@@ -228,6 +230,28 @@ def test_the_published_variances_are_the_sum_of_their_parts_and_b_the_larger():
         u[K.U_B] = before
         K.uncertainty_bias(u, var)
         assert u[K.U_B] == after
+
+
+def test_a_lost_fields_rotation_counts_every_axis_unsigned_and_a_used_field_shrinks_it():
+    # After FIELD_SILENT without a field, each sample adds |ω| dt to the
+    # rotation held (turning back and forth about a horizontal axis too) and
+    # ω's vertical part, signed, to the yaw held; a field that corrects the
+    # heading with gain κ keeps 1 − κ of both.
+    K = uncertainty_kernel
+    tracker = AttitudeUncertainty(use_mag=True)
+    tracker.start(0.01)
+    u = tracker._u
+    dt, rates = 0.01, ((0.0, 0.0, 2.0), (3.0, 0.0, -4.0), (-3.0, 0.0, 0.0))
+    for _ in range(int(K.FIELD_SILENT / dt) + 1):
+        K.uncertainty_step(u, dt, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
+    assert u[K.U_ROTATION_HELD] == 0.0
+    for g in rates:
+        K.uncertainty_step(u, dt, *g, 1.0, 0.0, 0.0, 0.0, 0.0)
+    assert u[K.U_ROTATION_HELD] == pytest.approx(dt * (2.0 + 5.0 + 3.0), rel=1e-12)
+    assert u[K.U_YAW_HELD] == pytest.approx(dt * (2.0 - 4.0), rel=1e-12)
+    tracker.field(0.01, 0.25)
+    assert u[K.U_ROTATION_HELD] == pytest.approx(0.75 * dt * 10.0, rel=1e-12)
+    assert u[K.U_FIELD_AGE] == 0.0
 
 
 def test_a_holes_step_corrects_the_inclination_variance_as_the_steps_it_missed():
