@@ -165,11 +165,50 @@ def gap_figures(path, start, gap, parameters=None):
     return covered, math.degrees(step), step / sigma[k1 - 1]
 
 
+def hold_figures(path, start, gap):
+    """
+    A BROAD trial's field removed from ``start`` for ``gap`` s (None: for good).
+
+    Returns the shares of moving samples whose heading error is within 2σ
+    while the field is lost (the heading held) and after its return (NaN
+    where there are none).
+    """
+    from ext_observer.broad.data import load_trial
+    trial = load_trial(path)
+    mag = trial.mag * 1e-6
+    k0 = int(start * trial.rate)
+    k1 = len(mag) if gap is None else min(k0 + int(gap * trial.rate), len(mag))
+    mag[k0:k1] = np.nan
+    run = attitude_from_imu(trial.gyr, trial.acc, mag, rate=trial.rate)
+    heading, sigma = signed_heading(run.quaternions, trial.quat), run.heading_std
+    scored = np.isfinite(heading) & trial.movement
+    within = np.abs(heading) <= 2.0 * sigma
+    return tuple(float(np.mean(within[a:b][scored[a:b]])) if scored[a:b].any() else math.nan
+                 for a, b in ((k0, k1), (k1, len(mag))))
+
+
+def _every_trial(folder, begin):
+    import glob
+    import os
+    print('| trial | 5 s: held, after | 60 s: held, after | for good: held |')
+    print('| --- | --- | --- | --- |')
+    for path in sorted(glob.glob(os.path.join(folder, '*.hdf5'))):
+        cells = [hold_figures(path, begin, gap) for gap in (5.0, 60.0, None)]
+        print(f'| {os.path.basename(path)[:2]} | ' + ' | '.join(
+            ', '.join(f'{share:.3f}' for share in cell[:2 if gap else 1])
+            for cell, gap in zip(cells, (5.0, 60.0, None))) + ' |', flush=True)
+
+
 if __name__ == '__main__':
     # python test/test_field_frame_and_timeout.py TRIAL.hdf5 [START]: the figures of
-    # docs/raw_imu.md, with mag_timeout at its default and at 0 (the gap's own gain).
+    # docs/raw_imu.md, with mag_timeout at its default and at 0 (the gap's own gain);
+    # with a folder (data_hdf5), every trial's shares within 2σ, held and after.
+    import os
     import sys
     where, begin = sys.argv[1], float(sys.argv[2]) if len(sys.argv) > 2 else 60.0
+    if os.path.isdir(where):
+        _every_trial(where, begin)
+        sys.exit(0)
     share = gap_figures(where, begin, 0.0)[0]
     print(f'no gap: within 2σ {share:.3f} from {begin:g} s on')
     for length in (5.0, 60.0, None):
