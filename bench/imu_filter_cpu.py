@@ -10,7 +10,8 @@ over the publishing window, in ``--rounds`` interleaved runs of each:
 
 - ``relay``: this module's :class:`ImuRelay`, the raw-IMU message path
   without the maths (per sample the node's two outputs, ``imu/data`` and
-  ``attitude_estimate``; the latest field kept), with the node's QoS
+  ``attitude_estimate``, each, as the node does, only while it has a
+  subscriber; the latest field kept), with the node's QoS
   (inputs best effort, outputs reliable, depth 100);
 - ``imu_filter``: the shipped ``imu_filter_node`` (the console script next
   to this interpreter, else ``python -m ext_observer.nodes.imu_filter_node``) with
@@ -83,6 +84,7 @@ class ImuRelay:
 
     def __init__(self, context, raw=False):
         from geometry_msgs.msg import QuaternionStamped
+        from rclpy.event_handler import PublisherEventCallbacks
         from rclpy.node import Node
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import Imu, MagneticField
@@ -91,9 +93,14 @@ class ImuRelay:
         # The node's QoS at its defaults (queue_depth 100): reliable outputs,
         # best-effort inputs, so that neither side drops what the other takes.
         out = QoSProfile(depth=RELAY_DEPTH)
-        self.publisher = self.node.create_publisher(Imu, 'imu/data', out)
-        self.estimate_publisher = self.node.create_publisher(
-            QuaternionStamped, 'attitude_estimate', out)
+        # Each output published only while it has a subscriber, as the node
+        # does (the benchmark reads imu/data only): the same work on each side.
+        self.readers = {}
+        self.publisher, self.estimate_publisher = (
+            self.node.create_publisher(kind, topic, out, event_callbacks=PublisherEventCallbacks(
+                matched=lambda info, topic=topic: self.readers.__setitem__(
+                    topic, info.current_count > 0)))
+            for kind, topic in ((Imu, 'imu/data'), (QuaternionStamped, 'attitude_estimate')))
         self._estimate = QuaternionStamped()
         self._estimate.quaternion.w = 1.0
         inputs = QoSProfile(depth=RELAY_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -115,9 +122,12 @@ class ImuRelay:
         out.header = msg.header
         out.angular_velocity = msg.angular_velocity
         out.linear_acceleration = msg.linear_acceleration
-        self.publisher.publish(out)
-        self._estimate.header.stamp = msg.header.stamp
-        self.estimate_publisher.publish(self._estimate)
+        readers = self.readers
+        if readers.get('imu/data'):
+            self.publisher.publish(out)
+        if readers.get('attitude_estimate'):
+            self._estimate.header.stamp = msg.header.stamp
+            self.estimate_publisher.publish(self._estimate)
 
 
 class RawImuRelay(ImuRelay):
@@ -141,8 +151,11 @@ class RawImuRelay(ImuRelay):
 
     def imu_data_raw_callback(self, raw):
         """Publish the sample's bytes and an estimate with its stamp."""
-        self.publisher.publish(raw)
-        self.estimate_publisher.publish(self._head + raw[4:12] + self._tail)
+        readers = self.readers
+        if readers.get('imu/data'):
+            self.publisher.publish(raw)
+        if readers.get('attitude_estimate'):
+            self.estimate_publisher.publish(self._head + raw[4:12] + self._tail)
 
 
 def step_only_node():
@@ -152,7 +165,8 @@ def step_only_node():
     ``imu_filter_node`` with its sample callback cut down to what no raw-IMU
     node can leave out: the stamp, one compiled call of the estimator's
     and the covariance's step (``sample_step``, the covariance written into
-    the message), and the two outputs; the field straight to the
+    the message), and the two outputs (each while it has a subscriber, as
+  in the node); the field straight to the
     estimator. No validation, no stamp checks, no unit checks, no
     counters: not a node to run, a floor to measure the node's own checks
     against (what they cost is the node's CPU above this one's).
@@ -183,15 +197,17 @@ def step_only_node():
             _, w, x, y, z = core.kernels.sample_step(
                 core.flat_state, tracker.state, msg.orientation_covariance, v.x, v.y, v.z,
                 a.x, a.y, a.z, dt, math.inf)
-            out = self._estimate_msg
-            out.header.stamp = stamp
-            o = out.quaternion
-            o.w, o.x, o.y, o.z = w, x, y, z
-            self.estimate_publisher.publish(out)
-            n = (w * w + x * x + y * y + z * z) ** 0.5
-            o = msg.orientation
-            o.w, o.x, o.y, o.z = w / n, x / n, y / n, z / n
-            self.imu_publisher.publish(msg)
+            if self._publish_estimate:
+                out = self._estimate_msg
+                out.header.stamp = stamp
+                o = out.quaternion
+                o.w, o.x, o.y, o.z = w, x, y, z
+                self.estimate_publisher.publish(out)
+            if self._publish_imu:
+                n = (w * w + x * x + y * y + z * z) ** 0.5
+                o = msg.orientation
+                o.w, o.x, o.y, o.z = w / n, x / n, y / n, z / n
+                self.imu_publisher.publish(msg)
 
         def imu_mag_callback(self, msg):
             stamp = msg.header.stamp

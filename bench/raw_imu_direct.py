@@ -6,7 +6,7 @@ node (``ImuFilterNode``, its defaults) and :class:`bench.imu_filter_cpu.ImuRelay
 in one process and calls their callbacks with prepared messages: the BROAD
 excerpt of the tests at 1 kHz, a field every tenth sample (no executor, no
 DDS receive, warm caches). Publishing is replaced by a no-op in both, and
-the node publishes ``imu/data`` as if subscribed, so both build their two
+both publish as if each output had a subscriber, so both build their two
 outputs per sample and send none: what is timed is each node's own Python
 work. Beside them, each part timed alone: the node's ROS-free pipeline
 (:class:`~ext_observer.pipeline.raw_imu.RawImuPipeline`: input checks, stamps, the
@@ -23,11 +23,14 @@ import sys
 import time
 
 from bench.numpy_use import numpy_use_per_step
-from bench.imu_filter_cpu import ImuRelay, load_samples
+from bench.imu_filter_cpu import ImuRelay, load_samples, RawImuRelay
 from bench.rosutil import set_stamp
 
 SAMPLES = 5000
 RATE = 1000  # Hz
+# The node starts on the plain kernels and goes on with the compiled ones once
+# its background compile has them (31 s cold here): what it runs is timed after.
+COMPILE_WAIT = 300  # s
 MAG_EVERY = 10  # one field per this many IMU samples (100 Hz)
 PASSES = 8  # the first warms up; the best of the others (shared cores)
 
@@ -73,6 +76,22 @@ def _messages(inputs):
             m.x, m.y, m.z = field
         out.append((imu, mag))
     return out
+
+
+def _serialized(messages):
+    """The messages as CDR bytes, as a subscription with ``raw=True`` hands them."""
+    from rclpy.serialization import serialize_message
+    return [(serialize_message(imu), None if mag is None else serialize_message(mag))
+            for imu, mag in messages]
+
+
+def _compiled(node):
+    """Run the node's compile timer until it goes on with the compiled kernels (or gives up)."""
+    deadline = time.monotonic() + COMPILE_WAIT
+    while node.compiler is not None and time.monotonic() < deadline:
+        node.compile_timer_callback()
+        time.sleep(0.1)
+    return node.compiler is None
 
 
 def _feed(imu_callback, mag_callback, messages):
@@ -123,11 +142,15 @@ def direct(count=SAMPLES):
     Returns
     -------
     dict
-        µs per IMU sample: ``imu_filter_callbacks``, ``relay_callbacks``,
-        ``pipeline``, ``core``; µs per call: ``publish_imu``,
+        µs per IMU sample: ``imu_filter_callbacks``, ``relay_callbacks``
+        (typed messages), ``imu_filter_serialized_callbacks``,
+        ``raw_relay_callbacks`` (CDR bytes), ``pipeline``, ``core``; µs per
+        call: ``publish_imu``,
         ``publish_estimate``; ``outputs_per_sample`` of each node (2 when
         both outputs were built); ``numpy_use_per_sample``
-        (:func:`bench.numpy_use.numpy_use_per_step`); ``samples``.
+        (:func:`bench.numpy_use.numpy_use_per_step`); ``samples``;
+        ``compiled`` (the node went on with the compiled kernels before
+        the timing).
 
     """
     import rclpy
@@ -141,23 +164,37 @@ def direct(count=SAMPLES):
     rclpy.init(context=context)
     try:
         node = ImuFilterNode(context=context)
-        relay = ImuRelay(context)
+        relay, raw_relay = ImuRelay(context), RawImuRelay(context)
         real_imu, real_estimate = node.imu_publisher.publish, node.estimate_publisher.publish
         silent = {}
         for name, publisher in (('imu_filter', node.imu_publisher),
                                 ('imu_filter', node.estimate_publisher),
-                                ('relay', relay.publisher), ('relay', relay.estimate_publisher)):
+                                ('relay', relay.publisher), ('relay', relay.estimate_publisher),
+                                ('raw_relay', raw_relay.publisher),
+                                ('raw_relay', raw_relay.estimate_publisher)):
             publisher.publish = silent.setdefault(name, _NoPublish())
-        # As with a subscriber on imu/data (the live benchmark has one).
-        node._publish_imu = True
-        result = {'samples': count}
+        silent['imu_filter_serialized'] = silent['imu_filter']
+        # As with a subscriber on each output: all build their two outputs.
+        node._publish_imu = node._publish_estimate = True
+        for r in (relay, raw_relay):
+            r.readers.update({'imu/data': True, 'attitude_estimate': True})
+        result = {'samples': count, 'compiled': _compiled(node)}
         # One time line per consumer: the node must see no gap between passes.
-        lines = {label: _Timeline(samples, count) for label in ('imu_filter', 'relay', 'parts')}
-        for label, imu_callback, mag_callback in (
-                ('imu_filter', node.imu_data_raw_callback, node.imu_mag_callback),
-                ('relay', relay.imu_data_raw_callback, relay.imu_mag_callback)):
+        lines = {label: _Timeline(samples, count) for label in (
+            'imu_filter', 'relay', 'raw_relay', 'parts')}
+        # The node's two paths go on from each other's last sample.
+        lines['imu_filter_serialized'] = lines['imu_filter']
+        for label, imu_callback, mag_callback, bytes_in in (
+                ('imu_filter', node.imu_data_raw_callback, node.imu_mag_callback, False),
+                ('imu_filter_serialized', node.imu_data_raw_serialized_callback,
+                 node.imu_mag_serialized_callback, True),
+                ('relay', relay.imu_data_raw_callback, relay.imu_mag_callback, False),
+                ('raw_relay', raw_relay.imu_data_raw_callback, raw_relay.imu_mag_callback,
+                 True)):
             before = silent[label].count
-            runs = [_feed(imu_callback, mag_callback, _messages(lines[label].inputs()))
+            convert = _serialized if bytes_in else list
+            runs = [_feed(imu_callback, mag_callback,
+                          convert(_messages(lines[label].inputs())))
                     for _ in range(PASSES)]
             result[f'{label}_callbacks'] = min(runs[1:])
             result.setdefault('outputs_per_sample', {})[label] = (
@@ -178,6 +215,7 @@ def direct(count=SAMPLES):
         result['publish_estimate'] = _best(lambda: real_estimate(estimate), count)
         node.destroy_node()
         relay.node.destroy_node()
+        raw_relay.node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
     return result
@@ -200,8 +238,9 @@ def main(argv=None):
     parser.add_argument('--json', metavar='PATH', help='also write the results there')
     args = parser.parse_args(argv)
     result = direct(args.samples)
-    for key in ('imu_filter_callbacks', 'relay_callbacks', 'pipeline', 'core',
-                'publish_imu', 'publish_estimate'):
+    print(f'compiled kernels: {result["compiled"]}')
+    for key in ('imu_filter_callbacks', 'relay_callbacks', 'imu_filter_serialized_callbacks',
+                'raw_relay_callbacks', 'pipeline', 'core', 'publish_imu', 'publish_estimate'):
         print(f'{key}: {result[key]:.1f} µs')
     print(f'numpy on the callbacks\' path: {result["numpy_use_per_sample"] or "none"}')
     if args.json:

@@ -180,6 +180,12 @@ def _direct_lines(d):
     rows = [
         ['`imu_filter_node`\'s two callbacks (`imu/data_raw`, `imu/mag`)', _us(node)],
         ['the relay\'s two callbacks', _us(relay)],
+    ]
+    if 'imu_filter_serialized_callbacks' in d:
+        rows += [['`imu_filter_node`\'s two callbacks on CDR bytes (`serialized_io` true, '
+                  'the default)', _us(d['imu_filter_serialized_callbacks'])],
+                 ['the relay on bytes\' two callbacks', _us(d['raw_relay_callbacks'])]]
+    rows += [
         ['… `RawImuPipeline` alone (input checks, stamps, unit checks, the estimator; '
          'no messages)', _us(d['pipeline'])],
         ['… … `AhrsObserver.update` and `update_mag` alone (the core\'s float step)',
@@ -196,14 +202,19 @@ def _direct_lines(d):
         'The callbacks called directly with prepared messages (`python -m '
         f'bench.raw_imu_direct`: {d["samples"]} samples at 1 kHz, a field every tenth; no '
         'executor, no DDS receive, warm caches; the best of a few passes). Publishing is '
-        'replaced by a no-op in both nodes, which build their two outputs per sample and send '
-        'none: the first two rows are each node\'s own Python work per IMU sample; the parts '
-        'below are timed alone.', '',
+        'replaced by a no-op in every node, which build their two outputs per sample and send '
+        'none: the rows on callbacks are each node\'s own Python work per IMU sample, the '
+        'filter on its compiled kernels' + ('' if d.get('compiled', True) else
+                                             ' (NOT compiled here: the plain kernels)')
+        + '; the parts below are timed alone.', '',
         _table(['per IMU sample', 'time'], rows), '',
         f'- What the filter adds to the relay\'s work, called directly: {_us(node - relay)} per '
         f'sample, {_us(d["pipeline"])} of it in the ROS-free pipeline ({_us(d["core"])} in the '
         'core\'s step); the rest turns messages into the pipeline\'s inputs and its estimate '
-        'into the two outputs.',
+        'into the two outputs.' + (
+            '' if 'imu_filter_serialized_callbacks' not in d else
+            f' On CDR bytes: {_us(d["imu_filter_serialized_callbacks"] - d["raw_relay_callbacks"])}'
+            ' above the relay on bytes.'),
         f'- Functions on the callbacks\' path that use numpy (`bench/numpy_use.py`): '
         f'{numpy_text}.', '']
 

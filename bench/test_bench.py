@@ -225,7 +225,8 @@ def test_report_renders_the_raw_imu_goals_and_section():
                'python': '3', 'numpy': '2', 'rclpy': '7', 'rmw': 'r',
                'rmw_fastrtps_cpp': '8', 'load_start': 0.1, 'load_end': 0.2}
     direct = {'samples': 5000, 'imu_filter_callbacks': 32.0, 'relay_callbacks': 2.0,
-              'pipeline': 15.0, 'core': 10.0, 'publish_imu': 14.0, 'publish_estimate': 10.0,
+              'imu_filter_serialized_callbacks': 9.5, 'raw_relay_callbacks': 0.5,
+              'compiled': True, 'pipeline': 15.0, 'core': 10.0, 'publish_imu': 14.0, 'publish_estimate': 10.0,
               'outputs_per_sample': {'imu_filter': 2.0, 'relay': 2.0},
               'numpy_use_per_sample': {}}
     batch = {'data': 'data/broad', 'trials': 22, 'recordings': 44, 'sample_updates': 2387574,
@@ -244,6 +245,8 @@ def test_report_renders_the_raw_imu_goals_and_section():
     assert any(line.startswith('| the core on all BROAD') and line.endswith('| met |')
                for line in text.splitlines())
     assert 'numpy (`bench/numpy_use.py`): none.' in text
+    assert 'On CDR bytes: 9.0 µs above the relay on bytes.' in text
+    assert 'NOT compiled' not in text
     assert '- **Raw IMU.**' in text
     raw['batch'] = {'error': 'not run: no BROAD data'}
     text = performance_page.render({'machine': machine, 'command': 'c', 'raw_imu': raw})
