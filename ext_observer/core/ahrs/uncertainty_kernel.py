@@ -121,8 +121,8 @@ GYRO_SCALE_SIGMA = 0.003
 # σ of the heading's drift per radian of rotation about any axis, without a
 # field: the gyro's axis and cross-axis errors, which a body turning back and
 # forth rectifies into a drift with no net turn (BROAD's dev trial 34 drifts
-# 9° steadily in 70 s, 0.085 % of the 10650° it turns; 0.05 % puts that
-# within 2σ with the other terms; 0.02 % would not).
+# 9° steadily in 70 s, 0.085 % of the 10650° it turns: 0.03 % puts all of it
+# within 2σ with the other terms, 0.02 % 97 %; 0.05 % leaves a margin).
 GYRO_MOTION_SIGMA = 0.0005
 # The model's one bias variance per axis is the mean of the bias filter's three
 # (its covariance's trace over the axes it sums).
