@@ -96,11 +96,9 @@ class ImuRelay:
         # Each output published only while it has a subscriber, as the node
         # does (the benchmark reads imu/data only): the same work on each side.
         self.readers = {}
-        self.publisher, self.estimate_publisher = (
-            self.node.create_publisher(kind, topic, out, event_callbacks=PublisherEventCallbacks(
-                matched=lambda info, topic=topic: self.readers.__setitem__(
-                    topic, info.current_count > 0)))
-            for kind, topic in ((Imu, 'imu/data'), (QuaternionStamped, 'attitude_estimate')))
+        self.publisher = self._publisher(Imu, 'imu/data', out, PublisherEventCallbacks)
+        self.estimate_publisher = self._publisher(
+            QuaternionStamped, 'attitude_estimate', out, PublisherEventCallbacks)
         self._estimate = QuaternionStamped()
         self._estimate.quaternion.w = 1.0
         inputs = QoSProfile(depth=RELAY_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -110,6 +108,13 @@ class ImuRelay:
                                       raw=raw)
         self._out = Imu()
         self._out.orientation.w = 1.0
+
+    def _publisher(self, kind, topic, qos, callbacks):
+        """A publisher whose matched event keeps ``readers[topic]``: has it a subscriber now."""
+        def matched(info):
+            self.readers[topic] = info.current_count > 0
+        return self.node.create_publisher(kind, topic, qos,
+                                          event_callbacks=callbacks(matched=matched))
 
     def imu_mag_callback(self, msg):
         """Keep the latest field, as the estimator does."""
@@ -166,7 +171,7 @@ def step_only_node():
     node can leave out: the stamp, one compiled call of the estimator's
     and the covariance's step (``sample_step``, the covariance written into
     the message), and the two outputs (each while it has a subscriber, as
-  in the node); the field straight to the
+    in the node); the field straight to the
     estimator. No validation, no stamp checks, no unit checks, no
     counters: not a node to run, a floor to measure the node's own checks
     against (what they cost is the node's CPU above this one's).
