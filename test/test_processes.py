@@ -204,6 +204,37 @@ def test_ctrl_c_on_busy_nodes_exits_cleanly(ros_processes, ros_context, spinner)
         assert_clean_exit(process)
 
 
+SIGINT_OF_A_BACKGROUND_JOB = '''
+import signal
+import sys
+from rclpy.node import Node
+from ext_observer.nodes.node_common import run_node
+
+class Node_(Node):
+    NODE_NAME = 'background'
+
+    def __init__(self):
+        super().__init__(self.NODE_NAME)
+        python = signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        print(f'python handles SIGINT: {python}', flush=True)
+        self.create_timer(0.01, lambda: None)
+
+sys.exit(run_node(Node_, ['background']))
+'''
+
+
+def test_a_background_jobs_ctrl_c_raises_keyboard_interrupt_in_the_spin(ros_processes):
+    # Started with SIGINT ignored, a node had only rclpy's signal thread to
+    # end it, which the EventsExecutor's loop missed about once in a thousand
+    # (the node spun on); run_node gives SIGINT back to Python first.
+    process = ros_processes(as_background_job([sys.executable, '-c',
+                                               SIGINT_OF_A_BACKGROUND_JOB]))
+    wait_for_output(process, 'python handles SIGINT:', 30.0)
+    assert 'python handles SIGINT: True' in process.output
+    process.interrupt(timeout=10.0)
+    assert_clean_exit(process)
+
+
 SHUTDOWN_UNDER_A_CALLBACK = '''
 import sys
 import threading

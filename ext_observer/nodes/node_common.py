@@ -10,6 +10,7 @@ status) in :mod:`ext_observer.nodes.estimator_node_base`.
 """
 
 import gc
+import signal
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -333,6 +334,22 @@ def _spin(node, kind):
         executor.shutdown()
 
 
+def python_sigint():
+    """
+    Give SIGINT back to Python where the process started with it ignored.
+
+    A node started as a shell's background job (``observer_node &`` in a
+    script, and so every node of a test suite run in the background)
+    inherits SIGINT ignored. rclpy takes SIGINT anyway from ``rclpy.init``
+    on, but then only through its own signal thread, and the EventsExecutor's
+    loop has at times missed that and spun on (about 1 in 1000 such Ctrl-Cs
+    here). With Python's handler back, Ctrl-C also raises
+    ``KeyboardInterrupt`` in the spin, as in a terminal.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def run_node(node_class, args=None):
     """
     Run one node until Ctrl-C or shutdown; the body of each node's ``main``.
@@ -369,6 +386,7 @@ def run_node(node_class, args=None):
     except ValueError as error:
         rclpy.logging.get_logger(node_class.NODE_NAME).fatal(f'not starting: {error}')
         return 2
+    python_sigint()
     rclpy.init(args=args)
     node = None
     exit_code = 0
