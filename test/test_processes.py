@@ -187,10 +187,10 @@ def as_background_job(argv):
 
 def test_ctrl_c_on_busy_nodes_exits_cleanly(ros_processes, ros_context, spinner):
     # At 2 kHz a callback is publishing most of the time, and rclpy's signal
-    # handler shuts the context down under it. When Python's own SIGINT
-    # handler is off (a node started as a background job), no
-    # KeyboardInterrupt comes first: without the care in run_node, most such
-    # gyros died with an RCLError traceback.
+    # thread shuts the context down under it, racing the KeyboardInterrupt
+    # (the gyro runs as a background job: run_node gave SIGINT back to
+    # Python). Before either, a publish fails with RCLError: without the care
+    # in run_node, most such gyros died with a traceback.
     probe = spinner.add(Probe(ros_context))
     observer = ros_processes([installed('observer_node'), '--ros-args',
                               '-p', 'queue_depth:=100'])
