@@ -190,7 +190,7 @@ def bare_bin(tmp_path_factory):
 def _environment(ros_domain_id, active, bare_bin):
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1',
-               RCUTILS_LOGGING_BUFFERED_STREAM='0')
+               RCUTILS_LOGGING_BUFFERED_STREAM='0', PYTHONFAULTHANDLER='1')
     for name in ('VIRTUAL_ENV', 'PYTHONPATH', 'PYTHONHOME'):
         env.pop(name, None)
     bin_dir = os.path.dirname(sys.executable)
@@ -222,8 +222,14 @@ def _end(process, timeout):
     try:
         return process.wait(timeout)
     except subprocess.TimeoutExpired:
-        os.killpg(process.pid, signal.SIGKILL)
-        process.wait(10)
+        # A process that did not end: SIGABRT first, so that faulthandler
+        # writes where its threads were into the log the failure shows.
+        os.killpg(process.pid, signal.SIGABRT)
+        try:
+            process.wait(5)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait(10)
         return None
 
 
