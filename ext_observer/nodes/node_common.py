@@ -340,11 +340,9 @@ def python_sigint():
 
     A node started as a shell's background job (``observer_node &`` in a
     script, and so every node of a test suite run in the background)
-    inherits SIGINT ignored. rclpy takes SIGINT anyway from ``rclpy.init``
-    on, but then only through its own signal thread, and the EventsExecutor's
-    loop has at times missed that and spun on (about 1 in 1000 such Ctrl-Cs
-    here). With Python's handler back, Ctrl-C also raises
-    ``KeyboardInterrupt`` in the spin, as in a terminal.
+    inherits SIGINT ignored: Python installs no KeyboardInterrupt, and only
+    rclpy's own handler, from ``rclpy.init`` on, ends the node. With
+    Python's handler back, Ctrl-C ends it the way it does in a terminal.
     """
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
