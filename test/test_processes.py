@@ -225,8 +225,8 @@ sys.exit(run_node(Node_, ['background']))
 
 def test_a_background_jobs_ctrl_c_raises_keyboard_interrupt_in_the_spin(ros_processes):
     # Started with SIGINT ignored, a node had only rclpy's signal thread to
-    # end it, which the EventsExecutor's loop missed about once in a thousand
-    # (the node spun on); run_node gives SIGINT back to Python first.
+    # end it; run_node gives SIGINT back to Python first, so that Ctrl-C
+    # raises KeyboardInterrupt as in a terminal.
     process = ros_processes(as_background_job([sys.executable, '-c',
                                                SIGINT_OF_A_BACKGROUND_JOB]))
     wait_for_output(process, 'python handles SIGINT:', 30.0)
