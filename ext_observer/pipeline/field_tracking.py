@@ -55,16 +55,10 @@ class FieldTracker:
         # the usual one (also a field judged disturbed or a calibration
         # still waiting): the covariance follows the gain applied.
         doubt = float(core.field('doubt_gain'))
-        # Where the field corrects the heading: the heading of the field used
-        # (calibrated: as given until a calibration is applied) in the corrected
-        # estimate's frame, whose recent mean is the heading's lag behind the fields.
-        used = calibration.apply(field) if calibration is not None else field
-        mx, my, _ = rotate(*core.q, *used)
-        innovation = math.atan2(mx, my)
         if doubt > 0.0:
             self.fields_used += calibrated
             self.uncertainty.field(dt, max(doubt, self.uncertainty.heading_gain(
-                self.fields_used, dt)), sigma, math.nan, dip, innovation)
+                self.fields_used, dt)), sigma, math.nan, dip, self._innovation(field))
             return
         if not (core.use_mag and calibrated and not core.mag_disturbed):
             reference = math.nan
@@ -87,4 +81,17 @@ class FieldTracker:
         # 1 − exp(−dt / tau_mag).
         self.fields_used += 1
         self.uncertainty.field(dt, self.uncertainty.heading_gain(self.fields_used, dt), sigma,
-                               math.nan, dip, innovation)
+                               math.nan, dip, self._innovation(field))
+
+    def _innovation(self, field):
+        """
+        The heading (rad) of the field used in the corrected estimate's frame.
+
+        Counted only where the field corrected the heading: its recent mean is
+        the heading's lag behind the fields. The field as the core used it
+        (calibrated, or as given until a calibration is applied).
+        """
+        calibration = getattr(self.core, 'calibration', None)
+        used = calibration.apply(field) if calibration is not None else field
+        mx, my, _ = rotate(*self.core.q, *used)
+        return math.atan2(mx, my)
