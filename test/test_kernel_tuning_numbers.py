@@ -1,8 +1,8 @@
 """
 The kernels name their tuning numbers: no bare numeric literal in their functions.
 
-The kernels are the files :mod:`ext_observer.core.ahrs.compiled` joins and
-compiles (its joined source, one section per file). In their functions a
+The kernels are the files :mod:`ext_observer.core.ahrs.compiled` compiles
+(``KERNEL_SOURCES``). In their functions a
 number other than 0, 1, 2 and 0.5 is a tuning number, to be a named
 constant of the layout (or a documented parameter), unless it is structure:
 an integer index, offset or size (in a subscript, a ``range()`` or a call's
@@ -28,12 +28,10 @@ PENDING = ()
 
 
 def kernel_sources():
-    """``{file name: its source}`` of the kernels, the files the joined source is made of."""
-    text, _ = compiled.joined_source()
-    folder = os.path.dirname(compiled.__file__)
+    """``{file name: its source}`` of the kernels, the files that are compiled."""
     sources = {}
-    for name in re.findall(r'^# --- (\S+) ---$', text, flags=re.MULTILINE):
-        with open(os.path.join(folder, name), encoding='utf-8') as f:
+    for name, path in zip(compiled.KERNEL_SOURCES, compiled.kernel_paths()):
+        with open(path, encoding='utf-8') as f:
             sources[name] = f.read()
     return sources
 

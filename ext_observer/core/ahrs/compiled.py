@@ -1,21 +1,21 @@
 """
 The raw-IMU estimator's kernels, plain or compiled by numba: :func:`kernels`.
 
-The estimator's steps are written once, in :mod:`~ext_observer.core.ahrs.ahrs_kernel`
-and the calibration's kernel (:mod:`~ext_observer.core.ahrs.magcal_layout`,
-:mod:`~ext_observer.core.ahrs.magcal_filter`, :mod:`~ext_observer.core.ahrs.magcal_kernel`),
-in the part of Python that numba compiles. Without numba (an optional
-dependency: ``pip install numba``) they run as they are, on a Python list of
-floats. With it, this module joins the files' source into one module (the
-imports between them dropped; a name defined differently in two is an
-error), compiles every function of it with ``numba.njit(cache=True)`` and
-runs them on a float64 array: the same source, compiled.
+The estimator's steps are written once, in the kernel files of this folder
+(:data:`KERNEL_SOURCES`), in the part of Python that numba compiles.
+Without numba (``pip install numba``; requirements.txt has it) they run as
+they are, on plain records (:mod:`~ext_observer.core.ahrs.record`). With it,
+this module imports the same files a second time as the modules of a
+package of their own (``ext_observer.core._kernels_<hash>``: each module
+keeps its own names, private ones too), compiles every function of them with
+``numba.njit(cache=True)`` and binds every name of a kernel function to the
+compiled one: the same source, compiled, on structured records.
 
-The joined source is written to a cache folder under a name made of its
-hash, so numba's on-disk cache (beside it, in ``__pycache__``) always
-belongs to the source it was compiled from: a changed kernel is a new file,
-compiled afresh, and a process started later loads the compiled code
-instead of compiling it again. The folder: ``$EXT_OBSERVER_CACHE``, else
+numba's on-disk cache lives in a folder named after the hash of all the
+kernel files (:func:`source_digest`), so that it always belongs to the
+source it was compiled from: a changed kernel is a new folder, compiled
+afresh, and a process started later loads the compiled code instead of
+compiling it again. The folder: ``$EXT_OBSERVER_CACHE``, else
 ``$XDG_CACHE_HOME/ext_observer``, else ``~/.cache/ext_observer``; a
 temporary folder where none of these can be written. Each function is
 compiled when first called; :mod:`ext_observer.pipeline.kernel_cache`
@@ -26,22 +26,22 @@ compiled (an error without numba), unset or ``auto``: compiled where numba
 imports.
 """
 
-import ast
 import hashlib
 import importlib.util
 import os
 import sys
 import tempfile
 import time
+import types
 
 import numpy as np
 
-__all__ = ['CompiledUnavailable', 'ENV', 'Kernels', 'PLAIN_COST', 'cache_folder',
-           'compiled_available', 'compiled_name', 'entry_point', 'joined_source', 'kernels',
-           'plain_warning', 'wanted', 'warn_if_plain']
+__all__ = ['CompiledUnavailable', 'ENV', 'KERNEL_SOURCES', 'Kernels', 'PLAIN_COST',
+           'cache_folder', 'compiled_available', 'compiled_name', 'entry_point', 'kernel_paths',
+           'kernels', 'plain_warning', 'source_digest', 'wanted', 'warn_if_plain']
 
-# In this order: each file's names are defined before the next one's functions use them.
-_SOURCES = ('layout.py', 'small_matrix.py',
+# The files of the kernels: every function of them is compiled.
+KERNEL_SOURCES = ('layout.py', 'small_matrix.py',
             'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
             'ahrs_layout.py', 'ahrs_filters.py', 'bias_kernel.py', 'clip_and_rest.py',
             'hole_kernel.py', 'velocity_kernel.py', 'accel_rejection.py', 'field_kernel.py',
@@ -69,7 +69,7 @@ class Kernels:
         The functions and layout constants of
         :mod:`~ext_observer.core.ahrs.ahrs_kernel`,
         :mod:`~ext_observer.core.ahrs.magcal_kernel` and
-        :mod:`~ext_observer.core.ahrs.uncertainty_kernel` (one joined module when
+        :mod:`~ext_observer.core.ahrs.uncertainty_kernel` (their compiled twins when
         compiled).
     sample_step : callable
         :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step`, the
@@ -188,55 +188,33 @@ def kernels(compiled=None):
     return _plain()
 
 
-def joined_source():
-    """The kernels' source as one module: ``(text, sha256 hex)``."""
-    global _JOINED
+def kernel_paths():
+    """The kernel files, in :data:`KERNEL_SOURCES`'s order: their full paths."""
     folder = os.path.dirname(os.path.abspath(__file__))
-    paths = [os.path.join(folder, name) for name in _SOURCES]
+    return [os.path.join(folder, name) for name in KERNEL_SOURCES]
+
+
+def source_digest():
+    """The sha256 (hex) of the kernel files' text, in order: the compiled kernels' version."""
+    global _DIGEST
+    paths = kernel_paths()
     # Read once per process, unless a file changed since (its size or time).
     stamp = tuple((os.stat(p).st_mtime_ns, os.stat(p).st_size) for p in paths)
-    if _JOINED is not None and _JOINED[0] == stamp:
-        return _JOINED[1]
-    parts, defined = [], {}
-    for name, path in zip(_SOURCES, paths):
-        with open(path, encoding='utf-8') as f:
-            text = f.read()
-        tree = ast.parse(text)
-        lines = text.splitlines()
-        drop = set()
-        for node in tree.body:
-            if isinstance(node, ast.ImportFrom) and node.level > 0:
-                drop.update(range(node.lineno - 1, node.end_lineno))
-                continue
-            targets = []
-            if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
-                targets = [node.name]
-            elif isinstance(node, ast.Assign):
-                targets = [t.id for t in node.targets if isinstance(t, ast.Name)]
-            for target in targets:
-                if target.startswith('__'):
-                    continue
-                # The same constant in both files is harmless; anything else
-                # is not (a call, such as a Layout(), made twice is two objects).
-                if target in defined and (ast.unparse(defined[target][1]) != ast.unparse(node)
-                                          or any(isinstance(n, ast.Call)
-                                                 for n in ast.walk(node))):
-                    raise RuntimeError(f'{target} is defined in both {defined[target][0]} and '
-                                       f'{name}: the kernels are joined into one module')
-                defined[target] = (name, node)
-        kept = ['' if i in drop else line for i, line in enumerate(lines)]
-        parts.append(f'# --- {name} ---\n' + '\n'.join(kept) + '\n')
-    text = '\n'.join(parts)
-    joined = text, hashlib.sha256(text.encode('utf-8')).hexdigest()
-    _JOINED = stamp, joined
-    return joined
+    if _DIGEST is not None and _DIGEST[0] == stamp:
+        return _DIGEST[1]
+    digest = hashlib.sha256()
+    for name, path in zip(KERNEL_SOURCES, paths):
+        with open(path, 'rb') as f:
+            digest.update(name.encode() + b'\0' + f.read() + b'\0')
+    _DIGEST = stamp, digest.hexdigest()
+    return _DIGEST[1]
 
 
-_JOINED = None
+_DIGEST = None
 
 
 def cache_folder():
-    """Where the joined source and numba's cache of it live (created if needed)."""
+    """Where numba's cache of the kernels lives (created if needed)."""
     candidates = []
     if os.environ.get('EXT_OBSERVER_CACHE'):
         candidates.append(os.environ['EXT_OBSERVER_CACHE'])
@@ -257,34 +235,48 @@ def cache_folder():
 
 
 def compiled_name():
-    """The joined module's name (after its hash) and the cache folder."""
-    _, digest = joined_source()
-    return f'ext_observer_kernels_{digest[:16]}', cache_folder()
+    """The compiled kernels' package name (after the sources' hash) and the cache folder."""
+    return f'_kernels_{source_digest()[:16]}', cache_folder()
 
 
 def _load_compiled():
     start = time.perf_counter()
     import numba
-    text, _ = joined_source()
     name, folder = compiled_name()
-    path = os.path.join(folder, name + '.py')
-    if not os.path.exists(path):
-        partial = f'{path}.{os.getpid()}.tmp'
-        with open(partial, 'w', encoding='utf-8') as f:
-            f.write(text)
-        os.replace(partial, path)  # atomic: processes starting together agree
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    # Every function wrapped before any runs, so that calls between them
-    # resolve to the compiled ones.
-    for key, value in list(vars(module).items()):
-        if callable(value) and getattr(value, '__module__', None) == name \
-                and not isinstance(value, type):
-            setattr(module, key, numba.njit(cache=True)(value))
-    return Kernels(module, module, True, load_seconds=time.perf_counter() - start,
-                   uncertainty=module)
+    # The kernel files imported a second time, as modules of a package of
+    # their own beside this one: each keeps its own names, as the plain
+    # modules do, and their imports of each other resolve to the twins.
+    package_name = f'{__package__.rpartition(".")[0]}.{name}'
+    package = types.ModuleType(package_name)
+    package.__path__ = [os.path.dirname(os.path.abspath(__file__))]
+    package.__package__ = package_name
+    sys.modules[package_name] = package
+    modules = [importlib.import_module(f'{package_name}.{source[:-3]}')
+               for source in KERNEL_SOURCES]
+    # numba's cache of each function is keyed by its file alone: a folder of
+    # this version of all the files keeps a caller compiled against an
+    # older callee from being loaded.
+    saved = numba.config.CACHE_DIR
+    numba.config.CACHE_DIR = os.path.join(folder, name)
+    try:
+        compiled = {}
+        for module in modules:
+            for key, value in list(vars(module).items()):
+                if isinstance(value, types.FunctionType) and value.__module__ == module.__name__:
+                    compiled[value] = numba.njit(cache=True)(value)
+                    setattr(module, key, compiled[value])
+    finally:
+        numba.config.CACHE_DIR = saved
+    # Every name bound to a kernel function, in any twin, now calls the
+    # compiled one: resolved when a caller is first compiled.
+    for module in modules:
+        for key, value in list(vars(module).items()):
+            if isinstance(value, types.FunctionType) and value in compiled:
+                setattr(module, key, compiled[value])
+    by_name = {m.__name__.rpartition('.')[2]: m for m in modules}
+    return Kernels(by_name['ahrs_kernel'], by_name['magcal_kernel'], True,
+                   load_seconds=time.perf_counter() - start,
+                   uncertainty=by_name['uncertainty_kernel'])
 
 
 def entry_point(dispatcher):
