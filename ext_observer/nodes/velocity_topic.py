@@ -17,7 +17,6 @@ Deserialized messages: they come at tens of Hz, not the IMU's rate.
 
 import math
 
-from ext_observer.core.ahrs.ahrs_layout import S_VEL_AGE, S_VEL_N
 from ext_observer.nodes.estimator_node_base import LOG_THROTTLE
 
 __all__ = ['VELOCITY_DROP_REASONS', 'VELOCITY_TOPICS', 'VelocityTopic']
@@ -122,8 +121,7 @@ class VelocityTopic:
     def key_values(self):
         """The diagnostic pairs: the source, whether the aid is in use, the age, the counts."""
         core = self.node.observer
-        s = core.flat_state
-        age = float(s[S_VEL_AGE]) if s[S_VEL_N] > 0.0 else math.nan
+        age = core.field('vel.age') if core.field('vel.n') > 0.0 else math.nan
         return [('velocity_source', self.source), ('velocity_used', bool(core.velocity_used)),
                 ('velocity_age_s', age), ('velocities_received', self.received),
                 ('velocities_used', self.used),

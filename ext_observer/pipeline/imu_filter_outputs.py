@@ -13,6 +13,7 @@ only puts the numbers into messages. Quaternions scalar first
 import math
 
 from ext_observer.core.ahrs.frames import initial_attitude
+from ext_observer.core.constants import STANDARD_GRAVITY
 from ext_observer.core.ahrs.ahrs_observer import WORLD_FRAMES
 from ext_observer.core.quaternion import multiply_floats
 
@@ -20,7 +21,6 @@ __all__ = ['STANDARD_GRAVITY', 'gravity_in_sensor', 'heading_factor', 'mounting_
            'rpy_from_quaternion', 'transform_from_estimate', 'without_gravity']
 
 # imu_filter_madgwick's gravity (its getGravity's default), m/s².
-STANDARD_GRAVITY = 9.80665
 
 
 def rpy_from_quaternion(q):

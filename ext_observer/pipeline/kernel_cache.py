@@ -126,7 +126,7 @@ def _warm_up(k):
     tracker.step(dt, (0.3, -0.2, 0.5), est.q, False)
     tracker.field(0.02, 0.1, 0.0, np.nan)
     _ = tracker.covariance
-    k.uncertainty.sample_step(est.flat_state, tracker.state, np.zeros(9), 0.3, -0.2, 0.5,
+    k.uncertainty.sample_step(est.state, tracker.state, np.zeros(9), 0.3, -0.2, 0.5,
                               0.1, 0.2, 9.8, dt, 0.1)
     est.reset()
     # The rest (the whole-recording loop, loading a calibration, the single

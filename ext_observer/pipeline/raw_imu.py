@@ -254,7 +254,7 @@ class RawImuEstimator:
         cov = self._covariance if covariance is None else covariance_out(covariance)
         try:
             outcome, w, x, y, z = core.kernels.sample_step(
-                core.flat_state, self.uncertainty.state, cov,
+                core.state, self.uncertainty.state, cov,
                 gyr[0], gyr[1], gyr[2], acc[0], acc[1], acc[2], dt, self.max_residual)
         except (ValueError, OverflowError, ZeroDivisionError):
             outcome = None

@@ -13,7 +13,6 @@ arm's ``ω̇ × r`` and the rotation's ``ω × (ω × r)``.
 
 import math
 
-from ext_observer.core.ahrs.ahrs_layout import S_BIAS, S_GYR_LAST
 from ext_observer.pipeline.imu_filter_parameters import velocity_frame
 
 __all__ = ['VelocityInput', 'with_velocity']
@@ -58,8 +57,9 @@ class VelocityInput:
 
     def _at_imu(self, v):
         rt, (ax, ay, az) = self.frame
-        s = self.estimator.core.flat_state
-        wx, wy, wz = (s[S_GYR_LAST + i] - s[S_BIAS + i] for i in range(3))
+        core = self.estimator.core
+        last, bias = core.field('gyro.last'), core.field('bias.rate')
+        wx, wy, wz = (last[i] - bias[i] for i in range(3))
         return (rt[0] * v[0] + rt[1] * v[1] + rt[2] * v[2] + wy * az - wz * ay,
                 rt[3] * v[0] + rt[4] * v[1] + rt[5] * v[2] + wz * ax - wx * az,
                 rt[6] * v[0] + rt[7] * v[1] + rt[8] * v[2] + wx * ay - wy * ax)

@@ -22,8 +22,14 @@ Written in the part of Python that numba compiles, as
 import math
 
 from .ahrs_filters import rotate
-from .ahrs_layout import (C_K_ACC, P_ACC_REJECT, P_ACC_REJECT_TIME, P_TAU_ACC, S_ACC_CARRIED,
-                          S_ACC_REJ, S_ACC_TILT, S_BIAS, S_BIAS_P, S_Q, S_REST_GYR)
+from .record import Group
+
+
+REJ = Group('rej', 'Acceleration rejection', [
+    ('carried', '1', 'u: the vertical the gyro carries, world frame', 3),
+    ('time', 's', 'the force has been rejected (0: used)'),
+    ('tilt', 'rad/s', 'the recent rate of tilting rotation'),
+])
 
 # s: how slowly the carried vertical follows the inclination's corrections
 # (BROAD's motions average out in the low-pass within a few seconds).
@@ -47,9 +53,9 @@ def _angle(ax, ay, az, bx, by, bz):
 def acc_rejection_reset(s):
     """Forget the carried vertical, a rejection and the tilting rate (a reset)."""
     for i in range(3):
-        s[S_ACC_CARRIED + i] = 0.0
-    s[S_ACC_REJ] = 0.0
-    s[S_ACC_TILT] = 0.0
+        s.rej.carried[i] = 0.0
+    s.rej.time = 0.0
+    s.rej.tilt = 0.0
 
 
 def _tilting(s, dt):
@@ -60,14 +66,14 @@ def _tilting(s, dt):
     errors, and the low-passed force settles only after it: u forgets per
     radian tilted until then (a vehicle turns about the vertical).
     """
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    rx = s[S_REST_GYR] - s[S_BIAS]
-    ry = s[S_REST_GYR + 1] - s[S_BIAS + 1]
-    rz = s[S_REST_GYR + 2] - s[S_BIAS + 2]
+    w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
+    rx = s.rest.gyr_lp[0] - s.bias.rate[0]
+    ry = s.rest.gyr_lp[1] - s.bias.rate[1]
+    rz = s.rest.gyr_lp[2] - s.bias.rate[2]
     wx, wy, wz = rotate(w, x, y, z, rx, ry, rz)
-    k = dt / (2.0 * s[P_TAU_ACC] + dt)
-    s[S_ACC_TILT] += k * (math.sqrt(wx * wx + wy * wy) - s[S_ACC_TILT])
-    return s[S_ACC_TILT]
+    k = dt / (2.0 * s.par.tau_acc + dt)
+    s.rej.tilt += k * (math.sqrt(wx * wx + wy * wy) - s.rej.tilt)
+    return s.rej.tilt
 
 
 def _longest(s, th, sigmas):
@@ -75,8 +81,8 @@ def _longest(s, th, sigmas):
     The longest rejection (s): ``acc_reject_time``, and no longer than the
     bias's ``sigmas`` σ (the largest per axis) takes to turn the vertical by ``th``.
     """
-    var = max(s[S_BIAS_P], max(s[S_BIAS_P + 3], s[S_BIAS_P + 5]))
-    return min(s[P_ACC_REJECT_TIME], th / (sigmas * math.sqrt(max(var, 0.0)) + _TINY))
+    var = max(s.bias.p[0], max(s.bias.p[3], s.bias.p[5]))
+    return min(s.par.acc_reject_time, th / (sigmas * math.sqrt(max(var, 0.0)) + _TINY))
 
 
 def acc_rotation(s, fx, fy, fz, dt, starting):
@@ -87,25 +93,25 @@ def acc_rotation(s, fx, fy, fz, dt, starting):
     and towards the new vertical; ``S_ACC_REJ`` counts the seconds rejected
     (0: the force is used).
     """
-    ux, uy, uz = s[S_ACC_CARRIED], s[S_ACC_CARRIED + 1], s[S_ACC_CARRIED + 2]
-    th = s[P_ACC_REJECT]
+    ux, uy, uz = s.rej.carried[0], s.rej.carried[1], s.rej.carried[2]
+    th = s.par.acc_reject
     if starting or th <= 0.0 or uz <= 0.0:
         # From the start (or a clipped gyro), and when off: the force as it is.
         ux, uy, uz = 0.0, 0.0, 1.0
-        s[S_ACC_REJ] = 0.0
+        s.rej.time = 0.0
     tx, ty, tz = fx, fy, fz
     if th > 0.0 and not starting:
         off = _angle(fx, fy, fz, ux, uy, uz)
-        if s[S_ACC_REJ] > 0.0 and off < _RELEASE * th:
-            s[S_ACC_REJ] = 0.0
-        elif s[S_ACC_REJ] > 0.0 or (off > th and _longest(s, th, _SIGMAS) > _TAU_CARRIED):
+        if s.rej.time > 0.0 and off < _RELEASE * th:
+            s.rej.time = 0.0
+        elif s.rej.time > 0.0 or (off > th and _longest(s, th, _SIGMAS) > _TAU_CARRIED):
             # (A bias too uncertain to carry the vertical for _TAU_CARRIED: no rejection.)
-            s[S_ACC_REJ] += dt
-            if s[S_ACC_REJ] > _longest(s, th, 1.0):
+            s.rej.time += dt
+            if s.rej.time > _longest(s, th, 1.0):
                 # Rejected too long: the force is gravity after all.
                 n = math.sqrt(fx * fx + fy * fy + fz * fz) + _TINY
                 ux, uy, uz = fx / n, fy / n, fz / n
-                s[S_ACC_REJ] = 0.0
+                s.rej.time = 0.0
             else:
                 tx, ty, tz = ux, uy, uz
     n = math.sqrt(tx * tx + ty * ty + tz * tz) + _TINY
@@ -113,12 +119,12 @@ def acc_rotation(s, fx, fy, fz, dt, starting):
     dn = math.sqrt(dw * dw + dx * dx + dy * dy) + _TINY
     dw, dx, dy = dw / dn, dx / dn, dy / dn
     # u in the corrected world frame, then a step towards its vertical.
-    kap = s[C_K_ACC]
+    kap = s.coef.k_acc
     ux, uy, uz = rotate(1.0 - kap + kap * dw, kap * dx, kap * dy, 0.0, ux, uy, uz)
     k = min(1.0, dt / _TAU_CARRIED + _tilting(s, dt) * dt / _TILT_CARRIED)
     ux, uy, uz = ux - k * ux, uy - k * uy, uz + k * (1.0 - uz)
     n = math.sqrt(ux * ux + uy * uy + uz * uz) + _TINY
-    s[S_ACC_CARRIED] = ux / n
-    s[S_ACC_CARRIED + 1] = uy / n
-    s[S_ACC_CARRIED + 2] = uz / n
+    s.rej.carried[0] = ux / n
+    s.rej.carried[1] = uy / n
+    s.rej.carried[2] = uz / n
     return dw, dx, dy

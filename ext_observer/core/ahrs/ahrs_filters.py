@@ -10,7 +10,8 @@ the second-order Butterworth low-pass whose states live in the flat state
 
 import math
 
-from .ahrs_layout import C_BW, S_Q
+from ..constants import STANDARD_GRAVITY
+
 
 # Below this |(1 + a_z, a_y, −a_x)| (about the angle, rad, from upside down) the
 # half-way rotation is rounding: the first attitude turns half a turn about x instead.
@@ -32,6 +33,26 @@ def rotate(w, x, y, z, vx, vy, vz):
             (s * vz + d * z + w2 * cz) / n2)
 
 
+def quat_multiply(aw, ax, ay, az, bw, bx, by, bz):
+    """The Hamilton product ``a ⊗ b`` of two quaternions ``(w, x, y, z)``: the kernels' one."""
+    return (aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw)
+
+
+def gravity_deviation(fx, fy, fz):
+    """
+    How far a world-frame specific force ``f`` (m/s²) is from gravity: a share of g².
+
+    ``max(d_z², (d_x² + d_y²) / 2) / g²`` of its deviation ``d`` from
+    ``(0, 0, g)``: one sample's variance per horizontal axis of the vertical
+    it shows (a moving body's translational acceleration).
+    """
+    dz = fz - STANDARD_GRAVITY
+    return max(dz * dz, 0.5 * (fx * fx + fy * fy)) / (STANDARD_GRAVITY * STANDARD_GRAVITY)
+
+
 def clip(v, lo, hi):
     return lo if v < lo else hi if v > hi else v
 
@@ -41,13 +62,13 @@ def gain(tau, dt):
     return 1.0 - math.exp(-dt / tau)
 
 
-def first_order_step(s, i, k, vx, vy, vz):
-    """One step of the first-order low-pass (gain ``k``) of a 3-vector kept at ``s[i:i+3]``."""
-    lx, ly, lz = s[i], s[i + 1], s[i + 2]
+def first_order_step(v, k, vx, vy, vz):
+    """One step of the first-order low-pass (gain ``k``) of the 3-vector ``v`` (updated)."""
+    lx, ly, lz = v[0], v[1], v[2]
     lx, ly, lz = lx + k * (vx - lx), ly + k * (vy - ly), lz + k * (vz - lz)
-    s[i] = lx
-    s[i + 1] = ly
-    s[i + 2] = lz
+    v[0] = lx
+    v[1] = ly
+    v[2] = lz
     return lx, ly, lz
 
 
@@ -75,34 +96,38 @@ def first_attitude(ax, ay, az, has_mag, mx, my, mz, use_mag):
     return c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w
 
 
-def steady(s, i, vx, vy, vz):
-    """The Butterworth states at ``s[i:i+3]``, ``s[i+3:i+6]`` steady for a constant ``v``."""
-    b1, b2, a1, a2 = s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
+def steady(bw, st, i, vx, vy, vz):
+    """
+    The Butterworth (coefficients ``bw``) steady for a constant ``v``.
+
+    Its states are ``st[i:i+3]`` (s1) and ``st[i+3:i+6]`` (s2).
+    """
+    b1, b2, a1, a2 = bw[1], bw[2], bw[3], bw[4]
     # Steady state of the transposed direct form II for a constant input.
-    s[i + 3] = (b2 - a2) * vx
-    s[i + 4] = (b2 - a2) * vy
-    s[i + 5] = (b2 - a2) * vz
-    s[i] = (b1 - a1) * vx + s[i + 3]
-    s[i + 1] = (b1 - a1) * vy + s[i + 4]
-    s[i + 2] = (b1 - a1) * vz + s[i + 5]
+    st[i + 3] = (b2 - a2) * vx
+    st[i + 4] = (b2 - a2) * vy
+    st[i + 5] = (b2 - a2) * vz
+    st[i] = (b1 - a1) * vx + st[i + 3]
+    st[i + 1] = (b1 - a1) * vy + st[i + 4]
+    st[i + 2] = (b1 - a1) * vz + st[i + 5]
 
 
-def lowpass(s, i, vx, vy, vz):
-    """One step of the Butterworth whose states are at ``s[i:i+6]``; its output."""
-    b0, b1, b2, a1, a2 = s[C_BW], s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
-    fx, fy, fz = b0 * vx + s[i], b0 * vy + s[i + 1], b0 * vz + s[i + 2]
-    s[i] = b1 * vx - a1 * fx + s[i + 3]
-    s[i + 1] = b1 * vy - a1 * fy + s[i + 4]
-    s[i + 2] = b1 * vz - a1 * fz + s[i + 5]
-    s[i + 3] = b2 * vx - a2 * fx
-    s[i + 4] = b2 * vy - a2 * fy
-    s[i + 5] = b2 * vz - a2 * fz
+def lowpass(bw, st, i, vx, vy, vz):
+    """One step of the Butterworth (coefficients ``bw``, states ``st[i:i+6]``); its output."""
+    b0, b1, b2, a1, a2 = bw[0], bw[1], bw[2], bw[3], bw[4]
+    fx, fy, fz = b0 * vx + st[i], b0 * vy + st[i + 1], b0 * vz + st[i + 2]
+    st[i] = b1 * vx - a1 * fx + st[i + 3]
+    st[i + 1] = b1 * vy - a1 * fy + st[i + 4]
+    st[i + 2] = b1 * vz - a1 * fz + st[i + 5]
+    st[i + 3] = b2 * vx - a2 * fx
+    st[i + 4] = b2 * vy - a2 * fy
+    st[i + 5] = b2 * vz - a2 * fz
     return fx, fy, fz
 
 
 def rotation_matrix(s):
     """The rows of ``R(q̂)`` (sensor → world), ``q̂`` of any nonzero norm."""
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
     n2 = w * w + x * x + y * y + z * z
     return ((w * w + x * x - y * y - z * z) / n2, 2.0 * (x * y - w * z) / n2,
             2.0 * (x * z + w * y) / n2,

@@ -19,7 +19,7 @@ from .frames import check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
 from .ahrs_params import AhrsParams
 from .compiled import kernels
 from .magcal import MagCalibrator
-from .ahrs_layout import P_VEL_TIMEOUT, S_VEL_USED
+from .ahrs_state import KERNEL_PARAMETERS, STATE
 from .velocity_kernel import VELOCITY_TIMEOUT
 
 __all__ = [
@@ -96,7 +96,6 @@ class AhrsObserver:
             uses = [bool(u) for u in self.use_mag]
         self._kernels = kernels(compiled)
         self.compiled = self._kernels.compiled
-        k = self._kernels.ahrs
         p = self.params
         values = p.as_dict()
 
@@ -106,20 +105,22 @@ class AhrsObserver:
 
         calibrate = [bool(np.asarray(p.mag_cal)[i] if np.ndim(p.mag_cal) else p.mag_cal)
                      and uses[i] for i in range(n)]
-        size = k.A_SIZE + (self._kernels.magcal.MC_SIZE if any(calibrate) else 0)
+        # One holder per estimate (record.py): its record is what the kernels step.
         self._states = []
         for i in range(n):
-            s = self._kernels.container(size)
-            for name in k.PARAMETERS:
-                s[k.AHRS.offset(name)] = each(name, i)
-            s[k.P_USE_MAG] = 1.0 if uses[i] else 0.0
-            s[k.P_EXTENDED] = 1.0 if variant == 'extended' else 0.0
-            s[k.P_HAS_CAL] = 1.0 if calibrate[i] else 0.0
-            s[k.P_MOTION_BIAS] = 1.0 if each('tau_bias', i) > 0.0 else 0.0
-            s[k.C_DT] = s[k.C_MAG_DT] = math.nan
-            s[k.S_ACC_STILL] = 1.0
-            s[P_VEL_TIMEOUT] = VELOCITY_TIMEOUT
-            self._states.append(s)
+            h = STATE.holder(self.compiled)
+            s = h[0]
+            for name in KERNEL_PARAMETERS:
+                STATE.set(s, f'par.{name}', each(name, i))
+            STATE.set(s, 'par.use_mag', 1.0 if uses[i] else 0.0)
+            STATE.set(s, 'par.extended', 1.0 if variant == 'extended' else 0.0)
+            STATE.set(s, 'par.has_cal', 1.0 if calibrate[i] else 0.0)
+            STATE.set(s, 'par.motion_bias', 1.0 if each('tau_bias', i) > 0.0 else 0.0)
+            STATE.set(s, 'coef.dt', math.nan)
+            STATE.set(s, 'coef.mag_dt', math.nan)
+            STATE.set(s, 'rest.acc_still', 1.0)
+            STATE.set(s, 'par.velocity_timeout', VELOCITY_TIMEOUT)
+            self._states.append(h)
         self._dt = None
         self._mag_dt = None
         self.calibration = None
@@ -129,11 +130,12 @@ class AhrsObserver:
                 soft_iron=p.mag_cal_soft_iron, delay=p.mag_cal_delay,
                 heading=p.mag_cal_heading, deadband=p.mag_cal_deadband,
                 drift=p.mag_cal_drift, kernel=self._kernels.magcal,
-                blocks=[(s, k.MC0) for s in self._states])
+                blocks=[(h[0].cal.flat if not self.compiled else h['cal']['flat'][0], 0)
+                        for h in self._states])
             # Slightly early, so that a field rate at mag_cal_rate learns from each.
             period = 0.999 / float(np.max(p.mag_cal_rate))
-            for s in self._states:
-                s[k.P_CAL_PERIOD] = period
+            for h in self._states:
+                STATE.set(h[0], 'par.cal_period', period)
         self.reset()
 
     def __getstate__(self):
@@ -163,17 +165,17 @@ class AhrsObserver:
         if kernels is self._kernels:
             return
         states = []
-        for s in self._states:
-            c = kernels.container(len(s))
-            for i in range(len(s)):
-                c[i] = float(s[i])
+        for h in self._states:
+            c = STATE.holder(kernels.compiled)
+            STATE.copy(h[0], c[0])
             states.append(c)
         self._states = states
         self._kernels = kernels
         self.compiled = kernels.compiled
         if self.calibration is not None:
-            self.calibration.use_kernel(kernels.magcal,
-                                        [(s, kernels.ahrs.MC0) for s in states])
+            self.calibration.use_kernel(
+                kernels.magcal, [(h[0].cal.flat if not self.compiled else h['cal']['flat'][0], 0)
+                                 for h in states])
 
     @property
     def kernels(self):
@@ -181,115 +183,101 @@ class AhrsObserver:
         return self._kernels
 
     @property
-    def flat_state(self):
+    def state(self):
         """
-        The flat state of a single estimate (ahrs_kernel's layout), for a caller that steps it.
+        The holder of a single estimate's state (``STATE``), for a caller that steps it.
 
         :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step` runs the
         estimator's step on it together with the covariance's. A new
-        container after :meth:`use_kernels`: ask again rather than keep it.
+        holder after :meth:`use_kernels`: ask again rather than keep it.
         """
         if self.batch is not None:
-            raise ValueError('flat_state is that of a single estimate, not of a batch')
+            raise ValueError('state is that of a single estimate, not of a batch')
         return self._states[0]
 
     # --- state -------------------------------------------------------------
 
     def reset(self):
         """Forget everything: the next accelerometer sample initializes."""
-        for s in self._states:
-            self._kernels.ahrs.ahrs_reset(s)
+        for h in self._states:
+            self._kernels.ahrs.ahrs_reset(h[0])
 
-    def _slots(self, start, count):
-        """Slots of the state(s): floats, or arrays (B,) with ``batch``."""
-        if self.batch is None:
-            s = self._states[0]
-            return tuple(float(s[start + i]) for i in range(count))
-        return tuple(np.array([float(s[start + i]) for s in self._states])
-                     for i in range(count))
+    def field(self, name):
+        """
+        A field of the state by its path (``'rest.time'``) or its name where unique (``'k_acc'``).
 
-    def _flag(self, slot):
+        A float (a vector: a tuple of floats); with ``batch``, arrays
+        ``(B,)``. E.g. ``'bias.rate'``, ``'inc.lp'`` (the Butterworth
+        states), ``'k_acc'``, ``'mag_used'``, ``'ref'``; every field:
+        :mod:`~ext_observer.core.ahrs.ahrs_state` (docs/layout.md).
+        """
         if self.batch is None:
-            return bool(self._states[0][slot] != 0.0)
-        return np.array([s[slot] != 0.0 for s in self._states])
+            return STATE.get(self._states[0][0], name)
+        values = [STATE.get(h[0], name) for h in self._states]
+        if isinstance(values[0], tuple):
+            return tuple(np.array(v) for v in zip(*values))
+        return np.array(values)
+
+    def set_field(self, name, value):
+        """Set a field of every estimate (a float, or an array ``(B,)``; a vector: a sequence)."""
+        path, size = STATE.path(name)
+        if size != 1:
+            for i, h in enumerate(self._states):
+                STATE.set(h[0], name, [float(value[j] if self.batch is None else value[j][i])
+                                       for j in range(size)])
+            return
+        values = np.broadcast_to(np.asarray(value, dtype=float), (self._n,))
+        for i, h in enumerate(self._states):
+            STATE.set(h[0], name, float(values[i]))
+
+    def _flag(self, name):
+        if self.batch is None:
+            return bool(STATE.get(self._states[0][0], name) != 0.0)
+        return np.array([STATE.get(h[0], name) != 0.0 for h in self._states])
 
     @property
     def initialized(self):
         """Whether the first accelerometer sample has initialized the estimate (``q`` not None)."""
-        k = self._kernels.ahrs
-        if self.batch is None:
-            return self._states[0][k.S_INIT] != 0.0
-        return any(s[k.S_INIT] != 0.0 for s in self._states)
+        return any(h[0].est.init != 0.0 if not self.compiled else h['est']['init'][0] != 0.0
+                   for h in self._states)
 
     @property
     def q(self):
         """The ambient estimate ``(w, x, y, z)``; None before the first sample."""
-        k = self._kernels.ahrs
-        if self.batch is None:  # the node's path, read every sample: no generator
-            s = self._states[0]
-            if s[k.S_INIT] == 0.0:
-                return None
-            i = k.S_Q
-            return float(s[i]), float(s[i + 1]), float(s[i + 2]), float(s[i + 3])
-        if not any(s[k.S_INIT] != 0.0 for s in self._states):
+        if not self.initialized:
             return None
-        return self._slots(k.S_Q, 4)
+        return self.field('est.q')
 
     @q.setter
     def q(self, value):
-        k = self._kernels.ahrs
-        for i, s in enumerate(self._states):
+        for i, h in enumerate(self._states):
             if value is None:
-                s[k.S_INIT] = 0.0
+                STATE.set(h[0], 'est.init', 0.0)
                 continue
-            for j in range(4):
-                s[k.S_Q + j] = float(value[j] if self.batch is None else value[j][i])
-            s[k.S_INIT] = 1.0
-
-    def field(self, name):
-        """
-        A field of the flat state by its name in ahrs_kernel's layout (``AHRS``).
-
-        A float (a vector: a tuple of floats); with ``batch``, arrays
-        ``(B,)``. E.g. ``'bias'``, ``'lp'`` (the Butterworth states),
-        ``'k_acc'``, ``'mag_used'``, ``'ref'``.
-        """
-        offset, size = self._kernels.ahrs.AHRS.fields[name]
-        values = self._slots(offset, size)
-        return values[0] if size == 1 else values
-
-    def set_field(self, name, value):
-        """Set a one-slot field of every estimate (a float, or an array ``(B,)``)."""
-        offset, size = self._kernels.ahrs.AHRS.fields[name]
-        if size != 1:
-            raise ValueError(f'{name} has {size} slots; set_field sets one-slot fields')
-        values = np.broadcast_to(np.asarray(value, dtype=float), (self._n,))
-        for i, s in enumerate(self._states):
-            s[offset] = float(values[i])
+            STATE.set(h[0], 'est.q', [float(value[j] if self.batch is None else value[j][i])
+                                      for j in range(4)])
+            STATE.set(h[0], 'est.init', 1.0)
 
     @property
     def bias(self):
         """The gyro bias estimate (rad/s), body frame; settable (a saved or known bias)."""
-        return self.field('bias')
+        return self.field('bias.rate')
 
     @bias.setter
     def bias(self, value):
         # VQF's setBiasEstimate: the estimate goes on from this bias (each
         # value a float, or with batch an array (B,)).
-        offset, size = self._kernels.ahrs.AHRS.fields['bias']
-        for i, s in enumerate(self._states):
-            for j in range(size):
-                s[offset + j] = float(value[j] if self.batch is None else value[j][i])
+        self.set_field('bias.rate', value)
 
     @property
     def bias_std(self):
         """σ of the gyro bias estimate per body axis (rad/s): its Kalman filter's."""
-        k = self._kernels.ahrs
+        k = self._kernels.bias
         if self.batch is None:
-            s = self._states[0]
+            s = self._states[0][0]
             return tuple(math.sqrt(max(float(k.bias_variance(s, i, i)), 0.0)) for i in range(3))
-        return tuple(np.array([math.sqrt(max(float(k.bias_variance(s, i, i)), 0.0))
-                               for s in self._states]) for i in range(3))
+        return tuple(np.array([math.sqrt(max(float(k.bias_variance(h[0], i, i)), 0.0))
+                               for h in self._states]) for i in range(3))
 
     @property
     def bias_variance(self):
@@ -305,66 +293,65 @@ class AhrsObserver:
         x, y, z = self.bias_std
         return (x * x + y * y + z * z) / 3.0
 
-    def _count(self, slot):
+    def _count(self, name):
         if self.batch is None:
-            return int(self._states[0][slot])
-        return np.array([int(s[slot]) for s in self._states])
+            return int(STATE.get(self._states[0][0], name))
+        return np.array([int(STATE.get(h[0], name)) for h in self._states])
 
     @property
     def clipped(self):
         """Samples found at the gyro's range so far (``gyro_range``, or stuck at its peak)."""
-        return self._count(self._kernels.ahrs.S_CLIPS)
+        return self._count('gyro.clips')
 
     @property
     def clip_variance(self):
         """What the last sample, at the gyro's range, adds to the variances (rad²; 0: none)."""
-        return self._slots(self._kernels.ahrs.S_CLIPPED, 1)[0]
+        return self.field('gyro.clipped')
 
     @property
     def holes(self):
         """Holes in the stream bridged so far (``hole_kernel``: intervals much longer than usual)."""
-        return self._count(self._kernels.ahrs.S_HOLES)
+        return self._count('hole.count')
 
     @property
     def hole_variance(self):
         """What the last sample's hole adds to the variances (rad² per axis; 0: none)."""
-        return self._slots(self._kernels.ahrs.S_HOLE_VAR, 1)[0]
+        return self.field('hole.var')
 
     @property
     def hole_restart(self):
         """After a hole: the seconds the inclination's restarted mean weighs the old as (−1: kept)."""
-        return self._slots(self._kernels.ahrs.S_HOLE_T0, 1)[0]
+        return self.field('hole.t0')
 
     @property
     def step_interval(self):
         """The interval the last step's coefficients are for, s (a hole's keeps the usual one)."""
-        return self._slots(self._kernels.ahrs.C_DT, 1)[0]
+        return self.field('coef.dt')
 
     @property
     def rest(self):
         """Whether rest is detected."""
-        return self._flag(self._kernels.ahrs.S_REST)
+        return self._flag('rest.detected')
 
     @property
     def mag_disturbed(self):
         """Whether the last magnetometer sample was rejected."""
-        return self._flag(self._kernels.ahrs.S_MAG_DIST)
+        return self._flag('field.mag_dist')
 
     @property
     def velocity_used(self):
         """Whether the last step removed the body's acceleration (a fresh velocity given)."""
-        return self._flag(S_VEL_USED)
+        return self._flag('vel.used')
 
     @property
     def velocity_timeout(self):
         """s: an older velocity is not used (``VELOCITY_TIMEOUT`` unless set)."""
-        return float(self._states[0][P_VEL_TIMEOUT])
+        return STATE.get(self._states[0][0], 'par.velocity_timeout')
 
     @velocity_timeout.setter
     def velocity_timeout(self, value):
         check_dt(value)
-        for s in self._states:
-            s[P_VEL_TIMEOUT] = float(value)
+        self.set_field('par.velocity_timeout', float(value))
 
     def velocity(self, v, dt=None):
         """
@@ -374,7 +361,7 @@ class AhrsObserver:
         remove ``dv/dt + ω × v`` from the specific force (the velocity aid,
         :mod:`~ext_observer.core.ahrs.velocity_kernel`); ``dt`` None: the first.
         """
-        self._each(self._kernels.ahrs.velocity_sample, v, -1.0 if dt is None else float(dt))
+        self._each(self._kernels.velocity.velocity_sample, v, -1.0 if dt is None else float(dt))
 
     @property
     def calibration_state(self):
@@ -408,9 +395,8 @@ class AhrsObserver:
         # Loaded while running: the heading and the references are taken
         # from the calibrated field at the next field (before the first
         # field, the start does that).
-        k = self._kernels.ahrs
-        for s in self._states:
-            s[k.S_CAL_LOADED] = s[k.S_HAS_REF]
+        for h in self._states:
+            STATE.set(h[0], 'cal_feed.loaded', STATE.get(h[0], 'field.has_ref'))
 
     # --- the three steps ---------------------------------------------------
 
@@ -520,20 +506,20 @@ class AhrsObserver:
         """
         if self.batch is not None:
             raise ValueError('unbridged takes one estimate, not a batch')
-        return self._kernels.ahrs.ahrs_unbridged(self._states[0], float(gyr[0]), float(gyr[1]),
+        return self._kernels.ahrs.ahrs_unbridged(self._states[0][0], float(gyr[0]), float(gyr[1]),
                                                  float(gyr[2]), float(dt))
 
     def _each(self, func, vector, *extra):
         if self.batch is None:
-            func(self._states[0], *vector, *extra)
+            func(self._states[0][0], *vector, *extra)
             return
         v = np.asarray(vector, dtype=float).reshape(len(vector), self._n)
-        for i, s in enumerate(self._states):
-            func(s, *(float(c) for c in v[:, i]), *extra)
+        for i, h in enumerate(self._states):
+            func(h[0], *(float(c) for c in v[:, i]), *extra)
 
     def update_acc(self, acc):
         """Correct the inclination from the world-frame filtered specific force."""
-        self._each(self._kernels.ahrs.ahrs_update_acc, acc)
+        self._each(self._kernels.gravity.ahrs_update_acc, acc)
 
     def update_mag(self, mag, dt=None):
         """
@@ -552,10 +538,10 @@ class AhrsObserver:
         if dt is None:
             # The last sample's interval, as the kernels hold it (a caller
             # may step them directly: RawImuEstimator's sample_step).
-            dt = float(self._states[0][self._kernels.ahrs.C_DT])
+            dt = self.field('coef.dt')
             check_dt(dt)
         elif dt != self._mag_dt:
             check_dt(dt)
             self._mag_dt = dt
-        self._each(self._kernels.ahrs.ahrs_update_mag, mag, float(dt))
+        self._each(self._kernels.field.ahrs_update_mag, mag, float(dt))
 

@@ -13,11 +13,27 @@ sample stays in the kernel.
 import math
 
 from .ahrs_filters import clip, first_order_step
-from .ahrs_layout import (BIAS_P_XX, BIAS_P_YY, BIAS_P_ZZ, C_DT, C_K_REST, P_BIAS_MAX,
-                          P_GYRO_RANGE, P_REST_GYR, P_REST_TIME, P_TAU_REST, S_ACC_STILL,
-                          S_BIAS, S_BIAS_P, S_CLIPPED, S_CLIPS,
-                          S_GYR_LAST, S_GYR_PREV, S_GYR_PEAK, S_REST, S_REST_GYR, S_REST_TIME,
-                          S_STUCK)
+from .bias_kernel import BIAS_P_XX, BIAS_P_YY, BIAS_P_ZZ
+from .record import Group
+
+
+# What the gyro's samples say: rates at the range, and rest.
+REST = Group('rest', 'Rest: the body still, the bias learned from the rate at rest', [
+    ('detected', '1', 'rest is detected'),
+    ('time', 's', 'time below both rest thresholds so far'),
+    ('gyr_lp', 'rad/s', 'the rate, low-passed (tau_rest) for rest detection', 3),
+    ('acc_lp', 'm/s²', 'the specific force, low-passed (tau_rest) for rest detection', 3),
+    ('acc_still', '1', "the specific force is within rest_acc of its low-pass"),
+])
+GYRO = Group('gyro', "The gyro's recent rates and a clipped gyro", [
+    ('clips', '', 'clipped samples counted'),
+    ('clipped', 'rad²', "the last sample's clipped variance (0: not clipped)"),
+    ('last', 'rad/s', "the latest sample's rate, as measured", 3),
+    ('prev', 'rad/s', 'the rate of the sample before the latest', 3),
+    ('peak', 'rad/s', 'the largest |rate| on any axis seen'),
+    ('stuck', '', 'samples each axis has repeated its rate at the peak', 3),
+    ('clip_left', 's', 'of the recovery from a clipped sample still to run'),
+])
 
 # σ of the bias learned at rest (rad/s), VQF's value: the low-passed rate of
 # a body at rest is a far better measurement than any correction in motion.
@@ -46,16 +62,16 @@ _SETTLED = 4.0
 def _at_range(s, i, g):
     """Whether rate ``g`` on axis ``i`` is at the gyro's range (and the axis's memory)."""
     a = abs(g)
-    rng = s[P_GYRO_RANGE]
+    rng = s.par.gyro_range
     if rng > 0.0:
         at = a >= rng * (1.0 - _AT_RANGE)
     else:
         # Unknown range: stuck at the largest magnitude seen.
-        same = a >= _CLIP_FLOOR and a == abs(s[S_GYR_LAST + i]) and a >= s[S_GYR_PEAK]
-        s[S_STUCK + i] = s[S_STUCK + i] + 1.0 if same else 0.0
-        at = s[S_STUCK + i] >= _STUCK
-    s[S_GYR_PREV + i] = s[S_GYR_LAST + i]  # a hole's end correction takes the slope
-    s[S_GYR_LAST + i] = g
+        same = a >= _CLIP_FLOOR and a == abs(s.gyro.last[i]) and a >= s.gyro.peak
+        s.gyro.stuck[i] = s.gyro.stuck[i] + 1.0 if same else 0.0
+        at = s.gyro.stuck[i] >= _STUCK
+    s.gyro.prev[i] = s.gyro.last[i]  # a hole's end correction takes the slope
+    s.gyro.last[i] = g
     return at
 
 
@@ -67,18 +83,18 @@ def clipped_variance(s, gx, gy, gz):
     ``(range dt)²`` (``S_CLIPPED``, for the covariance), and the sample is
     counted (``S_CLIPS``).
     """
-    dt = s[C_DT]
+    dt = s.coef.dt
     cx = _at_range(s, 0, gx)
     cy = _at_range(s, 1, gy)
     cz = _at_range(s, 2, gz)
     peak = max(abs(gx), max(abs(gy), abs(gz)))
-    if peak > s[S_GYR_PEAK]:
-        s[S_GYR_PEAK] = peak
-    top = max(s[P_GYRO_RANGE], s[S_GYR_PEAK]) * dt
+    if peak > s.gyro.peak:
+        s.gyro.peak = peak
+    top = max(s.par.gyro_range, s.gyro.peak) * dt
     var = ((1.0 if cx else 0.0) + (1.0 if cy else 0.0) + (1.0 if cz else 0.0)) * top * top
-    s[S_CLIPPED] = var
+    s.gyro.clipped = var
     if var != 0.0:
-        s[S_CLIPS] += 1.0
+        s.gyro.clips += 1.0
     return var
 
 
@@ -86,29 +102,29 @@ def detect_rest(s, gx, gy, gz):
     """
     Rest (gyro and specific force still for ``rest_time``); at rest the bias is the low-passed rate.
     """
-    k = s[C_K_REST]
-    lx, ly, lz = first_order_step(s, S_REST_GYR, k, gx, gy, gz)
-    bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
+    k = s.coef.k_rest
+    lx, ly, lz = first_order_step(s.rest.gyr_lp, k, gx, gy, gz)
+    bx, by, bz = s.bias.rate[0], s.bias.rate[1], s.bias.rate[2]
     ex, ey, ez = gx - lx, gy - ly, gz - lz
     dev = ex * ex + ey * ey + ez * ez
     mx, my, mz = lx - bx, ly - by, lz - bz
     mean = mx * mx + my * my + mz * mz
-    th = s[P_REST_GYR] * s[P_REST_GYR]
-    settled = s[S_REST_TIME] > s[P_REST_TIME] + _SETTLED * s[P_TAU_REST]
+    th = s.par.rest_gyr * s.par.rest_gyr
+    settled = s.rest.time > s.par.rest_time + _SETTLED * s.par.tau_rest
     held = _HELD * _HELD * th if settled else th
     # A rate well beyond bias_max on any axis is no bias: a steady turn is not rest.
-    big = max(abs(lx), max(abs(ly), abs(lz))) > s[P_BIAS_MAX] + _BEYOND * s[P_REST_GYR]
-    still = (dev < th) and (mean < held) and s[S_ACC_STILL] != 0.0 and not big
-    s[S_REST_TIME] = (s[S_REST_TIME] + s[C_DT]) if still else 0.0
-    rest = s[S_REST_TIME] >= s[P_REST_TIME]
-    s[S_REST] = 1.0 if rest else 0.0
+    big = max(abs(lx), max(abs(ly), abs(lz))) > s.par.bias_max + _BEYOND * s.par.rest_gyr
+    still = (dev < th) and (mean < held) and s.rest.acc_still != 0.0 and not big
+    s.rest.time = (s.rest.time + s.coef.dt) if still else 0.0
+    rest = s.rest.time >= s.par.rest_time
+    s.rest.detected = 1.0 if rest else 0.0
     # At rest the bias is the low-passed rate, within bias_max per axis
     # as in motion.
     kr = k if rest else 0.0
-    m = s[P_BIAS_MAX]
-    s[S_BIAS] = clip(bx + kr * mx, -m, m)
-    s[S_BIAS + 1] = clip(by + kr * my, -m, m)
-    s[S_BIAS + 2] = clip(bz + kr * mz, -m, m)
+    m = s.par.bias_max
+    s.bias.rate[0] = clip(bx + kr * mx, -m, m)
+    s.bias.rate[1] = clip(by + kr * my, -m, m)
+    s.bias.rate[2] = clip(bz + kr * mz, -m, m)
     if rest:
         # Its variance as that of a measurement whose steady σ is
         # _REST_BIAS_SIGMA's: (1 − k)² P + k² r, r = 2 σ² / k.
@@ -116,4 +132,4 @@ def detect_rest(s, gx, gy, gz):
         add = 2.0 * k * _REST_BIAS_SIGMA * _REST_BIAS_SIGMA
         for i in range(6):
             diagonal = i == BIAS_P_XX or i == BIAS_P_YY or i == BIAS_P_ZZ
-            s[S_BIAS_P + i] = a * s[S_BIAS_P + i] + (add if diagonal else 0.0)
+            s.bias.p[i] = a * s.bias.p[i] + (add if diagonal else 0.0)

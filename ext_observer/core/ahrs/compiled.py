@@ -27,6 +27,7 @@ imports.
 """
 
 import hashlib
+import importlib
 import importlib.util
 import os
 import sys
@@ -43,7 +44,7 @@ __all__ = ['CompiledUnavailable', 'ENV', 'KERNEL_SOURCES', 'Kernels', 'PLAIN_COS
 # The files of the kernels: every function of them is compiled.
 KERNEL_SOURCES = ('layout.py', 'small_matrix.py',
             'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
-            'ahrs_layout.py', 'ahrs_filters.py', 'bias_kernel.py', 'clip_and_rest.py',
+            'ahrs_filters.py', 'bias_kernel.py', 'clip_and_rest.py',
             'hole_kernel.py', 'velocity_kernel.py', 'accel_rejection.py', 'field_kernel.py',
             'gravity_kernel.py', 'ahrs_kernel.py', 'uncertainty_kernel.py')
 ENV = 'EXT_OBSERVER_COMPILED'
@@ -59,18 +60,22 @@ class CompiledUnavailable(RuntimeError):
     """The compiled kernels were asked for and cannot be had (numba missing or failing)."""
 
 
+# The kernel modules a wrapper calls, by their short names (ahrs: ahrs_kernel.py).
+_WRAPPED = ('ahrs', 'gravity', 'field', 'bias', 'velocity', 'hole', 'magcal', 'uncertainty')
+
+
 class Kernels:
     """
     One set of kernels.
 
     Attributes
     ----------
-    ahrs, magcal, uncertainty : module
-        The functions and layout constants of
-        :mod:`~ext_observer.core.ahrs.ahrs_kernel`,
-        :mod:`~ext_observer.core.ahrs.magcal_kernel` and
-        :mod:`~ext_observer.core.ahrs.uncertainty_kernel` (their compiled twins when
-        compiled).
+    ahrs, gravity, field, bias, velocity, hole, magcal, uncertainty : module
+        The kernel modules the wrappers call:
+        :mod:`~ext_observer.core.ahrs.ahrs_kernel`, ``gravity_kernel``,
+        ``field_kernel``, ``bias_kernel``, ``velocity_kernel``,
+        ``hole_kernel``, ``magcal_kernel`` and ``uncertainty_kernel`` (their
+        compiled twins when compiled).
     sample_step : callable
         :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step`, the
         node's call per sample; once :func:`ext_observer.pipeline.kernel_cache.load`
@@ -82,10 +87,9 @@ class Kernels:
         How long getting them took (compiling, or loading numba's cache).
     """
 
-    def __init__(self, ahrs, magcal, compiled, load_seconds=0.0, uncertainty=None):
-        self.ahrs = ahrs
-        self.magcal = magcal
-        self.uncertainty = uncertainty if uncertainty is not None else ahrs
+    def __init__(self, modules, compiled, load_seconds=0.0):
+        for name in _WRAPPED:
+            setattr(self, name, modules[f'{name}_kernel'])
         self.sample_step = self.uncertainty.sample_step
         self.compiled = compiled
         self.load_seconds = load_seconds
@@ -103,8 +107,8 @@ _FAILURE = None
 def _plain():
     global _PLAIN
     if _PLAIN is None:
-        from . import ahrs_kernel, magcal_kernel, uncertainty_kernel
-        _PLAIN = Kernels(ahrs_kernel, magcal_kernel, False, uncertainty=uncertainty_kernel)
+        _PLAIN = Kernels({f'{name}_kernel': importlib.import_module(f'{__package__}.{name}_kernel')
+                          for name in _WRAPPED}, False)
     return _PLAIN
 
 
@@ -274,9 +278,7 @@ def _load_compiled():
             if isinstance(value, types.FunctionType) and value in compiled:
                 setattr(module, key, compiled[value])
     by_name = {m.__name__.rpartition('.')[2]: m for m in modules}
-    return Kernels(by_name['ahrs_kernel'], by_name['magcal_kernel'], True,
-                   load_seconds=time.perf_counter() - start,
-                   uncertainty=by_name['uncertainty_kernel'])
+    return Kernels(by_name, True, load_seconds=time.perf_counter() - start)
 
 
 def entry_point(dispatcher):

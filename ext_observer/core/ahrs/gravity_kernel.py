@@ -13,47 +13,54 @@ Python that numba compiles, as :mod:`~ext_observer.core.ahrs.ahrs_kernel`
 
 from .accel_rejection import acc_rotation
 from .ahrs_filters import first_order_step, rotate, steady
-from .ahrs_layout import (C_BW, C_DT, C_K_ACC, C_K_REST, P_ACC_REJECT, P_MOTION_BIAS, P_REST_ACC,
-                          P_TAU_ACC, S_ACC_REJ, S_ACC_STILL, S_INC_SIGMA, S_LP, S_Q, S_REST_ACC,
-                          S_START, S_START_N, S_STEPS)
 from .bias_kernel import learn_bias, rlp_steady
 from .hole_kernel import RECOVERING, acc_deviation
 from .velocity_kernel import velocity_removed
+from .record import Group
+
+INC = Group('inc', "The inclination's filters: the world-frame specific force", [
+    ('lp', 'm/s²', 'the Butterworth states s1 (3), s2 (3) of the world-frame force', 6),
+    ('start', 's', 'since the start (or a clipped stretch)'),
+    ('start_n', '', 'samples in the running mean of the start'),
+    ('acc_dev', '(1/g)²', "the specific force's recent deviation from gravity"),
+    ('sigma', 'rad', "the inclination's error σ that holes and clipped samples left beyond "
+     "the usual, forgotten at the low-pass's pace (0: none)"),
+])
 
 
 def ahrs_update_acc(s, ax, ay, az):
     """Correct the inclination from the world-frame filtered specific force."""
     # Rest detection needs the accelerometer's deviation from its mean.
-    rx, ry, rz = first_order_step(s, S_REST_ACC, s[C_K_REST], ax, ay, az)
+    rx, ry, rz = first_order_step(s.rest.acc_lp, s.coef.k_rest, ax, ay, az)
     ex, ey, ez = ax - rx, ay - ry, az - rz
-    s[S_ACC_STILL] = 1.0 if (ex * ex + ey * ey + ez * ez) < s[P_REST_ACC] * s[P_REST_ACC] else 0.0
+    s.rest.acc_still = 1.0 if (ex * ex + ey * ey + ez * ez) < s.par.rest_acc * s.par.rest_acc else 0.0
     # Gravity from the specific force less the body's own acceleration (rest sees it all).
     ax, ay, az = velocity_removed(s, ax, ay, az)
 
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
     vx, vy, vz = rotate(w, x, y, z, ax, ay, az)
-    dt = s[C_DT]
+    dt = s.coef.dt
     acc_deviation(s, vx, vy, vz, dt)
-    starting = s[S_START] < s[P_TAU_ACC]
+    starting = s.inc.start < s.par.tau_acc
     if starting:
         # The first tau_acc seconds (from the start, or after a clipped
         # gyro): the running mean of the world-frame specific force, which
         # a low-pass started on one sample of a moving body would only
         # approach at its own pace (VQF starts its low-pass so too).
-        n = s[S_START_N] + 1.0
-        s[S_START_N] = n
-        fx = s[S_LP] + (vx - s[S_LP]) / n
-        fy = s[S_LP + 1] + (vy - s[S_LP + 1]) / n
-        fz = s[S_LP + 2] + (vz - s[S_LP + 2]) / n
+        n = s.inc.start_n + 1.0
+        s.inc.start_n = n
+        fx = s.inc.lp[0] + (vx - s.inc.lp[0]) / n
+        fy = s.inc.lp[1] + (vy - s.inc.lp[1]) / n
+        fz = s.inc.lp[2] + (vz - s.inc.lp[2]) / n
         s1x, s1y, s1z = fx, fy, fz
         s2x, s2y, s2z = 0.0, 0.0, 0.0
-        s[S_START] += dt
+        s.inc.start += dt
     else:
-        b0, b1, b2, a1, a2 = s[C_BW], s[C_BW + 1], s[C_BW + 2], s[C_BW + 3], s[C_BW + 4]
-        s1x, s1y, s1z = s[S_LP], s[S_LP + 1], s[S_LP + 2]
-        s2x, s2y, s2z = s[S_LP + 3], s[S_LP + 4], s[S_LP + 5]
+        b0, b1, b2, a1, a2 = s.coef.bw[0], s.coef.bw[1], s.coef.bw[2], s.coef.bw[3], s.coef.bw[4]
+        s1x, s1y, s1z = s.inc.lp[0], s.inc.lp[1], s.inc.lp[2]
+        s2x, s2y, s2z = s.inc.lp[3], s.inc.lp[4], s.inc.lp[5]
         # A hole's sample stands for the steps lost too (held across them).
-        for _ in range(max(int(s[S_STEPS] + 0.5), 1)):
+        for _ in range(max(int(s.hole.steps + 0.5), 1)):
             fx, fy, fz = b0 * vx + s1x, b0 * vy + s1y, b0 * vz + s1z
             s1x, s1y, s1z = (b1 * vx - a1 * fx + s2x, b1 * vy - a1 * fy + s2y,
                              b1 * vz - a1 * fz + s2z)
@@ -62,32 +69,32 @@ def ahrs_update_acc(s, ax, ay, az):
     # δ: the rotation taking f/|f| (or, f rejected, the gyro's vertical) to
     # the vertical, [1 + u_z, u_y, −u_x, 0] (|δ| = 0 only shrinks q̂).
     # (No rejection while holes or a clipped stretch leave the vertical unsure.)
-    recovering = s[S_INC_SIGMA] > RECOVERING * s[P_ACC_REJECT]
+    recovering = s.inc.sigma > RECOVERING * s.par.acc_reject
     dw, dx, dy = acc_rotation(s, fx, fy, fz, dt, starting or recovering)
     # q̂ + κ (δ ⊗ q̂ − q̂) = r ⊗ q̂ with r = (1 − κ) + κ δ.
-    kap = s[C_K_ACC]
-    if s[S_STEPS] > 1.0:
-        kap = 1.0 - (1.0 - kap) ** s[S_STEPS]
+    kap = s.coef.k_acc
+    if s.hole.steps > 1.0:
+        kap = 1.0 - (1.0 - kap) ** s.hole.steps
     rw, rx, ry = 1.0 - kap + kap * dw, kap * dx, kap * dy
-    s[S_Q] = rw * w - rx * x - ry * y
-    s[S_Q + 1] = rw * x + rx * w + ry * z
-    s[S_Q + 2] = rw * y + ry * w - rx * z
-    s[S_Q + 3] = rw * z + rx * y - ry * x
+    s.est.q[0] = rw * w - rx * x - ry * y
+    s.est.q[1] = rw * x + rx * w + ry * z
+    s.est.q[2] = rw * y + ry * w - rx * z
+    s.est.q[3] = rw * z + rx * y - ry * x
     # The filter's states follow the applied rotation (r need not be unit).
-    s[S_LP], s[S_LP + 1], s[S_LP + 2] = rotate(rw, rx, ry, 0.0, s1x, s1y, s1z)
-    s[S_LP + 3], s[S_LP + 4], s[S_LP + 5] = rotate(rw, rx, ry, 0.0, s2x, s2y, s2z)
+    s.inc.lp[0], s.inc.lp[1], s.inc.lp[2] = rotate(rw, rx, ry, 0.0, s1x, s1y, s1z)
+    s.inc.lp[3], s.inc.lp[4], s.inc.lp[5] = rotate(rw, rx, ry, 0.0, s2x, s2y, s2z)
     if starting:
-        if s[S_START] >= s[P_TAU_ACC]:
+        if s.inc.start >= s.par.tau_acc:
             # The mean hands over to the low-pass, steady at it.
-            steady(s, S_LP, s[S_LP], s[S_LP + 1], s[S_LP + 2])
+            steady(s.coef.bw, s.inc.lp, 0, s.inc.lp[0], s.inc.lp[1], s.inc.lp[2])
             rlp_steady(s)
         else:
             rlp_steady(s)
         return
     # The corrections measure a bias once the low-pass has settled from
     # the start, one tau_acc after the running mean handed over.
-    settled = s[S_START] >= 2.0 * s[P_TAU_ACC]
+    settled = s.inc.start >= 2.0 * s.par.tau_acc
     if not settled:
-        s[S_START] += dt
-    if s[P_MOTION_BIAS] != 0.0 and s[S_ACC_REJ] == 0.0:
+        s.inc.start += dt
+    if s.par.motion_bias != 0.0 and s.rej.time == 0.0:
         learn_bias(s, rw, rx, ry, dt, settled)

@@ -26,11 +26,19 @@ constants. Plain Python that numba compiles, as
 
 import math
 
-from .ahrs_layout import (C_DT, MC0, P_HAS_CAL, P_TAU_ACC, S_ACC_DEV, S_CAL_TURN, S_CLIP_LEFT, S_CAL_WAIT,
-                          S_GYR_LAST, S_GYR_PREV, S_HOLE_END, S_HOLE_RUN, S_HOLE_T0, S_HOLE_VAR,
-                          S_HOLES, S_INC_SIGMA, S_INIT, S_STEPS, S_LP,
-                          S_Q, S_START, S_START_N, S_WAIT_N, S_WAIT_TURN)
+from .ahrs_filters import gravity_deviation, quat_multiply
 from .magcal_kernel import mc_restart
+from .record import Group
+
+HOLE = Group('hole', 'Holes in the stream: intervals much longer than the usual one', [
+    ('run', 's', 'of holes in a row (longer: the rate changed)'),
+    ('var', 'rad²', "per axis, what the last step's hole adds (0: none)"),
+    ('count', '', 'holes bridged'),
+    ('t0', 's', "the inclination's restarted mean weighs the old as (−1: kept)"),
+    ('end', '', 'the end correction a hole leaves for the next usual sample: T²/12 over '
+     "the usual interval (0: none), and the rate's change into the hole (rad/s, 3)", 4),
+    ('steps', '', "the usual steps this sample stands for (a hole's: more than 1)"),
+])
 
 # An interval longer than this many times the usual one is a hole (one
 # sample lost makes it twice the usual).
@@ -77,33 +85,31 @@ CLIP_SHARE = 0.2
 # this share of acc_reject, the gyro has not carried the vertical: no
 # acceleration rejection (the low-pass's force is the way back).
 RECOVERING = 1.0 / 3.0
-# Standard gravity, m/s².
-GRAVITY = 9.80665
 
 
 def restart_mean(s):
     """Start from a running mean of the vertical, as at a start (nothing of the old weighed)."""
-    s[S_START] = 0.0
-    s[S_START_N] = 0.0
-    s[S_LP + 3] = 0.0
-    s[S_LP + 4] = 0.0
-    s[S_LP + 5] = 0.0
+    s.inc.start = 0.0
+    s.inc.start_n = 0.0
+    s.inc.lp[3] = 0.0
+    s.inc.lp[4] = 0.0
+    s.inc.lp[5] = 0.0
 
 
 def forget_wait(s):
     """Forget the turn the fields of a wait for the calibration would have given the heading."""
-    s[S_WAIT_TURN] = 0.0
-    s[S_WAIT_N] = 0.0
+    s.field.wait_turn = 0.0
+    s.field.wait_n = 0.0
 
 
 def calibration_restart(s):
     """The magnetometer calibration follows the field afresh: it learns nothing across a gap."""
-    if s[P_HAS_CAL] != 0.0:
-        mc_restart(s, MC0)
-        s[S_CAL_TURN] = 1.0
+    if s.par.has_cal != 0.0:
+        mc_restart(s.cal.flat, 0)
+        s.cal_feed.turn[0] = 1.0
         for i in range(1, 4):
-            s[S_CAL_TURN + i] = 0.0
-        s[S_CAL_WAIT] = math.inf
+            s.cal_feed.turn[i] = 0.0
+        s.cal_feed.wait = math.inf
 
 
 def hole_starts(s, dt):
@@ -115,9 +121,9 @@ def hole_starts(s, dt):
     less than :data:`HOLE_RUN_TIME` before. Otherwise the step is a usual
     one (:func:`hole_ends`) and the caller takes ``dt`` as the new interval.
     """
-    if s[S_INIT] != 0.0 and dt > HOLE_FACTOR * s[C_DT] and s[S_HOLE_RUN] < HOLE_RUN_TIME:
-        s[S_HOLE_RUN] += dt
-        s[S_STEPS] = dt / s[C_DT]
+    if s.est.init != 0.0 and dt > HOLE_FACTOR * s.coef.dt and s.hole.run < HOLE_RUN_TIME:
+        s.hole.run += dt
+        s.hole.steps = dt / s.coef.dt
         return True
     hole_ends(s)
     return False
@@ -125,9 +131,9 @@ def hole_starts(s, dt):
 
 def hole_ends(s):
     """A usual step: no hole in a row, nothing to add to the covariance."""
-    s[S_HOLE_RUN] = 0.0
-    s[S_HOLE_VAR] = 0.0
-    s[S_STEPS] = 1.0
+    s.hole.run = 0.0
+    s.hole.var = 0.0
+    s.hole.steps = 1.0
 
 
 def hole_rate(s, gx, gy, gz, dt):
@@ -140,8 +146,8 @@ def hole_rate(s, gx, gy, gz, dt):
     ``(L + 1) / (2L)`` and the one before the hole the rest (one step: the
     usual step; a long hole: the trapezoid).
     """
-    w = 0.5 + 0.5 * s[C_DT] / dt
-    lx, ly, lz = s[S_GYR_LAST], s[S_GYR_LAST + 1], s[S_GYR_LAST + 2]
+    w = 0.5 + 0.5 * s.coef.dt / dt
+    lx, ly, lz = s.gyro.last[0], s.gyro.last[1], s.gyro.last[2]
     return lx + w * (gx - lx), ly + w * (gy - ly), lz + w * (gz - lz)
 
 
@@ -155,16 +161,13 @@ def acc_deviation(s, vx, vy, vz, dt):
     """
     Follow how far the world-frame specific force ``v`` (m/s²) strays from gravity.
 
-    ``max(d_z², (d_x² + d_y²) / 2) / g²`` of its deviation ``d`` from
-    ``(0, 0, g)``, averaged over about :data:`HOLE_DEVIATION_TIME`: one
-    sample's variance per horizontal axis of the vertical it shows (a
-    moving body's translational acceleration), which a hole's own is
-    weighed against.
+    :func:`~ext_observer.core.ahrs.ahrs_filters.gravity_deviation`,
+    averaged over about :data:`HOLE_DEVIATION_TIME`: what a hole's own
+    variance is weighed against.
     """
-    dz = vz - GRAVITY
-    e = max(dz * dz, 0.5 * (vx * vx + vy * vy)) / (GRAVITY * GRAVITY)
+    e = gravity_deviation(vx, vy, vz)
     k = min(dt / HOLE_DEVIATION_TIME, 1.0)
-    s[S_ACC_DEV] += k * (e - s[S_ACC_DEV])
+    s.inc.acc_dev += k * (e - s.inc.acc_dev)
 
 
 def hole_after(s, var):
@@ -181,14 +184,14 @@ def hole_after(s, var):
     mean of the fields, gyro-held across the hole: the first fields after it
     would bring the inclination's error there times ``tan(dip)``.
     """
-    if s[S_HOLE_END] != 0.0:
+    if s.hole.end[0] != 0.0:
         var *= HOLE_END_SHARE * HOLE_END_SHARE
-    s[S_HOLE_VAR] = var
-    s[S_HOLES] += 1.0
+    s.hole.var = var
+    s.hole.count += 1.0
     if var > HOLE_CALIBRATION:
         calibration_restart(s)
-    s[S_INC_SIGMA] = math.sqrt(s[S_INC_SIGMA] * s[S_INC_SIGMA] + var)
-    s[S_HOLE_T0] = restart_weighted(s, var)
+    s.inc.sigma = math.sqrt(s.inc.sigma * s.inc.sigma + var)
+    s.hole.t0 = restart_weighted(s, var)
 
 
 def restart_weighted(s, var):
@@ -201,17 +204,17 @@ def restart_weighted(s, var):
     mean's own weight, the mean starts again with the old weighed as ``t0``
     seconds. Returns ``t0``, or −1.0 where the mean is kept.
     """
-    t0 = HOLE_CORRELATION * (s[S_ACC_DEV] / var - 1.0)
-    if t0 >= s[P_TAU_ACC]:
+    t0 = HOLE_CORRELATION * (s.inc.acc_dev / var - 1.0)
+    if t0 >= s.par.tau_acc:
         return -1.0
     t0 = max(t0, 0.0)
-    if s[S_START] < s[P_TAU_ACC] and t0 >= s[S_START]:
+    if s.inc.start < s.par.tau_acc and t0 >= s.inc.start:
         return -1.0
-    s[S_START] = t0
-    s[S_START_N] = t0 / s[C_DT]
-    s[S_LP + 3] = 0.0
-    s[S_LP + 4] = 0.0
-    s[S_LP + 5] = 0.0
+    s.inc.start = t0
+    s.inc.start_n = t0 / s.coef.dt
+    s.inc.lp[3] = 0.0
+    s.inc.lp[4] = 0.0
+    s.inc.lp[5] = 0.0
     return t0
 
 
@@ -228,14 +231,14 @@ def clip_after(s, var):
     """
     if var == 0.0:
         # (Most samples: nothing to forget, and the division skipped.)
-        if s[S_INC_SIGMA] != 0.0:
-            s[S_INC_SIGMA] *= 1.0 - s[C_DT] / s[P_TAU_ACC]
-        if s[S_CLIP_LEFT] != 0.0:
-            s[S_CLIP_LEFT] = max(s[S_CLIP_LEFT] - s[C_DT], 0.0)
+        if s.inc.sigma != 0.0:
+            s.inc.sigma *= 1.0 - s.coef.dt / s.par.tau_acc
+        if s.gyro.clip_left != 0.0:
+            s.gyro.clip_left = max(s.gyro.clip_left - s.coef.dt, 0.0)
         return
-    s[S_CLIP_LEFT] = s[P_TAU_ACC]
-    sigma = s[S_INC_SIGMA] + CLIP_SHARE * math.sqrt(var)
-    s[S_INC_SIGMA] = sigma
+    s.gyro.clip_left = s.par.tau_acc
+    sigma = s.inc.sigma + CLIP_SHARE * math.sqrt(var)
+    s.inc.sigma = sigma
     restart_weighted(s, sigma * sigma)
 
 
@@ -248,11 +251,11 @@ def hole_slope(s, dt):
     (:func:`hole_end_fix`) waits for the rate's slope after it.
     """
     f = 0.0
-    if s[S_HOLE_RUN] == dt and dt <= HOLE_END_TIME:
-        f = dt * dt / (HOLE_HERMITE_DIVISOR * s[C_DT])
+    if s.hole.run == dt and dt <= HOLE_END_TIME:
+        f = dt * dt / (HOLE_HERMITE_DIVISOR * s.coef.dt)
         for i in range(3):
-            s[S_HOLE_END + 1 + i] = s[S_GYR_LAST + i] - s[S_GYR_PREV + i]
-    s[S_HOLE_END] = f
+            s.hole.end[1 + i] = s.gyro.last[i] - s.gyro.prev[i]
+    s.hole.end[0] = f
 
 
 def hole_end_fix(s, gx, gy, gz):
@@ -265,19 +268,16 @@ def hole_end_fix(s, gx, gy, gz):
     slopes, a Hermite interpolation); the slopes are the differences of the
     samples next to the hole, known once the one after it is here.
     """
-    f = s[S_HOLE_END]
-    s[S_HOLE_END] = 0.0
-    cx = f * (s[S_HOLE_END + 1] - (gx - s[S_GYR_LAST]))
-    cy = f * (s[S_HOLE_END + 2] - (gy - s[S_GYR_LAST + 1]))
-    cz = f * (s[S_HOLE_END + 3] - (gz - s[S_GYR_LAST + 2]))
+    f = s.hole.end[0]
+    s.hole.end[0] = 0.0
+    cx = f * (s.hole.end[1] - (gx - s.gyro.last[0]))
+    cy = f * (s.hole.end[2] - (gy - s.gyro.last[1]))
+    cz = f * (s.hole.end[3] - (gz - s.gyro.last[2]))
     n = math.sqrt(cx * cx + cy * cy + cz * cz)
     if n == 0.0:
         return
     c = math.cos(0.5 * n)
     k = math.sin(0.5 * n) / n
     bx, by, bz = k * cx, k * cy, k * cz
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
-    s[S_Q] = w * c - x * bx - y * by - z * bz
-    s[S_Q + 1] = w * bx + x * c + y * bz - z * by
-    s[S_Q + 2] = w * by - x * bz + y * c + z * bx
-    s[S_Q + 3] = w * bz + x * by - y * bx + z * c
+    q = s.est.q
+    q[0], q[1], q[2], q[3] = quat_multiply(q[0], q[1], q[2], q[3], c, bx, by, bz)

@@ -21,8 +21,7 @@ the compiled kernels, one crossing from Python per sample.
 import math
 
 from .ahrs_filters import rotate
-from .ahrs_kernel import ahrs_update
-from .ahrs_layout import C_DT, P_MOTION_BIAS, S_CLIPPED, S_HOLE_T0, S_HOLE_VAR, S_INIT, S_REST
+from .ahrs_kernel import ahrs_step
 from .bias_kernel import bias_variance
 from .layout import Layout
 
@@ -323,11 +322,12 @@ def uncertainty_variances(u):
     return t, h + held * held + more * ((lag ** 0.5 + held) ** 2 - h - held * held)
 
 
-def sample_step(s, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
+def sample_step(state, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
     """
     The usual raw-IMU sample of an estimate that exists, in one call.
 
-    The estimator's step without a field (``s``), the guard (the estimate
+    The estimator's step without a field (``state``: the estimate's holder,
+    :mod:`~ext_observer.core.ahrs.record`), the guard (the estimate
     finite, ``|q̂̄q̂ − 1| ≤ max_residual``), and where it passes the
     covariance's step (``u``) and the 3×3 covariance written into ``cov``
     (9 slots, row-major: ``diag(V_t, V_t, V_h)``).
@@ -343,32 +343,33 @@ def sample_step(s, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
         The estimate after the step (ambient, sensor → ENU).
 
     """
-    if s[S_INIT] == 0.0:
+    s = state[0]
+    if s.est.init == 0.0:
         return SAMPLE_NOT_STARTED, 0.0, 0.0, 0.0, 0.0
     if not (dt > 0.0 and dt < math.inf):
         return SAMPLE_BAD_DT, 0.0, 0.0, 0.0, 0.0
-    w, x, y, z = ahrs_update(s, gx, gy, gz, ax, ay, az, False, 0.0, 0.0, 0.0, dt)
+    w, x, y, z = ahrs_step(s, gx, gy, gz, ax, ay, az, False, 0.0, 0.0, 0.0, dt)
     n2 = w * w + x * x + y * y + z * z
     if not math.isfinite(n2):
         return SAMPLE_NON_FINITE, w, x, y, z
     if abs(n2 - 1.0) > max_residual:
         return SAMPLE_RESIDUAL, w, x, y, z
     # The usual interval: dt itself, or the one a hole's step kept.
-    step_dt = s[C_DT]
-    uncertainty_step(u, step_dt, gx, gy, gz, w, x, y, z, 1.0 if s[S_REST] != 0.0 else 0.0)
-    hole = s[S_HOLE_VAR]
-    if hole != 0.0 and s[S_HOLE_T0] >= 0.0:
-        uncertainty_restart(u, s[S_HOLE_T0])
+    step_dt = s.coef.dt
+    uncertainty_step(u, step_dt, gx, gy, gz, w, x, y, z, 1.0 if s.rest.detected != 0.0 else 0.0)
+    hole = s.hole.var
+    if hole != 0.0 and s.hole.t0 >= 0.0:
+        uncertainty_restart(u, s.hole.t0)
     if u[U_START_V] != 0.0 or u[U_START_T] < u[U_TAU_ACC]:
         fx, fy, fz = rotate(w, x, y, z, ax, ay, az)
         uncertainty_start(u, step_dt, fx, fy, fz)
-    if s[P_MOTION_BIAS] != 0.0:
+    if s.par.motion_bias != 0.0:
         uncertainty_bias(u, (bias_variance(s, 0, 0) + bias_variance(s, 1, 1)
                              + bias_variance(s, 2, 2)) / BIAS_TRACE_AXES)
-    if s[S_CLIPPED] != 0.0:
-        uncertainty_clipped(u, s[S_CLIPPED])
+    if s.gyro.clipped != 0.0:
+        uncertainty_clipped(u, s.gyro.clipped)
     if hole != 0.0:
-        uncertainty_hole(u, dt - step_dt, hole, s[S_HOLE_T0] < 0.0)
+        uncertainty_hole(u, dt - step_dt, hole, s.hole.t0 < 0.0)
     t, h = uncertainty_variances(u)
     zero = 0.0 * t
     cov[0] = t
