@@ -23,6 +23,7 @@ from ext_observer.core.ahrs.ahrs_observer import WORLD_FRAMES
 from ext_observer.core.ahrs.magcal import check_calibration
 from ext_observer.core.ahrs.ahrs_params import (AHRS_TABLE, AhrsParams, UNCERTAINTY_TABLE,
                                                 UncertaintyParams)
+from ext_observer.core.constants import STANDARD_GRAVITY
 from ext_observer.core.ahrs.velocity_kernel import VELOCITY_TIMEOUT
 from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_settings,
                                                    ParameterSpec, spec_from_tunable)
@@ -124,8 +125,8 @@ IMU_TOOLS_OPTIONS = (
     ParameterSpec('fixed_frame', 'odom', 'With publish_tf: the parent frame of the transform '
                   '(as imu_filter_madgwick).'),
     ParameterSpec('remove_gravity_vector', False,
-                  'linear_acceleration of imu/data without gravity (9.80665 m/s² along the '
-                  'estimated vertical), in the sensor frame, as imu_filter_madgwick; false: '
+                  f'linear_acceleration of imu/data without gravity ({STANDARD_GRAVITY} m/s² '
+                  'along the estimated vertical), in the sensor frame, as imu_filter_madgwick; false: '
                   'as measured.'),
 )
 
