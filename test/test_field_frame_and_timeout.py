@@ -1,5 +1,6 @@
 """
-The magnetometer's own frame (mag_frame_rpy) and a lost field (mag_timeout).
+The magnetometer's own frame (mag_mounting; the deprecated mag_frame_rpy) and a
+lost field (mag_timeout).
 
 A field measured in a rotated frame, with the mounting set, gives the estimate
 of the field in the IMU frame; a field that stops holds the heading within its
@@ -17,7 +18,7 @@ from broad_replay import fields_tesla, load, START, SECOND
 from ext_observer.broad.scoring import error_angles
 from ext_observer.core.quaternion import conjugate, multiply
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
-from ext_observer.pipeline.imu_filter_outputs import mounting_matrix
+from ext_observer.pipeline.imu_filter_outputs import mounting_matrix, quaternion_from_rpy
 from ext_observer.recordings.recording import attitude_from_imu
 from imu_driver import connect, Driver
 from ros_helpers import overrides, values_of
@@ -61,9 +62,14 @@ def test_a_field_in_a_mounted_frame_gives_the_imu_frames_estimate(excerpt):
     r = np.array(mounting_matrix(MOUNTING)).reshape(3, 3)
     mounted = mag @ r  # m_mag = Rᵀ m_imu, row by row
     plain = _run(excerpt, mag)
-    turned = _run(excerpt, mounted, mag_frame_rpy=list(MOUNTING))
+    turned = _run(excerpt, mounted, mag_mounting=list(quaternion_from_rpy(MOUNTING)))
     total = error_angles(turned.quaternions, plain.quaternions)[0]
     assert np.degrees(np.nanmax(total)) <= SAME_DEG
+    # The deprecated spelling, warned of, gives the same estimates (the same
+    # rotation; its matrix from the angles differs by rounding only).
+    with pytest.warns(FutureWarning, match='mag_frame_rpy is deprecated'):
+        by_angles = _run(excerpt, mounted, mag_frame_rpy=list(MOUNTING))
+    assert np.nanmax(np.abs(by_angles.quaternions - turned.quaternions)) < 1e-9
     # Without the mounting the estimate is another one: the test can fail.
     wrong = _run(excerpt, mounted)
     assert np.degrees(np.nanmax(error_angles(wrong.quaternions, plain.quaternions)[0])) > 5.0
@@ -131,7 +137,7 @@ def test_the_node_warns_of_a_lost_field_and_of_a_field_in_another_frame(ros_cont
     assert values['field_lost'] == 'true' and values['field_frame_mismatch'] == 'true'
     assert float(values['field_silent_s']) >= 0.5
     # The field back, the mounting set: neither.
-    observer.set_parameters([Parameter('mag_frame_rpy', value=[0.0, 0.0, 0.5])])
+    observer.set_parameters([Parameter('mag_mounting', value=[0.0, 0.0, 0.0, 1.0])])
     stamp = START + 100 * SECOND // 100
     driver.send_field(stamp, (2e-5, 0.0, -4e-5), frame_id='mag_link')
     driver.send_imu(stamp + SECOND // 100, (0.0, 0.0, 0.1), (0.0, 0.0, 9.81))

@@ -51,13 +51,15 @@ from ext_observer.core.ahrs.compiled import plain_warning
 from ext_observer.pipeline.kernel_cache import BackgroundCompile, start_plan
 from ext_observer.nodes.estimator_node_base import EstimatorNode, LOG_THROTTLE
 from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
-                                                         imu_filter_settings, unused_text)
+                                                         imu_filter_settings,
+                                                         mag_frame_rpy_text, unused_text)
 from ext_observer.nodes.node_common import NO_TF2, run_node, transform_broadcaster
 from ext_observer.nodes.stream_watch import StreamWatch
 from ext_observer.nodes.velocity_topic import VelocityTopic
 from ext_observer.pipeline.health import health_text, HealthWatch
-from ext_observer.pipeline.imu_filter_outputs import (raw_attitude, rpy_from_quaternion,
-                                             transform_from_estimate, without_gravity)
+from ext_observer.pipeline.imu_filter_outputs import (field_mounting, raw_attitude,
+                                                      rpy_from_quaternion,
+                                                      transform_from_estimate, without_gravity)
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, KINDS
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 
@@ -160,6 +162,14 @@ class ImuFilterNode(EstimatorNode):
         unused = unused_text(self.parameters.values, self.parameters.given)
         if unused:
             logger.warning(unused)
+        self._warn_deprecated(settings)
+
+    def _warn_deprecated(self, settings):
+        """Log once that mag_frame_rpy is deprecated (at start, or when set at runtime)."""
+        text = mag_frame_rpy_text(settings)
+        if text is not None and 'mag_frame_rpy' not in self._said:
+            self._said.add('mag_frame_rpy')
+            self.get_logger().warning(text)
 
     def _create_extra_outputs(self, settings, logger):
         """imu_filter_madgwick's debug topics and TF, where the settings ask for them."""
@@ -409,6 +419,7 @@ class ImuFilterNode(EstimatorNode):
         super()._apply_parameters(settings, changed)
         self.pipeline.configure(settings)
         self._cache_settings(settings)
+        self._warn_deprecated(settings)
 
     # Diagnostics (EstimatorNode) ------------------------------------------
 
@@ -502,12 +513,12 @@ class ImuFilterNode(EstimatorNode):
         imu, mag = self._frames['imu'], self._frames['mag']
         if imu is None or mag is None or imu == mag:
             return None
-        if any(float(v) != 0.0 for v in self.parameters.settings['mag_frame_rpy']):
+        if field_mounting(self.parameters.settings) is not None:
             return None
-        return (f"magnetic field in frame '{mag}', IMU samples in '{imu}', and mag_frame_rpy "
-                'is zero: the field is used as if in the IMU frame. Set mag_frame_rpy to the '
-                "mounting (the node cannot look it up on /tf: tf2 is not on PyPI), or give "
-                'both the same frame_id')
+        return (f"magnetic field in frame '{mag}', IMU samples in '{imu}', and no mag_mounting "
+                'set: the field is used as if in the IMU frame. Set mag_mounting to the '
+                "mounting (a unit quaternion w, x, y, z; the node cannot look it up on /tf: "
+                'tf2 is not on PyPI), or give both the same frame_id')
 
     def _clipping_problems(self):
         # A gyro at its range (ahrs.gyro_range, or a rate stuck at its peak):

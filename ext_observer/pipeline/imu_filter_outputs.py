@@ -17,8 +17,9 @@ from ext_observer.core.constants import STANDARD_GRAVITY
 from ext_observer.core.ahrs.ahrs_observer import WORLD_FRAMES
 from ext_observer.core.quaternion import multiply_floats
 
-__all__ = ['STANDARD_GRAVITY', 'gravity_in_sensor', 'heading_factor', 'mounting_matrix', 'raw_attitude',
-           'rpy_from_quaternion', 'transform_from_estimate', 'without_gravity']
+__all__ = ['IDENTITY_MOUNTING', 'STANDARD_GRAVITY', 'field_mounting', 'gravity_in_sensor',
+           'heading_factor', 'mounting_matrix', 'quaternion_from_rpy', 'quaternion_matrix',
+           'raw_attitude', 'rpy_from_quaternion', 'transform_from_estimate', 'without_gravity']
 
 # imu_filter_madgwick's gravity (its getGravity's default), m/s².
 
@@ -140,12 +141,48 @@ def transform_from_estimate(q, fixed_frame, imu_frame, reverse=False):
     return fixed_frame, imu_frame, (w, x, y, z)
 
 
+# A mounting quaternion (w, x, y, z) that leaves the frame as it is.
+IDENTITY_MOUNTING = (1.0, 0.0, 0.0, 0.0)
+
+
+def quaternion_matrix(q):
+    """
+    Return the rotation matrix R of a mounting quaternion ``q = (w, x, y, z)`` (9 floats, row-major).
+
+    The one definition for the mountings given as quaternions
+    (``mag_mounting``: ``m_imu = R m_mag``; ``velocity_mounting``:
+    ``v_imu = Rᵀ v``). ``q`` is taken as it is, not normalized: the
+    parameters' checks hold its norm to 1 within their tolerance.
+    """
+    w, x, y, z = (float(c) for c in q)
+    return (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y))
+
+
+def quaternion_from_rpy(rpy):
+    """
+    Return the unit quaternion (w, x, y, z) of roll, pitch, yaw (rad, fixed axes), as tf2's ``setRPY``.
+
+    The rotation of :func:`mounting_matrix` (``q_z(yaw) ⊗ q_y(pitch) ⊗ q_x(roll)``).
+    """
+    roll, pitch, yaw = (0.5 * float(v) for v in rpy)
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+
+
 def mounting_matrix(rpy):
     """
     Return R = R_z(yaw) R_y(pitch) R_x(roll) (9 floats, row-major), or None for (0, 0, 0).
 
     ``m_imu = R m_mag`` for a magnetometer frame at ``rpy`` (rad, fixed axes)
-    in the IMU's, as tf2's ``setRPY`` and static_transform_publisher give it.
+    in the IMU's, as tf2's ``setRPY`` and static_transform_publisher give it:
+    the deprecated ``mag_frame_rpy``'s matrix, built from the angles so that
+    its estimates stay those it gave (through :func:`quaternion_from_rpy`
+    and :func:`quaternion_matrix` it is the same rotation within rounding).
     """
     roll, pitch, yaw = (float(v) for v in rpy)
     if roll == pitch == yaw == 0.0:
@@ -156,6 +193,22 @@ def mounting_matrix(rpy):
     return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
             sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
             -sp, cp * sr, cp * cr)
+
+
+def field_mounting(settings):
+    """
+    Return the magnetometer's mounting R (``m_imu = R m_mag``, 9 floats), or None for the IMU's frame.
+
+    From ``mag_mounting`` (a unit quaternion w, x, y, z); from the
+    deprecated ``mag_frame_rpy`` when that is the one set (the parameters'
+    checks refuse both), its matrix built from the angles as before. Missing
+    settings are their defaults.
+    """
+    rpy = settings.get('mag_frame_rpy', (0.0, 0.0, 0.0))
+    if any(float(v) != 0.0 for v in rpy):
+        return mounting_matrix(rpy)
+    q = tuple(float(c) for c in settings.get('mag_mounting', IDENTITY_MOUNTING))
+    return None if q == IDENTITY_MOUNTING else quaternion_matrix(q)
 
 
 def _about_z(angle):

@@ -25,18 +25,21 @@ from ext_observer.core.ahrs.ahrs_params import (AHRS_TABLE, AhrsParams, UNCERTAI
                                                 UncertaintyParams)
 from ext_observer.core.constants import STANDARD_GRAVITY
 from ext_observer.core.ahrs.velocity_kernel import VELOCITY_TIMEOUT
+from ext_observer.pipeline.imu_filter_outputs import (IDENTITY_MOUNTING, quaternion_from_rpy,
+                                                      quaternion_matrix)
 from ext_observer.pipeline.parameter_specs import (COMMON_PARAMETERS, common_settings,
                                                    ParameterSpec, spec_from_tunable)
 
 __all__ = ['AHRS_PREFIX', 'COMPLEMENTARY_UNUSED', 'COVARIANCE_MODES', 'COVARIANCE_PREFIX',
            'IMU_FILTER_OWN', 'IMU_FILTER_PARAMETERS', 'IMU_TOOLS_OPTIONS', 'IMU_TOOLS_UNUSED',
            'MADGWICK_UNUSED', 'REPLACED_BY', 'ahrs_params', 'covariance_estimated',
-           'covariance_text', 'imu_filter_settings', 'uncertainty_params', 'unused_text',
+           'covariance_text', 'imu_filter_settings', 'mag_frame_rpy_text',
+           'uncertainty_params', 'unused_text',
            'velocity_frame', 'VELOCITY_SOURCES']
 
 # Where the velocity aid's velocity comes from (velocity_source).
 VELOCITY_SOURCES = ('none', 'odom', 'twist')
-# A velocity_mounting's norm may differ from 1 by this much (rounded input).
+# A mounting quaternion's (mag_mounting, velocity_mounting) norm may differ from 1 by this much (rounded input).
 _UNIT_TOLERANCE = 1e-6
 # The core's parameters are the node's parameters ahrs.<name>.
 AHRS_PREFIX = 'ahrs.'
@@ -200,15 +203,23 @@ IMU_FILTER_OWN = (
                   'mag_bias_*. python -m ext_observer calibrate and the ~/save_calibration '
                   'service write both.',
                   constraints='9 finite numbers: symmetric, positive definite.'),
+    ParameterSpec('mag_mounting', list(IDENTITY_MOUNTING),
+                  "The magnetometer's mounting: the orientation of the field's frame "
+                  "(imu/mag's frame_id) in the IMU's (imu/data_raw's), a unit quaternion w, "
+                  "x, y, z (as velocity_mounting; static_transform_publisher's --qw --qx "
+                  "--qy --qz with --frame-id the IMU's, --child-frame-id the field's): "
+                  'm_imu = R m_mag, the field turned into '
+                  'the IMU frame before mag_bias_* and mag_soft_iron, which are then the '
+                  "IMU frame's. The node cannot look the transform up on /tf (tf2 is not on "
+                  'PyPI): it warns once when the two frame_ids differ and this is the '
+                  'identity.',
+                  constraints='4 finite numbers of norm 1 (within 1e-6).'),
     ParameterSpec('mag_frame_rpy', [0.0, 0.0, 0.0],
-                  "The magnetometer's mounting: roll, pitch, yaw (rad, about the fixed x, y, "
-                  "z axes, as static_transform_publisher's and tf2's setRPY) of the field's "
-                  "frame (imu/mag's frame_id) in the IMU's (imu/data_raw's): the field is "
-                  'turned into the IMU frame before mag_bias_* and mag_soft_iron, which are '
-                  "then the IMU frame's. The node cannot look the transform up on /tf (tf2 "
-                  'is not on PyPI): it warns once when the two frame_ids differ and this '
-                  'is zero.',
-                  constraints='3 finite numbers.'),
+                  'Deprecated: mag_mounting. The same mounting as roll, pitch, yaw (rad, '
+                  "about the fixed x, y, z axes, as tf2's setRPY); still used when set (not "
+                  'zero) and mag_mounting is the identity, with a warning naming the '
+                  'quaternion it is; both set is refused.',
+                  constraints='3 finite numbers; zero when mag_mounting is set.'),
     ParameterSpec('mag_timeout', 1.0,
                   'A field lost: after this long without one (s, on the IMU\'s stamps) the '
                   'node warns (/diagnostics and the log, once per episode) and runs 6D, '
@@ -344,6 +355,11 @@ def imu_filter_settings(values):
     if len(rpy) != 3 or not all(math.isfinite(float(v)) for v in rpy):
         raise ValueError(f'mag_frame_rpy must be 3 finite numbers (roll, pitch, yaw, rad), '
                          f'got {list(rpy)}')
+    q = _unit_quaternion(values, 'mag_mounting')
+    if q != IDENTITY_MOUNTING and any(float(v) != 0.0 for v in rpy):
+        raise ValueError(f'mag_mounting ({list(q)}) and mag_frame_rpy ({list(rpy)}) are both '
+                         'set: give the magnetometer\'s mounting once, as mag_mounting (a unit '
+                         'quaternion w, x, y, z); mag_frame_rpy is deprecated')
     if values['world_frame'] not in WORLD_FRAMES:
         raise ValueError(f'world_frame must be one of {tuple(WORLD_FRAMES)}, got '
                          f'{values["world_frame"]!r}')
@@ -374,23 +390,44 @@ def velocity_frame(values):
     ValueError
         For a mounting that is not a finite unit quaternion, a lever arm not 3 finite numbers.
     """
-    q = [float(c) for c in values['velocity_mounting']]
+    q = _unit_quaternion(values, 'velocity_mounting')
     r = [float(c) for c in values['velocity_lever_arm']]
-    if len(q) != 4 or not all(math.isfinite(c) for c in q) or abs(
-            sum(c * c for c in q) - 1.0) > _UNIT_TOLERANCE:
-        raise ValueError(f'velocity_mounting must be a unit quaternion w, x, y, z, got {q}')
     if len(r) != 3 or not all(math.isfinite(c) for c in r):
         raise ValueError(f'velocity_lever_arm must be 3 finite numbers (m), got {r}')
-    if q == [1.0, 0.0, 0.0, 0.0] and r == [0.0, 0.0, 0.0]:
+    if q == IDENTITY_MOUNTING and r == [0.0, 0.0, 0.0]:
         return None
-    w, x, y, z = q
     # R (IMU → velocity frame) transposed: rows are R's columns.
-    rt = (1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y),
-          2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x),
-          2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))
+    m = quaternion_matrix(q)
+    rt = (m[0], m[3], m[6], m[1], m[4], m[7], m[2], m[5], m[8])
     arm = tuple(rt[3 * i] * r[0] + rt[3 * i + 1] * r[1] + rt[3 * i + 2] * r[2]
                 for i in range(3))
     return rt, arm
+
+
+def _unit_quaternion(values, name):
+    """``values[name]`` as a tuple of 4 floats, checked: finite, of norm 1 within the tolerance."""
+    q = tuple(float(c) for c in values[name])
+    if len(q) != 4 or not all(math.isfinite(c) for c in q) or abs(
+            sum(c * c for c in q) - 1.0) > _UNIT_TOLERANCE:
+        raise ValueError(f'{name} must be a unit quaternion w, x, y, z (norm 1 within '
+                         f'{_UNIT_TOLERANCE:g}), got {list(q)}')
+    return q
+
+
+def mag_frame_rpy_text(values):
+    """
+    The warning for the deprecated ``mag_frame_rpy`` set (not zero), or None.
+
+    Names the ``mag_mounting`` it is (tf2's ``setRPY`` quaternion), to copy
+    into the params file.
+    """
+    rpy = [float(v) for v in values.get('mag_frame_rpy', (0.0, 0.0, 0.0))]
+    if not any(v != 0.0 for v in rpy):
+        return None
+    q = list(quaternion_from_rpy(rpy))
+    return (f'mag_frame_rpy is deprecated: give the magnetometer\'s mounting as mag_mounting, '
+            f'a unit quaternion w, x, y, z; mag_frame_rpy {rpy} is mag_mounting {q} '
+            '(used as given meanwhile)')
 
 
 def covariance_estimated(values):

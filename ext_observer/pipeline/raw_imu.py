@@ -30,7 +30,7 @@ from ext_observer.core.validation import check_state
 from ext_observer.pipeline.field_tracking import FieldTracker
 from ext_observer.pipeline.guard import GUARD_REASONS
 from ext_observer.pipeline.imu_filter_parameters import ahrs_params, uncertainty_params
-from ext_observer.pipeline.imu_filter_outputs import heading_factor, mounting_matrix
+from ext_observer.pipeline.imu_filter_outputs import field_mounting, heading_factor
 from ext_observer.pipeline.pairing import BACKWARD_JUMP, Step, StepPairer
 from ext_observer.pipeline.units import UnitCheck
 from ext_observer.pipeline.velocity_aid import VelocityInput
@@ -146,7 +146,7 @@ class RawImuEstimator:
                             else tuple(np.linalg.inv(soft_iron).ravel().tolist()))
         self._frame = heading_factor(self.world_frame, settings['declination'],
                                      settings['yaw_offset'])
-        self._mounting = mounting_matrix(settings.get('mag_frame_rpy', (0.0, 0.0, 0.0)))
+        self._mounting = field_mounting(settings)
         self._mag_timeout = float(settings.get('mag_timeout', 0.0))
         # The gyro bias given (gyro_bias_*, rad/s): the estimate starts from
         # it, now and after each reset; gyro_bias_learning false holds the

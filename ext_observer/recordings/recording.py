@@ -37,11 +37,13 @@ import array
 import heapq
 import itertools
 import math
+import warnings
 
 import numpy as np
 
 from ext_observer.pipeline.batch import hold_finite
-from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS, imu_filter_settings
+from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS, imu_filter_settings,
+                                                         mag_frame_rpy_text)
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 from ext_observer.pipeline.health import HEALTH_STATES, HealthWatch
 from ext_observer.pipeline.velocity_aid import with_velocity
@@ -99,7 +101,12 @@ def node_settings(given=None, strict_types=False):
             raise ValueError(f'unknown parameter {name!r} (imu_filter_node has: '
                              f'{", ".join(sorted(_SPECS))})')
         values[name] = _checked_value(spec, value, strict_types)
-    return imu_filter_settings(values)
+    settings = imu_filter_settings(values)
+    deprecated = mag_frame_rpy_text(settings)
+    if deprecated:
+        # Once per process (the warnings module's default), as the node logs it once.
+        warnings.warn(deprecated, FutureWarning)
+    return settings
 
 
 def _checked_value(spec, value, strict_types):

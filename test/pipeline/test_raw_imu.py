@@ -2,14 +2,17 @@
 The raw-IMU estimator as imu_filter_node runs it, without ROS
 (``pipeline/raw_imu.py``): the divergence guard reinitializing from the
 sample, the first sample of a time line, resets counted by cause, a jump
-back, a forward gap's action, fields and the silence since the last. (The
+back, a forward gap's action, fields and the silence since the last, the
+magnetometer's mounting (mag_mounting, the deprecated mag_frame_rpy). (The
 same through DDS against the offline run: ``test_raw_imu_through_dds.py``.)
 """
 
 import math
 
+import numpy as np
 import pytest
 
+from ext_observer.pipeline.imu_filter_outputs import mounting_matrix, quaternion_from_rpy
 from ext_observer.pipeline.imu_filter_parameters import IMU_FILTER_PARAMETERS
 from ext_observer.pipeline.raw_imu import RawImuEstimator, RawImuPipeline
 from ros_helpers import SECOND
@@ -128,3 +131,45 @@ def test_a_hole_too_long_to_bridge_leaves_a_heading_its_covariance_covers(use_ma
         assert error < math.radians(5.0) and sigma < math.radians(30.0)
     else:
         assert error > math.radians(40.0) and error < 2.0 * sigma
+
+
+MOUNTING_RPY = (0.3, -1.1, 2.4)  # roll, pitch, yaw, rad: far from any axis
+
+
+def _mounted_run(**changes):
+    """A short run with a field every sample: the fields taken and the estimates."""
+    p = pipeline(**changes)
+    fields, states = [], []
+    for k in range(200):
+        stamp = 1 * SECOND + k * 10_000_000
+        _, estimate = p.imu(stamp, GYR, ACC)
+        p.field(stamp, FIELD)
+        fields.append(p.estimator.latest_field)
+        if estimate is not None:
+            states.append(tuple(estimate.state))
+    return fields, states
+
+
+def test_mag_mounting_turns_the_field_as_the_equivalent_mag_frame_rpy():
+    q = list(quaternion_from_rpy(MOUNTING_RPY))
+    by_quaternion, q_states = _mounted_run(mag_mounting=q)
+    by_angles, rpy_states = _mounted_run(mag_frame_rpy=list(MOUNTING_RPY))
+    # The field in the IMU frame, R m: the same rotation within rounding.
+    expected = np.reshape(mounting_matrix(MOUNTING_RPY), (3, 3)) @ FIELD
+    assert np.allclose(by_quaternion[0], expected, rtol=0.0, atol=1e-19)
+    assert np.allclose(by_angles[0], expected, rtol=0.0, atol=1e-19)
+    assert np.abs(np.subtract(q_states, rpy_states)).max() < 1e-12
+    # mag_frame_rpy alone: its matrix from the angles, as before, to the bit.
+    r = mounting_matrix(MOUNTING_RPY)
+    assert by_angles[0] == tuple(r[3 * i] * FIELD[0] + r[3 * i + 1] * FIELD[1]
+                                 + r[3 * i + 2] * FIELD[2] for i in range(3))
+    # The mounting matters (the test can fail), and the identity is no mounting.
+    plain, plain_states = _mounted_run()
+    assert np.abs(np.subtract(plain_states, q_states)).max() > 1e-3
+    assert _mounted_run(mag_mounting=[1.0, 0.0, 0.0, 0.0]) == (plain, plain_states)
+
+
+def test_a_quarter_turn_about_z_maps_x_to_y():
+    h = math.sqrt(0.5)
+    fields, _ = _mounted_run(mag_mounting=[h, 0.0, 0.0, h])
+    assert np.allclose(fields[0], (0.0, 2e-5, -4e-5), rtol=0.0, atol=1e-19)

@@ -156,3 +156,16 @@ def test_parameters_file(tmp_path):
     path.write_text('camera:\n  other: 1\n')
     with pytest.raises(ValueError, match='no section with ros__parameters'):
         parameters_from_yaml(str(path))
+
+
+def test_a_params_file_with_mag_frame_rpy_still_runs_with_a_warning(tmp_path):
+    # The commands' path (csv, bag: --params): the deprecated spelling taken, warned of.
+    path = tmp_path / 'p.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    mag_frame_rpy: [0.0, 0.0, 0.5]\n')
+    with pytest.warns(FutureWarning, match=r'mag_frame_rpy is deprecated.*mag_mounting \['):
+        settings = node_settings(parameters_from_yaml(str(path)), strict_types=True)
+    assert settings['mag_frame_rpy'] == [0.0, 0.0, 0.5]
+    path.write_text('/**:\n  ros__parameters:\n    mag_frame_rpy: [0.0, 0.0, 0.5]\n'
+                    '    mag_mounting: [0.0, 0.0, 0.0, 1.0]\n')
+    with pytest.raises(ValueError, match='mag_mounting .* and mag_frame_rpy .* are both set'):
+        node_settings(parameters_from_yaml(str(path)), strict_types=True)
