@@ -1,12 +1,14 @@
-"""The package's structure: layouts declared once."""
+"""The package's structure: layouts and state groups declared once."""
 
 import ast
 import pathlib
 
 import pytest
 
-from ext_observer.core.ahrs import ahrs_kernel, ahrs_layout, magcal_layout, uncertainty_kernel
-from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
+from ext_observer.core.ahrs import magcal_layout, uncertainty_kernel
+from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_state import KERNEL_PARAMETERS, STATE
+from ext_observer.core.ahrs.record import Group
 
 PACKAGE = pathlib.Path(__file__).resolve().parent.parent / 'ext_observer'
 # Flat-state slot names: parameters, coefficients, state, uncertainty, calibration, sizes.
@@ -35,8 +37,7 @@ def _hand_numbered(folder):
 def test_the_kernels_slots_come_from_their_layout_tables():
     found = _hand_numbered(PACKAGE / 'core')
     assert len(found) <= 10, '\n'.join(found)
-    for module, layout, size in ((ahrs_layout, ahrs_layout.AHRS, ahrs_layout.A_SIZE),
-                                 (magcal_layout, magcal_layout.MAGCAL, magcal_layout.MC_SIZE),
+    for module, layout, size in ((magcal_layout, magcal_layout.MAGCAL, magcal_layout.MC_SIZE),
                                  (uncertainty_kernel, uncertainty_kernel.UNCERTAINTY,
                                   uncertainty_kernel.U_SIZE)):
         spans = sorted(layout.fields.values())
@@ -52,20 +53,59 @@ def test_the_kernels_slots_come_from_their_layout_tables():
         for name in assigned:
             if name.startswith(SLOT_PREFIXES) and name != 'MC0':
                 assert getattr(module, name) in offsets, name
-    # The estimator's parameters are the first slots, in AhrsParams's names.
-    assert ahrs_kernel.PARAMETERS == tuple(ahrs_kernel.AHRS.parameters)
-    assert ahrs_kernel.AHRS.offset('alpha') == ahrs_kernel.P_ALPHA
+
+
+def test_the_estimators_state_is_its_groups_each_declared_once_every_field_with_its_meaning():
+    groups = []
+
+    def walk(group):
+        for member in group.members:
+            if isinstance(member, Group):
+                groups.append(member.name)
+                walk(member)
+
+    walk(STATE)
+    # Each group's name is unique in the state, and it is declared once in the
+    # package (beside the code that owns it: ahrs_state.py holds the rest).
+    assert len(groups) == len(set(groups)), groups
+    declared = {}
+    for path in sorted((PACKAGE / 'core').rglob('*.py')):
+        for node in ast.parse(path.read_text(encoding='utf-8')).body:
+            if (isinstance(node, ast.Assign) and isinstance(node.value, ast.Call)
+                    and isinstance(node.value.func, ast.Name) and node.value.func.id == 'Group'):
+                declared.setdefault(node.value.args[0].value, []).append(path.name)
+    assert all(len(declared.get(name, [])) == 1 for name in groups), declared
+    # Every field has its meaning (docs/layout.md's table) and a unit ('' where none).
+    fields = STATE.fields()
+    for path, unit, meaning, size in fields:
+        assert isinstance(unit, str) and meaning.strip() and size >= 1, path
+    # Contiguous: each field starts where the one before ends; the record is its fields.
+    at = 0
+    for path, _, _, size in fields:
+        assert STATE.offset('.'.join(path)) == at, path
+        at += size
+    assert STATE.size == at
+    # The estimator's parameters are the first fields, in AhrsParams's names.
+    first = fields[:len(KERNEL_PARAMETERS)]
+    assert tuple(path for path, *_ in first) == tuple(('par', n) for n in KERNEL_PARAMETERS)
+    assert set(KERNEL_PARAMETERS) <= set(AhrsParams.DEFAULTS)
+    assert STATE.offset('par.alpha') == 0
 
 
 def test_the_estimators_fields_are_read_by_name():
     est = AhrsObserver(compiled=False)
     est.update((0.1, 0.0, -0.02), (0.3, 0.1, 9.8), None, 0.01)
-    assert est.field('q') == est.q and est.field('bias') == est.bias
-    assert len(est.field('lp')) == 6 and isinstance(est.field('k_acc'), float)
+    assert est.field('q') == est.q and est.field('est.q') == est.q
+    assert est.field('bias.rate') == est.bias
+    assert len(est.field('inc.lp')) == 6 and isinstance(est.field('k_acc'), float)
     est.set_field('mag_used', 3.0)
-    assert est.field('mag_used') == 3.0
-    with pytest.raises(ValueError, match='slots'):
-        est.set_field('q', 1.0)
+    assert est.field('mag_used') == 3.0 and est.field('field.mag_used') == 3.0
+    est.set_field('bias.rate', (0.01, -0.02, 0.03))
+    assert est.bias == (0.01, -0.02, 0.03)
+    # A vector takes its size of values, no fewer, no more, not one.
+    for wrong in (1.0, (1.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0, 0.0)):
+        with pytest.raises(ValueError, match='values'):
+            est.set_field('q', wrong)
     batch = AhrsObserver(batch=3, compiled=False)
     batch.set_field('mag_used', [1.0, 2.0, 3.0])
     assert list(batch.field('mag_used')) == [1.0, 2.0, 3.0]

@@ -222,6 +222,8 @@ class AhrsObserver:
         """Set a field of every estimate (a float, or an array ``(B,)``; a vector: a sequence)."""
         path, size = STATE.path(name)
         if size != 1:
+            if np.ndim(value) == 0 or len(value) != size:
+                raise ValueError(f'{name} has {size} values, got {value!r}')
             for i, h in enumerate(self._states):
                 STATE.set(h[0], name, [float(value[j] if self.batch is None else value[j][i])
                                        for j in range(size)])

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs import compiled as compiled_module
-from ext_observer.core.ahrs.ahrs_layout import S_ACC_REJ, S_ACC_STILL, S_BIAS, S_REST
 from ext_observer.core.ahrs.ahrs_params import AhrsParams
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
 from ext_observer.core.ahrs.clip_and_rest import detect_rest
@@ -37,12 +36,13 @@ def _turn(yaw_rate, seconds=30.0, still=10.0):
 
 
 def _run(gyr, acc, params=None, compiled=False, watch=None):
+    """The estimates per sample, and ``watch(core)`` (a list of state values) after each."""
     core = AhrsObserver(params, use_mag=False, compiled=compiled)
     out, seen = [], []
     for k in range(len(gyr)):
         out.append(core.update(gyr[k], acc[k], None, 1.0 / RATE))
         if watch is not None:
-            seen.append([core.flat_state[i] for i in watch])
+            seen.append(watch(core))
     return np.array(out), np.array(seen)
 
 
@@ -53,7 +53,7 @@ def _tilt_deg(q):
 
 def test_a_long_turn_without_a_velocity_is_rejected_and_stays_near_level():
     gyr, acc = _turn(0.3)  # 0.46 g: the apparent gravity 24.6° off the vertical
-    held, seen = _run(gyr, acc, watch=(S_ACC_REJ,))
+    held, seen = _run(gyr, acc, watch=lambda core: [core.field('rej.time')])
     off, _ = _run(gyr, acc, AhrsParams(acc_reject=0.0))
     assert _tilt_deg(held).max() < 3.0  # at most about acc_reject before it begins
     assert _tilt_deg(held)[-1000:].mean() < 1.0
@@ -63,7 +63,8 @@ def test_a_long_turn_without_a_velocity_is_rejected_and_stays_near_level():
 
 def test_after_the_longest_rejection_the_force_is_gravity_again():
     gyr, acc = _turn(0.3)
-    q, seen = _run(gyr, acc, AhrsParams(acc_reject_time=5.0), watch=(S_ACC_REJ,))
+    q, seen = _run(gyr, acc, AhrsParams(acc_reject_time=5.0),
+                   watch=lambda core: [core.field('rej.time')])
     tilt = _tilt_deg(q)
     assert tilt[-1000:].mean() > 10.0
     assert seen[:, 0].max() <= 5.0 + 1.0 / RATE
@@ -74,16 +75,16 @@ def test_a_steady_turn_faster_than_bias_max_is_not_rest():
     # within rest_gyr of the bias, but no bias can be that large.
     core = AhrsObserver(use_mag=False, compiled=False)
     core.update((0.0, 0.0, 0.0), (0.0, 0.0, G), None, 1.0 / RATE)
-    s = core.flat_state
-    s[S_BIAS + 2] = AhrsParams().bias_max
+    s = core.state[0]
+    s.bias.rate[2] = AhrsParams().bias_max
     for _ in range(int(3.0 * RATE)):
-        s[S_ACC_STILL] = 1.0
+        s.rest.acc_still = 1.0
         detect_rest(s, 0.0, 0.0, 0.065)
-    assert s[S_REST] == 0.0
-    assert s[S_BIAS + 2] == AhrsParams().bias_max
+    assert s.rest.detected == 0.0
+    assert s.bias.rate[2] == AhrsParams().bias_max
     for _ in range(int(3.0 * RATE)):  # a rate a bias can be, steady: rest
         detect_rest(s, 0.0, 0.0, 0.5 * AhrsParams().bias_max)
-    assert s[S_REST] == 1.0
+    assert s.rest.detected == 1.0
 
 
 def _steered(yaw_rate, slope_deg, cruise=15.0, ramp=2.0, hold=10.0):
@@ -103,7 +104,8 @@ def test_a_rate_ramping_into_a_turn_is_not_learned_as_a_bias():
     # Steering slowly into a 0.1 g turn: the rate leads its low-pass by under
     # rest_gyr, and a bias following it (to bias_max) would tilt a sloped road.
     gyr, acc = _steered(0.065, 5.0)
-    _, seen = _run(gyr, acc, watch=(S_BIAS + 2, S_REST))
+    _, seen = _run(gyr, acc, watch=lambda core: [core.field('bias.rate')[2],
+                                                 core.field('rest.detected')])
     cruise = int(15.0 * RATE)
     assert seen[cruise - 1, 1] == 1.0  # cruising straight is rest
     assert abs(seen[-1, 0]) < math.radians(0.5)

@@ -2,7 +2,7 @@
 The estimator's shared arithmetic against independent forms of the same maths (no ROS).
 
 ``ahrs_filters.py`` rotates vectors, builds ``R(q̂)``, turns time constants
-into gains, runs the second-order Butterworth whose states live in the flat
+into gains, runs the second-order Butterworth whose states live in the
 state, and finds a first attitude. Each is checked here against another way
 of computing it (the quaternion product, the filter's difference equation
 in direct form I, the rotation that the first attitude must perform) on
@@ -17,7 +17,6 @@ import pytest
 
 from ext_observer.core import quaternion as quat
 from ext_observer.core.ahrs import ahrs_filters as f
-from ext_observer.core.ahrs.ahrs_layout import C_BW, S_LP, S_Q, S_RLP
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 
 
@@ -37,12 +36,12 @@ def quaternions(seed, count=6):
 @pytest.mark.parametrize('seed', range(3))
 def test_rotate_and_the_rotation_matrix_are_the_quaternion_product(seed):
     rng = np.random.default_rng(100 + seed)
-    s = AhrsObserver(AhrsParams(), use_mag=False).flat_state
+    s = AhrsObserver(AhrsParams(), use_mag=False, compiled=False).state[0]
     for q in quaternions(seed):
         v = rng.normal(size=3)
         assert f.rotate(*q, *v) == pytest.approx(rotated(q, v), rel=1e-12, abs=1e-12)
         for i in range(4):
-            s[S_Q + i] = q[i]
+            s.est.q[i] = q[i]
         r = np.reshape(f.rotation_matrix(s), (3, 3))
         assert r @ v == pytest.approx(rotated(q, v), rel=1e-12, abs=1e-12)
 
@@ -55,9 +54,9 @@ def test_gain_clip():
 
 
 def butterworth_state(coefficients):
-    s = AhrsObserver(AhrsParams(), use_mag=False).flat_state
+    s = AhrsObserver(AhrsParams(), use_mag=False, compiled=False).state[0]
     for k, c in enumerate(coefficients):
-        s[C_BW + k] = c
+        s.coef.bw[k] = c
     return s
 
 
@@ -81,8 +80,8 @@ def test_the_butterworth_is_its_difference_equation_from_a_steady_start():
     x = rng.normal(size=(40, 3))
     y0 = np.array([0.3, -1.2, 9.8])
     s = butterworth_state(COEFFICIENTS)
-    f.steady(s, S_LP, *y0)
-    out = np.array([f.lowpass(s, S_LP, *v) for v in x])
+    f.steady(s.coef.bw, s.inc.lp, 0, *y0)
+    out = np.array([f.lowpass(s.coef.bw, s.inc.lp, 0, *v) for v in x])
     for axis in range(3):
         assert out[:, axis] == pytest.approx(direct_form_1(COEFFICIENTS, x[:, axis], y0[axis]),
                                              rel=1e-12, abs=1e-12)
@@ -90,9 +89,10 @@ def test_the_butterworth_is_its_difference_equation_from_a_steady_start():
 
 def test_a_steady_butterworth_holds_a_constant_input():
     s = butterworth_state(COEFFICIENTS)
-    f.steady(s, S_RLP + 6, 1.5, -2.0, 0.25)
+    f.steady(s.coef.bw, s.bias.r_lp, 6, 1.5, -2.0, 0.25)
     for _ in range(3):
-        assert f.lowpass(s, S_RLP + 6, 1.5, -2.0, 0.25) == pytest.approx((1.5, -2.0, 0.25), rel=1e-12)
+        assert f.lowpass(s.coef.bw, s.bias.r_lp, 6, 1.5, -2.0, 0.25) == pytest.approx(
+            (1.5, -2.0, 0.25), rel=1e-12)
 
 
 @pytest.mark.parametrize('seed', range(3))
@@ -135,14 +135,11 @@ def test_the_coefficients_are_a_butterworth_at_1_over_2_pi_tau_and_first_order_g
     # Butterworth, cutoff 1/(2π tau_acc): unit gain at DC, 1/√2 at the
     # cutoff (prewarped: exact), zero at Nyquist; the gains 1 − e^(−dt/τ).
     from ext_observer.core.ahrs.ahrs_kernel import ahrs_coefficients
-    from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_Q, C_BIAS_R, C_K_ACC, C_K_REST,
-                                                    P_BIAS_SIGMA_MOTION, P_TAU_ACC,
-                                                    P_TAU_ACC_GAIN, P_TAU_BIAS, P_TAU_REST)
-    s = AhrsObserver(AhrsParams(), use_mag=False).flat_state
-    s[P_TAU_ACC], s[P_TAU_ACC_GAIN], s[P_TAU_REST] = tau, 2.0 * tau, 5.0 * tau
-    s[P_BIAS_SIGMA_MOTION], s[P_TAU_BIAS] = 0.01, tau_bias
+    s = AhrsObserver(AhrsParams(), use_mag=False, compiled=False).state[0]
+    s.par.tau_acc, s.par.tau_acc_gain, s.par.tau_rest = tau, 2.0 * tau, 5.0 * tau
+    s.par.bias_sigma_motion, s.par.tau_bias = 0.01, tau_bias
     ahrs_coefficients(s, dt)
-    b0, b1, b2, a1, a2 = (s[C_BW + k] for k in range(5))
+    b0, b1, b2, a1, a2 = (s.coef.bw[k] for k in range(5))
 
     def gain_at(omega):
         z = np.exp(-1j * omega * dt)
@@ -152,9 +149,9 @@ def test_the_coefficients_are_a_butterworth_at_1_over_2_pi_tau_and_first_order_g
     assert gain_at(1.0 / tau) == pytest.approx(math.sqrt(0.5), rel=1e-8)
     assert gain_at(math.pi / dt) == pytest.approx(0.0, abs=1e-9)
     assert b1 == pytest.approx(2.0 * b0, rel=1e-15) and b2 == b0
-    assert s[C_K_ACC] == pytest.approx(1.0 - math.exp(-dt / (2.0 * tau)), rel=1e-12)
-    assert s[C_K_REST] == pytest.approx(1.0 - math.exp(-dt / (5.0 * tau)), rel=1e-12)
+    assert s.coef.k_acc == pytest.approx(1.0 - math.exp(-dt / (2.0 * tau)), rel=1e-12)
+    assert s.coef.k_rest == pytest.approx(1.0 - math.exp(-dt / (5.0 * tau)), rel=1e-12)
     # The bias in motion: σ² grows by bias_sigma_motion² dt / tau_bias per
     # sample; a correction rate's noise density bias_sigma_motion² tau_bias.
-    assert s[C_BIAS_Q] == pytest.approx(1e-4 * dt / tau_bias, rel=1e-12)
-    assert s[C_BIAS_R] == pytest.approx(1e-4 * tau_bias, rel=1e-12)
+    assert s.coef.bias_q == pytest.approx(1e-4 * dt / tau_bias, rel=1e-12)
+    assert s.coef.bias_r == pytest.approx(1e-4 * tau_bias, rel=1e-12)

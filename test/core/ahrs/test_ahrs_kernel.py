@@ -17,6 +17,7 @@ sets the heading; and a reset leaves the state a new estimator's. Part of
 kernels.
 """
 
+import copy
 import math
 
 import numpy as np
@@ -24,20 +25,27 @@ import pytest
 
 from ext_observer.core.ahrs.ahrs_filters import lowpass, rotate
 from ext_observer.core.ahrs.ahrs_kernel import ahrs_update_acc, ahrs_update_gyr
-from ext_observer.core.ahrs.ahrs_layout import (C_K_ACC, MC0, S_BIAS, S_BIAS_P, S_CAL_LOADED,
-                                                S_CAL_MOVED, S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN,
-                                                S_CAL_WAIT, S_CAND_TIME, S_CLIPPED, S_CLIPS,
-                                                S_HAS_REF, S_LP, S_MAG_DIST, S_MAG_USED, S_Q,
-                                                S_REF, S_REJECTED, S_REST, S_REST_GYR, S_REST_TIME,
-                                                S_RLP, S_START, S_START_N, S_WAIT_N, S_WAIT_TURN,
-                                                S_CLIP_LEFT, S_RZLP)
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_state import STATE
 from ext_observer.core.ahrs.clip_and_rest import _REST_BIAS_SIGMA, detect_rest
 
 DT = 0.01
 TILTED = (1.2, -0.8, 9.7)
 STILL = (0.0, 0.0, 0.0)
 FIELD = (1.5e-5, 1.0e-5, -3.5e-5)
+
+
+def record(est):
+    """The estimate's state record, its fields by attribute (plain, or a view of the compiled)."""
+    holder = est.state
+    return holder.view(np.recarray)[0] if isinstance(holder, np.ndarray) else holder[0]
+
+
+def snapshot(s):
+    """A plain copy of a state record."""
+    copied = STATE.plain()
+    STATE.copy(s, copied)
+    return copied
 
 
 def qmul(a, b):
@@ -57,19 +65,19 @@ def test_the_gyros_step_is_the_exact_increment_then_the_extension_term(variant):
     params = AhrsParams()
     est = AhrsObserver(params, use_mag=True, variant=variant)
     est.update(STILL, TILTED, FIELD, DT)
-    s = est.flat_state
+    s = record(est)
     q = 1.05 * np.array([0.6, -0.3, 0.5, 0.5385164807134504])   # not unit
     bias = np.array([0.02, -0.015, 0.01])
-    s[S_Q:S_Q + 4] = q
-    s[S_BIAS:S_BIAS + 3] = bias
+    s.est.q[:] = list(q)
+    s.bias.rate[:] = list(bias)
     gyr = np.array([1.5, -4.0, 2.5])
     ahrs_update_gyr(s, *gyr)
     p = qmul(q, qexp((gyr - bias) * DT))
     if variant == 'extended':
         p = p * (1.0 - 4.0 * params.alpha * (p @ p - 1.0))
-    assert np.allclose(s[S_Q:S_Q + 4], p, rtol=0.0, atol=1e-14)
+    assert np.allclose(s.est.q, p, rtol=0.0, atol=1e-14)
     # The calibration is handed the rate less the bias.
-    assert np.allclose(s[S_CAL_RATE:S_CAL_RATE + 3], gyr - bias, rtol=0.0, atol=1e-15)
+    assert np.allclose(s.cal_feed.rate, gyr - bias, rtol=0.0, atol=1e-15)
 
 
 def test_the_body_has_moved_once_the_low_passed_rate_less_the_bias_reaches_rest_gyr():
@@ -81,12 +89,12 @@ def test_the_body_has_moved_once_the_low_passed_rate_less_the_bias_reaches_rest_
     for factor, moved in ((1.01, 1.0), (0.99, 0.0)):
         est = AhrsObserver(params, use_mag=True)
         est.update(STILL, TILTED, FIELD, DT)
-        s = est.flat_state
-        assert s[S_CAL_MOVED] == 0.0
-        s[S_BIAS:S_BIAS + 3] = bias
-        s[S_REST_GYR:S_REST_GYR + 3] = bias + factor * params.rest_gyr * diagonal
+        s = record(est)
+        assert s.cal_feed.moved == 0.0
+        s.bias.rate[:] = list(bias)
+        s.rest.gyr_lp[:] = list(bias + factor * params.rest_gyr * diagonal)
         ahrs_update_gyr(s, *bias)
-        assert s[S_CAL_MOVED] == moved, factor
+        assert s.cal_feed.moved == moved, factor
 
 
 def test_after_the_start_the_accelerometers_step_low_passes_the_world_frame_specific_force():
@@ -96,7 +104,7 @@ def test_after_the_start_the_accelerometers_step_low_passes_the_world_frame_spec
     # (δ taking the filtered f to it), and the states with r.
     params = AhrsParams(tau_acc=0.5)
     est = AhrsObserver(params, use_mag=False)
-    s = est.flat_state
+    s = record(est)
     checked = 0
     for k in range(120):
         rate = (0.4 * math.sin(0.1 * k), 0.3, -0.2)
@@ -105,22 +113,22 @@ def test_after_the_start_the_accelerometers_step_low_passes_the_world_frame_spec
             est.update(rate, acc, None, DT)
             continue
         ahrs_update_gyr(s, *rate)
-        before = np.array(s, dtype=float)
+        before = snapshot(s)
         ahrs_update_acc(s, *acc)
-        if before[S_START] < params.tau_acc:
+        if before.inc.start < params.tau_acc:
             continue
-        shadow = before.copy()
-        q = before[S_Q:S_Q + 4]
-        f = np.array(lowpass(shadow, S_LP, *rotate(*q, *acc)))
+        shadow = copy.deepcopy(before)
+        q = np.array(before.est.q)
+        f = np.array(lowpass(shadow.coef.bw, shadow.inc.lp, 0, *rotate(*q, *acc)))
         u = f / np.linalg.norm(f)
         delta = np.array([1.0 + u[2], u[1], -u[0], 0.0])
         delta /= np.linalg.norm(delta)
         kap = 1.0 - math.exp(-DT / params.tau_acc_gain)
-        assert before[C_K_ACC] == pytest.approx(kap, rel=1e-12)
+        assert before.coef.k_acc == pytest.approx(kap, rel=1e-12)
         r = np.array([1.0 - kap, 0.0, 0.0, 0.0]) + kap * delta
-        assert np.allclose(s[S_Q:S_Q + 4], qmul(r, q), rtol=0.0, atol=1e-13), k
-        for i in (S_LP, S_LP + 3):
-            assert np.allclose(s[i:i + 3], rotate(*r, *shadow[i:i + 3]), rtol=1e-12,
+        assert np.allclose(s.est.q, qmul(r, q), rtol=0.0, atol=1e-13), k
+        for i in (0, 3):
+            assert np.allclose(s.inc.lp[i:i + 3], rotate(*r, *shadow.inc.lp[i:i + 3]), rtol=1e-12,
                                atol=1e-13), (k, i)
         checked += 1
     assert checked > 50
@@ -179,7 +187,7 @@ def test_at_rest_the_bias_is_the_low_passed_rate_on_every_axis(axis):
     for _ in range(1000):
         est.update(tuple(bias), TILTED, None, DT)
     assert est.rest
-    assert np.allclose(est.flat_state[S_BIAS:S_BIAS + 3], bias, rtol=0.0, atol=1e-6)
+    assert np.allclose(record(est).bias.rate, bias, rtol=0.0, atol=1e-6)
 
 
 def test_at_rest_the_bias_covariance_is_that_of_a_measurement_of_the_rests_sigma():
@@ -189,14 +197,13 @@ def test_at_rest_the_bias_covariance_is_that_of_a_measurement_of_the_rests_sigma
     for _ in range(200):
         est.update(STILL, TILTED, None, DT)
     assert est.rest
-    s = est.flat_state
+    s = record(est)
     p = np.array([[4.0, 0.5, -0.3], [0.5, 3.0, 0.2], [-0.3, 0.2, 2.0]]) * 1e-6
-    s[S_BIAS_P:S_BIAS_P + 6] = p[np.triu_indices(3)]
+    s.bias.p[:] = list(p[np.triu_indices(3)])
     detect_rest(s, 0.0, 0.0, 0.0)
     k = 1.0 - math.exp(-DT / AhrsParams().tau_rest)
     expected = (1.0 - k) ** 2 * p + 2.0 * k * _REST_BIAS_SIGMA ** 2 * np.eye(3)
-    assert np.allclose(s[S_BIAS_P:S_BIAS_P + 6], expected[np.triu_indices(3)], rtol=1e-12,
-                       atol=0.0)
+    assert np.allclose(s.bias.p, expected[np.triu_indices(3)], rtol=1e-12, atol=0.0)
 
 
 @pytest.mark.parametrize('stuck', [(0.5, 3.0, -1.0), (0.5, -1.0, -3.0)])
@@ -229,7 +236,7 @@ def test_after_a_clip_the_next_field_sets_the_heading_at_once():
 @pytest.mark.parametrize('mag_cal', [False, True])
 def test_a_reset_leaves_the_state_a_new_estimators(mag_cal):
     # 9D: still with a gyro bias until at rest (a bias learned), a disturbed
-    # field, a clip. After a reset and one sample, the whole flat state is
+    # field, a clip. After a reset and one sample, the whole state is
     # that of a new estimator after the same sample, but for the counts kept
     # on purpose (the clips counted since the node started) and the
     # calibration's own block (what it learned a reset keeps).
@@ -238,7 +245,7 @@ def test_a_reset_leaves_the_state_a_new_estimators(mag_cal):
     bias = (0.01, -0.02, 0.015)
     for _ in range(250):
         used.update(bias, TILTED, FIELD, DT)
-    assert used.rest and np.all(np.abs(np.array(used.flat_state[S_BIAS:S_BIAS + 3])) > 1e-3)
+    assert used.rest and np.all(np.abs(np.array(record(used).bias.rate)) > 1e-3)
     for _ in range(20):
         used.update(bias, TILTED, tuple(2.0 * np.array(FIELD)), DT)
     used.update((20.0, 0.0, 0.0), TILTED, FIELD, DT)
@@ -247,11 +254,16 @@ def test_a_reset_leaves_the_state_a_new_estimators(mag_cal):
     b = fresh.update(bias, TILTED, FIELD, DT)
     if not mag_cal:
         assert a == b
-    x, y = np.array(used.flat_state, dtype=float), np.array(fresh.flat_state, dtype=float)
-    x, y = x[:MC0], y[:MC0]
-    differ = np.flatnonzero(~((x == y) | (np.isnan(x) & np.isnan(y))))
-    assert list(differ) == [S_CLIPS], differ
-    assert x[S_CLIPS] == 1.0 and y[S_CLIPS] == 0.0
+    x, y = record(used), record(fresh)
+    differ = []
+    for path, _, _, _ in STATE.fields():
+        name = '.'.join(path)
+        if path[0] != 'cal' and not np.array_equal(np.atleast_1d(STATE.get(x, name)),
+                                                    np.atleast_1d(STATE.get(y, name)),
+                                                    equal_nan=True):
+            differ.append(name)
+    assert differ == ['gyro.clips'], differ
+    assert x.gyro.clips == 1.0 and y.gyro.clips == 0.0
 
 
 def test_a_new_estimator_has_counted_nothing_and_its_calibration_turn_is_none():
@@ -263,15 +275,16 @@ def test_a_new_estimator_has_counted_nothing_and_its_calibration_turn_is_none():
     # calibration applied (its time infinite) and none loaded; no clip to
     # recover from (the health's recovering state).
     est = AhrsObserver(AhrsParams(), use_mag=True)
-    s = np.array(est.flat_state, dtype=float)
-    zero = [S_REJECTED, S_CAND_TIME, S_REST_TIME, S_MAG_USED, S_WAIT_N, S_WAIT_TURN, S_START,
-            S_START_N, S_CLIPPED, S_HAS_REF, S_MAG_DIST, S_REST, S_CAL_MOVED, S_CAL_LOADED,
-            S_CLIP_LEFT]
-    assert [s[i] for i in zero] == [0.0] * len(zero)
-    assert list(s[S_BIAS:S_BIAS + 3]) == [0.0] * 3
-    assert list(s[S_CAL_TURN:S_CAL_TURN + 4]) == [1.0, 0.0, 0.0, 0.0]
-    assert list(s[S_CAL_RATE:S_CAL_RATE + 3]) == [0.0] * 3
-    assert s[S_CAL_WAIT] == math.inf and s[S_CAL_SINCE] == math.inf
+    s = record(est)
+    zero = [s.field.rejected, s.field.cand_time, s.rest.time, s.field.mag_used, s.field.wait_n,
+            s.field.wait_turn, s.inc.start, s.inc.start_n, s.gyro.clipped, s.field.has_ref,
+            s.field.mag_dist, s.rest.detected, s.cal_feed.moved, s.cal_feed.loaded,
+            s.gyro.clip_left]
+    assert zero == [0.0] * len(zero)
+    assert list(s.bias.rate) == [0.0] * 3
+    assert list(s.cal_feed.turn) == [1.0, 0.0, 0.0, 0.0]
+    assert list(s.cal_feed.rate) == [0.0] * 3
+    assert s.cal_feed.wait == math.inf and s.cal_feed.since == math.inf
 
 
 LEVEL = (0.0, 0.0, 9.81)
@@ -293,8 +306,8 @@ LEVEL = (0.0, 0.0, 9.81)
 # reset) calibrates its first field once.
 
 def field_state(est):
-    s = est.flat_state
-    return [s[S_HAS_REF], s[S_REF], s[S_REF + 1], s[S_MAG_USED]]
+    s = record(est)
+    return [s.field.has_ref, s.field.ref[0], s.field.ref[1], s.field.mag_used]
 
 
 def test_in_9d_samples_without_a_field_leave_the_fields_state_and_the_heading():
@@ -427,7 +440,7 @@ def test_a_field_with_no_horizontal_part_says_nothing_of_the_heading():
     est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True)
     for _ in range(50):
         est.update(STILL, LEVEL, (0.0, 0.0, -4e-5), DT)
-    assert est.flat_state[S_MAG_USED] == 0.0
+    assert record(est).field.mag_used == 0.0
     h, a = 4e-5 * math.cos(math.radians(85.0)), math.radians(60.0)
     field = (h * math.cos(a), h * math.sin(a), -4e-5 * math.sin(math.radians(85.0)))
     q = est.update(STILL, LEVEL, field, DT)
@@ -447,14 +460,14 @@ def test_the_calibrations_turn_is_the_gyros_rotation_since_its_last_field_and_a_
     rate = 8.0 * axis
     for k in range(1, 31):
         est.update(tuple(rate), LEVEL, None, DT)
-        turn = est.flat_state[S_CAL_TURN:S_CAL_TURN + 4]
+        turn = record(est).cal_feed.turn
         assert np.allclose(turn, quat_exp(rate * k * DT), rtol=0.0, atol=1e-12), k
     clip = np.array([20.0, 0.0, 0.0])
     est.update(tuple(clip), LEVEL, None, DT)
     assert est.clipped == 1
     for k in range(1, 11):
         est.update(tuple(rate), LEVEL, None, DT)
-        turn = est.flat_state[S_CAL_TURN:S_CAL_TURN + 4]
+        turn = record(est).cal_feed.turn
         expected = quat_mul(quat_exp(clip * DT), quat_exp(rate * k * DT))
         assert np.allclose(turn, expected, rtol=0.0, atol=1e-12), k
 
@@ -528,17 +541,17 @@ def test_a_rest_touches_the_bias_and_its_covariance_but_not_the_low_passed_attit
     # Level and still: one estimator detects the rest (rest_time 1.5 s, the
     # default), the other never (rest_time 1000 s). The rest learns the
     # bias (zero here) and updates its covariance; the low-passed R(q̂)
-    # that the bias learned in motion uses (the flat state's slots after
-    # the covariance's six) is the same in both, to the bit.
+    # that the bias learned in motion uses (bias.r_lp, beside the
+    # covariance) is the same in both, to the bit.
     rest, never = (AhrsObserver(AhrsParams(rest_time=t), use_mag=False) for t in (1.5, 1000.0))
     for _ in range(400):
         rest.update(STILL, LEVEL, None, DT)
         never.update(STILL, LEVEL, None, DT)
     assert rest.rest and not never.rest
-    a, b = rest.flat_state, never.flat_state
-    assert not np.array_equal(a[S_BIAS_P:S_BIAS_P + 6], b[S_BIAS_P:S_BIAS_P + 6])
-    assert np.array_equal(a[S_RLP:S_RLP + 18], b[S_RLP:S_RLP + 18])
-    assert np.ptp(a[S_RLP:S_RLP + 18]) > 0.5   # R's states are not all zero
+    a, b = record(rest), record(never)
+    assert not np.array_equal(a.bias.p, b.bias.p)
+    assert np.array_equal(a.bias.r_lp, b.bias.r_lp)
+    assert np.ptp(a.bias.r_lp) > 0.5   # R's states are not all zero
 
 
 def test_after_a_clip_the_inclination_restarts_from_a_mean_of_one_sample():
@@ -596,10 +609,10 @@ def test_the_first_sample_starts_the_low_passed_vertical_at_the_estimates():
     # tilted and turned (6D: no field step moves it).
     est = AhrsObserver(AhrsParams(), use_mag=False)
     est.update(STILL, TILTED, None, DT)
-    s = est.flat_state
-    w, x, y, z = (float(v) for v in s[S_Q:S_Q + 4])
+    s = record(est)
+    w, x, y, z = (float(v) for v in s.est.q)
     n2 = w * w + x * x + y * y + z * z
     row = [2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
            (w * w - x * x - y * y + z * z) / n2]
     assert abs(row[0]) > 0.05 and abs(row[1]) > 0.05
-    assert list(s[S_RZLP:S_RZLP + 3]) == pytest.approx(row, abs=1e-12)
+    assert list(s.bias.rz_lp) == pytest.approx(row, abs=1e-12)

@@ -16,24 +16,22 @@ import pytest
 
 from ext_observer.core.ahrs import bias_kernel as kernel
 from ext_observer.core.ahrs.ahrs_filters import lowpass
-from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_Q, C_BIAS_R, C_BW, P_BIAS_MAX,
-                                                P_BIAS_SIGMA_INIT, S_BIAS, S_BIAS_P, S_Q,
-                                                S_REST, S_RLP)
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_state import STATE
 
 # Element (i, j) of the covariance -> its slot among the six (xx xy xz yy yz zz).
 SLOT = {(0, 0): 0, (0, 1): 1, (0, 2): 2, (1, 1): 3, (1, 2): 4, (2, 2): 5}
 
 
 def state(p, bias=(0.0, 0.0, 0.0), bias_max=1.0, sigma_init=0.1):
-    """An estimator's flat state holding the bias ``bias`` and covariance ``p``."""
-    s = AhrsObserver(AhrsParams(), use_mag=False).flat_state
+    """An estimator's state record holding the bias ``bias`` and covariance ``p``."""
+    s = AhrsObserver(AhrsParams(), use_mag=False, compiled=False).state[0]
     for i in range(3):
-        s[S_BIAS + i] = bias[i]
+        s.bias.rate[i] = bias[i]
     for (i, j), k in SLOT.items():
-        s[S_BIAS_P + k] = p[i, j]
-    s[P_BIAS_MAX] = bias_max
-    s[P_BIAS_SIGMA_INIT] = sigma_init
+        s.bias.p[k] = p[i, j]
+    s.par.bias_max = bias_max
+    s.par.bias_sigma_init = sigma_init
     return s
 
 
@@ -64,7 +62,7 @@ def test_a_bias_measurement_is_the_kalman_update(seed):
     s = state(p, bias)
     kernel.bias_measure(s, h[0], h[1], h[2], y, r)
     gain = p @ h / (h @ p @ h + r)
-    assert [s[S_BIAS + i] for i in range(3)] == pytest.approx(bias + gain * y, rel=1e-12)
+    assert [s.bias.rate[i] for i in range(3)] == pytest.approx(bias + gain * y, rel=1e-12)
     expected = p - np.outer(gain, h @ p)
     assert covariance(s) == pytest.approx(expected, rel=1e-9, abs=1e-18)
     # bias_variance reads the one symmetric matrix, whichever the order.
@@ -77,30 +75,30 @@ def test_an_innovation_beyond_3_sigma_teaches_nothing_and_the_bias_is_clipped():
     r = 1e-4
     sigma = np.sqrt(h @ p @ h + r)   # 0.0134 rad/s
     s = state(p)
-    before = np.array(s, dtype=float)
+    before = np.array(STATE.flat(s))
     kernel.bias_measure(s, h[0], h[1], h[2], 3.01 * sigma, r)
-    assert np.array_equal(np.array(s, dtype=float), before, equal_nan=True)
+    assert np.array_equal(np.array(STATE.flat(s)), before, equal_nan=True)
     kernel.bias_measure(s, h[0], h[1], h[2], 2.99 * sigma, r)
-    assert s[S_BIAS] > 0.0 and s[S_BIAS + 1] < 0.0 and s[S_BIAS + 2] == 0.0
+    assert s.bias.rate[0] > 0.0 and s.bias.rate[1] < 0.0 and s.bias.rate[2] == 0.0
     # A bias_max below what it would learn: held at the bound, per axis.
     s = state(p, bias_max=1e-3)
     kernel.bias_measure(s, h[0], h[1], h[2], 2.99 * sigma, r)
-    assert [s[S_BIAS + i] for i in range(3)] == [1e-3, -1e-3, 0.0]
+    assert [s.bias.rate[i] for i in range(3)] == [1e-3, -1e-3, 0.0]
 
 
 def test_the_bias_variances_grow_by_q_up_to_bias_sigma_init_squared():
     p = np.array([[1e-6, 2e-7, 0.0], [2e-7, 5e-3, 1e-7], [0.0, 1e-7, 2e-2]])
     s = state(p, sigma_init=0.1)   # bias_sigma_init² = 0.01
     q = 1e-6
-    s[C_BIAS_Q] = q
+    s.coef.bias_q = q
     kernel._bias_grow(s)
     grown = covariance(s)
     # xx grows by q; yy by q (below the cap); zz, above the cap already,
     # stays as it is (the growth never lowers a variance); off-diagonal kept.
     assert np.diag(grown) == pytest.approx([1e-6 + q, 5e-3 + q, 2e-2], rel=1e-12)
     assert grown[0, 1] == 2e-7 and grown[1, 2] == 1e-7
-    s[S_BIAS_P + SLOT[1, 1]] = 0.01 - 0.5 * q
-    s[S_BIAS_P + SLOT[2, 2]] = 1e-3
+    s.bias.p[SLOT[1, 1]] = 0.01 - 0.5 * q
+    s.bias.p[SLOT[2, 2]] = 1e-3
     kernel._bias_grow(s)
     assert kernel.bias_variance(s, 1, 1) == pytest.approx(0.01, rel=1e-12)
     assert kernel.bias_variance(s, 2, 2) == pytest.approx(1e-3 + q, rel=1e-12)
@@ -120,12 +118,12 @@ COEFFICIENTS = (0.05, 0.09, 0.03, -1.3, 0.47)
 def attitude_state(q, p, rest=0.0):
     s = state(p)
     for i in range(4):
-        s[S_Q + i] = q[i]
+        s.est.q[i] = q[i]
     for k, c in enumerate(COEFFICIENTS):
-        s[C_BW + k] = c
-    s[S_REST] = rest
-    s[C_BIAS_Q] = 1e-9
-    s[C_BIAS_R] = 1e-5
+        s.coef.bw[k] = c
+    s.rest.detected = rest
+    s.coef.bias_q = 1e-9
+    s.coef.bias_r = 1e-5
     kernel.rlp_steady(s)
     return s
 
@@ -147,13 +145,14 @@ def test_in_motion_two_corrections_measure_the_bias_through_the_rows_of_r():
     kernel._bias_grow(expected)
     kernel.bias_measure(expected, *r[0], -2.0 * rx / (rw * dt), 1e-5 / dt)
     kernel.bias_measure(expected, *r[1], -2.0 * ry / (rw * dt), 1e-5 / dt)
-    assert [s[S_BIAS + i] for i in range(3)] != [0.0, 0.0, 0.0]
-    assert [s[S_BIAS + i] for i in range(3)] == pytest.approx(
-        [expected[S_BIAS + i] for i in range(3)], rel=1e-9)
+    assert [s.bias.rate[i] for i in range(3)] != [0.0, 0.0, 0.0]
+    assert [s.bias.rate[i] for i in range(3)] == pytest.approx(
+        [expected.bias.rate[i] for i in range(3)], rel=1e-9)
     assert covariance(s) == pytest.approx(covariance(expected), rel=1e-9)
     # The low-passed R stays R (all three rows, steady).
     for j in range(3):
-        assert lowpass(s, S_RLP + 6 * j, *r[j]) == pytest.approx(r[j], rel=1e-9, abs=1e-12)
+        assert lowpass(s.coef.bw, s.bias.r_lp, 6 * j, *r[j]) == pytest.approx(r[j], rel=1e-9,
+                                                                          abs=1e-12)
     # At rest, or before the low-pass has settled: the variances grow, no
     # measurement.
     for rest, settled in ((1.0, True), (0.0, False)):
@@ -161,5 +160,5 @@ def test_in_motion_two_corrections_measure_the_bias_through_the_rows_of_r():
         kernel.learn_bias(s, rw, rx, ry, dt, settled)
         grown = attitude_state(q, p, rest=rest)
         kernel._bias_grow(grown)
-        assert [s[S_BIAS + i] for i in range(3)] == [0.0, 0.0, 0.0]
+        assert [s.bias.rate[i] for i in range(3)] == [0.0, 0.0, 0.0]
         assert covariance(s) == pytest.approx(covariance(grown), rel=1e-12)

@@ -1,9 +1,9 @@
 """
 What the gyro's own samples say (``clip_and_rest.py``): a rate at the sensor's range, a body at rest.
 
-Each function is called on an estimator's flat state (plain kernels, one
+Each function is called on an estimator's state record (plain kernels, one
 sample of a level body first, so that the coefficients are set) and its
-slots compared with what its docstring states: a clipped axis adds
+fields compared with what its docstring states: a clipped axis adds
 ``(range dt)²`` and counts the sample once; without a known range a rate
 repeated at the largest magnitude seen is clipped from its second repeat;
 rest is the low-passed rate and the specific force still for
@@ -15,9 +15,6 @@ import math
 
 import pytest
 
-from ext_observer.core.ahrs.ahrs_layout import (C_DT, C_K_REST, S_ACC_STILL, S_BIAS, S_CLIPPED,
-                                                S_CLIPS, S_GYR_LAST, S_GYR_PEAK, S_GYR_PREV,
-                                                S_REST, S_REST_GYR, S_REST_TIME, S_STUCK)
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.clip_and_rest import clipped_variance, detect_rest
 
@@ -27,11 +24,11 @@ STILL = (0.0, 0.0, 0.0)
 
 
 def state(**params):
-    """The flat state of a plain estimator after one still, level sample at ``DT``."""
+    """The state record of a plain estimator after one still, level sample at ``DT``."""
     est = AhrsObserver(AhrsParams(**params), use_mag=False, compiled=False)
     est.update(STILL, LEVEL, None, DT)
-    s = est.flat_state
-    assert s[C_DT] == DT
+    s = est.state[0]
+    assert s.coef.dt == DT
     return s
 
 
@@ -39,15 +36,15 @@ def state(**params):
 
 def test_each_axis_at_a_known_range_adds_range_dt_squared_and_counts_the_sample_once():
     s = state(gyro_range=4.0)
-    clips = s[S_CLIPS]
+    clips = s.gyro.clips
     assert clipped_variance(s, 4.0, -1.0, 0.5) == pytest.approx((4.0 * DT) ** 2, rel=1e-15)
-    assert s[S_CLIPPED] == pytest.approx((4.0 * DT) ** 2, rel=1e-15)
-    assert s[S_CLIPS] == clips + 1.0
+    assert s.gyro.clipped == pytest.approx((4.0 * DT) ** 2, rel=1e-15)
+    assert s.gyro.clips == clips + 1.0
     assert clipped_variance(s, -4.0, 4.0, -4.0) == pytest.approx(3 * (4.0 * DT) ** 2, rel=1e-15)
-    assert s[S_CLIPS] == clips + 2.0
+    assert s.gyro.clips == clips + 2.0
     # Below the range: nothing added, nothing counted, the slot cleared.
     assert clipped_variance(s, 3.9, -3.9, 0.0) == 0.0
-    assert s[S_CLIPPED] == 0.0 and s[S_CLIPS] == clips + 2.0
+    assert s.gyro.clipped == 0.0 and s.gyro.clips == clips + 2.0
 
 
 def test_a_rate_within_a_ten_thousandth_of_the_range_is_at_it():
@@ -61,15 +58,15 @@ def test_with_the_range_unknown_the_top_is_the_largest_rate_seen():
     # Rates that move are never stuck, whatever their size.
     for g in (5.0, 6.0, 6.5):
         assert clipped_variance(s, g, 0.0, 0.0) == 0.0
-    assert s[S_GYR_PEAK] == 6.5
+    assert s.gyro.peak == 6.5
     # The largest rate repeated: stuck from the second repeat, the top 6.5 dt.
     assert clipped_variance(s, 6.5, 0.0, 0.0) == 0.0
-    assert s[S_STUCK] == 1.0
+    assert s.gyro.stuck[0] == 1.0
     assert clipped_variance(s, 6.5, 0.0, 0.0) == pytest.approx((6.5 * DT) ** 2, rel=1e-15)
-    assert s[S_STUCK] == 2.0
+    assert s.gyro.stuck[0] == 2.0
     # A new value ends it.
     assert clipped_variance(s, 6.4, 0.0, 0.0) == 0.0
-    assert s[S_STUCK] == 0.0
+    assert s.gyro.stuck[0] == 0.0
 
 
 @pytest.mark.parametrize('axis', [0, 1, 2])
@@ -79,22 +76,22 @@ def test_a_rate_below_any_gyros_range_repeated_is_not_stuck(axis):
     rate[axis] = -1.9  # rad/s: below the smallest range a gyro has (±125 °/s)
     for _ in range(10):
         assert clipped_variance(s, *rate) == 0.0
-    assert s[S_STUCK + axis] == 0.0
+    assert s.gyro.stuck[axis] == 0.0
 
 
 def test_each_sample_keeps_the_last_two_rates_for_a_holes_end():
     s = state()
     clipped_variance(s, 0.1, 0.2, 0.3)
     clipped_variance(s, 0.4, 0.5, 0.6)
-    assert list(s[S_GYR_PREV:S_GYR_PREV + 3]) == [0.1, 0.2, 0.3]
-    assert list(s[S_GYR_LAST:S_GYR_LAST + 3]) == [0.4, 0.5, 0.6]
+    assert list(s.gyro.prev) == [0.1, 0.2, 0.3]
+    assert list(s.gyro.last) == [0.4, 0.5, 0.6]
 
 
 # --- rest -----------------------------------------------------------------------
 
 def still_for(s, seconds, rate=(0.0, 0.0, 0.0)):
     for _ in range(round(seconds / DT)):
-        s[S_ACC_STILL] = 1.0
+        s.rest.acc_still = 1.0
         detect_rest(s, *rate)
 
 
@@ -102,34 +99,34 @@ def test_rest_comes_after_rest_time_of_a_still_gyro_and_specific_force():
     params = AhrsParams()
     s = state()
     still_for(s, params.rest_time - 2 * DT)
-    assert s[S_REST] == 0.0
+    assert s.rest.detected == 0.0
     still_for(s, 3 * DT)
-    assert s[S_REST] == 1.0
+    assert s.rest.detected == 1.0
     # A specific force that moves ends it at once, and the time starts over.
-    s[S_ACC_STILL] = 0.0
+    s.rest.acc_still = 0.0
     detect_rest(s, 0.0, 0.0, 0.0)
-    assert s[S_REST] == 0.0 and s[S_REST_TIME] == 0.0
+    assert s.rest.detected == 0.0 and s.rest.time == 0.0
 
 
 def test_a_rate_that_leaves_the_low_pass_by_more_than_rest_gyr_ends_rest():
     params = AhrsParams()
     s = state()
     still_for(s, params.rest_time + 0.1)
-    assert s[S_REST] == 1.0
-    s[S_ACC_STILL] = 1.0
-    detect_rest(s, 0.0, 0.0, 1.2 * params.rest_gyr / (1.0 - s[C_K_REST]))
-    assert s[S_REST] == 0.0 and s[S_REST_TIME] == 0.0
+    assert s.rest.detected == 1.0
+    s.rest.acc_still = 1.0
+    detect_rest(s, 0.0, 0.0, 1.2 * params.rest_gyr / (1.0 - s.coef.k_rest))
+    assert s.rest.detected == 0.0 and s.rest.time == 0.0
 
 
 def test_the_rate_is_low_passed_with_the_rests_gain():
     s = state()
-    k = s[C_K_REST]
+    k = s.coef.k_rest
     assert k == pytest.approx(1.0 - math.exp(-DT / AhrsParams().tau_rest), rel=1e-12)
-    before = list(s[S_REST_GYR:S_REST_GYR + 3])
-    s[S_ACC_STILL] = 1.0
+    before = list(s.rest.gyr_lp)
+    s.rest.acc_still = 1.0
     detect_rest(s, 0.01, -0.02, 0.03)
     for i, g in enumerate((0.01, -0.02, 0.03)):
-        assert s[S_REST_GYR + i] == pytest.approx(before[i] + k * (g - before[i]), rel=1e-15)
+        assert s.rest.gyr_lp[i] == pytest.approx(before[i] + k * (g - before[i]), rel=1e-15)
 
 
 def test_at_rest_the_bias_moves_toward_the_low_passed_rate_within_bias_max():
@@ -137,13 +134,13 @@ def test_at_rest_the_bias_moves_toward_the_low_passed_rate_within_bias_max():
     s = state()
     bias = (0.004, -0.006, 0.02)  # rad/s, within rest_gyr of a zero bias
     still_for(s, params.rest_time + 20 * params.tau_rest, rate=bias)
-    assert s[S_REST] == 1.0
-    assert list(s[S_BIAS:S_BIAS + 3]) == pytest.approx(bias, abs=1e-6)
+    assert s.rest.detected == 1.0
+    assert list(s.bias.rate) == pytest.approx(bias, abs=1e-6)
     # Out of rest the bias stays where it is.
-    held = list(s[S_BIAS:S_BIAS + 3])
-    s[S_ACC_STILL] = 0.0
+    held = list(s.bias.rate)
+    s.rest.acc_still = 0.0
     detect_rest(s, 0.0, 0.0, 0.0)
-    assert list(s[S_BIAS:S_BIAS + 3]) == held
+    assert list(s.bias.rate) == held
 
 
 def test_a_bias_learned_at_rest_is_clipped_at_bias_max():
@@ -151,17 +148,17 @@ def test_a_bias_learned_at_rest_is_clipped_at_bias_max():
     # than half of rest_gyr is still rest, and the bias stays at bias_max.
     params = AhrsParams()
     s = state()
-    s[S_BIAS + 2] = params.bias_max
+    s.bias.rate[2] = params.bias_max
     rate = params.bias_max + 0.4 * params.rest_gyr
     still_for(s, params.rest_time + 10 * params.tau_rest, rate=(0.0, 0.0, rate))
-    assert s[S_REST] == 1.0
-    assert s[S_BIAS + 2] == params.bias_max
+    assert s.rest.detected == 1.0
+    assert s.bias.rate[2] == params.bias_max
     # Beyond it by more than half of rest_gyr: a steady turn, never rest.
     s = state()
-    s[S_BIAS + 2] = params.bias_max
+    s.bias.rate[2] = params.bias_max
     still_for(s, params.rest_time + 10 * params.tau_rest,
               rate=(0.0, 0.0, params.bias_max + 0.6 * params.rest_gyr))
-    assert s[S_REST] == 0.0
+    assert s.rest.detected == 0.0
 
 
 def test_a_steady_rate_farther_than_rest_gyr_from_the_bias_is_not_rest():
@@ -172,4 +169,4 @@ def test_a_steady_rate_farther_than_rest_gyr_from_the_bias_is_not_rest():
     rate = 1.3 * params.rest_gyr
     assert rate < params.bias_max + 0.5 * params.rest_gyr
     still_for(s, params.rest_time + 10 * params.tau_rest, rate=(0.0, 0.0, rate))
-    assert s[S_REST] == 0.0 and s[S_BIAS + 2] == 0.0
+    assert s.rest.detected == 0.0 and s.bias.rate[2] == 0.0

@@ -15,6 +15,7 @@ subset of the kernel (docs/tests.md#mutmut): the whole file takes about
 a second on the plain kernels.
 """
 
+import copy
 import math
 
 import numpy as np
@@ -25,20 +26,33 @@ from ext_observer.core.ahrs.ahrs_filters import rotate
 from ext_observer.core.ahrs.field_kernel import (HEADING_LOST, _doubt_gain, _turn_heading,
                                                 ahrs_update_mag, field_doubt)
 from ext_observer.core.ahrs.bias_kernel import bias_measure
-from ext_observer.core.ahrs.ahrs_layout import (C_BIAS_R, MC0, S_BIAS, S_BIAS_P, S_CAL_MOVED,
-                                                S_CAL_RATE, S_CAL_SINCE, S_CAL_TURN, S_CAL_WAIT,
-                                                S_CAND, S_CAND_TIME, S_HAS_REF, S_LP, S_MAG_USED,
-                                                S_Q, S_REF, S_REF_AGE, S_REF_REST, S_REJECTED,
-                                                S_REST, S_RZLP, S_START, S_WAIT_N, S_WAIT_TURN,
-                                                S_HEAD_DOUBT, S_TILT_DOUBT, P_TAU_ACC,
-                                                P_TAU_ACC_GAIN)
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_state import STATE
 from ext_observer.core.ahrs.magcal_layout import MAGCAL, MC_READY, MC_REFUSED, MC_USED
 
 DT = 0.01
 LEVEL = (0.0, 0.0, 9.81)
 STILL = (0.0, 0.0, 0.0)
 NORM, DIP = 4.5e-5, math.radians(-60.0)
+
+
+def record(est):
+    """The estimate's state record, its fields by attribute (plain, or a view of the compiled)."""
+    holder = est.state
+    return holder.view(np.recarray)[0] if isinstance(holder, np.ndarray) else holder[0]
+
+
+def calibration(est):
+    """The calibration's block of the estimate's state (``cal.flat``), plain or compiled."""
+    holder = est.state
+    return holder['cal']['flat'][0] if isinstance(holder, np.ndarray) else holder[0].cal.flat
+
+
+def snapshot(s):
+    """A plain copy of a state record."""
+    copied = STATE.plain()
+    STATE.copy(s, copied)
+    return copied
 
 
 def world_field(norm, dip, heading=0.0):
@@ -66,10 +80,10 @@ def wrap(a):
 def test_the_first_field_sets_the_references_and_the_candidate():
     est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True)
     est.update(STILL, LEVEL, body_field(world_field(NORM, DIP, 0.7), 0.0), DT)
-    s = est.flat_state
-    assert s[S_HAS_REF] == 1.0
-    assert list(s[S_REF:S_REF + 2]) == pytest.approx([NORM, DIP], rel=1e-12)
-    assert list(s[S_CAND:S_CAND + 2]) == pytest.approx([NORM, DIP], rel=1e-12)
+    s = record(est)
+    assert s.field.has_ref == 1.0
+    assert list(s.field.ref) == pytest.approx([NORM, DIP], rel=1e-12)
+    assert list(s.field.cand) == pytest.approx([NORM, DIP], rel=1e-12)
 
 
 @pytest.mark.parametrize('change', ['norm', 'dip'])
@@ -83,13 +97,13 @@ def test_a_new_field_is_followed_by_its_candidate_and_accepted_after_mag_new_tim
     # accepted: the references are the candidate's, the rejection time 0.
     params = AhrsParams(mag_cal=False, mag_new_time=1.0)
     est = AhrsObserver(params, use_mag=True)
-    s = est.flat_state
+    s = record(est)
     kr = 1.0 - math.exp(-DT / params.tau_mag_ref)
     rate, yaw = 1.0, 0.0
     for _ in range(200):
         yaw += rate * DT
         est.update((0.0, 0.0, rate), LEVEL, body_field(world_field(NORM, DIP), yaw), DT)
-    assert not est.mag_disturbed and s[S_REF_AGE] > 1.0
+    assert not est.mag_disturbed and s.field.ref_age > 1.0
     cand, cand_time, rejected, accepted = None, 0.0, 0.0, None
     for k in range(200):
         norm, dip = (1.3 * NORM * (1.0 + 1e-4 * k), DIP) if change == 'norm' else (
@@ -103,19 +117,19 @@ def test_a_new_field_is_followed_by_its_candidate_and_accepted_after_mag_new_tim
             cand_time += DT
         if est.mag_disturbed:
             rejected += DT
-            assert list(s[S_CAND:S_CAND + 2]) == pytest.approx(list(cand), rel=1e-9), k
-            assert s[S_CAND_TIME] == pytest.approx(cand_time, abs=1e-9), k
-            assert s[S_REJECTED] == pytest.approx(rejected, abs=1e-9), k
-            assert list(s[S_REF:S_REF + 2]) == pytest.approx([NORM, DIP], rel=1e-9), k
+            assert list(s.field.cand) == pytest.approx(list(cand), rel=1e-9), k
+            assert s.field.cand_time == pytest.approx(cand_time, abs=1e-9), k
+            assert s.field.rejected == pytest.approx(rejected, abs=1e-9), k
+            assert list(s.field.ref) == pytest.approx([NORM, DIP], rel=1e-9), k
         else:
             accepted = k
             break
     assert accepted in (100, 101)
-    assert s[S_REJECTED] == 0.0 and s[S_REF_REST] == 0.0
+    assert s.field.rejected == 0.0 and s.field.ref_rest == 0.0
     # The references are the candidate's, then follow this field as any used.
     ref = cand + kr * (np.array([norm, dip]) - cand)
-    assert list(s[S_REF:S_REF + 2]) == pytest.approx(list(ref), rel=1e-9)
-    assert s[S_REF_AGE] == pytest.approx(cand_time + DT, abs=1e-9)
+    assert list(s.field.ref) == pytest.approx(list(ref), rel=1e-9)
+    assert s.field.ref_age == pytest.approx(cand_time + DT, abs=1e-9)
 
 
 def test_while_the_references_are_young_a_field_off_the_candidate_takes_back_twice_its_time():
@@ -128,7 +142,7 @@ def test_while_the_references_are_young_a_field_off_the_candidate_takes_back_twi
     # the first field, the rejection time decays by 2 dt a sample.
     params = AhrsParams(mag_cal=False, mag_new_time=2.0)
     est = AhrsObserver(params, use_mag=True)
-    s = est.flat_state
+    s = record(est)
     first = world_field(NORM, DIP)
     for _ in range(50):
         est.update(STILL, LEVEL, body_field(first, 0.0), DT)
@@ -136,9 +150,9 @@ def test_while_the_references_are_young_a_field_off_the_candidate_takes_back_twi
     for _ in range(40):
         yaw += rate * DT
         est.update((0.0, 0.0, rate), LEVEL, body_field(first, yaw), DT)
-    cand_time, age = s[S_CAND_TIME], s[S_REF_AGE]
+    cand_time, age = s.field.cand_time, s.field.ref_age
     taken_back = math.ceil(cand_time / (2.0 * DT) - 1e-9)
-    assert 0.1 < cand_time < age < 1.0 and s[S_REF_REST] == 0.0
+    assert 0.1 < cand_time < age < 1.0 and s.field.ref_rest == 0.0
     strong = world_field(1.3 * NORM, DIP)
     n = 0
     while cand_time > 0.0:
@@ -146,12 +160,12 @@ def test_while_the_references_are_young_a_field_off_the_candidate_takes_back_twi
         est.update((0.0, 0.0, rate), LEVEL, body_field(strong, yaw), DT)
         cand_time = max(cand_time - 2.0 * DT, 0.0)
         n += 1
-        assert s[S_CAND_TIME] == pytest.approx(cand_time, abs=1e-9), n
+        assert s.field.cand_time == pytest.approx(cand_time, abs=1e-9), n
         assert est.mag_disturbed
         expected = [1.3 * NORM, DIP] if cand_time == 0.0 else [NORM, DIP]
-        assert list(s[S_CAND:S_CAND + 2]) == pytest.approx(expected, rel=1e-9), n
+        assert list(s.field.cand) == pytest.approx(expected, rel=1e-9), n
     assert n == taken_back
-    assert s[S_REF_AGE] == pytest.approx(age, abs=1e-12)   # fields not used do not age them
+    assert s.field.ref_age == pytest.approx(age, abs=1e-12)   # fields not used do not age them
     steps = 0
     while est.mag_disturbed:
         yaw += rate * DT
@@ -159,17 +173,17 @@ def test_while_the_references_are_young_a_field_off_the_candidate_takes_back_twi
         steps += 1
         assert steps < 200
     assert abs(steps * DT - age) <= 1.5 * DT
-    rejected = s[S_REJECTED]
+    rejected = s.field.rejected
     assert rejected == 0.0
     # A stretch of the old field (now rejected) then the new one again.
     for _ in range(30):
         yaw += rate * DT
         est.update((0.0, 0.0, rate), LEVEL, body_field(first, yaw), DT)
-    assert s[S_REJECTED] == pytest.approx(30 * DT, abs=1e-9)
+    assert s.field.rejected == pytest.approx(30 * DT, abs=1e-9)
     for k in range(1, 11):
         yaw += rate * DT
         est.update((0.0, 0.0, rate), LEVEL, body_field(strong, yaw), DT)
-        assert s[S_REJECTED] == pytest.approx((30 - 2 * k) * DT, abs=1e-9)
+        assert s.field.rejected == pytest.approx((30 - 2 * k) * DT, abs=1e-9)
 
 
 @pytest.mark.parametrize('waited', [1, 40])
@@ -181,23 +195,23 @@ def test_fields_waited_for_are_applied_when_the_calibration_finds_the_sensor_cal
     # the turn it would have had is kept (a running mean over all the
     # fields used, then k_mag). The calibration then says ready and not
     # applied (as it does when it finds the sensor calibrated: here set in
-    # its flat state, a converged calibration takes minutes): at the next
+    # its block of the state, a converged calibration takes minutes): at the next
     # field the heading turns by the kept turn and corrects the rest of
     # the field's heading with the gain of all the fields used.
     params = AhrsParams(mag_cal_rate=0.2)
     est = AhrsObserver(params, use_mag=True)
-    s = est.flat_state
+    s = record(est)
     k_mag = 1.0 - math.exp(-DT / params.tau_mag)
     for _ in range(20):
         est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
     assert abs(yaw_of(est.q)) < 1e-12
     rate, yaw = 0.5, 0.0
-    while s[S_CAL_MOVED] == 0.0:
+    while s.cal_feed.moved == 0.0:
         yaw += rate * DT
         est.update((0.0, 0.0, rate), LEVEL, None, DT)
         assert yaw < 1.0
-    assert s[MC0 + MC_READY] == 0.0 and s[S_WAIT_N] == 0.0
-    used = s[S_MAG_USED]
+    assert calibration(est)[MC_READY] == 0.0 and s.field.wait_n == 0.0
+    used = s.field.mag_used
     assert used == 20.0
     turned = world_field(NORM, DIP, 0.4)
     turn = 0.0
@@ -207,15 +221,15 @@ def test_fields_waited_for_are_applied_when_the_calibration_finds_the_sensor_cal
         assert yaw_of(q) == pytest.approx(wrap(yaw), abs=1e-9)    # not corrected
         kap = max(k_mag, 1.0 / (used + k + 1.0))
         turn += kap * (0.4 - turn)
-        assert s[S_WAIT_N] == k + 1.0
-        assert s[S_WAIT_TURN] == pytest.approx(turn, abs=1e-12)
-    assert s[S_MAG_USED] == used
-    s[MC0 + MC_READY] = 1.0
+        assert s.field.wait_n == k + 1.0
+        assert s.field.wait_turn == pytest.approx(turn, abs=1e-12)
+    assert s.field.mag_used == used
+    calibration(est)[MC_READY] = 1.0
     yaw += rate * DT
-    since = s[S_CAL_SINCE] + DT
+    since = s.cal_feed.since + DT
     q = est.update((0.0, 0.0, rate), LEVEL, body_field(turned, yaw), DT)
     total = used + waited + 1.0
-    assert s[S_MAG_USED] == total and s[S_WAIT_N] == 0.0 and s[S_WAIT_TURN] == 0.0
+    assert s.field.mag_used == total and s.field.wait_n == 0.0 and s.field.wait_turn == 0.0
     kap = max(k_mag, 1.0 / total, 1.0 - math.exp(-DT / max(1.0, 0.5 * since)))
     rest = 0.4 - turn
     correction = 2.0 * math.atan2(kap * math.sin(0.5 * rest),
@@ -243,10 +257,11 @@ def test_each_calibration_step_hands_the_calibration_its_turn_time_rate_vertical
     # latest rate, the vertical R(q)ᵀ e_z, and whether the calibrated field
     # passes the references' norm and dip test. Between steps, nothing.
     params = AhrsParams(mag_cal_rate=20.0)
-    est = AhrsObserver(params, use_mag=True)
+    # The plain kernels: their field step is called here on the state.
+    est = AhrsObserver(params, use_mag=True, compiled=False)
     offset, soft = np.array([2e-5, -1e-5, 0.5e-5]), np.diag([1.1, 0.95, 1.0])
     est.load_calibration(tuple(offset), soft)
-    s = est.flat_state
+    s = record(est)
     field = world_field(NORM, DIP, 0.3)
     period = 1.0 / params.mag_cal_rate
     steps = refused = 0
@@ -264,40 +279,41 @@ def test_each_calibration_step_hands_the_calibration_its_turn_time_rate_vertical
         body = np.array(rotate(truth[0], -truth[1], -truth[2], -truth[3], *field))
         strong = steps % 3 == 2
         raw = soft @ (body * (1.4 if strong else 1.0)) + offset
-        wait = s[S_CAL_WAIT] + DT
+        wait = s.cal_feed.wait + DT
         if wait >= period:
             # The kernel's attitude need not be unit (the extension term
             # pulls it back): the vertical is that of its rotation.
             for i in range(4):
-                s[S_Q + i] *= 1.03
-        before = np.array(s, dtype=float)
+                s.est.q[i] *= 1.03
+        before = snapshot(s)
         ahrs_update_mag(s, *raw, DT)
         if wait < period:
-            assert s[S_CAL_WAIT] == pytest.approx(wait, abs=1e-15)
-            assert np.array_equal(s[MC0:MC0 + MAGCAL.size], before[MC0:MC0 + MAGCAL.size])
+            assert s.cal_feed.wait == pytest.approx(wait, abs=1e-15)
+            assert np.array_equal(s.cal.flat, before.cal.flat)
             continue
-        shadow = before.copy()
-        c = np.array(magcal_kernel.mc_apply(shadow, MC0, *raw))
-        w = rotate(*before[S_Q:S_Q + 4], *c)
+        shadow = copy.deepcopy(before)
+        c = np.array(magcal_kernel.mc_apply(shadow.cal.flat, 0, *raw))
+        w = rotate(*before.est.q, *c)
         h = math.hypot(w[0], w[1])
         norm, dip = math.hypot(h, w[2]), math.atan2(w[2], h)
-        ref_n, ref_d = before[S_REF], before[S_REF + 1]
+        ref_n, ref_d = before.field.ref[0], before.field.ref[1]
         # (the first field's step: no references yet, nothing to check)
-        allow = before[S_HAS_REF] == 0.0 or (abs(norm - ref_n) <= params.mag_norm_th * ref_n
+        allow = before.field.has_ref == 0.0 or (abs(norm - ref_n) <= params.mag_norm_th * ref_n
                                              and abs(dip - ref_d) <= params.mag_dip_th)
         assert allow != strong, (k, norm / ref_n, dip - ref_d)
-        magcal_kernel.mc_learn(shadow, MC0, tuple(raw), tuple(before[S_CAL_TURN:S_CAL_TURN + 4]),
-                               wait, tuple(before[S_CAL_RATE:S_CAL_RATE + 3]), 1.0,
-                               tuple(up_of(before[S_Q:S_Q + 4])), 1.0 if allow else 0.0)
-        a, b = s[MC0:MC0 + MAGCAL.size], shadow[MC0:MC0 + MAGCAL.size]
+        magcal_kernel.mc_learn(shadow.cal.flat, 0, tuple(raw), tuple(before.cal_feed.turn),
+                               wait, tuple(before.cal_feed.rate), 1.0,
+                               tuple(up_of(before.est.q)), 1.0 if allow else 0.0)
+        assert len(s.cal.flat) == MAGCAL.size
+        a, b = np.array(s.cal.flat), np.array(shadow.cal.flat)
         bad = ~np.isclose(a, b, rtol=1e-9, atol=0.0)
         assert not bad.any(), (k, np.flatnonzero(bad), a[bad], b[bad])
-        assert list(s[S_CAL_TURN:S_CAL_TURN + 4]) == [1.0, 0.0, 0.0, 0.0]
-        assert s[S_CAL_WAIT] == 0.0
+        assert list(s.cal_feed.turn) == [1.0, 0.0, 0.0, 0.0]
+        assert s.cal_feed.wait == 0.0
         steps += 1
         refused += strong
     assert steps in (47, 48) and refused == steps // 3
-    assert s[MC0 + MC_REFUSED] == refused and s[MC0 + MC_USED] >= 30.0
+    assert s.cal.flat[MC_REFUSED] == refused and s.cal.flat[MC_USED] >= 30.0
 
 
 def test_a_calibration_applied_while_running_restarts_the_references_from_its_field():
@@ -308,20 +324,20 @@ def test_a_calibration_applied_while_running_restarts_the_references_from_its_fi
     # 0, the refinement's time restarts (one field's dt after that field)
     # and the heading's running mean is over (no mean: the refinement).
     est = AhrsObserver(AhrsParams(), use_mag=True)
-    s = est.flat_state
+    s = record(est)
     field = world_field(NORM, DIP, 0.5)
     offset = np.array([2e-5, -1.5e-5, 1e-5])
     raw = tuple(np.asarray(body_field(field, 0.0)) + offset)
     for _ in range(50):
         est.update(STILL, LEVEL, raw, DT)
     n_raw = float(np.linalg.norm(raw))
-    assert s[S_REF] == pytest.approx(n_raw, rel=1e-9)
+    assert s.field.ref[0] == pytest.approx(n_raw, rel=1e-9)
     est.load_calibration(tuple(offset), np.eye(3))
     est.update(STILL, LEVEL, raw, DT)
-    assert list(s[S_REF:S_REF + 2]) == pytest.approx([NORM, DIP], rel=1e-9)
-    assert list(s[S_CAND:S_CAND + 2]) == pytest.approx([NORM, DIP], rel=1e-9)
-    assert s[S_CAND_TIME] == 0.0
-    assert s[S_CAL_SINCE] == DT and s[S_MAG_USED] == math.inf
+    assert list(s.field.ref) == pytest.approx([NORM, DIP], rel=1e-9)
+    assert list(s.field.cand) == pytest.approx([NORM, DIP], rel=1e-9)
+    assert s.field.cand_time == 0.0
+    assert s.cal_feed.since == DT and s.field.mag_used == math.inf
 
 
 def test_a_heading_turn_turns_the_estimate_and_its_low_passed_vertical_alike():
@@ -330,20 +346,20 @@ def test_a_heading_turn_turns_the_estimate_and_its_low_passed_vertical_alike():
     # components each) turned by r's angle about the vertical, not scaled.
     est = AhrsObserver(AhrsParams(), use_mag=False)
     est.update(STILL, (1.2, -0.8, 9.7), None, DT)
-    s = est.flat_state
+    s = record(est)
     states = np.array([0.3, -0.2, 9.7, 0.1, 0.05, -0.4])
-    s[S_LP:S_LP + 6] = states
-    q0 = np.array(s[S_Q:S_Q + 4], dtype=float)
+    s.inc.lp[:] = list(states)
+    q0 = np.array(s.est.q, dtype=float)
     a = 0.7
     rw, rz = 0.9 * math.cos(0.5 * a), 0.9 * math.sin(0.5 * a)
     _turn_heading(s, rw, rz)
     w, x, y, z = q0
-    assert list(s[S_Q:S_Q + 4]) == pytest.approx(
+    assert list(s.est.q) == pytest.approx(
         [rw * w - rz * z, rw * x - rz * y, rw * y + rz * x, rw * z + rz * w], abs=1e-15)
     turn = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
     expected = np.concatenate([turn @ states[0:2], states[2:3], turn @ states[3:5],
                                states[5:6]])
-    assert np.allclose(s[S_LP:S_LP + 6], expected, rtol=0.0, atol=1e-14)
+    assert np.allclose(s.inc.lp, expected, rtol=0.0, atol=1e-14)
 
 
 def test_in_motion_the_steady_heading_correction_teaches_the_bias_through_the_low_passed_vertical():
@@ -359,7 +375,7 @@ def test_in_motion_the_steady_heading_correction_teaches_the_bias_through_the_lo
     # its covariance alone.
     params = AhrsParams(mag_cal=False, tau_mag=2.0, tau_acc=1.5)
     est = AhrsObserver(params, use_mag=True)
-    s = est.flat_state
+    s = record(est)
     k_mag = 1.0 - math.exp(-DT / params.tau_mag)
     field = world_field(NORM, DIP, 0.3)
     truth = np.array([math.cos(0.3), math.sin(0.3) * 0.6, math.sin(0.3) * 0.8, 0.0])
@@ -374,31 +390,32 @@ def test_in_motion_the_steady_heading_correction_teaches_the_bias_through_the_lo
         truth = np.concatenate(([w * e[0] - v @ e[1:]], w * e[1:] + e[0] * v + np.cross(v, e[1:])))
         est.update(tuple(rate + bias), tuple(9.81 * up_of(truth)), None, DT)
         if k == 0:   # the start: the low-passed row starts at R(q)'s
-            assert np.allclose(s[S_RZLP:S_RZLP + 3], up_of(est.q), rtol=0.0, atol=1e-14)
+            assert np.allclose(s.bias.rz_lp, up_of(est.q), rtol=0.0, atol=1e-14)
         body = rotate(truth[0], -truth[1], -truth[2], -truth[3], *field)
-        before = np.array(s, dtype=float)
+        before = snapshot(s)
         ahrs_update_mag(s, *body, DT)
-        q = np.array(s[S_Q:S_Q + 4], dtype=float)
+        q = np.array(s.est.q, dtype=float)
         row = up_of(q)      # R(q)'s z row is R(q)ᵀ e_z
-        z_row = before[S_RZLP:S_RZLP + 3] + k_mag * (row - before[S_RZLP:S_RZLP + 3])
-        assert np.allclose(s[S_RZLP:S_RZLP + 3], z_row, rtol=0.0, atol=1e-12), k
-        used = before[S_MAG_USED] + 1.0
+        rz_lp = np.array(before.bias.rz_lp)
+        z_row = rz_lp + k_mag * (row - rz_lp)
+        assert np.allclose(s.bias.rz_lp, z_row, rtol=0.0, atol=1e-12), k
+        used = before.field.mag_used + 1.0
         kap = max(k_mag, 1.0 / used)
-        steady = (kap == k_mag and used * k_mag > 1.0 and before[S_REST] == 0.0
-                  and before[S_START] >= 2.0 * params.tau_acc)
-        shadow = before.copy()
+        steady = (kap == k_mag and used * k_mag > 1.0 and before.rest.detected == 0.0
+                  and before.inc.start >= 2.0 * params.tau_acc)
+        shadow = copy.deepcopy(before)
         if steady:
-            h = rotate(*before[S_Q:S_Q + 4], *body)
+            h = rotate(*before.est.q, *body)
             psi = math.atan2(h[0], h[1])
             rw, rz = 1.0 - kap + kap * math.cos(0.5 * psi), kap * math.sin(0.5 * psi)
             bias_measure(shadow, *z_row, -2.0 * rz / (rw * DT),
-                         before[C_BIAS_R] * params.tau_mag / (params.tau_acc * DT))
+                         before.coef.bias_r * params.tau_mag / (params.tau_acc * DT))
             learned += 1
         else:
             quiet += 1
-        assert np.allclose(s[S_BIAS:S_BIAS + 3], shadow[S_BIAS:S_BIAS + 3], rtol=1e-9,
+        assert np.allclose(s.bias.rate, shadow.bias.rate, rtol=1e-9,
                            atol=1e-15), k
-        assert np.allclose(s[S_BIAS_P:S_BIAS_P + 6], shadow[S_BIAS_P:S_BIAS_P + 6], rtol=1e-9,
+        assert np.allclose(s.bias.p, shadow.bias.p, rtol=1e-9,
                            atol=0.0), k
     assert learned > 250 and quiet > 250
 
@@ -416,7 +433,7 @@ def test_the_calibration_learns_nothing_from_a_clipped_stretch():
                        compiled=False)
     field = world_field(NORM, DIP)
     yaw = 0.0
-    fields = MC0 + MAGCAL.offset('fields')
+    fields = MAGCAL.offset('fields')
 
     def step(rate):
         nonlocal yaw
@@ -425,15 +442,15 @@ def test_the_calibration_learns_nothing_from_a_clipped_stretch():
 
     for _ in range(100):
         step(0.5)
-    before = est.flat_state[fields]
+    before = calibration(est)[fields]
     assert before > 0.0
     for _ in range(30):
         step(1.5 * RANGE)
     assert est.clipped == 30
-    assert est.flat_state[fields] == before
+    assert calibration(est)[fields] == before
     for _ in range(10):
         step(0.5)
-    assert est.flat_state[fields] > before
+    assert calibration(est)[fields] > before
 
 
 def test_after_a_hole_the_heading_comes_back_from_the_field_as_its_doubt_allows():
@@ -448,14 +465,14 @@ def test_after_a_hole_the_heading_comes_back_from_the_field_as_its_doubt_allows(
     turn = math.radians(40.0) * 0.4
     est.update(STILL, LEVEL, body_field(field, turn), 0.45)
     assert est.holes == 1
-    doubt = est.flat_state[S_HEAD_DOUBT]
+    doubt = record(est).field.head_doubt
     assert doubt > math.radians(4.0) ** 2
     lost = abs(wrap(yaw_of(est.q) - turn))
     assert lost > math.radians(12.0)
     for _ in range(200):
         est.update(STILL, LEVEL, body_field(field, turn), DT)
     assert abs(wrap(yaw_of(est.q) - turn)) < 0.4 * lost
-    assert est.flat_state[S_HEAD_DOUBT] < 0.5 * doubt
+    assert record(est).field.head_doubt < 0.5 * doubt
 
 
 def test_the_gyros_losses_add_up_as_the_fields_doubt_until_the_heading_is_lost():
@@ -465,14 +482,14 @@ def test_the_gyros_losses_add_up_as_the_fields_doubt_until_the_heading_is_lost()
     est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
     for _ in range(20):
         est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
-    s = est.flat_state
-    assert s[S_HEAD_DOUBT] == 0.0 and s[S_TILT_DOUBT] == 0.0 and s[S_MAG_USED] == 20.0
+    s = record(est)
+    assert s.field.head_doubt == 0.0 and s.field.tilt_doubt == 0.0 and s.field.mag_used == 20.0
     field_doubt(s, 0.25 * HEADING_LOST)
     field_doubt(s, 0.5 * HEADING_LOST)
-    assert s[S_HEAD_DOUBT] == pytest.approx(0.75 * HEADING_LOST, rel=1e-12)
-    assert s[S_TILT_DOUBT] == pytest.approx(0.75 * HEADING_LOST, rel=1e-12)
+    assert s.field.head_doubt == pytest.approx(0.75 * HEADING_LOST, rel=1e-12)
+    assert s.field.tilt_doubt == pytest.approx(0.75 * HEADING_LOST, rel=1e-12)
     field_doubt(s, 0.25 * HEADING_LOST)
-    assert (s[S_HEAD_DOUBT], s[S_TILT_DOUBT], s[S_MAG_USED]) == (0.0, 0.0, 0.0)
+    assert (s.field.head_doubt, s.field.tilt_doubt, s.field.mag_used) == (0.0, 0.0, 0.0)
 
 
 def test_the_tilts_doubt_is_forgotten_at_the_inclinations_pace():
@@ -481,9 +498,9 @@ def test_the_tilts_doubt_is_forgotten_at_the_inclinations_pace():
     est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
     for _ in range(20):
         est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
-    s = est.flat_state
-    s[S_HEAD_DOUBT] = s[S_TILT_DOUBT] = 0.01
+    s = record(est)
+    s.field.head_doubt = s.field.tilt_doubt = 0.01
     dt = 0.05
     assert _doubt_gain(s, 0.125, 2.0 * NORM, DIP, 0.0, dt) == 0.125
-    tau = s[P_TAU_ACC] + s[P_TAU_ACC_GAIN]
-    assert s[S_TILT_DOUBT] == pytest.approx(0.01 * math.exp(-2.0 * dt / tau), rel=1e-12)
+    tau = s.par.tau_acc + s.par.tau_acc_gain
+    assert s.field.tilt_doubt == pytest.approx(0.01 * math.exp(-2.0 * dt / tau), rel=1e-12)

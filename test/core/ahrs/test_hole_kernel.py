@@ -9,6 +9,7 @@ added to the covariance, and the means restarted where it is large. Plain
 kernels: fast; the compiled ones are held equal in test_compiled.py.
 """
 
+import copy
 import math
 
 import numpy as np
@@ -16,12 +17,8 @@ import pytest
 
 from ext_observer.core.ahrs import hole_kernel
 from ext_observer.core.ahrs.ahrs_filters import rotate, steady
-from ext_observer.core.ahrs.ahrs_layout import (C_BW, C_DT, C_K_ACC, P_TAU_ACC, S_ACC_DEV,
-                                                S_ACC_REJ, S_CLIP_LEFT, S_GYR_LAST, S_GYR_PREV,
-                                                S_HOLE_END, S_HOLE_RUN, S_HOLE_VAR, S_HOLES,
-                                                S_INC_SIGMA, S_INIT, S_LP, S_MAG_USED, S_Q,
-                                                S_START, S_START_N, S_STEPS)
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
+from ext_observer.core.ahrs.ahrs_state import STATE
 from ext_observer.core.ahrs.hole_kernel import (HOLE_CALIBRATION, HOLE_CORRELATION, HOLE_FACTOR,
                                                 HOLE_RATE_CHANGE, HOLE_RATE_WALK,
                                                 HOLE_END_SHARE, HOLE_END_TIME, HOLE_RUN_TIME,
@@ -29,6 +26,7 @@ from ext_observer.core.ahrs.hole_kernel import (HOLE_CALIBRATION, HOLE_CORRELATI
                                                 hole_end_fix, hole_rate, hole_slope, hole_starts,
                                                 hole_variance)
 from ext_observer.core.ahrs.gravity_kernel import ahrs_update_acc
+from ext_observer.core.constants import STANDARD_GRAVITY
 from ext_observer.recordings.recording import attitude_from_imu
 
 DT = 0.01
@@ -44,28 +42,28 @@ def _started(params=None, use_mag=False):
 
 
 def test_a_hole_is_an_interval_over_the_factor_and_a_run_of_them_ends():
-    s = [0.0] * len(_started().flat_state)
-    s[C_DT] = DT
+    s = STATE.plain()
+    s.coef.dt = DT
     assert not hole_starts(s, 3.0 * DT)  # no estimate yet: nothing to bridge
-    s[S_INIT] = 1.0
+    s.est.init = 1.0
     assert not hole_starts(s, HOLE_FACTOR * DT)
-    s[S_HOLE_VAR] = 1.0
-    assert hole_starts(s, 1.0001 * HOLE_FACTOR * DT) and s[S_HOLE_RUN] == 1.0001 * HOLE_FACTOR * DT
-    assert s[S_HOLE_VAR] == 1.0  # the bridge sets it
-    assert not hole_starts(s, 1.2 * DT) and s[S_HOLE_RUN] == 0.0 and s[S_HOLE_VAR] == 0.0
+    s.hole.var = 1.0
+    assert hole_starts(s, 1.0001 * HOLE_FACTOR * DT) and s.hole.run == 1.0001 * HOLE_FACTOR * DT
+    assert s.hole.var == 1.0  # the bridge sets it
+    assert not hole_starts(s, 1.2 * DT) and s.hole.run == 0.0 and s.hole.var == 0.0
     # Longer intervals in a row than HOLE_RUN_TIME: the rate has changed.
     count = 0
     while hole_starts(s, 2.0 * DT):
         count += 1
     assert round(HOLE_RUN_TIME / (2.0 * DT)) <= count <= round(HOLE_RUN_TIME / (2.0 * DT)) + 1
-    assert s[S_HOLE_RUN] == 0.0
+    assert s.hole.run == 0.0
 
 
 @pytest.mark.parametrize('steps, weight', [(1.0, 1.0), (2.0, 0.75), (4.0, 0.625), (1e6, 0.5000005)])
 def test_the_bridges_rate_is_what_the_usual_steps_would_have_integrated(steps, weight):
-    s = [0.0] * len(_started().flat_state)
-    s[C_DT] = DT
-    s[S_GYR_LAST:S_GYR_LAST + 3] = [1.0, -2.0, 0.5]
+    s = STATE.plain()
+    s.coef.dt = DT
+    s.gyro.last[:] = [1.0, -2.0, 0.5]
     new = np.array([3.0, 2.0, -1.5])
     rate = hole_rate(s, *new, steps * DT)
     np.testing.assert_allclose(rate, (1.0 - weight) * np.array([1.0, -2.0, 0.5]) + weight * new,
@@ -86,48 +84,48 @@ def test_the_bridges_variance_is_the_rate_change_and_the_walk():
 def test_the_end_correction_turns_by_the_slopes_at_both_ends(length):
     # About the vertical: T² (m₀ − m₁) / 12 with the slopes from the samples
     # beside the hole; a hole in a row, or longer than HOLE_END_TIME, none.
-    s = [0.0] * len(_started().flat_state)
-    s[C_DT], s[S_Q], s[S_HOLE_RUN] = DT, 1.0, length
-    s[S_GYR_PREV + 2], s[S_GYR_LAST + 2] = 1.0, 1.2  # m₀ = 20 rad/s²
+    s = STATE.plain()
+    s.coef.dt, s.est.q[0], s.hole.run = DT, 1.0, length
+    s.gyro.prev[2], s.gyro.last[2] = 1.0, 1.2  # m₀ = 20 rad/s²
     hole_slope(s, length)
-    s[S_GYR_LAST + 2] = 2.0  # the sample that closes the hole
+    s.gyro.last[2] = 2.0  # the sample that closes the hole
     hole_end_fix(s, 0.0, 0.0, 1.7)  # m₁ = −30 rad/s²
-    turn = 2.0 * math.atan2(s[S_Q + 3], s[S_Q])
+    turn = 2.0 * math.atan2(s.est.q[3], s.est.q[0])
     want = length * length * 50.0 / 12.0 if length <= HOLE_END_TIME else 0.0
-    assert turn == pytest.approx(want, rel=1e-12, abs=1e-15) and s[S_HOLE_END] == 0.0
-    s[S_HOLE_RUN] = 2.0 * length
+    assert turn == pytest.approx(want, rel=1e-12, abs=1e-15) and s.hole.end[0] == 0.0
+    s.hole.run = 2.0 * length
     hole_slope(s, length)
-    assert s[S_HOLE_END] == 0.0
+    assert s.hole.end[0] == 0.0
 
 
 def test_a_small_hole_keeps_the_means_a_large_one_restarts_the_inclinations_weighed():
     est = _started()
-    s = est.flat_state
-    s[S_START], s[S_START_N], s[S_MAG_USED] = 10.0, 0.0, 50.0
-    s[S_ACC_DEV] = 0.01  # a body that moves: its samples show the vertical to 0.1 rad
+    s = est.state[0]
+    s.inc.start, s.inc.start_n, s.field.mag_used = 10.0, 0.0, 50.0
+    s.inc.acc_dev = 0.01  # a body that moves: its samples show the vertical to 0.1 rad
     small = 0.5 * HOLE_CALIBRATION
     hole_after(s, small)
-    assert (s[S_START], s[S_MAG_USED], s[S_HOLE_VAR], s[S_HOLES]) == (10.0, 50.0, small, 1.0)
+    assert (s.inc.start, s.field.mag_used, s.hole.var, s.hole.count) == (10.0, 50.0, small, 1.0)
     # The old mean is worth t0 = c (m / var − 1) s of new samples.
     var = 0.005
     hole_after(s, var)
     t0 = HOLE_CORRELATION * (0.01 / var - 1.0)
-    assert s[S_START] == pytest.approx(t0) and s[S_START_N] == pytest.approx(t0 / DT)
-    assert s[S_MAG_USED] == 50.0  # the heading keeps its mean, gyro-held
+    assert s.inc.start == pytest.approx(t0) and s.inc.start_n == pytest.approx(t0 / DT)
+    assert s.field.mag_used == 50.0  # the heading keeps its mean, gyro-held
     # Worse than any sample: the mean starts from the next one (as a start).
     hole_after(s, 1.0)
-    assert s[S_START] == 0.0 and s[S_START_N] == 0.0
+    assert s.inc.start == 0.0 and s.inc.start_n == 0.0
     # A hole whose end correction waits: the share of the linear bridge's σ left.
-    s[S_HOLE_END] = 1.0
+    s.hole.end[0] = 1.0
     hole_after(s, 1.0)
-    assert s[S_HOLE_VAR] == HOLE_END_SHARE * HOLE_END_SHARE
+    assert s.hole.var == HOLE_END_SHARE * HOLE_END_SHARE
 
 
 def test_a_hole_keeps_the_usual_coefficients_and_integrates_its_whole_length():
     # About the vertical at a rate that changes linearly: the bridge is exact.
     est = _started()
-    s = est.flat_state
-    coefficients = list(s[C_BW:C_BW + 5]) + [s[C_K_ACC]]
+    s = est.state[0]
+    coefficients = list(s.coef.bw) + [s.coef.k_acc]
     rate = lambda t: 0.5 + 2.0 * t  # noqa: E731  rad/s about z
     t, heading = 0.0, 0.0
     for k in range(1, 60):
@@ -136,9 +134,9 @@ def test_a_hole_keeps_the_usual_coefficients_and_integrates_its_whole_length():
         steps = round(dt / DT)
         heading += sum(rate(t - (steps - 1 - j) * DT) for j in range(steps)) * DT
         est.update((0.0, 0.0, rate(t)), UP, None, dt)
-        assert s[C_DT] == DT and list(s[C_BW:C_BW + 5]) + [s[C_K_ACC]] == coefficients
+        assert s.coef.dt == DT and list(s.coef.bw) + [s.coef.k_acc] == coefficients
     assert est.holes == 5
-    w, z = s[S_Q], s[S_Q + 3]
+    w, z = s.est.q[0], s.est.q[3]
     assert 2.0 * math.atan2(z, w) == pytest.approx(heading, abs=1e-9)
 
 
@@ -146,7 +144,7 @@ def test_a_lasting_slower_rate_becomes_the_usual_one():
     est = _started()
     for _ in range(int(HOLE_RUN_TIME / (2 * DT)) + 2):
         est.update(STILL, UP, None, 2 * DT)
-    assert est.flat_state[C_DT] == 2 * DT and est.hole_variance == 0.0
+    assert est.state[0].coef.dt == 2 * DT and est.hole_variance == 0.0
 
 
 def _turning(rate_hz, seconds, lost=None):
@@ -228,7 +226,7 @@ def test_the_general_steps_follow_a_hole_as_the_one_call_sample_does():
 
 def _tilt(s):
     """The angle (rad) between the estimate's vertical and the world's."""
-    w, x, y, z = s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3]
+    w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
     return math.acos(min(1.0, (w * w - x * x - y * y + z * z) / (w * w + x * x + y * y + z * z)))
 
 
@@ -237,46 +235,46 @@ def test_a_holes_sample_corrects_the_inclination_as_the_steps_it_missed():
     est = _started(AhrsParams(tau_bias=0.0, acc_reject=0.0))
     for _ in range(500):
         est.update(STILL, UP, None, DT)
-    s = est.flat_state
+    s = est.state[0]
     half = 0.5 * math.radians(5.0)
-    s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3] = math.cos(half), math.sin(half), 0.0, 0.0
-    tilted = rotate(s[S_Q], s[S_Q + 1], s[S_Q + 2], s[S_Q + 3], *UP)
-    steady(s, S_LP, *tilted)
-    one, hole, usual = list(s), list(s), list(s)
+    s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3] = math.cos(half), math.sin(half), 0.0, 0.0
+    tilted = rotate(s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3], *UP)
+    steady(s.coef.bw, s.inc.lp, 0, *tilted)
+    one, hole, usual = copy.deepcopy(s), copy.deepcopy(s), copy.deepcopy(s)
     ahrs_update_acc(one, *UP)
-    hole[S_STEPS] = 3.0
+    hole.hole.steps = 3.0
     ahrs_update_acc(hole, *UP)
     for _ in range(3):
         ahrs_update_acc(usual, *UP)
     tilt0 = math.radians(5.0)
     assert _tilt(hole) == pytest.approx(_tilt(usual), rel=0.05)
-    assert _tilt(hole) < (1.0 - s[C_K_ACC]) ** 2 * tilt0 < _tilt(one)
+    assert _tilt(hole) < (1.0 - s.coef.k_acc) ** 2 * tilt0 < _tilt(one)
 
 
 def test_a_clipped_stretch_sums_its_error_and_weighs_the_inclinations_mean():
     est = _started()
-    s = est.flat_state
-    s[S_START], s[S_START_N] = 10.0, 0.0
-    s[S_ACC_DEV] = 0.01  # the samples show the vertical to 0.1 rad
+    s = est.state[0]
+    s.inc.start, s.inc.start_n = 10.0, 0.0
+    s.inc.acc_dev = 0.01  # the samples show the vertical to 0.1 rad
     var = 1e-4  # each clipped sample: (range dt)², a σ of 0.01 rad
     clip_after(s, var)
     # One sample's share of the range's σ weighs little against the mean: kept.
-    assert s[S_INC_SIGMA] == pytest.approx(CLIP_SHARE * 0.01) and s[S_START] == 10.0
-    assert s[S_CLIP_LEFT] == s[P_TAU_ACC]
+    assert s.inc.sigma == pytest.approx(CLIP_SHARE * 0.01) and s.inc.start == 10.0
+    assert s.gyro.clip_left == s.par.tau_acc
     # Along the stretch the σ adds up (the rate stays beyond the range) until
     # the old mean is worth less than tau_acc of new samples: restarted, weighed.
     count = 1
-    while s[S_START] == 10.0:
+    while s.inc.start == 10.0:
         clip_after(s, var)
         count += 1
     sigma = count * CLIP_SHARE * 0.01
-    assert s[S_INC_SIGMA] == pytest.approx(sigma)
+    assert s.inc.sigma == pytest.approx(sigma)
     t0 = HOLE_CORRELATION * (0.01 / sigma ** 2 - 1.0)
-    assert 0.0 < t0 < s[P_TAU_ACC] and s[S_START] == pytest.approx(t0)
+    assert 0.0 < t0 < s.par.tau_acc and s.inc.start == pytest.approx(t0)
     # After it, the σ is forgotten at the low-pass's pace; the recovery lasts tau_acc.
     clip_after(s, 0.0)
-    assert s[S_INC_SIGMA] == pytest.approx(sigma * (1.0 - DT / s[P_TAU_ACC]))
-    assert s[S_CLIP_LEFT] == pytest.approx(s[P_TAU_ACC] - DT)
+    assert s.inc.sigma == pytest.approx(sigma * (1.0 - DT / s.par.tau_acc))
+    assert s.gyro.clip_left == pytest.approx(s.par.tau_acc - DT)
 
 
 def test_no_acceleration_rejection_while_the_vertical_is_unsure():
@@ -284,13 +282,13 @@ def test_no_acceleration_rejection_while_the_vertical_is_unsure():
         est = _started()
         for _ in range(500):
             est.update(STILL, UP, None, DT)
-        s = est.flat_state
+        s = est.state[0]
         # The low-passed force 10° off the vertical the gyro carried.
         tilted = (0.0, 9.81 * math.sin(0.17), 9.81 * math.cos(0.17))
-        steady(s, S_LP, *tilted)
-        s[S_INC_SIGMA] = sigma
+        steady(s.coef.bw, s.inc.lp, 0, *tilted)
+        s.inc.sigma = sigma
         ahrs_update_acc(s, *tilted)
-        return s[S_ACC_REJ] > 0.0
+        return s.rej.time > 0.0
     assert rejected(0.0)
     assert not rejected(RECOVERING * AhrsParams().acc_reject * 1.01)
 
@@ -298,17 +296,17 @@ def test_no_acceleration_rejection_while_the_vertical_is_unsure():
 def test_the_end_correction_is_a_body_frame_turn_of_any_axis():
     # q <- q ⊗ exp(c / 2), c = T² (m₀ − m₁) / 12 per axis, the attitude tilted
     # and turned (every term of the product matters).
-    s = [0.0] * len(_started().flat_state)
+    s = STATE.plain()
     length = HOLE_END_TIME
-    s[C_DT], s[S_HOLE_RUN] = DT, length
+    s.coef.dt, s.hole.run = DT, length
     q = np.array([0.8, 0.3, -0.4, 0.2])
     q /= np.linalg.norm(q)
-    s[S_Q:S_Q + 4] = list(q)
+    s.est.q[:] = list(q)
     before, last, after = [0.1, -0.3, 0.2], [0.5, -0.1, -0.4], [0.2, 0.6, -0.3]
-    s[S_GYR_PREV:S_GYR_PREV + 3] = before
-    s[S_GYR_LAST:S_GYR_LAST + 3] = last
+    s.gyro.prev[:] = before
+    s.gyro.last[:] = last
     hole_slope(s, length)
-    s[S_GYR_LAST:S_GYR_LAST + 3] = [1.0, 0.4, 0.7]  # the sample that closes the hole
+    s.gyro.last[:] = [1.0, 0.4, 0.7]  # the sample that closes the hole
     hole_end_fix(s, *after)
     f = length * length / (12.0 * DT)
     c = np.array([f * ((b - a) - (g - h)) for a, b, h, g in zip(
@@ -319,55 +317,55 @@ def test_the_end_correction_is_a_body_frame_turn_of_any_axis():
     want = [w * e[0] - x * e[1] - y * e[2] - z * e[3], w * e[1] + x * e[0] + y * e[3] - z * e[2],
             w * e[2] - x * e[3] + y * e[0] + z * e[1], w * e[3] + x * e[2] - y * e[1] + z * e[0]]
     assert n > 0.01
-    assert s[S_Q:S_Q + 4] == pytest.approx(want, abs=1e-15)
+    assert s.est.q == pytest.approx(want, abs=1e-15)
 
 
 def test_the_deviation_from_gravity_is_a_low_pass_of_the_larger_share():
     # d <- d + k (e - d), k = dt / HOLE_DEVIATION_TIME, e the larger of the
     # vertical deviation² and half the horizontal², over g².
-    s = [0.0] * len(_started().flat_state)
-    g = hole_kernel.GRAVITY
-    s[S_ACC_DEV] = 0.02
+    s = STATE.plain()
+    g = STANDARD_GRAVITY
+    s.inc.acc_dev = 0.02
     hole_kernel.acc_deviation(s, 0.3, -0.4, g + 0.1, 0.25)
     k = 0.25 / hole_kernel.HOLE_DEVIATION_TIME
-    assert s[S_ACC_DEV] == pytest.approx(0.02 + k * (0.5 * 0.25 / (g * g) - 0.02), rel=1e-12)
+    assert s.inc.acc_dev == pytest.approx(0.02 + k * (0.5 * 0.25 / (g * g) - 0.02), rel=1e-12)
     hole_kernel.acc_deviation(s, 0.0, 0.1, g - 2.0, 0.25)
     d = 0.02 + k * (0.5 * 0.25 / (g * g) - 0.02)
-    assert s[S_ACC_DEV] == pytest.approx(d + k * (4.0 / (g * g) - d), rel=1e-12)
+    assert s.inc.acc_dev == pytest.approx(d + k * (4.0 / (g * g) - d), rel=1e-12)
 
 
 def test_a_hole_with_its_end_correction_counts_the_share_it_leaves():
-    s = [0.0] * len(_started().flat_state)
-    s[C_DT], s[P_TAU_ACC], s[S_ACC_DEV] = DT, 3.0, 1e-3
-    s[S_HOLE_END] = 0.01
+    s = STATE.plain()
+    s.coef.dt, s.par.tau_acc, s.inc.acc_dev = DT, 3.0, 1e-3
+    s.hole.end[0] = 0.01
     hole_after(s, 4e-6)
-    assert s[S_HOLE_VAR] == pytest.approx(4e-6 * HOLE_END_SHARE * HOLE_END_SHARE, rel=1e-12)
-    s[S_HOLE_END] = 0.0
+    assert s.hole.var == pytest.approx(4e-6 * HOLE_END_SHARE * HOLE_END_SHARE, rel=1e-12)
+    s.hole.end[0] = 0.0
     hole_after(s, 4e-6)
-    assert s[S_HOLE_VAR] == 4e-6
+    assert s.hole.var == 4e-6
 
 
 def test_the_recovery_from_a_clip_lasts_tau_acc_after_the_last_clipped_sample():
-    s = [0.0] * len(_started().flat_state)
-    s[C_DT], s[P_TAU_ACC], s[S_ACC_DEV] = 0.25, 1.0, 1e-3
+    s = STATE.plain()
+    s.coef.dt, s.par.tau_acc, s.inc.acc_dev = 0.25, 1.0, 1e-3
     clip_after(s, 1e-4)
-    assert s[S_CLIP_LEFT] == 1.0
+    assert s.gyro.clip_left == 1.0
     left = []
     for _ in range(5):
         clip_after(s, 0.0)
-        left.append(s[S_CLIP_LEFT])
+        left.append(s.gyro.clip_left)
     assert left == [0.75, 0.5, 0.25, 0.0, 0.0]
 
 
 def test_a_mean_worth_more_than_tau_acc_is_kept_and_reported_kept():
     # t0 = c (m / var − 1) ≥ tau_acc: nothing restarts, and −1.0 tells the
     # uncertainty's hole step that the mean was kept (t0 ≥ 0 restarts it).
-    s = [0.0] * len(_started().flat_state)
-    s[C_DT], s[P_TAU_ACC], s[S_START], s[S_START_N] = DT, 3.0, 10.0, 1000.0
+    s = STATE.plain()
+    s.coef.dt, s.par.tau_acc, s.inc.start, s.inc.start_n = DT, 3.0, 10.0, 1000.0
     var = 1e-6
-    s[S_ACC_DEV] = var * (1.0 + 2.0 * 3.0 / HOLE_CORRELATION)
+    s.inc.acc_dev = var * (1.0 + 2.0 * 3.0 / HOLE_CORRELATION)
     assert hole_kernel.restart_weighted(s, var) == -1.0
-    assert (s[S_START], s[S_START_N]) == (10.0, 1000.0)
+    assert (s.inc.start, s.inc.start_n) == (10.0, 1000.0)
 
 
 def test_a_holes_variance_is_the_rate_change_across_it_on_every_axis():
@@ -376,9 +374,9 @@ def test_a_holes_variance_is_the_rate_change_across_it_on_every_axis():
     before, rate = (0.01, -0.02, 0.03), (0.03, -0.05, 0.08)
     for _ in range(10):
         est.update(before, UP, None, DT)
-    s = est.flat_state
+    s = est.state[0]
     est.update(rate, UP, None, 0.04)
     assert est.holes == 1
-    share = HOLE_END_SHARE * HOLE_END_SHARE if s[S_HOLE_END] != 0.0 else 1.0
+    share = HOLE_END_SHARE * HOLE_END_SHARE if s.hole.end[0] != 0.0 else 1.0
     change = [b - a for a, b in zip(before, rate)]
-    assert s[S_HOLE_VAR] == pytest.approx(hole_variance(*change, 0.04) * share, rel=1e-12)
+    assert s.hole.var == pytest.approx(hole_variance(*change, 0.04) * share, rel=1e-12)

@@ -18,7 +18,6 @@ import pytest
 from ext_observer import attitude_from_imu
 from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs import velocity_kernel as vk
-from ext_observer.core.ahrs.ahrs_layout import S_VEL_N, S_VEL_USED
 from ext_observer.core.ahrs.ahrs_params import AhrsParams
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
 
@@ -52,7 +51,7 @@ def _tilt_deg(q):
 
 
 def test_in_a_constant_turn_the_corrected_specific_force_is_gravity_and_stale_is_as_measured():
-    s = AhrsObserver(use_mag=False, compiled=False).flat_state
+    s = AhrsObserver(use_mag=False, compiled=False).state[0]
     dt = 1.0 / RATE
     vk.velocity_sample(s, SPEED, 0.0, 0.0, -1.0)
     assert vk.velocity_step(s, 0.0, 0.0, YAW_RATE, dt) == 0.0  # no derivative yet
@@ -68,7 +67,7 @@ def test_in_a_constant_turn_the_corrected_specific_force_is_gravity_and_stale_is
     # Older than the timeout: the specific force as measured, not in use.
     for _ in range(int(vk.VELOCITY_TIMEOUT / dt) + 1):
         vk.velocity_step(s, 0.0, 0.0, YAW_RATE, dt)
-    assert s[S_VEL_USED] == 0.0
+    assert s.vel.used == 0.0
     assert vk.velocity_removed(s, 0.0, YAW_RATE * SPEED, G) == (0.0, YAW_RATE * SPEED, G)
 
 
@@ -112,7 +111,7 @@ def test_a_stale_velocity_steps_as_no_velocity_to_the_bit():
     core.update(gyr[fresh], acc[fresh], None, dt)
     assert not core.velocity_used
     twin = copy.deepcopy(core)
-    twin.flat_state[S_VEL_N] = 0.0  # no velocity ever
+    twin.state[0].vel.n = 0.0  # no velocity ever
     for k in range(fresh + 1, len(gyr)):
         assert core.update(gyr[k], acc[k], None, dt) == twin.update(gyr[k], acc[k], None, dt)
     # A single velocity has no derivative: not used, the estimate as without one.
