@@ -40,9 +40,9 @@ RAW_IMU = (
 # A road vehicle: every drive over three seeds, or the level drives once.
 VEHICLE = ['bench.vehicle']
 VEHICLE_QUICK = ['bench.vehicle', '--quick']
-# Lost samples and a busy machine: both halves in full, or a short DDS run.
+# Lost samples and a busy machine: the whole trial, or a short part of it.
 LOAD = ['bench.load']
-LOAD_QUICK = ['bench.load', '--dds-only', '--start', '30', '--seconds', '20',
+LOAD_QUICK = ['bench.load', '--start', '30', '--seconds', '20',
               '--speeds', '1', '4', '--modes', '9D', '--fields', '100']
 RAW_IMU_QUICK = (
     ('node_events', ['bench.imu_filter_cpu', '--executor', 'events', '--seconds', '2',

@@ -116,7 +116,7 @@ def _results(rows, **more):
     results = {'machine': {'commit': 'abc1234', 'date': 'today', 'cores': 2, 'cpu': 'cpu',
                            'python': '3', 'numpy': '2', 'rclpy': '7', 'rmw': 'rmw',
                            'load_start': 1.0, 'load_end': 2.0},
-               'command': shown_command(['python -m bench.load', '--dds-only', '--json', os.path.join(
+               'command': shown_command(['python -m bench.load', '--json', os.path.join(
                    REPO, 'out', 'load.json')]),
                'seconds': 12.0,
                'dds': {'trial': {'name': '07_made_up', 'samples': COUNT, 'rate': RATE,
@@ -144,16 +144,7 @@ def test_the_page_holds_every_case_the_verdicts_and_no_path_of_this_machine():
     assert any('lowest 62.5 %, **not met**' in line for line in lines)
     assert 'out/load.json' in page
     assert REPO not in page
-    assert 'Not run (`--dds-only`)' in page
-
-
-def test_the_batch_half_is_rendered_by_its_own_module_or_said_missing(monkeypatch):
-    monkeypatch.setattr(load, 'batch_half', lambda: (None, lambda rows: f'BATCH {len(rows)}'))
-    page = load.render(_results(_rows(), batch={'rows': [{}, {}]}))
-    assert 'BATCH 2' in page
-    monkeypatch.setattr(load, 'batch_half', lambda: None)
-    page = load.render(_results(_rows(), batch={'rows': [{}, {}]}))
-    assert 'BATCH' not in page and 'not in this tree' in page
+    assert 'raw_imu.md#holes-in-the-stream' in page
 
 
 def test_the_busy_loops_end_by_themselves_and_with_their_context():
