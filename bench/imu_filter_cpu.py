@@ -5,7 +5,7 @@ Node CPU per IMU sample of ``imu_filter_node``, beside a bare relay, against its
 [--seconds 10] [--rounds 3] [--json PATH]`` publishes ``sensor_msgs/Imu`` on
 ``imu/data_raw`` at ``--rate`` and ``sensor_msgs/MagneticField`` on
 ``imu/mag`` at ``--mag-rate`` (both best effort, as IMU drivers publish)
-into each target in turn, and reads the target's CPU time from ``/proc``
+into each target in turn, and reads the target's CPU time (psutil)
 over the publishing window, in ``--rounds`` interleaved runs of each:
 
 - ``relay``: this module's :class:`ImuRelay`, the raw-IMU message path
@@ -33,7 +33,6 @@ the medians against the goal, ``met`` or ``not met``: within
 
 import argparse
 import glob
-import json
 import math
 import os
 import statistics
@@ -43,8 +42,8 @@ import time
 
 import numpy as np
 
-from bench.machine import load, load_range
-from bench.procs import Child, REPO, reserved_domain_id, ros_env
+from bench.machine import load, load_range, log, save_json
+from bench.procs import Child, cpu_seconds, REPO, reserved_domain_id, ros_env
 from bench.rosutil import EXECUTORS, make_executor, spin_until_shutdown
 
 DATA = os.path.join(REPO, 'test', 'data')
@@ -263,12 +262,6 @@ def target_args(label, executor):
     return command + (['-p', 'serialized_io:=false'] if label == TYPED else [])
 
 
-def _cpu_seconds(pid):
-    with open(f'/proc/{pid}/stat') as f:
-        fields = f.read().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-
-
 def load_samples():
     """IMU samples (gyr rad/s, acc m/s², mag T) of the tests' BROAD excerpts."""
     gyr, acc, mag = [], [], []
@@ -351,7 +344,7 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
         count = int(seconds * rate)
         if window is not None:
             window(child.proc.pid)
-        load_before, start_cpu = load(), _cpu_seconds(child.proc.pid)
+        load_before, start_cpu = load(), cpu_seconds(child.proc.pid)
         start = time.monotonic()
         stamp0 = time.time_ns()
         fields = 0
@@ -375,7 +368,7 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
                 time.sleep(wait)
         elapsed = time.monotonic() - start
         time.sleep(0.5)
-        cpu = _cpu_seconds(child.proc.pid) - start_cpu
+        cpu = cpu_seconds(child.proc.pid) - start_cpu
         if window is not None:
             window(child.proc.pid)
         stop.set()
@@ -531,18 +524,16 @@ def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds
 
 def table(result):
     """The printed table of one :func:`compare`."""
-    lines = [f'| target ({result["executor"]}) | CPU µs per IMU sample, median (runs) | '
-             'samples | fields | outputs received | achieved rate (Hz) |',
-             '|---|---|---|---|---|---|']
-    for label, rows in result['runs'].items():
-        cpu = [r['cpu_us_per_sample'] for r in rows]
-        last = rows[-1]
-        lines.append(
-            f'| {label} | {result["medians"][label]:.1f} '
-            f'({", ".join(f"{c:.0f}" for c in cpu)}) | {last["samples"]} | '
-            f'{last["fields"]} | {min(r["outputs"] for r in rows)} | '
-            f'{min(r["achieved_rate_hz"] for r in rows):.0f} |')
-    return '\n'.join(lines)
+    from docgen.markdown import table as markdown_table
+    rows = []
+    for label, runs in result['runs'].items():
+        cpu = ', '.join(f'{r["cpu_us_per_sample"]:.0f}' for r in runs)
+        rows.append([label, f'{result["medians"][label]:.1f} ({cpu})', runs[-1]['samples'],
+                     runs[-1]['fields'], min(r['outputs'] for r in runs),
+                     f'{min(r["achieved_rate_hz"] for r in runs):.0f}'])
+    return markdown_table([f'target ({result["executor"]})',
+                           'CPU µs per IMU sample, median (runs)', 'samples', 'fields',
+                           'outputs received', 'achieved rate (Hz)'], rows)
 
 
 def main(argv=None):
@@ -570,7 +561,7 @@ def main(argv=None):
     if args.rounds < 1:
         parser.error('--rounds must be at least 1')
     result = compare(args.executor, args.rate, args.mag_rate, args.seconds, args.rounds,
-                     args.log_dir, lambda text: print(text, file=sys.stderr, flush=True),
+                     args.log_dir, log,
                      floor=args.floor, serialized=args.serialized)
     print(table(result))
     print()
@@ -579,9 +570,7 @@ def main(argv=None):
         print(floor_line(result))
     for line in ratios_lines(result):
         print(line)
-    if args.json:
-        with open(args.json, 'w') as out:
-            json.dump(result, out, indent=1)
+    save_json(args.json, result)
     return 0
 
 

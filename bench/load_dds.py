@@ -38,7 +38,7 @@ import time
 import numpy as np
 
 from bench.machine import load
-from bench.procs import Child, reserved_domain_id, ros_env
+from bench.procs import Child, cpu_seconds, reserved_domain_id, ros_env
 
 SPEEDS = (1.0, 2.0, 4.0)
 # 'imu': a field after every IMU sample, with its stamp; a number: Hz.
@@ -354,13 +354,6 @@ def analyze(trial, mode, outputs, statuses, reference):
 
 
 # --- the processes -----------------------------------------------------------
-
-def cpu_seconds(pid):
-    """utime + stime of a process, s (``/proc/<pid>/stat``)."""
-    with open(f'/proc/{pid}/stat') as f:
-        fields = f.read().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-
 
 @contextlib.contextmanager
 def busy_cores(seconds, cores=None):

@@ -1,9 +1,12 @@
-"""The machine and software a benchmark ran on, and where its page goes."""
+"""The machine and software a benchmark ran on, and where its progress, results and page go."""
 
 import datetime
+import json
 import os
 import platform
+import signal
 import subprocess
+import sys
 from importlib import metadata
 
 from bench.procs import REPO
@@ -75,13 +78,42 @@ def load_range(runs):
     return f'{low:g}' if low == high else f'{low:g}–{high:g}'
 
 
+def log(text):
+    """A benchmark's progress: one line on stderr (its figures and page go to stdout)."""
+    print(text, file=sys.stderr, flush=True)
+
+
+def save_json(path, result):
+    """Write a benchmark's results to ``path`` (``--json``); nothing without a path."""
+    if path:
+        with open(path, 'w') as out:
+            json.dump(result, out, indent=1)
+
+
+def page_main(args, run, render, path):
+    """
+    A benchmark that writes a page: its results (``run()``, or ``--render``'s file), the page.
+
+    The results are saved with ``--json``; SIGTERM ends a run through the
+    ``finally`` blocks that stop its children. Returns :func:`write_page`'s code.
+    """
+    if args.render:
+        with open(args.render) as saved:
+            results = json.load(saved)
+    else:
+        signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+        results = run()
+        results['machine']['load_end'] = load()
+        save_json(args.json, results)
+    return write_page(render(results), path)
+
+
 def write_page(text, path):
     """Print a benchmark's page and, unless ``path`` is None, write it there."""
-    import sys
     print(text)
     if path is not None:
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
         with open(path, 'w') as out:
             out.write(text)
-        print(f'wrote {os.path.relpath(path, REPO)}', file=sys.stderr)
+        log(f'wrote {os.path.relpath(path, REPO)}')
     return 0

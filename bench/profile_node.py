@@ -21,7 +21,7 @@ Run by ``python -m bench`` (see :func:`profile_direct`, :func:`profile_loop`).
 node on both paths beside the typed and the serialized relay, each fed at
 1 kHz IMU and 100 Hz field, its CPU per sample split by thread
 (:func:`imu_threads`), and the serialized callbacks called directly under
-cProfile (:func:`imu_direct`).
+cProfile (:func:`bench.raw_imu_direct.direct`).
 """
 
 import argparse
@@ -35,25 +35,17 @@ import tempfile
 import threading
 import time
 
+import psutil
+
 from bench.numpy_use import numpy_use_per_step
 from bench.procs import Child, children, reserved_domain_id, ros_env
 from bench.rosutil import (EXECUTORS, make_executor, set_stamp,
                            spin_until_shutdown)
+from bench.timing import best_pass, best_seconds, top_functions
 
 DIRECT_STEPS = 5000
 LOOP_RATE = 1000  # Hz
 LOOP_SECONDS = 2.0
-
-
-def _best_per_call(function, calls, repeat=5):
-    """Best of ``repeat`` runs of ``calls`` calls, µs per call."""
-    best = float('inf')
-    for _ in range(repeat):
-        start = time.perf_counter()
-        for _ in range(calls):
-            function()
-        best = min(best, (time.perf_counter() - start) / calls)
-    return best * 1e6
 
 
 def _messages(steps, start, period_ns=1_000_000):
@@ -97,7 +89,6 @@ PARTS = {
     'publish': ('publisher.py', 'publish'),
     'clock_now': ('clock.py', 'now'),
 }
-TOP_FUNCTIONS = 10
 
 
 def direct(steps=DIRECT_STEPS):
@@ -134,26 +125,20 @@ def direct(steps=DIRECT_STEPS):
         # Warm up, then the best of three passes; stamps go on across passes.
         profiled_steps = 1000
         *timed, profiled = _passes(5, steps)
-        runs = [_run_pairs(node.increment_callback, node.measurement_callback,
-                           pairs) for pairs in timed]
-        result['observer_callbacks'] = min(runs[1:])
-        runs = [_run_pairs(relay.increment_callback, relay.measurement_callback,
-                           pairs) for pairs in _passes(4, steps)]
-        result['relay_callbacks'] = min(runs[1:])
+        pairs = iter(timed)
+        result['observer_callbacks'] = best_pass(lambda: _run_pairs(
+            node.increment_callback, node.measurement_callback, next(pairs)), 4)
+        pairs = iter(_passes(4, steps))
+        result['relay_callbacks'] = best_pass(lambda: _run_pairs(
+            relay.increment_callback, relay.measurement_callback, next(pairs)), 4)
         profile = cProfile.Profile()
         profile.runcall(_run_pairs, node.increment_callback,
                         node.measurement_callback, profiled[:profiled_steps])
-        stats = pstats.Stats(profile).stats
-        calls_per_step, own = dict.fromkeys(PARTS, 0.0), []
-        for (path, _, name), (_, calls, tottime, _, _) in stats.items():
-            label = f'{os.path.basename(path)}:{name}' if path != '~' else name
+        calls_per_step = dict.fromkeys(PARTS, 0.0)
+        for (path, _, name), (_, calls, _, _, _) in pstats.Stats(profile).stats.items():
             for key, (ending, function) in PARTS.items():
                 if name == function and path.endswith(ending):
                     calls_per_step[key] += calls / profiled_steps
-            if name not in ('_run_pairs', "<method 'disable' of "
-                            "'_lsprof.Profiler' objects>"):
-                own.append((tottime / profiled_steps * 1e6, label,
-                            calls / profiled_steps))
         # Which functions use numpy, by what their calls do (not by module),
         # on the next steps of the same pass.
         result['numpy_use_per_step'] = numpy_use_per_step(
@@ -161,24 +146,23 @@ def direct(steps=DIRECT_STEPS):
             profiled[profiled_steps:2 * profiled_steps])
         result['numpy_use_steps'] = profiled_steps
         result['calls_per_step'] = calls_per_step
-        result['top'] = [{'function': label, 'own_us': us, 'calls': calls}
-                         for us, label, calls in sorted(own, reverse=True)
-                         [:TOP_FUNCTIONS]]
+        result['top'] = top_functions(profile, profiled_steps, skip=(
+            '_run_pairs', "<method 'disable' of '_lsprof.Profiler' objects>"))
         observer = SingleObserver()
         increment, measurement = (0.001, -0.002, 0.003), (1.0, 0.0, 0.0, 0.0)
-        result['core_step'] = _best_per_call(
-            lambda: observer.step(increment, measurement), steps)
+        result['core_step'] = 1e6 * best_seconds(
+            lambda: observer.step(increment, measurement), steps, 5)
         state = observer.state
-        result['numpy_normalize'] = _best_per_call(
-            lambda: normalize(np.asarray(state)), steps)
+        result['numpy_normalize'] = 1e6 * best_seconds(
+            lambda: normalize(np.asarray(state)), steps, 5)
         msg = quaternion_stamped(state, time.time_ns(), 'world')
-        result['build_message'] = _best_per_call(
-            lambda: quaternion_stamped(state, 1_000_000_000, 'world'), steps)
-        result['publish'] = _best_per_call(
-            lambda: node.estimate_publisher.publish(msg), steps)
+        result['build_message'] = 1e6 * best_seconds(
+            lambda: quaternion_stamped(state, 1_000_000_000, 'world'), steps, 5)
+        result['publish'] = 1e6 * best_seconds(
+            lambda: node.estimate_publisher.publish(msg), steps, 5)
         clock = node.get_clock()
-        result['clock_now'] = _best_per_call(lambda: clock.now().nanoseconds,
-                                             steps)
+        result['clock_now'] = 1e6 * best_seconds(lambda: clock.now().nanoseconds,
+                                                   steps, 5)
         node.destroy_node()
         relay.node.destroy_node()
     finally:
@@ -393,7 +377,6 @@ def profile_loop(executor='single', index=0, rate=LOOP_RATE,
 
 # The raw-IMU targets of bench.imu_filter_cpu whose threads imu_threads() splits.
 IMU_TARGETS = ('relay', 'raw_relay', 'imu_filter_typed', 'imu_filter')
-IMU_DIRECT_SAMPLES = 5000
 
 
 def thread_cpu(pid):
@@ -402,21 +385,19 @@ def thread_cpu(pid):
 
     The process's main thread (named after the executable) is ``main``;
     Fast DDS's threads keep their names less the numbers (``dds.shm``,
-    ``dds.ev``, ``dds.udp``...).
+    ``dds.ev``, ``dds.udp``...). The times are psutil's; a thread's name is
+    its ``comm``.
     """
-    tick = os.sysconf('SC_CLK_TCK')
     seconds = {}
-    for tid in os.listdir(f'/proc/{pid}/task'):
+    for thread in psutil.Process(pid).threads():
         try:
-            with open(f'/proc/{pid}/task/{tid}/stat') as stat:
-                text = stat.read()
+            with open(f'/proc/{pid}/task/{thread.id}/comm') as comm:
+                name = comm.read().strip()
         except OSError:
             continue
-        name = text[text.index('(') + 1:text.rindex(')')]
-        kind = 'main' if tid == str(pid) else '.'.join(
+        kind = 'main' if thread.id == pid else '.'.join(
             part for part in name.split('.') if not part.isdigit())
-        fields = text.rsplit(')', 1)[1].split()
-        seconds[kind] = seconds.get(kind, 0.0) + (int(fields[11]) + int(fields[12])) / tick
+        seconds[kind] = seconds.get(kind, 0.0) + thread.user_time + thread.system_time
     return seconds
 
 
@@ -453,91 +434,23 @@ def imu_threads(labels=IMU_TARGETS, rate=1000.0, mag_rate=100.0, seconds=8.0, ro
     return result
 
 
-def imu_direct(samples=IMU_DIRECT_SAMPLES):
-    """
-    imu_filter_node's serialized callbacks called directly with prepared bytes.
-
-    Publishing is a no-op (the messages are built, not sent); 1 kHz stamps, a
-    field every tenth sample, the BROAD excerpt of bench.imu_filter_cpu; the
-    compiled kernels once loaded.
-
-    Returns
-    -------
-    result : dict
-        ``callbacks`` (µs per IMU sample, the best of 3 passes) and ``top``:
-        the functions with the most own time per sample under cProfile.
-
-    """
-    import rclpy
-    from rclpy.context import Context
-
-    from bench.imu_filter_cpu import load_samples
-    from ext_observer.nodes.imu_filter_node import ImuFilterNode
-    from ext_observer.recordings import cdr
-    gyr, acc, mag = load_samples()
-    context = Context()
-    rclpy.init(context=context)
-    try:
-        node = ImuFilterNode(context=context)
-        deadline = time.monotonic() + 120.0
-        while node.compiler is not None and time.monotonic() < deadline:
-            node.compile_timer_callback()
-            time.sleep(0.05)
-
-        class _Discard:
-            def publish(self, msg):
-                pass
-        node.estimate_publisher = node.imu_publisher = _Discard()
-        node._publish_imu = True
-        start = time.time_ns()
-
-        def messages(index):
-            first = start + index * samples * 1_000_000
-            return [(cdr.encode_field(first + k * 1_000_000, 'imu', tuple(mag[k % len(mag)]))
-                     if k % 10 == 0 else None,
-                     cdr.encode_imu(first + k * 1_000_000, 'imu', tuple(gyr[k % len(gyr)]),
-                                    tuple(acc[k % len(acc)]))) for k in range(samples)]
-
-        def one_pass(data):
-            began = time.perf_counter()
-            for field, imu in data:
-                if field is not None:
-                    node.imu_mag_serialized_callback(field)
-                node.imu_data_raw_serialized_callback(imu)
-            return (time.perf_counter() - began) / samples * 1e6
-        best = min(one_pass(messages(index)) for index in range(3))
-        data = messages(3)
-        profile = cProfile.Profile()
-        profile.runcall(one_pass, data)
-        own = [(tottime / samples * 1e6, f'{os.path.basename(path)}:{name}', calls / samples)
-               for (path, _, name), (_, calls, tottime, _, _) in
-               pstats.Stats(profile).stats.items() if name not in ('one_pass', '<listcomp>')]
-        node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
-    return {'callbacks': best, 'top': [
-        {'function': label, 'own_us': us, 'calls': calls}
-        for us, label, calls in sorted(own, reverse=True)[:TOP_FUNCTIONS]]}
-
-
 def imu_report(threads, direct):
-    """The two tables of the raw-IMU profile, as Markdown."""
+    """The two tables of the raw-IMU profile, as Markdown (``direct``: bench.raw_imu_direct's)."""
+    from docgen.markdown import table
     kinds = sorted({kind for rows in threads.values() for per in rows for kind in per},
                    key=lambda kind: (kind != 'total', kind != 'main', kind))
-    lines = ['| µs per IMU sample (median of rounds) | ' + ' | '.join(threads) + ' |',
-             '|---|' + '---|' * len(threads)]
-    for kind in kinds:
-        if not any(per.get(kind, 0.0) for rows in threads.values() for per in rows):
-            continue
-        cells = [f'{statistics.median(per.get(kind, 0.0) for per in rows):.1f}'
-                 for rows in threads.values()]
-        lines.append(f'| {kind} | ' + ' | '.join(cells) + ' |')
-    lines += ['', f'imu_filter_node\'s serialized callbacks called directly: '
-              f'{direct["callbacks"]:.1f} µs per IMU sample; own time under cProfile:', '',
-              '| function | own µs per sample | calls per sample |', '|---|---|---|']
-    lines += [f'| `{row["function"]}` | {row["own_us"]:.2f} | {row["calls"]:.2f} |'
-              for row in direct['top']]
-    return '\n'.join(lines)
+    rows = [[kind] + [f'{statistics.median(per.get(kind, 0.0) for per in runs):.1f}'
+                      for runs in threads.values()]
+            for kind in kinds
+            if any(per.get(kind, 0.0) for runs in threads.values() for per in runs)]
+    return '\n'.join([
+        table(['µs per IMU sample (median of rounds)', *threads], rows), '',
+        'imu_filter_node\'s serialized callbacks called directly (`bench.raw_imu_direct`): '
+        f'{direct["imu_filter_serialized_callbacks"]:.1f} µs per IMU sample; own time under '
+        'cProfile:', '',
+        table(['function', 'own µs per sample', 'calls per sample'],
+              [[f'`{row["function"]}`', f'{row["own_us"]:.2f}', f'{row["calls"]:.2f}']
+               for row in direct['top']])])
 
 
 def main(argv=None):
@@ -554,7 +467,8 @@ def main(argv=None):
     if args.mode == 'imu':
         threads = imu_threads(seconds=args.seconds if args.seconds != LOOP_SECONDS else 8.0,
                               rounds=args.rounds)
-        text = imu_report(threads, imu_direct())
+        from bench import raw_imu_direct
+        text = imu_report(threads, raw_imu_direct.direct())
         print(text)
         if args.out:
             with open(args.out, 'w') as out:

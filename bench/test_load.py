@@ -15,9 +15,11 @@ import time
 import types
 
 import numpy as np
+import psutil
 import pytest
 
 from bench import load, load_dds
+from docgen import load_page
 from ext_observer.broad.data import shown_command
 from bench.procs import REPO
 from ext_observer.broad.data import Trial
@@ -135,7 +137,7 @@ def _rows():
 
 
 def test_the_page_holds_every_case_the_verdicts_and_no_path_of_this_machine():
-    page = load.render(_results(_rows()))
+    page = load_page.render(_results(_rows()))
     lines = page.splitlines()
     table = [line for line in lines if line.startswith('| busy') or line.startswith('| idle')]
     assert len(table) == 2
@@ -195,9 +197,8 @@ def test_what_the_benchmark_starts_ends_when_it_is_killed(kind):
 def _alive(pid):
     """Running (not a zombie waiting for its parent)."""
     try:
-        with open(f'/proc/{pid}/stat') as f:
-            return f.read().rsplit(')', 1)[1].split()[0] != 'Z'
-    except OSError:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.Error:
         return False
 
 
