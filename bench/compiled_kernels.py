@@ -380,13 +380,12 @@ def main(argv=None):
         whole = whole_figures(folder, progress=progress)
     if args.node:
         from bench import imu_filter_cpu
-        result = imu_filter_cpu.compare(rounds=5, progress=progress, floor=True)
+        result = imu_filter_cpu.compare(rounds=5, progress=progress)
         ratio = result['ratio']
         node = (imu_filter_cpu.table(result) + '\n\n' + imu_filter_cpu.goal_line(result) + '\n\n'
                 f'goal (compiled kernels): imu_filter ≤ {COMPILED_NODE_GOAL:g}× the relay\'s CPU '
                 f'per IMU sample: {ratio:.2f}× (the same medians): '
-                f'{imu_filter_cpu.verdict(ratio is not None and ratio <= COMPILED_NODE_GOAL)}\n\n'
-                + imu_filter_cpu.floor_line(result))
+                f'{imu_filter_cpu.verdict(ratio is not None and ratio <= COMPILED_NODE_GOAL)}')
     import numba
     from bench import machine
     facts = machine.describe()

@@ -17,11 +17,8 @@ Two measurements, each in a child process with its own ROS domain:
     in the node's callbacks.
 
 Run by ``python -m bench`` (see :func:`profile_direct`, :func:`profile_loop`).
-``python -m bench.profile_node imu [--rounds N] [--seconds S]``: the raw-IMU
-node on both paths beside the typed and the serialized relay, each fed at
-1 kHz IMU and 100 Hz field, its CPU per sample split by thread
-(:func:`imu_threads`), and the serialized callbacks called directly under
-cProfile (:func:`bench.raw_imu_direct.direct`).
+The raw-IMU node's CPU split by thread (``python -m bench.profile_node imu``)
+answered where its time goes (docs/nodes.md) and left after commit 7319e4b.
 """
 
 import argparse
@@ -29,13 +26,10 @@ import cProfile
 import json
 import os
 import pstats
-import statistics
 import sys
 import tempfile
 import threading
 import time
-
-import psutil
 
 from bench.numpy_use import numpy_use_per_step
 from bench.procs import Child, children, reserved_domain_id, ros_env
@@ -375,107 +369,16 @@ def profile_loop(executor='single', index=0, rate=LOOP_RATE,
         return result
 
 
-# The raw-IMU targets of bench.imu_filter_cpu whose threads imu_threads() splits.
-IMU_TARGETS = ('relay', 'raw_relay', 'imu_filter_typed', 'imu_filter')
-
-
-def thread_cpu(pid):
-    """
-    CPU seconds (user + system) of each thread of ``pid``, added up by kind.
-
-    The process's main thread (named after the executable) is ``main``;
-    Fast DDS's threads keep their names less the numbers (``dds.shm``,
-    ``dds.ev``, ``dds.udp``...). The times are psutil's; a thread's name is
-    its ``comm``.
-    """
-    seconds = {}
-    for thread in psutil.Process(pid).threads():
-        try:
-            with open(f'/proc/{pid}/task/{thread.id}/comm') as comm:
-                name = comm.read().strip()
-        except OSError:
-            continue
-        kind = 'main' if thread.id == pid else '.'.join(
-            part for part in name.split('.') if not part.isdigit())
-        seconds[kind] = seconds.get(kind, 0.0) + thread.user_time + thread.system_time
-    return seconds
-
-
-def imu_threads(labels=IMU_TARGETS, rate=1000.0, mag_rate=100.0, seconds=8.0, rounds=1,
-                log_dir=None):
-    """
-    CPU per IMU sample of each raw-IMU target by thread, fed by bench.imu_filter_cpu's driver.
-
-    Returns
-    -------
-    result : dict
-        ``{label: [{thread kind: µs per sample}, ...]}``, one dict per round
-        (``total`` the whole process's, as bench.imu_filter_cpu measures it).
-
-    """
-    from bench.imu_filter_cpu import load_samples, measure, RAW_RELAY, target_args
-    samples = load_samples()
-    result = {label: [] for label in labels}
-    with tempfile.TemporaryDirectory(prefix='bench-') as tmp:
-        for _ in range(rounds):
-            for index, label in enumerate(labels):
-                snapshots = []
-                with reserved_domain_id(index) as domain_id:
-                    run = measure(target_args(label, 'events'), domain_id, samples, rate,
-                                  mag_rate, seconds,
-                                  os.path.join(log_dir or tmp, f'threads-{label}.log'),
-                                  settle=label not in ('relay', RAW_RELAY),
-                                  window=lambda pid: snapshots.append(thread_cpu(pid)))
-                before, after = snapshots
-                per = {kind: (after[kind] - before.get(kind, 0.0)) / run['samples'] * 1e6
-                       for kind in after}
-                per['total'] = run['cpu_us_per_sample']
-                result[label].append(per)
-    return result
-
-
-def imu_report(threads, direct):
-    """The two tables of the raw-IMU profile, as Markdown (``direct``: bench.raw_imu_direct's)."""
-    from docgen.markdown import table
-    kinds = sorted({kind for rows in threads.values() for per in rows for kind in per},
-                   key=lambda kind: (kind != 'total', kind != 'main', kind))
-    rows = [[kind] + [f'{statistics.median(per.get(kind, 0.0) for per in runs):.1f}'
-                      for runs in threads.values()]
-            for kind in kinds
-            if any(per.get(kind, 0.0) for runs in threads.values() for per in runs)]
-    return '\n'.join([
-        table(['µs per IMU sample (median of rounds)', *threads], rows), '',
-        'imu_filter_node\'s serialized callbacks called directly (`bench.raw_imu_direct`): '
-        f'{direct["imu_filter_serialized_callbacks"]:.1f} µs per IMU sample; own time under '
-        'cProfile:', '',
-        table(['function', 'own µs per sample', 'calls per sample'],
-              [[f'`{row["function"]}`', f'{row["own_us"]:.2f}', f'{row["calls"]:.2f}']
-               for row in direct['top']])])
-
-
 def main(argv=None):
-    """Child entry point: ``direct`` or ``loop``; ``imu`` prints the raw-IMU profile."""
+    """Child entry point: ``direct`` or ``loop``."""
     parser = argparse.ArgumentParser(prog='python -m bench.profile_node')
-    parser.add_argument('mode', choices=('direct', 'loop', 'imu'))
-    parser.add_argument('--rounds', type=int, default=1, help='imu: rounds of the targets')
-    parser.add_argument('--out')
+    parser.add_argument('mode', choices=('direct', 'loop'))
+    parser.add_argument('--out', required=True)
     parser.add_argument('--executor', choices=EXECUTORS, default='single')
     parser.add_argument('--seconds', type=float, default=LOOP_SECONDS)
     parser.add_argument('--node', choices=('observer', 'relay'),
                         default='observer')
     args = parser.parse_args(argv)
-    if args.mode == 'imu':
-        threads = imu_threads(seconds=args.seconds if args.seconds != LOOP_SECONDS else 8.0,
-                              rounds=args.rounds)
-        from bench import raw_imu_direct
-        text = imu_report(threads, raw_imu_direct.direct())
-        print(text)
-        if args.out:
-            with open(args.out, 'w') as out:
-                out.write(text + '\n')
-        return 0
-    if args.out is None:
-        parser.error('--out is needed')
     if args.mode == 'direct':
         result = direct()
         with open(args.out, 'w') as out:

@@ -16,8 +16,7 @@ each output with no subscriber; the functions on the callbacks' path
 that use numpy (:mod:`bench.numpy_use`); and the functions with the most own
 time in the callbacks on bytes under cProfile. Each figure is the best of a
 few passes (:mod:`bench.timing`), µs per IMU sample. Run in a child process
-by ``python -m bench``; ``python -m bench.profile_node imu`` prints its
-callbacks' profile.
+by ``python -m bench``.
 """
 
 import argparse
@@ -30,6 +29,7 @@ from bench.machine import save_json
 from bench.numpy_use import numpy_use_per_step
 from bench.rosutil import set_stamp
 from bench.timing import best_pass, best_seconds, top_functions
+from docgen.markdown import table
 
 SAMPLES = 5000
 RATE = 1000  # Hz
@@ -242,6 +242,10 @@ def main(argv=None):
                 'raw_relay_callbacks', 'pipeline', 'core', 'publish_imu', 'publish_estimate'):
         print(f'{key}: {result[key]:.1f} µs')
     print(f'numpy on the callbacks\' path: {result["numpy_use_per_sample"] or "none"}')
+    print('own time under cProfile, callbacks on bytes:')
+    print(table(['function', 'own µs per sample', 'calls per sample'],
+                [[f'`{row["function"]}`', f'{row["own_us"]:.2f}', f'{row["calls"]:.2f}']
+                 for row in result['top']]))
     save_json(args.json, result)
     return 0
 

@@ -7,8 +7,7 @@ Rendered from what ``python -m bench`` gathers under ``raw_imu`` (see
 (:func:`bench.raw_imu_direct.direct`) and ``batch``
 (:func:`bench.broad_batch.batch`); and under ``compiled``
 (``python -m bench.compiled_kernels --json``: BROAD, the step per sample, the
-start-up times), whose node row is section 6's ``node_events`` with the
-``step_only`` floor. Any of them may be missing or hold an ``error``. Every
+start-up times), whose node row is section 6's ``node_events``. Any of them may be missing or hold an ``error``. Every
 verdict is computed here from the figures, never typed.
 """
 
@@ -19,7 +18,7 @@ from bench.compiled_kernels import (BROAD_GOAL, COLD_GOAL_S, COMPILED_NODE_GOAL,
                                     SCORE_TOLERANCE, STEP_GOAL_US, WARM_GOAL_S, WHOLE_AIM,
                                     WHOLE_GOAL, whole_medians)
 from bench.machine import load_range
-from bench.imu_filter_cpu import (FLOOR, NODE_GOAL, RAW_RELAY, SERIALIZED_GOAL, SERIALIZED_AIM,
+from bench.imu_filter_cpu import (NODE_GOAL, RAW_RELAY, SERIALIZED_GOAL, SERIALIZED_AIM,
                                   short_text, TYPED, verdict)
 from docgen.compiled_page import BEGIN, END
 from docgen.markdown import table as _table
@@ -121,7 +120,7 @@ def _anchor(heading):
 
 def _node_rows(node, executor):
     rows = []
-    for label in [t for t in ('imu_filter', TYPED, FLOOR, RAW_RELAY, 'relay')
+    for label in [t for t in ('imu_filter', TYPED, RAW_RELAY, 'relay')
                   if t in node['runs']]:
         runs = node['runs'][label]
         cpu = ', '.join(f'{r["cpu_us_per_sample"]:.0f}' for r in runs)
@@ -150,8 +149,6 @@ def section(raw):
             f'samples; {first["seconds"]:g} s per run, relay and filter runs interleaved, '
             'medians. `python -m bench.imu_filter_cpu --executor events|single --seconds '
             f'{first["seconds"]:g} --rounds N` prints the same table and the verdict; with '
-            f'`--floor` also `{FLOOR}`, the node cut down to the '
-            'estimate\'s arithmetic and its outputs (`bench.imu_filter_cpu.step_only_node`); with '
             f'`--serialized` (the events runs here) also `{TYPED}` (the node with '
             f'`serialized_io` false) and `{RAW_RELAY}` (the relay on bytes, '
             '`bench.imu_filter_cpu.RawImuRelay`).', '',
@@ -298,9 +295,6 @@ def _node_row(node):
     if ratios:
         measured += f', rounds {min(ratios):.2f}–{max(ratios):.2f}'
     measured += ')'
-    if medians.get(FLOOR) and medians.get('relay'):
-        measured += (f'; {FLOOR}, the estimate\'s arithmetic alone: '
-                     f'{medians[FLOOR] / medians["relay"]:.2f}×')
     text = verdict(ratio <= COMPILED_NODE_GOAL)
     if ratios and min(ratios) <= COMPILED_NODE_GOAL < max(ratios):
         text += ' (rounds on both sides of the goal)'
