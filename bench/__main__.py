@@ -200,16 +200,9 @@ def build_parser():
                         help=f'comma-separated subset of {",".join(SECTIONS)}')
     parser.add_argument('--quick', action='store_true',
                         help='a short smoke run (few sizes and rates)')
-    parser.add_argument('--output',
-                        default=os.path.join(REPO, 'docs', 'performance.md'),
-                        help='Markdown file to write (default docs/performance.md)')
-    parser.add_argument('--no-write', action='store_true',
-                        help='print only, write no file')
-    parser.add_argument('--json', metavar='PATH', help='also write raw results')
     parser.add_argument('--log-dir', metavar='DIR',
                         help="keep the child processes' stderr there")
-    parser.add_argument('--render', metavar='JSON',
-                        help='only render results saved by --json')
+    machine.add_page_arguments(parser, 'performance.md')
     return parser
 
 
@@ -225,15 +218,15 @@ def main(argv=None):
         return 2
     if args.log_dir:
         os.makedirs(args.log_dir, exist_ok=True)
-    return machine.page_main(args, lambda: _run(args, argv, sections), performance_page.render,
-                             None if args.no_write else args.output)
+    return machine.page_main(args, shown_command(['python -m bench', *argv]),
+                             lambda: _run(args, sections), performance_page.render,
+                             machine.page_path(args))
 
 
-def _run(args, argv, sections):
+def _run(args, sections):
     """Run the sections asked for; return the results the page is rendered from."""
     start = time.monotonic()
-    results = {'machine': machine.describe(),
-               'command': shown_command(['python -m bench', *argv])}
+    results = {}
     notes = []
     if 'batch' in sections:
         results['batch'] = _batch(args.quick)

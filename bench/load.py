@@ -17,7 +17,6 @@ Progress goes to stderr, the page to stdout. Timings never fail the run.
 import argparse
 import os
 import sys
-import time
 
 from bench import load_dds, machine
 from bench.machine import log
@@ -94,8 +93,7 @@ def build_parser():
     parser.add_argument('--modes', nargs='+', choices=load_dds.MODES,
                         default=list(load_dds.MODES))
     parser.add_argument('--docs', metavar='DIR', help='write DIR/load.md')
-    parser.add_argument('--json', metavar='PATH', help='also write the results there')
-    parser.add_argument('--render', metavar='JSON', help='only render results saved by --json')
+    machine.add_page_arguments(parser)
     parser.add_argument('--note', help='a sentence for "How it was made" (the machine\'s state)')
     parser.add_argument('--log-dir', default=os.path.join(REPO, 'out', 'bench'),
                         help='the node\'s and the recorder\'s stderr')
@@ -108,14 +106,9 @@ def main(argv=None):
     from docgen import load_page
     args = build_parser().parse_args(argv)
 
-    def run():
-        start = time.monotonic()
-        results = {'machine': machine.describe(),
-                   'command': shown_command(['python -m bench.load', *argv]),
-                   'note': args.note, 'dds': run_dds(args)}
-        results['seconds'] = time.monotonic() - start
-        return results
-    return machine.page_main(args, run, load_page.render, _page(args))
+    return machine.page_main(args, shown_command(['python -m bench.load', *argv]),
+                             lambda: {'note': args.note, 'dds': run_dds(args)},
+                             load_page.render, _page(args))
 
 def _page(args):
     return os.path.join(args.docs, 'load.md') if args.docs else None

@@ -7,6 +7,7 @@ import platform
 import signal
 import subprocess
 import sys
+import time
 from importlib import metadata
 
 from bench.procs import REPO
@@ -90,19 +91,44 @@ def save_json(path, result):
             json.dump(result, out, indent=1)
 
 
-def page_main(args, run, render, path):
+def add_page_arguments(parser, page=None):
     """
-    A benchmark that writes a page: its results (``run()``, or ``--render``'s file), the page.
+    The options of a benchmark that writes a page: ``--json``, ``--render``.
 
-    The results are saved with ``--json``; SIGTERM ends a run through the
-    ``finally`` blocks that stop its children. Returns :func:`write_page`'s code.
+    With ``page`` (its name in docs/), also ``--output`` (default
+    ``docs/<page>``) and ``--no-write``; :func:`page_path` reads them.
+    """
+    if page:
+        parser.add_argument('--output', default=os.path.join(REPO, 'docs', page),
+                            help=f'Markdown file to write (default docs/{page})')
+        parser.add_argument('--no-write', action='store_true', help='print only, write no file')
+    parser.add_argument('--json', metavar='PATH', help='also write the raw results')
+    parser.add_argument('--render', metavar='JSON', help='only render results saved by --json')
+
+
+def page_path(args):
+    """Where ``--output`` and ``--no-write`` say the page goes (None: nowhere)."""
+    return None if args.no_write else args.output
+
+
+def page_main(args, command, run, render, path):
+    """
+    A benchmark that writes a page: its results, then the page (``render(results)``) at ``path``.
+
+    The results are ``run()``'s with the machine, ``command`` and the
+    ``seconds`` it took, or ``--render``'s file; ``--json`` saves them.
+    SIGTERM ends a run through the ``finally`` blocks that stop its
+    children. Returns :func:`write_page`'s code.
     """
     if args.render:
         with open(args.render) as saved:
             results = json.load(saved)
     else:
         signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-        results = run()
+        start = time.monotonic()
+        results = {'machine': describe(), 'command': command}
+        results.update(run())
+        results['seconds'] = time.monotonic() - start
         results['machine']['load_end'] = load()
         save_json(args.json, results)
     return write_page(render(results), path)

@@ -20,15 +20,13 @@ None where it cannot run yet.
 import argparse
 import inspect
 import math
-import os
 import sys
 import time
 
 import numpy as np
 
 from bench import vehicle_sim
-from bench.machine import log
-from bench.procs import REPO
+from bench.machine import add_page_arguments, log
 
 MODES = ('6D', '9D')
 TESLA_PER_MICROTESLA = 1e-6
@@ -275,11 +273,7 @@ def build_parser():
     parser.add_argument('--seeds', type=int, default=3, help='noise seeds per drive (3)')
     parser.add_argument('--quick', action='store_true',
                         help='one seed, the level drives only (a smoke run)')
-    parser.add_argument('--output', default=os.path.join(REPO, 'docs', 'vehicle.md'),
-                        help='Markdown file to write (default docs/vehicle.md)')
-    parser.add_argument('--no-write', action='store_true', help='print only, write no file')
-    parser.add_argument('--json', metavar='PATH', help='also write the raw results')
-    parser.add_argument('--render', metavar='JSON', help='only render results saved by --json')
+    add_page_arguments(parser, 'vehicle.md')
     return parser
 
 
@@ -287,29 +281,25 @@ def main(argv=None):
     """Run the benchmark, print and write the page; return 0."""
     from bench import machine
     from docgen import vehicle_page
+    from ext_observer.broad.data import shown_command
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
 
     def run():
-        start = time.monotonic()
         drives = vehicle_sim.scenarios()
         seeds = args.seeds
         if args.quick:
             drives, seeds = [d for d in drives if not d.slope_deg], 1
-        results = {'machine': machine.describe(), 'versions': _versions(), 'seeds': seeds,
-                   'command': ' '.join(['python -m bench.vehicle'] + argv)}
         log('vehicle: the long turn as first measured ...')
-        results['baseline'] = baseline()
-        results['rows'] = run_scenarios(drives, seeds)
-        results['seconds'] = time.monotonic() - start
-        results['drive_names'] = [d.name for d in drives]
-        return results
+        return {'versions': _versions(), 'seeds': seeds, 'baseline': baseline(),
+                'rows': run_scenarios(drives, seeds), 'drive_names': [d.name for d in drives]}
 
     def render(results):
         by_name = {d.name: d for d in vehicle_sim.scenarios()}
         drives = [by_name[n] for n in results['drive_names'] if n in by_name]
         return vehicle_page.render(dict(results, drives=drives))
-    return machine.page_main(args, run, render, None if args.no_write else args.output)
+    return machine.page_main(args, shown_command(['python -m bench.vehicle', *argv]), run, render,
+                             machine.page_path(args))
 
 if __name__ == '__main__':
     sys.exit(main())
