@@ -18,7 +18,8 @@ Two measurements, each in a child process with its own ROS domain:
 
 Run by ``python -m bench`` (see :func:`profile_direct`, :func:`profile_loop`).
 The raw-IMU node's CPU split by thread (``python -m bench.profile_node imu``)
-answered where its time goes (docs/nodes.md) and left after commit 7319e4b.
+answered where its time goes (docs/nodes.md) and left; its code is this file at
+commit 7319e4b.
 """
 
 import argparse
