@@ -43,6 +43,7 @@ import time
 import numpy as np
 
 from bench.machine import log, save_json
+from bench.rosutil import kernels_of
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXCERPT = os.path.join(REPO, 'test', 'data', 'broad_01_undisturbed_slow_rotation_A.npz')
@@ -161,14 +162,6 @@ def _kernel_process(cache):
     return time.perf_counter() - start
 
 
-def _kernels_value(msg):
-    for status in msg.status:
-        for kv in status.values:
-            if kv.key == 'kernels':
-                return kv.value
-    return None
-
-
 def _node_start(executable, cache, domain_id, timeout=300.0):
     """
     Seconds from launching ``executable`` to its first /diagnostics, and to compiled kernels.
@@ -203,7 +196,7 @@ def _node_start(executable, cache, domain_id, timeout=300.0):
 
     def compiled_at():
         for at, msg in seen:
-            value = _kernels_value(msg)
+            value = kernels_of(msg)
             if value == 'compiled':
                 return at - start
         return None
@@ -214,7 +207,7 @@ def _node_start(executable, cache, domain_id, timeout=300.0):
         if not seen:
             return float('nan'), float('nan')
         first = seen[0][0] - start
-        if _kernels_value(seen[0][1]) is None:
+        if kernels_of(seen[0][1]) is None:
             return first, None
         while compiled_at() is None and time.perf_counter() - start < timeout:
             executor.spin_once(timeout_sec=0.01)

@@ -41,8 +41,9 @@ import time
 import numpy as np
 
 from bench.machine import load, load_range, log, save_json
-from bench.procs import Child, cpu_seconds, REPO, reserved_domain_id, ros_env
-from bench.rosutil import EXECUTORS, make_executor, spin_until_shutdown
+from bench.procs import Child, cpu_seconds, installed_node, REPO, reserved_domain_id, ros_env
+from bench.rosutil import (EXECUTORS, make_executor, on_compiled_kernels, spin_until_shutdown,
+                           watch_kernels)
 
 DATA = os.path.join(REPO, 'test', 'data')
 # The raw-IMU node's speed goal: CPU per IMU sample (1 kHz IMU, 100 Hz field) within this
@@ -182,9 +183,8 @@ def target_args(label, executor):
         return ['-m', 'bench.imu_filter_cpu', 'relay', '--executor', executor]
     if label == RAW_RELAY:
         return ['-m', 'bench.imu_filter_cpu', 'relay', '--executor', executor, '--raw']
-    script = os.path.join(os.path.dirname(sys.executable), 'imu_filter_node')
-    command = [script] if os.path.exists(script) else ['-m', 'ext_observer.nodes.imu_filter_node']
-    command += ['--executor', executor, '--ros-args', '-p', 'use_mag:=true']
+    command = installed_node('imu_filter_node') + [
+        '--executor', executor, '--ros-args', '-p', 'use_mag:=true']
     return command + (['-p', 'serialized_io:=false'] if label == TYPED else [])
 
 
@@ -218,7 +218,6 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
 
     """
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Imu, MagneticField
     env = ros_env(domain_id)
@@ -238,8 +237,7 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
         # ones once loaded (compiled first where the cache is cold): measured
         # from then on, as it runs for good.
         kernels = []
-        node.create_subscription(DiagnosticArray, '/diagnostics', lambda msg: kernels.extend(
-            kv.value for st in msg.status for kv in st.values if kv.key == 'kernels'), 10)
+        watch_kernels(node, kernels)
         executor = make_executor('single', context)
         executor.add_node(node)
         stop = threading.Event()
@@ -254,7 +252,7 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
             time.sleep(0.05)
         if settle:
             deadline = time.monotonic() + 300.0
-            while not kernels or kernels[-1].startswith('plain ('):
+            while not on_compiled_kernels(kernels):
                 if time.monotonic() > deadline or child.proc.poll() is not None:
                     raise RuntimeError(f'the kernels did not settle: {child.log_tail()}')
                 time.sleep(0.05)

@@ -69,6 +69,13 @@ def cpu_seconds(pid):
     return times.user + times.system
 
 
+def installed_node(name):
+    """The command of the package's executable ``name``: its script beside this Python, or ``-m``."""
+    script = os.path.join(os.path.dirname(sys.executable), name)
+    return [script] if os.path.exists(script) else [sys.executable, '-m',
+                                                   f'ext_observer.nodes.{name}']
+
+
 def ros_env(domain_id):
     """Return the environment of a child that starts a ROS node."""
     env = dict(os.environ)

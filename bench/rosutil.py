@@ -109,3 +109,24 @@ def serve_lines(commands, match):
             commands[words[0]](words)
         else:
             print(f'error unknown command {words[0]!r}', flush=True)
+
+
+def kernels_of(msg):
+    """The ``kernels`` value of a ``/diagnostics`` message, or None."""
+    return next((kv.value for st in msg.status for kv in st.values if kv.key == 'kernels'), None)
+
+
+def watch_kernels(node, kernels):
+    """Append every ``kernels`` value ``/diagnostics`` says to ``kernels``; return the subscription."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    def seen(msg):
+        value = kernels_of(msg)
+        if value is not None:
+            kernels.append(value)
+    return node.create_subscription(DiagnosticArray, '/diagnostics', seen, 10)
+
+
+def on_compiled_kernels(kernels):
+    """Whether the last ``kernels`` values seen say the node runs on the compiled ones for good."""
+    return bool(kernels) and not kernels[-1].startswith('plain (')
