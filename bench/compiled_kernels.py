@@ -332,14 +332,10 @@ def whole_figures(data, runs=5, progress=print):
             if label == 'ours':
                 out['first estimate'].append(first)
     out['load'] = [before, os.getloadavg()[0]]
+    from docgen.compiled_page import whole_medians
     progress('BROAD command, whole process: ' + ', '.join(
         f'{k} {v:.2f} s' for k, v in whole_medians(out).items()))
     return out
-
-
-def whole_medians(whole):
-    """``{label: median}`` of :func:`whole_figures`' runs."""
-    return {k: float(np.median(v)) for k, v in whole.items() if k != 'load'}
 
 
 def main(argv=None):

@@ -24,14 +24,6 @@ from bench.procs import REPO
 from ext_observer.broad.data import shown_command
 
 DEFAULT_TRIAL = '09'
-# What the node should do with every core busy (the done-criteria of the
-# load benchmark): answered over the movement samples, at these speeds...
-ANSWERED_LIMIT = 0.99
-ANSWERED_SPEEDS = (1.0, 2.0)
-# ... its error over them against the batch run's, and e²/σ²'s range.
-ERROR_RATIO_LIMIT = 1.5
-ERROR_RATIO_GOAL = 1.2
-Z2_RANGE = (0.3, 3.0)
 # Added to each case's replay time in the estimate printed first, s (the
 # node's start, connection and drain).
 CASE_OVERHEAD = 12.0

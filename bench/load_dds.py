@@ -46,6 +46,14 @@ SPEEDS = (1.0, 2.0, 4.0)
 FIELD_RATES = ('imu', 100.0)
 LOADS = ('idle', 'busy')
 MODES = ('9D', '6D')
+# What the node should do with every core busy (the done-criteria of the
+# load benchmark): answered over the movement samples, at these speeds...
+ANSWERED_LIMIT = 0.99
+ANSWERED_SPEEDS = (1.0, 2.0)
+# ... its error over them against the batch run's, and e²/σ²'s range.
+ERROR_RATIO_LIMIT = 1.5
+ERROR_RATIO_GOAL = 1.2
+Z2_RANGE = (0.3, 3.0)
 # Above this share of samples lost, /diagnostics should say WARN.
 WARN_SHARE = 0.01
 # A case's output is over once no imu/data came for this long, s.

@@ -280,8 +280,10 @@ def build_parser():
 def main(argv=None):
     """Run the benchmark, print and write the page; return 0."""
     from bench import machine
-    from docgen import vehicle_page
     from ext_observer.broad.data import shown_command
+    # As the package's commands find their pages: the page imports this module.
+    from ext_observer.source_tree import docgen
+    vehicle_page = docgen('vehicle_page')
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
 

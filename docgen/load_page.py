@@ -8,8 +8,8 @@ verdicts, what the table cannot hold, and how the run was made.
 import math
 
 from bench import load_dds
-from bench.load import (ANSWERED_LIMIT, ANSWERED_SPEEDS, ERROR_RATIO_GOAL, ERROR_RATIO_LIMIT,
-                        Z2_RANGE)
+from bench.load_dds import (ANSWERED_LIMIT, ANSWERED_SPEEDS, ERROR_RATIO_GOAL, ERROR_RATIO_LIMIT,
+                            Z2_RANGE)
 from docgen.markdown import table
 
 TITLE = '# Lost samples and a busy machine'

@@ -16,11 +16,11 @@ import statistics
 from bench.broad_batch import BATCH_GOAL
 from bench.compiled_kernels import (BROAD_GOAL, COLD_GOAL_S, COMPILED_NODE_GOAL,
                                     SCORE_TOLERANCE, STEP_GOAL_US, WARM_GOAL_S, WHOLE_AIM,
-                                    WHOLE_GOAL, whole_medians)
+                                    WHOLE_GOAL)
 from bench.machine import load_range
 from bench.imu_filter_cpu import (NODE_GOAL, RAW_RELAY, SERIALIZED_GOAL, SERIALIZED_AIM,
                                   short_text, TYPED, verdict)
-from docgen.compiled_page import BEGIN, END
+from docgen.compiled_page import BEGIN, END, whole_medians
 from docgen.markdown import table as _table
 
 HEADING = '6. Raw-IMU estimator (imu_filter_node)'
