@@ -15,13 +15,14 @@ run (a node that does not start, no BROAD data) is reported as such.
 import argparse
 import json
 import os
-import signal
 import subprocess
 import sys
 import tempfile
 import time
 
-from bench import machine, performance_page
+from bench import machine
+from bench.machine import log
+from docgen import performance_page
 from bench.procs import REPO, reserved_domain_id, ros_env
 from ext_observer.broad.data import shown_command
 
@@ -40,9 +41,9 @@ RAW_IMU = (
 # A road vehicle: every drive over three seeds, or the level drives once.
 VEHICLE = ['bench.vehicle']
 VEHICLE_QUICK = ['bench.vehicle', '--quick']
-# Lost samples and a busy machine: both halves in full, or a short DDS run.
+# Lost samples and a busy machine: the whole trial, or a short part of it.
 LOAD = ['bench.load']
-LOAD_QUICK = ['bench.load', '--dds-only', '--start', '30', '--seconds', '20',
+LOAD_QUICK = ['bench.load', '--start', '30', '--seconds', '20',
               '--speeds', '1', '4', '--modes', '9D', '--fields', '100']
 RAW_IMU_QUICK = (
     ('node_events', ['bench.imu_filter_cpu', '--executor', 'events', '--seconds', '2',
@@ -51,23 +52,19 @@ RAW_IMU_QUICK = (
 )
 
 
-def _log(text):
-    print(text, file=sys.stderr, flush=True)
-
-
 def _batch(quick):
     from bench import core_speed
     result = {}
-    _log('batch core: observer updates per second ...')
+    log('batch core: observer updates per second ...')
     sizes = (1, 1000) if quick else core_speed.BATCH_SIZES
     result['observer_rates'] = core_speed.observer_rates(sizes)
     result['single'] = core_speed.single_observer_costs()
-    _log('batch core: products and exp ...')
+    log('batch core: products and exp ...')
     result['products'] = core_speed.product_costs()
     result['lean'] = core_speed.lean_prototype_rate()
     result['reproduce'] = []
     if not quick:
-        _log('batch core: reproduce --seeds 5 ...')
+        log('batch core: reproduce --seeds 5 ...')
         result['reproduce'].append(core_speed.reproduce_time(5))
         result['reproduce'].append(core_speed.reproduce_time(5, no_plots=True))
     return result
@@ -102,9 +99,9 @@ def _nodes(quick, log_dir):
         rates, seconds, latency_seconds = (250, 1000, 4000), 1.0, 1.0
     results = []
     for index, target in enumerate(targets):
-        _log(f'node throughput: {target.name} ...')
+        log(f'node throughput: {target.name} ...')
         results += nodes.sweep(target, index, rates, seconds, latency_seconds,
-                               log_dir=log_dir, progress=_log)
+                               log_dir=log_dir, progress=log)
     return results, list(rates), notes
 
 
@@ -112,13 +109,13 @@ def _profile(log_dir):
     from bench import profile_node
     if not os.path.exists(os.path.join(REPO, 'ext_observer', 'nodes', 'observer_node.py')):
         return None, []
-    _log('profile: the node\'s callbacks, direct ...')
+    log('profile: the node\'s callbacks, direct ...')
     direct = profile_node.profile_direct(index=10, log_dir=log_dir)
     loops = []
     for index, (node, executor) in enumerate(
             (('observer', 'single'), ('relay', 'single'),
              ('observer', 'events'), ('relay', 'events'))):
-        _log(f'profile: {node}/{executor} at {profile_node.LOOP_RATE} Hz ...')
+        log(f'profile: {node}/{executor} at {profile_node.LOOP_RATE} Hz ...')
         loops.append(profile_node.profile_loop(executor, index=11 + index,
                                                log_dir=log_dir, node=node))
     return direct, loops
@@ -128,7 +125,7 @@ def _raw_imu(quick, log_dir):
     result = {}
     with tempfile.TemporaryDirectory(prefix='bench-') as tmp:
         for index, (key, args) in enumerate(RAW_IMU_QUICK if quick else RAW_IMU):
-            _log(f'raw IMU: python -m {" ".join(args)} ...')
+            log(f'raw IMU: python -m {" ".join(args)} ...')
             out = os.path.join(tmp, f'{key}.json')
             extra = ['--log-dir', log_dir] if log_dir and key.startswith('node') else []
             # The direct timing starts a node in this process's child: a
@@ -148,7 +145,7 @@ def _raw_imu(quick, log_dir):
 def _compiled(quick):
     """The compiled kernels' figures: ``python -m bench.compiled_kernels --json`` (node CPU: section 6's)."""
     args = ['bench.compiled_kernels'] + (['--sections', 'steps'] if quick else [])
-    _log(f'compiled kernels: python -m {" ".join(args)} ...')
+    log(f'compiled kernels: python -m {" ".join(args)} ...')
     # Relative to the repository, as the page shows the command (a reader can rerun it).
     out = os.path.join('out', 'bench_compiled.json')
     os.makedirs(os.path.join(REPO, 'out'), exist_ok=True)
@@ -184,7 +181,7 @@ def _vehicle(quick, args):
 
 def _page_benchmark(label, command, extra, page):
     """Run a benchmark that writes its own page; return the note that says how long it took."""
-    _log(f'{label.lower()}: python -m {" ".join(command + extra)} ...')
+    log(f'{label.lower()}: python -m {" ".join(command + extra)} ...')
     start = time.monotonic()
     # Its progress goes to stderr; the page it prints is in its own file.
     done = subprocess.run([sys.executable, '-m', *command, *extra], cwd=REPO,
@@ -203,16 +200,9 @@ def build_parser():
                         help=f'comma-separated subset of {",".join(SECTIONS)}')
     parser.add_argument('--quick', action='store_true',
                         help='a short smoke run (few sizes and rates)')
-    parser.add_argument('--output',
-                        default=os.path.join(REPO, 'docs', 'performance.md'),
-                        help='Markdown file to write (default docs/performance.md)')
-    parser.add_argument('--no-write', action='store_true',
-                        help='print only, write no file')
-    parser.add_argument('--json', metavar='PATH', help='also write raw results')
     parser.add_argument('--log-dir', metavar='DIR',
                         help="keep the child processes' stderr there")
-    parser.add_argument('--render', metavar='JSON',
-                        help='only render results saved by --json')
+    machine.add_page_arguments(parser, 'performance.md')
     return parser
 
 
@@ -228,21 +218,21 @@ def main(argv=None):
         return 2
     if args.log_dir:
         os.makedirs(args.log_dir, exist_ok=True)
-    if args.render:
-        with open(args.render) as saved:
-            return machine.write_page(performance_page.render(json.load(saved)),
-                                      None if args.no_write else args.output)
-    # SIGTERM ends the run through the finally blocks that stop the children.
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    return machine.page_main(args, shown_command(['python -m bench', *argv]),
+                             lambda: _run(args, sections), performance_page.render,
+                             machine.page_path(args))
+
+
+def _run(args, sections):
+    """Run the sections asked for; return the results the page is rendered from."""
     start = time.monotonic()
-    results = {'machine': machine.describe(),
-               'command': shown_command(['python -m bench', *argv])}
+    results = {}
     notes = []
     if 'batch' in sections:
         results['batch'] = _batch(args.quick)
     if 'accuracy' in sections:
         from bench import core_speed
-        _log('accuracy: Table 1 setup ...')
+        log('accuracy: Table 1 setup ...')
         results['accuracy'] = core_speed.accuracy()
     if 'nodes' in sections:
         results['nodes'], results['rates'], results['node_notes'] = _nodes(
@@ -262,13 +252,8 @@ def main(argv=None):
     if 'vehicle' in sections:
         notes.append(_vehicle(args.quick, args))
     notes.append(f'The whole run took {time.monotonic() - start:.0f} s.')
-    results['machine']['load_end'] = machine.load()
     results['notes'] = notes
-    if args.json:
-        with open(args.json, 'w') as out:
-            json.dump(results, out, indent=1)
-    return machine.write_page(performance_page.render(results), None if args.no_write else args.output)
-
+    return results
 
 if __name__ == '__main__':
     sys.exit(main())

@@ -14,13 +14,12 @@ or ``not met``. ``--vectorized`` adds one run in this process
 """
 
 import argparse
-import json
 import os
 import statistics
 import sys
 
-from bench.machine import load, load_range
 from bench.imu_filter_cpu import verdict
+from bench.machine import load, load_range, log, save_json
 
 # The raw-IMU speed goal: the core over all 22 trials, both modes, batched, in under this (s).
 BATCH_GOAL = 10.0
@@ -96,21 +95,17 @@ def main(argv=None):
         parser.error('--runs must be at least 1')
     try:
         result = batch(args.data, args.runs, args.workers, args.vectorized,
-                       lambda text: print(text, file=sys.stderr, flush=True))
+                       log)
     except ValueError as error:
         print(f'error: {error}', file=sys.stderr)
-        if args.json:
-            with open(args.json, 'w') as out:
-                json.dump({'error': f'not run: {error}'}, out)
+        save_json(args.json, {'error': f'not run: {error}'})
         return 2
     for run in result['runs'] + ([result['vectorized']] if result['vectorized'] else []):
         print(f'workers {run["workers"]}: {run["seconds"]:.1f} s wall, '
               f'{run["cpu_seconds"]:.1f} s CPU')
     print(f'{result["sample_updates"]} sample-updates ({result["recordings"]} recordings)')
     print(goal_line(result))
-    if args.json:
-        with open(args.json, 'w') as out:
-            json.dump(result, out, indent=1)
+    save_json(args.json, result)
     return 0
 
 

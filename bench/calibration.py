@@ -24,9 +24,8 @@ a soft-iron ``S = I + E``, ``E`` symmetric with elements uniform in ±10 %
 
 Scored as BROAD scores (:func:`ext_observer.broad.score`, total angle):
 over the movement samples, and over those 30 s or more after the first one.
-Trials are split as in docs/broad_tuning.md: sorted by name, alternately
-tuning (the first, third, ...) and held out. Figures are printed, never a
-pass/fail; ``--docs DIR`` writes them into ``DIR/calibration.md`` (between
+Trials are split by :mod:`ext_observer.broad.split` (tuning, held out).
+Figures are printed, never a pass/fail; ``--docs DIR`` writes them into ``DIR/calibration.md`` (between
 its markers) with the figure ``DIR/figures/calibration_trial.png``.
 """
 
@@ -227,12 +226,6 @@ def _call(item):
 
 # --- the report ---------------------------------------------------------------
 
-def split(names):
-    """Sorted by name, alternately: (tuning, held out), as docs/broad_tuning.md."""
-    names = sorted(names)
-    return names[0::2], names[1::2]
-
-
 def _mean(values):
     values = [v for v in values if v is not None and math.isfinite(v)]
     return float(np.mean(values)) if values else float('nan')
@@ -240,8 +233,9 @@ def _mean(values):
 
 def summary(result, levels):
     """Means per split and level, with the goals' ratios."""
+    from ext_observer.broad.split import held_out_trials, tuning_trials
     names = sorted(result)
-    tuning, held = split(names)
+    tuning, held = tuning_trials(names), held_out_trials(names)
     out = {}
     for label, group in (('tuning', tuning), ('held out', held), ('all', names)):
         rows = {}
@@ -284,8 +278,9 @@ def _f(value, digits=2):
 def markdown(result, levels, meta):
     """The page's generated section."""
     summ = summary(result, levels)
+    from ext_observer.broad.split import tuning_trials
     names = sorted(result)
-    tuning, _ = split(names)
+    tuning = tuning_trials(names)
     lines = [BEGIN, '',
              f'Measured with `{meta["command"]}` at commit `{meta["commit"]}` '
              f'({meta["machine"]}; {meta["seconds"]:.0f} s on {meta["jobs"]} processes). '

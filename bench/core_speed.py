@@ -2,11 +2,11 @@
 The numerical core: batch speed, its ceilings, and accuracy beside the limit.
 
 Everything here runs in the benchmark's own process (no ROS). Timings take
-the best of a few repeats of loops long enough to dwarf the timer.
+the best of a few repeats of loops long enough to dwarf the timer
+(:func:`bench.timing.best_seconds`).
 """
 
 import itertools
-import math
 import os
 import subprocess
 import sys
@@ -14,36 +14,13 @@ import time
 
 import numpy as np
 
+from bench.timing import best_seconds
 from ext_observer.core import (LuenbergerObserver, multiply,
                                quaternion_from_rotation_vector,
                                SimulatedGyro, SingleObserver, VARIANTS)
 
 BATCH_SIZES = (1, 1000, 100_000)
 PRODUCT_BATCH = 100_000
-MIN_SECONDS = 0.15  # per timed loop
-REPEATS = 3
-
-
-def _time_per_call(function, min_seconds=MIN_SECONDS, repeats=REPEATS):
-    """Best time of one call, s, over ``repeats`` loops of >= min_seconds."""
-    function()  # warm caches and lazy imports
-    calls = 1
-    while True:
-        start = time.perf_counter()
-        for _ in range(calls):
-            function()
-        elapsed = time.perf_counter() - start
-        if elapsed >= min_seconds / 4:
-            break
-        calls *= 4
-    calls = max(1, int(calls * min_seconds / elapsed))
-    best = math.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(calls):
-            function()
-        best = min(best, (time.perf_counter() - start) / calls)
-    return best
 
 
 def _trajectory(batch, seed, steps):
@@ -88,9 +65,9 @@ def observer_rates(batch_sizes=BATCH_SIZES, variants=VARIANTS, seed=0):
                 k = next(counter) % cycle
                 obs.step(traj.increments[k], traj.measurements[k],
                          rotation=rotations[k])
-            increment_time = _time_per_call(with_increment)
+            increment_time = best_seconds(with_increment)
             obs.reset()
-            rotation_time = _time_per_call(with_rotation)
+            rotation_time = best_seconds(with_rotation)
             rows.append({
                 'variant': variant, 'batch': batch,
                 'us_per_step': increment_time * 1e6,
@@ -113,7 +90,7 @@ def single_observer_costs(variants=VARIANTS, seed=0, cycle=256):
 
         def step():
             obs.step(*inputs[next(counter) % cycle])
-        costs[variant] = _time_per_call(step) * 1e6
+        costs[variant] = best_seconds(step) * 1e6
     return costs
 
 
@@ -138,10 +115,10 @@ def product_costs(batch=PRODUCT_BATCH, seed=0):
     half_angles = 0.5 * np.linalg.norm(increments, axis=-1)
     result = {
         'batch': batch,
-        'multiply_us': _time_per_call(lambda: multiply(p, q)) * 1e6,
-        'exp_half_us': _time_per_call(
+        'multiply_us': best_seconds(lambda: multiply(p, q)) * 1e6,
+        'exp_half_us': best_seconds(
             lambda: quaternion_from_rotation_vector(increments)) * 1e6,
-        'sincos_us': _time_per_call(
+        'sincos_us': best_seconds(
             lambda: (np.sin(half_angles), np.cos(half_angles))) * 1e6,
         'numpy_quaternion_us': None,
         'numpy_quaternion_version': None,
@@ -155,7 +132,7 @@ def product_costs(batch=PRODUCT_BATCH, seed=0):
     # Same convention (Hamilton, scalar first): the reference must agree.
     if not np.allclose(npq.as_float_array(product), multiply(p, q)):
         raise RuntimeError('numpy-quaternion disagrees with quaternion.multiply')
-    result['numpy_quaternion_us'] = _time_per_call(lambda: a * b) * 1e6
+    result['numpy_quaternion_us'] = best_seconds(lambda: a * b) * 1e6
     from importlib import metadata
     try:
         result['numpy_quaternion_version'] = metadata.version('numpy-quaternion')
@@ -266,6 +243,6 @@ def lean_prototype_rate(batch=PRODUCT_BATCH, seed=0):
     def advance():
         k = next(counter)
         step(states[k % 2], e[k % 8], y[k % 8], states[(k + 1) % 2])
-    seconds = _time_per_call(advance)
+    seconds = best_seconds(advance)
     return {'us_per_step': seconds * 1e6, 'updates_per_s': batch / seconds,
             'gap': gap}

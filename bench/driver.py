@@ -30,7 +30,7 @@ import time
 
 import numpy as np
 
-from bench.rosutil import write_raw_stamp
+from bench.rosutil import serve_lines, wait_until, write_raw_stamp
 
 TEMPLATES = 256
 
@@ -75,13 +75,8 @@ class Driver:
 
     def match(self, timeout):
         """Wait until both publishers have a subscriber; return success."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if (self.increment_publisher.get_subscription_count() > 0
-                    and self.measurement_publisher.get_subscription_count() > 0):
-                return True
-            time.sleep(0.02)
-        return False
+        return wait_until(lambda: self.increment_publisher.get_subscription_count() > 0
+                          and self.measurement_publisher.get_subscription_count() > 0, timeout)
 
     def run(self, rate, duration):
         """
@@ -136,25 +131,16 @@ def main(argv=None):
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     driver = Driver(context)
     print('ready', flush=True)
+
+    def run(words):
+        rate, duration, path = float(words[1]), float(words[2]), words[3]
+        stamps, published = driver.run(rate, duration)
+        np.savez(path, stamps=stamps, published=published)
+        span = (published[-1] - published[0]) / 1e9
+        achieved = (len(published) - 1) / span if span > 0 else rate
+        print(f'done {len(published)} {achieved:.1f}', flush=True)
     try:
-        for line in sys.stdin:
-            words = line.split()
-            if not words:
-                continue
-            if words[0] == 'quit':
-                break
-            if words[0] == 'match':
-                ok = driver.match(float(words[1]))
-                print('matched' if ok else 'unmatched', flush=True)
-            elif words[0] == 'run':
-                rate, duration, path = float(words[1]), float(words[2]), words[3]
-                stamps, published = driver.run(rate, duration)
-                np.savez(path, stamps=stamps, published=published)
-                span = (published[-1] - published[0]) / 1e9
-                achieved = (len(published) - 1) / span if span > 0 else rate
-                print(f'done {len(published)} {achieved:.1f}', flush=True)
-            else:
-                print(f'error unknown command {words[0]!r}', flush=True)
+        serve_lines({'run': run}, driver.match)
     except KeyboardInterrupt:
         pass
     finally:

@@ -5,7 +5,7 @@ Node CPU per IMU sample of ``imu_filter_node``, beside a bare relay, against its
 [--seconds 10] [--rounds 3] [--json PATH]`` publishes ``sensor_msgs/Imu`` on
 ``imu/data_raw`` at ``--rate`` and ``sensor_msgs/MagneticField`` on
 ``imu/mag`` at ``--mag-rate`` (both best effort, as IMU drivers publish)
-into each target in turn, and reads the target's CPU time from ``/proc``
+into each target in turn, and reads the target's CPU time (psutil)
 over the publishing window, in ``--rounds`` interleaved runs of each:
 
 - ``relay``: this module's :class:`ImuRelay`, the raw-IMU message path
@@ -16,9 +16,6 @@ over the publishing window, in ``--rounds`` interleaved runs of each:
 - ``imu_filter``: the shipped ``imu_filter_node`` (the console script next
   to this interpreter, else ``python -m ext_observer.nodes.imu_filter_node``) with
   its defaults (``use_mag`` true);
-- with ``--floor``, ``step_only`` between them: :func:`step_only_node`, the
-  node cut down to the estimate's arithmetic (no input checks): what the
-  node's own checks cost is its CPU above this one's.
 
 All spin on the same executor (``--executor``, default ``events``, the
 node's default). The samples are the BROAD excerpt the tests replay
@@ -28,13 +25,13 @@ the medians against the goal, ``met`` or ``not met``: within
 :data:`NODE_GOAL` × the relay's.
 
 ``python -m bench.imu_filter_cpu relay --executor events`` runs the relay alone
-(SIGINT ends it); ``python -m bench.imu_filter_cpu step_only`` the floor.
+(SIGINT ends it). The ``step_only`` floor (``--floor``: the node cut down to the
+estimate's arithmetic) answered what the node's own checks cost
+(docs/compiled.md) and left; its code is this file at commit 7319e4b.
 """
 
 import argparse
 import glob
-import json
-import math
 import os
 import statistics
 import sys
@@ -43,9 +40,10 @@ import time
 
 import numpy as np
 
-from bench.machine import load, load_range
-from bench.procs import Child, REPO, reserved_domain_id, ros_env
-from bench.rosutil import EXECUTORS, make_executor, spin_until_shutdown
+from bench.machine import load, load_range, log, save_json
+from bench.procs import Child, cpu_seconds, installed_node, REPO, reserved_domain_id, ros_env
+from bench.rosutil import (EXECUTORS, make_executor, on_compiled_kernels, spin_until_shutdown,
+                           watch_kernels)
 
 DATA = os.path.join(REPO, 'test', 'data')
 # The raw-IMU node's speed goal: CPU per IMU sample (1 kHz IMU, 100 Hz field) within this
@@ -55,8 +53,6 @@ TARGETS = ('relay', 'imu_filter')
 # With --serialized: the relay on bytes (RawImuRelay) and the node
 # with serialized_io false, beside the two above.
 RAW_RELAY, TYPED = 'raw_relay', 'imu_filter_typed'
-# With --floor: a third target between them (see step_only_node).
-FLOOR = 'step_only'
 # Below this share of the samples coming back as outputs, a target (or the
 # driver) fell behind: a target that dropped samples did less work per
 # sample published, and the ratio is no longer a clean measure.
@@ -163,73 +159,6 @@ class RawImuRelay(ImuRelay):
             self.estimate_publisher.publish(self._head + raw[4:12] + self._tail)
 
 
-def step_only_node():
-    """
-    The node class of the ``step_only`` target: the estimate's arithmetic and nothing else.
-
-    ``imu_filter_node`` with its sample callback cut down to what no raw-IMU
-    node can leave out: the stamp, one compiled call of the estimator's
-    and the covariance's step (``sample_step``, the covariance written into
-    the message), and the two outputs (each while it has a subscriber, as
-    in the node); the field straight to the
-    estimator. No validation, no stamp checks, no unit checks, no
-    counters: not a node to run, a floor to measure the node's own checks
-    against (what they cost is the node's CPU above this one's).
-    """
-    from ext_observer.nodes.imu_filter_node import ImuFilterNode
-
-    class StepOnly(ImuFilterNode):
-
-        def __init__(self, *args, **kwargs):
-            super().__init__(*args, **kwargs)
-            self._previous = None
-            self._field_previous = None
-
-        def imu_data_raw_callback(self, msg):
-            stamp = msg.header.stamp
-            ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-            previous, self._previous = self._previous, ns
-            if previous is None:
-                return
-            dt = (ns - previous) * 1e-9
-            v, a = msg.angular_velocity, msg.linear_acceleration
-            estimator = self.pipeline.estimator
-            core, tracker = estimator.core, estimator.uncertainty
-            if core.q is None:
-                core.update((v.x, v.y, v.z), (a.x, a.y, a.z), estimator.latest_field, dt)
-                tracker.start(dt)
-                return
-            _, w, x, y, z = core.kernels.sample_step(
-                core.flat_state, tracker.state, msg.orientation_covariance, v.x, v.y, v.z,
-                a.x, a.y, a.z, dt, math.inf)
-            if self._publish_estimate:
-                out = self._estimate_msg
-                out.header.stamp = stamp
-                o = out.quaternion
-                o.w, o.x, o.y, o.z = w, x, y, z
-                self.estimate_publisher.publish(out)
-            if self._publish_imu:
-                n = (w * w + x * x + y * y + z * z) ** 0.5
-                o = msg.orientation
-                o.w, o.x, o.y, o.z = w / n, x / n, y / n, z / n
-                self.imu_publisher.publish(msg)
-
-        def imu_mag_callback(self, msg):
-            stamp = msg.header.stamp
-            ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-            previous, self._field_previous = self._field_previous, ns
-            f = msg.magnetic_field
-            self.pipeline.estimator.field(
-                (f.x, f.y, f.z), None if previous is None else (ns - previous) * 1e-9)
-
-    return StepOnly
-
-
-def _step_only_main(argv):
-    from ext_observer.nodes.node_common import run_node
-    return run_node(step_only_node(), argv)
-
-
 def _relay_main(argv):
     parser = argparse.ArgumentParser(prog='python -m bench.imu_filter_cpu relay')
     parser.add_argument('--executor', choices=EXECUTORS, default='events')
@@ -254,19 +183,9 @@ def target_args(label, executor):
         return ['-m', 'bench.imu_filter_cpu', 'relay', '--executor', executor]
     if label == RAW_RELAY:
         return ['-m', 'bench.imu_filter_cpu', 'relay', '--executor', executor, '--raw']
-    if label == FLOOR:
-        return ['-m', 'bench.imu_filter_cpu', FLOOR, '--executor', executor, '--ros-args', '-p',
-                'use_mag:=true']
-    script = os.path.join(os.path.dirname(sys.executable), 'imu_filter_node')
-    command = [script] if os.path.exists(script) else ['-m', 'ext_observer.nodes.imu_filter_node']
-    command += ['--executor', executor, '--ros-args', '-p', 'use_mag:=true']
+    command = installed_node('imu_filter_node') + [
+        '--executor', executor, '--ros-args', '-p', 'use_mag:=true']
     return command + (['-p', 'serialized_io:=false'] if label == TYPED else [])
-
-
-def _cpu_seconds(pid):
-    with open(f'/proc/{pid}/stat') as f:
-        fields = f.read().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def load_samples():
@@ -282,16 +201,13 @@ def load_samples():
     return np.concatenate(gyr), np.concatenate(acc), np.concatenate(mag)
 
 
-def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settle=False,
-            window=None):
+def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settle=False):
     """
     Publish into one target and return its CPU and output figures.
 
     With ``settle``, the window starts once the target's ``/diagnostics``
     says its kernels are no longer ``plain (...)``: a node that starts on the
-    plain kernels is measured as it runs for good. ``window(pid)``, if
-    given, is called with the target's pid as the publishing window opens
-    and again as it closes (:mod:`bench.profile_node` reads its threads).
+    plain kernels is measured as it runs for good.
 
     Returns
     -------
@@ -302,7 +218,6 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
 
     """
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Imu, MagneticField
     env = ros_env(domain_id)
@@ -322,8 +237,7 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
         # ones once loaded (compiled first where the cache is cold): measured
         # from then on, as it runs for good.
         kernels = []
-        node.create_subscription(DiagnosticArray, '/diagnostics', lambda msg: kernels.extend(
-            kv.value for st in msg.status for kv in st.values if kv.key == 'kernels'), 10)
+        watch_kernels(node, kernels)
         executor = make_executor('single', context)
         executor.add_node(node)
         stop = threading.Event()
@@ -338,7 +252,7 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
             time.sleep(0.05)
         if settle:
             deadline = time.monotonic() + 300.0
-            while not kernels or kernels[-1].startswith('plain ('):
+            while not on_compiled_kernels(kernels):
                 if time.monotonic() > deadline or child.proc.poll() is not None:
                     raise RuntimeError(f'the kernels did not settle: {child.log_tail()}')
                 time.sleep(0.05)
@@ -349,9 +263,7 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
         imu.header.frame_id = field.header.frame_id = 'imu_link'
         period = 1.0 / rate
         count = int(seconds * rate)
-        if window is not None:
-            window(child.proc.pid)
-        load_before, start_cpu = load(), _cpu_seconds(child.proc.pid)
+        load_before, start_cpu = load(), cpu_seconds(child.proc.pid)
         start = time.monotonic()
         stamp0 = time.time_ns()
         fields = 0
@@ -375,9 +287,7 @@ def measure(target, domain_id, samples, rate, mag_rate, seconds, log_path, settl
                 time.sleep(wait)
         elapsed = time.monotonic() - start
         time.sleep(0.5)
-        cpu = _cpu_seconds(child.proc.pid) - start_cpu
-        if window is not None:
-            window(child.proc.pid)
+        cpu = cpu_seconds(child.proc.pid) - start_cpu
         stop.set()
         spinner.join(timeout=2.0)
         return dict(cpu_us_per_sample=cpu / count * 1e6, samples=count, fields=fields,
@@ -440,16 +350,6 @@ def goal_line(result):
     return text
 
 
-def floor_line(result):
-    """The ``step_only`` floor against the relay and the node, or '' without it."""
-    m = result['medians']
-    if FLOOR not in m or not m.get('relay') or 'imu_filter' not in m:
-        return ''
-    return (f'{FLOOR} (the estimate\'s arithmetic alone, no input checks): '
-            f'{m[FLOOR] / m["relay"]:.2f}× the relay; the node\'s checks, stamps and '
-            f'counters: {m["imu_filter"] - m[FLOOR]:.0f} µs per sample more')
-
-
 # CPU per IMU sample of the node on bytes against the typed relay's, same run:
 # at most SERIALIZED_GOAL, SERIALIZED_AIM the aim.
 SERIALIZED_GOAL, SERIALIZED_AIM = 0.6, 0.4
@@ -494,7 +394,7 @@ def short_text(result):
 
 
 def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds=3,
-            log_dir=None, progress=None, floor=False, serialized=False):
+            log_dir=None, progress=None, serialized=False):
     """
     Run the relay and the node in interleaved rounds; return the runs and the verdict.
 
@@ -509,9 +409,7 @@ def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds
     samples = load_samples()
     # One run of one target varies by about ±10 % (the machine's other
     # work); interleaved rounds and medians keep the ratio steady.
-    targets = (TARGETS[0], FLOOR, TARGETS[1]) if floor else TARGETS
-    if serialized:
-        targets = (TARGETS[0], RAW_RELAY, TYPED, TARGETS[1])
+    targets = (TARGETS[0], RAW_RELAY, TYPED, TARGETS[1]) if serialized else TARGETS
     runs = {label: [] for label in targets}
     for round_ in range(rounds):
         for index, label in enumerate(targets):
@@ -531,18 +429,16 @@ def compare(executor='events', rate=1000.0, mag_rate=100.0, seconds=10.0, rounds
 
 def table(result):
     """The printed table of one :func:`compare`."""
-    lines = [f'| target ({result["executor"]}) | CPU µs per IMU sample, median (runs) | '
-             'samples | fields | outputs received | achieved rate (Hz) |',
-             '|---|---|---|---|---|---|']
-    for label, rows in result['runs'].items():
-        cpu = [r['cpu_us_per_sample'] for r in rows]
-        last = rows[-1]
-        lines.append(
-            f'| {label} | {result["medians"][label]:.1f} '
-            f'({", ".join(f"{c:.0f}" for c in cpu)}) | {last["samples"]} | '
-            f'{last["fields"]} | {min(r["outputs"] for r in rows)} | '
-            f'{min(r["achieved_rate_hz"] for r in rows):.0f} |')
-    return '\n'.join(lines)
+    from docgen.markdown import table as markdown_table
+    rows = []
+    for label, runs in result['runs'].items():
+        cpu = ', '.join(f'{r["cpu_us_per_sample"]:.0f}' for r in runs)
+        rows.append([label, f'{result["medians"][label]:.1f} ({cpu})', runs[-1]['samples'],
+                     runs[-1]['fields'], min(r['outputs'] for r in runs),
+                     f'{min(r["achieved_rate_hz"] for r in runs):.0f}'])
+    return markdown_table([f'target ({result["executor"]})',
+                           'CPU µs per IMU sample, median (runs)', 'samples', 'fields',
+                           'outputs received', 'achieved rate (Hz)'], rows)
 
 
 def main(argv=None):
@@ -550,8 +446,6 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ['relay']:
         return _relay_main(argv[1:])
-    if argv[:1] == [FLOOR]:
-        return _step_only_main(argv[1:])
     parser = argparse.ArgumentParser(prog='python -m bench.imu_filter_cpu')
     parser.add_argument('--rate', type=float, default=1000.0, help='IMU rate, Hz')
     parser.add_argument('--mag-rate', type=float, default=100.0, help='field rate, Hz')
@@ -559,8 +453,6 @@ def main(argv=None):
     parser.add_argument('--rounds', type=int, default=3,
                         help='runs of each target, interleaved (relay, imu_filter, relay, ...)')
     parser.add_argument('--executor', choices=EXECUTORS, default='events')
-    parser.add_argument('--floor', action='store_true',
-                        help=f'also the {FLOOR} target: the estimate\'s arithmetic alone')
     parser.add_argument('--serialized', action='store_true',
                         help=f'also {RAW_RELAY} (the relay on bytes) and {TYPED} (the node '
                              'with serialized_io false)')
@@ -570,18 +462,13 @@ def main(argv=None):
     if args.rounds < 1:
         parser.error('--rounds must be at least 1')
     result = compare(args.executor, args.rate, args.mag_rate, args.seconds, args.rounds,
-                     args.log_dir, lambda text: print(text, file=sys.stderr, flush=True),
-                     floor=args.floor, serialized=args.serialized)
+                     args.log_dir, log, serialized=args.serialized)
     print(table(result))
     print()
     print(goal_line(result))
-    if floor_line(result):
-        print(floor_line(result))
     for line in ratios_lines(result):
         print(line)
-    if args.json:
-        with open(args.json, 'w') as out:
-            json.dump(result, out, indent=1)
+    save_json(args.json, result)
     return 0
 
 

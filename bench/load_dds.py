@@ -38,13 +38,22 @@ import time
 import numpy as np
 
 from bench.machine import load
-from bench.procs import Child, reserved_domain_id, ros_env
+from bench.procs import Child, cpu_seconds, installed_node, reserved_domain_id, ros_env
+from bench.rosutil import on_compiled_kernels, watch_kernels
 
 SPEEDS = (1.0, 2.0, 4.0)
 # 'imu': a field after every IMU sample, with its stamp; a number: Hz.
 FIELD_RATES = ('imu', 100.0)
 LOADS = ('idle', 'busy')
 MODES = ('9D', '6D')
+# What the node should do with every core busy (the done-criteria of the
+# load benchmark): answered over the movement samples, at these speeds...
+ANSWERED_LIMIT = 0.99
+ANSWERED_SPEEDS = (1.0, 2.0)
+# ... its error over them against the batch run's, and e²/σ²'s range.
+ERROR_RATIO_LIMIT = 1.5
+ERROR_RATIO_GOAL = 1.2
+Z2_RANGE = (0.3, 3.0)
 # Above this share of samples lost, /diagnostics should say WARN.
 WARN_SHARE = 0.01
 # A case's output is over once no imu/data came for this long, s.
@@ -355,13 +364,6 @@ def analyze(trial, mode, outputs, statuses, reference):
 
 # --- the processes -----------------------------------------------------------
 
-def cpu_seconds(pid):
-    """utime + stime of a process, s (``/proc/<pid>/stat``)."""
-    with open(f'/proc/{pid}/stat') as f:
-        fields = f.read().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-
-
 @contextlib.contextmanager
 def busy_cores(seconds, cores=None):
     """
@@ -388,10 +390,8 @@ def busy_cores(seconds, cores=None):
 
 def node_command(mode):
     """The installed ``imu_filter_node`` (beside this interpreter), ``use_mag`` by ``mode``."""
-    script = os.path.join(os.path.dirname(sys.executable), 'imu_filter_node')
-    command = ([script] if os.path.exists(script)
-               else [sys.executable, '-m', 'ext_observer.nodes.imu_filter_node'])
-    return command + ['--ros-args', '-p', f'use_mag:={"true" if mode == "9D" else "false"}']
+    return installed_node('imu_filter_node') + [
+        '--ros-args', '-p', f'use_mag:={"true" if mode == "9D" else "false"}']
 
 
 def guarded(command):
@@ -453,7 +453,6 @@ def run_case(messages, trial_rate, mode, speed, busy, log_dir, index=0, settle=T
 
     """
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Imu, MagneticField
@@ -482,9 +481,7 @@ def run_case(messages, trial_rate, mode, speed, busy, log_dir, index=0, settle=T
         imu_pub = driver.create_publisher(Imu, 'imu/data_raw', qos_profile_sensor_data)
         mag_pub = driver.create_publisher(MagneticField, 'imu/mag', qos_profile_sensor_data)
         kernels = []
-        watch = driver.create_subscription(
-            DiagnosticArray, '/diagnostics', lambda msg: kernels.extend(
-                kv.value for st in msg.status for kv in st.values if kv.key == 'kernels'), 10)
+        watch = watch_kernels(driver, kernels)
         recorder.expect('ready', START_TIMEOUT)
 
         def connected():
@@ -496,7 +493,7 @@ def run_case(messages, trial_rate, mode, speed, busy, log_dir, index=0, settle=T
         _wait_for(connected, executor, (node, recorder), START_TIMEOUT, 'connection')
         if settle:
             # Measured as it runs for good: once the compiled kernels are in.
-            _wait_for(lambda: kernels and not kernels[-1].startswith('plain ('), executor,
+            _wait_for(lambda: on_compiled_kernels(kernels), executor,
                       (node, recorder), SETTLE_TIMEOUT, 'compiled kernels')
         driver.destroy_subscription(watch)
         executor.spin_once(timeout_sec=0.5)  # the node sees the recorder's match

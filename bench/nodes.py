@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from bench.procs import Child, children, reserved_domain_id, ros_env
+from bench.procs import Child, children, cpu_seconds, reserved_domain_id, ros_env
 
 RATES = (250, 500, 1000, 2000, 3000, 4000, 6000, 8000, 10000)  # Hz
 SEGMENT_SECONDS = 2.0
@@ -32,7 +32,6 @@ SUSTAINED_MEDIAN_MS = 5.0
 DIAGNOSTIC_WAIT = 0.25  # s
 # Stop a target's sweep after this many consecutive unsustained rates.
 STOP_AFTER_FAILURES = 2
-_CLOCK_TICK = os.sysconf('SC_CLK_TCK')
 
 
 class Target:
@@ -101,16 +100,6 @@ def relay_targets(executors=('single', 'multi', 'events'), polling=True,
             note=f'PollingRelay: one timer every {ms} ms takes all waiting '
                  'messages; queue depth 100'))
     return targets
-
-
-def _cpu_seconds(pid):
-    """User + system CPU time of a process, s (None when it is gone)."""
-    try:
-        with open(f'/proc/{pid}/stat') as stat:
-            fields = stat.read().rsplit(')', 1)[1].split()
-    except OSError:
-        return None
-    return (int(fields[11]) + int(fields[12])) / _CLOCK_TICK
 
 
 def analyze(stamps, published, est_stamps, arrived, stamp_offset, rate):
@@ -201,12 +190,12 @@ def _segment(target, node, driver, probe, rate, seconds, tmp):
     before = _counters(ppath)
     pids = {'node': node.proc.pid, 'driver': driver.proc.pid,
             'probe': probe.proc.pid}
-    cpu0 = {name: _cpu_seconds(pid) for name, pid in pids.items()}
+    cpu0 = {name: cpu_seconds(pid) for name, pid in pids.items()}
     driver.send(f'run {rate} {seconds} {dpath}')
     words = driver.expect('done', 3 * seconds + 20).split()
     steps, achieved = int(words[0]), float(words[1])
     _drain(probe, steps)
-    cpu1 = {name: _cpu_seconds(pid) for name, pid in pids.items()}
+    cpu1 = {name: cpu_seconds(pid) for name, pid in pids.items()}
     cpu = {name: None if cpu0[name] is None or cpu1[name] is None
            else 1e6 * (cpu1[name] - cpu0[name]) / steps for name in pids}
     time.sleep(DIAGNOSTIC_WAIT)

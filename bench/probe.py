@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from bench.rosutil import (EXECUTORS, make_executor, raw_stamp_ns,
-                           spin_until_shutdown)
+from bench.rosutil import (EXECUTORS, make_executor, raw_stamp_ns, serve_lines,
+                           spin_until_shutdown, wait_until)
 
 
 class Probe:
@@ -73,36 +73,20 @@ class Probe:
 
     def match(self, timeout):
         """Wait for a publisher of the topic; return success."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.node.count_publishers(self.topic) > 0:
-                return True
-            time.sleep(0.02)
-        return False
+        return wait_until(lambda: self.node.count_publishers(self.topic) > 0, timeout)
 
 
 def _serve(probe, stop):
+    def count(words):
+        with probe.lock:
+            print(f'count {len(probe.arrived)}', flush=True)
+
+    def dump(words):
+        stamps, arrived = probe.take()
+        np.savez(words[1], stamps=stamps, arrived=arrived, counters=json.dumps(probe.counters))
+        print(f'dumped {len(stamps)}', flush=True)
     try:
-        for line in sys.stdin:
-            words = line.split()
-            if not words:
-                continue
-            if words[0] == 'quit':
-                break
-            if words[0] == 'match':
-                ok = probe.match(float(words[1]))
-                print('matched' if ok else 'unmatched', flush=True)
-            elif words[0] == 'count':
-                with probe.lock:
-                    count = len(probe.arrived)
-                print(f'count {count}', flush=True)
-            elif words[0] == 'dump':
-                stamps, arrived = probe.take()
-                np.savez(words[1], stamps=stamps, arrived=arrived,
-                         counters=json.dumps(probe.counters))
-                print(f'dumped {len(stamps)}', flush=True)
-            else:
-                print(f'error unknown command {words[0]!r}', flush=True)
+        serve_lines({'count': count, 'dump': dump}, probe.match)
     finally:
         stop.set()
 

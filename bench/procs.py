@@ -6,7 +6,8 @@ LOCALHOST`` and a ``ROS_DOMAIN_ID`` reserved here in the benchmark range
 (40–60), with the port convention of ``domain_coordinator`` (a TCP port
 bound at 32768 + id) so that concurrent test runs that use it never pick
 the same id. Children start in their own session so that the whole group
-can be ended, also when the benchmark fails.
+can be ended, also when the benchmark fails. A process's CPU time comes
+from psutil (:func:`cpu_seconds`).
 """
 
 import contextlib
@@ -18,6 +19,8 @@ import subprocess
 import sys
 import threading
 import time
+
+import psutil
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOMAIN_RANGE = range(40, 61)
@@ -55,6 +58,22 @@ def reserved_domain_id(start=0):
             sock.close()
         return
     raise RuntimeError(f'no free ROS_DOMAIN_ID in {DOMAIN_RANGE}')
+
+
+def cpu_seconds(pid):
+    """User + system CPU time of a process (all its threads), s; None when it is gone."""
+    try:
+        times = psutil.Process(pid).cpu_times()
+    except psutil.Error:
+        return None
+    return times.user + times.system
+
+
+def installed_node(name):
+    """The command of the package's executable ``name``: its script beside this Python, or ``-m``."""
+    script = os.path.join(os.path.dirname(sys.executable), name)
+    return [script] if os.path.exists(script) else [sys.executable, '-m',
+                                                   f'ext_observer.nodes.{name}']
 
 
 def ros_env(domain_id):

@@ -17,11 +17,9 @@ Two measurements, each in a child process with its own ROS domain:
     in the node's callbacks.
 
 Run by ``python -m bench`` (see :func:`profile_direct`, :func:`profile_loop`).
-``python -m bench.profile_node imu [--rounds N] [--seconds S]``: the raw-IMU
-node on both paths beside the typed and the serialized relay, each fed at
-1 kHz IMU and 100 Hz field, its CPU per sample split by thread
-(:func:`imu_threads`), and the serialized callbacks called directly under
-cProfile (:func:`imu_direct`).
+The raw-IMU node's CPU split by thread (``python -m bench.profile_node imu``)
+answered where its time goes (docs/nodes.md) and left; its code is this file at
+commit 7319e4b.
 """
 
 import argparse
@@ -29,7 +27,6 @@ import cProfile
 import json
 import os
 import pstats
-import statistics
 import sys
 import tempfile
 import threading
@@ -39,21 +36,11 @@ from bench.numpy_use import numpy_use_per_step
 from bench.procs import Child, children, reserved_domain_id, ros_env
 from bench.rosutil import (EXECUTORS, make_executor, set_stamp,
                            spin_until_shutdown)
+from bench.timing import best_pass, best_seconds, top_functions
 
 DIRECT_STEPS = 5000
 LOOP_RATE = 1000  # Hz
 LOOP_SECONDS = 2.0
-
-
-def _best_per_call(function, calls, repeat=5):
-    """Best of ``repeat`` runs of ``calls`` calls, µs per call."""
-    best = float('inf')
-    for _ in range(repeat):
-        start = time.perf_counter()
-        for _ in range(calls):
-            function()
-        best = min(best, (time.perf_counter() - start) / calls)
-    return best * 1e6
 
 
 def _messages(steps, start, period_ns=1_000_000):
@@ -97,7 +84,6 @@ PARTS = {
     'publish': ('publisher.py', 'publish'),
     'clock_now': ('clock.py', 'now'),
 }
-TOP_FUNCTIONS = 10
 
 
 def direct(steps=DIRECT_STEPS):
@@ -134,26 +120,20 @@ def direct(steps=DIRECT_STEPS):
         # Warm up, then the best of three passes; stamps go on across passes.
         profiled_steps = 1000
         *timed, profiled = _passes(5, steps)
-        runs = [_run_pairs(node.increment_callback, node.measurement_callback,
-                           pairs) for pairs in timed]
-        result['observer_callbacks'] = min(runs[1:])
-        runs = [_run_pairs(relay.increment_callback, relay.measurement_callback,
-                           pairs) for pairs in _passes(4, steps)]
-        result['relay_callbacks'] = min(runs[1:])
+        pairs = iter(timed)
+        result['observer_callbacks'] = best_pass(lambda: _run_pairs(
+            node.increment_callback, node.measurement_callback, next(pairs)), 4)
+        pairs = iter(_passes(4, steps))
+        result['relay_callbacks'] = best_pass(lambda: _run_pairs(
+            relay.increment_callback, relay.measurement_callback, next(pairs)), 4)
         profile = cProfile.Profile()
         profile.runcall(_run_pairs, node.increment_callback,
                         node.measurement_callback, profiled[:profiled_steps])
-        stats = pstats.Stats(profile).stats
-        calls_per_step, own = dict.fromkeys(PARTS, 0.0), []
-        for (path, _, name), (_, calls, tottime, _, _) in stats.items():
-            label = f'{os.path.basename(path)}:{name}' if path != '~' else name
+        calls_per_step = dict.fromkeys(PARTS, 0.0)
+        for (path, _, name), (_, calls, _, _, _) in pstats.Stats(profile).stats.items():
             for key, (ending, function) in PARTS.items():
                 if name == function and path.endswith(ending):
                     calls_per_step[key] += calls / profiled_steps
-            if name not in ('_run_pairs', "<method 'disable' of "
-                            "'_lsprof.Profiler' objects>"):
-                own.append((tottime / profiled_steps * 1e6, label,
-                            calls / profiled_steps))
         # Which functions use numpy, by what their calls do (not by module),
         # on the next steps of the same pass.
         result['numpy_use_per_step'] = numpy_use_per_step(
@@ -161,24 +141,23 @@ def direct(steps=DIRECT_STEPS):
             profiled[profiled_steps:2 * profiled_steps])
         result['numpy_use_steps'] = profiled_steps
         result['calls_per_step'] = calls_per_step
-        result['top'] = [{'function': label, 'own_us': us, 'calls': calls}
-                         for us, label, calls in sorted(own, reverse=True)
-                         [:TOP_FUNCTIONS]]
+        result['top'] = top_functions(profile, profiled_steps, skip=(
+            '_run_pairs', "<method 'disable' of '_lsprof.Profiler' objects>"))
         observer = SingleObserver()
         increment, measurement = (0.001, -0.002, 0.003), (1.0, 0.0, 0.0, 0.0)
-        result['core_step'] = _best_per_call(
-            lambda: observer.step(increment, measurement), steps)
+        result['core_step'] = 1e6 * best_seconds(
+            lambda: observer.step(increment, measurement), steps, 5)
         state = observer.state
-        result['numpy_normalize'] = _best_per_call(
-            lambda: normalize(np.asarray(state)), steps)
+        result['numpy_normalize'] = 1e6 * best_seconds(
+            lambda: normalize(np.asarray(state)), steps, 5)
         msg = quaternion_stamped(state, time.time_ns(), 'world')
-        result['build_message'] = _best_per_call(
-            lambda: quaternion_stamped(state, 1_000_000_000, 'world'), steps)
-        result['publish'] = _best_per_call(
-            lambda: node.estimate_publisher.publish(msg), steps)
+        result['build_message'] = 1e6 * best_seconds(
+            lambda: quaternion_stamped(state, 1_000_000_000, 'world'), steps, 5)
+        result['publish'] = 1e6 * best_seconds(
+            lambda: node.estimate_publisher.publish(msg), steps, 5)
         clock = node.get_clock()
-        result['clock_now'] = _best_per_call(lambda: clock.now().nanoseconds,
-                                             steps)
+        result['clock_now'] = 1e6 * best_seconds(lambda: clock.now().nanoseconds,
+                                                   steps, 5)
         node.destroy_node()
         relay.node.destroy_node()
     finally:
@@ -391,177 +370,16 @@ def profile_loop(executor='single', index=0, rate=LOOP_RATE,
         return result
 
 
-# The raw-IMU targets of bench.imu_filter_cpu whose threads imu_threads() splits.
-IMU_TARGETS = ('relay', 'raw_relay', 'imu_filter_typed', 'imu_filter')
-IMU_DIRECT_SAMPLES = 5000
-
-
-def thread_cpu(pid):
-    """
-    CPU seconds (user + system) of each thread of ``pid``, added up by kind.
-
-    The process's main thread (named after the executable) is ``main``;
-    Fast DDS's threads keep their names less the numbers (``dds.shm``,
-    ``dds.ev``, ``dds.udp``...).
-    """
-    tick = os.sysconf('SC_CLK_TCK')
-    seconds = {}
-    for tid in os.listdir(f'/proc/{pid}/task'):
-        try:
-            with open(f'/proc/{pid}/task/{tid}/stat') as stat:
-                text = stat.read()
-        except OSError:
-            continue
-        name = text[text.index('(') + 1:text.rindex(')')]
-        kind = 'main' if tid == str(pid) else '.'.join(
-            part for part in name.split('.') if not part.isdigit())
-        fields = text.rsplit(')', 1)[1].split()
-        seconds[kind] = seconds.get(kind, 0.0) + (int(fields[11]) + int(fields[12])) / tick
-    return seconds
-
-
-def imu_threads(labels=IMU_TARGETS, rate=1000.0, mag_rate=100.0, seconds=8.0, rounds=1,
-                log_dir=None):
-    """
-    CPU per IMU sample of each raw-IMU target by thread, fed by bench.imu_filter_cpu's driver.
-
-    Returns
-    -------
-    result : dict
-        ``{label: [{thread kind: µs per sample}, ...]}``, one dict per round
-        (``total`` the whole process's, as bench.imu_filter_cpu measures it).
-
-    """
-    from bench.imu_filter_cpu import load_samples, measure, RAW_RELAY, target_args
-    samples = load_samples()
-    result = {label: [] for label in labels}
-    with tempfile.TemporaryDirectory(prefix='bench-') as tmp:
-        for _ in range(rounds):
-            for index, label in enumerate(labels):
-                snapshots = []
-                with reserved_domain_id(index) as domain_id:
-                    run = measure(target_args(label, 'events'), domain_id, samples, rate,
-                                  mag_rate, seconds,
-                                  os.path.join(log_dir or tmp, f'threads-{label}.log'),
-                                  settle=label not in ('relay', RAW_RELAY),
-                                  window=lambda pid: snapshots.append(thread_cpu(pid)))
-                before, after = snapshots
-                per = {kind: (after[kind] - before.get(kind, 0.0)) / run['samples'] * 1e6
-                       for kind in after}
-                per['total'] = run['cpu_us_per_sample']
-                result[label].append(per)
-    return result
-
-
-def imu_direct(samples=IMU_DIRECT_SAMPLES):
-    """
-    imu_filter_node's serialized callbacks called directly with prepared bytes.
-
-    Publishing is a no-op (the messages are built, not sent); 1 kHz stamps, a
-    field every tenth sample, the BROAD excerpt of bench.imu_filter_cpu; the
-    compiled kernels once loaded.
-
-    Returns
-    -------
-    result : dict
-        ``callbacks`` (µs per IMU sample, the best of 3 passes) and ``top``:
-        the functions with the most own time per sample under cProfile.
-
-    """
-    import rclpy
-    from rclpy.context import Context
-
-    from bench.imu_filter_cpu import load_samples
-    from ext_observer.nodes.imu_filter_node import ImuFilterNode
-    from ext_observer.recordings import cdr
-    gyr, acc, mag = load_samples()
-    context = Context()
-    rclpy.init(context=context)
-    try:
-        node = ImuFilterNode(context=context)
-        deadline = time.monotonic() + 120.0
-        while node.compiler is not None and time.monotonic() < deadline:
-            node.compile_timer_callback()
-            time.sleep(0.05)
-
-        class _Discard:
-            def publish(self, msg):
-                pass
-        node.estimate_publisher = node.imu_publisher = _Discard()
-        node._publish_imu = True
-        start = time.time_ns()
-
-        def messages(index):
-            first = start + index * samples * 1_000_000
-            return [(cdr.encode_field(first + k * 1_000_000, 'imu', tuple(mag[k % len(mag)]))
-                     if k % 10 == 0 else None,
-                     cdr.encode_imu(first + k * 1_000_000, 'imu', tuple(gyr[k % len(gyr)]),
-                                    tuple(acc[k % len(acc)]))) for k in range(samples)]
-
-        def one_pass(data):
-            began = time.perf_counter()
-            for field, imu in data:
-                if field is not None:
-                    node.imu_mag_serialized_callback(field)
-                node.imu_data_raw_serialized_callback(imu)
-            return (time.perf_counter() - began) / samples * 1e6
-        best = min(one_pass(messages(index)) for index in range(3))
-        data = messages(3)
-        profile = cProfile.Profile()
-        profile.runcall(one_pass, data)
-        own = [(tottime / samples * 1e6, f'{os.path.basename(path)}:{name}', calls / samples)
-               for (path, _, name), (_, calls, tottime, _, _) in
-               pstats.Stats(profile).stats.items() if name not in ('one_pass', '<listcomp>')]
-        node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
-    return {'callbacks': best, 'top': [
-        {'function': label, 'own_us': us, 'calls': calls}
-        for us, label, calls in sorted(own, reverse=True)[:TOP_FUNCTIONS]]}
-
-
-def imu_report(threads, direct):
-    """The two tables of the raw-IMU profile, as Markdown."""
-    kinds = sorted({kind for rows in threads.values() for per in rows for kind in per},
-                   key=lambda kind: (kind != 'total', kind != 'main', kind))
-    lines = ['| µs per IMU sample (median of rounds) | ' + ' | '.join(threads) + ' |',
-             '|---|' + '---|' * len(threads)]
-    for kind in kinds:
-        if not any(per.get(kind, 0.0) for rows in threads.values() for per in rows):
-            continue
-        cells = [f'{statistics.median(per.get(kind, 0.0) for per in rows):.1f}'
-                 for rows in threads.values()]
-        lines.append(f'| {kind} | ' + ' | '.join(cells) + ' |')
-    lines += ['', f'imu_filter_node\'s serialized callbacks called directly: '
-              f'{direct["callbacks"]:.1f} µs per IMU sample; own time under cProfile:', '',
-              '| function | own µs per sample | calls per sample |', '|---|---|---|']
-    lines += [f'| `{row["function"]}` | {row["own_us"]:.2f} | {row["calls"]:.2f} |'
-              for row in direct['top']]
-    return '\n'.join(lines)
-
-
 def main(argv=None):
-    """Child entry point: ``direct`` or ``loop``; ``imu`` prints the raw-IMU profile."""
+    """Child entry point: ``direct`` or ``loop``."""
     parser = argparse.ArgumentParser(prog='python -m bench.profile_node')
-    parser.add_argument('mode', choices=('direct', 'loop', 'imu'))
-    parser.add_argument('--rounds', type=int, default=1, help='imu: rounds of the targets')
-    parser.add_argument('--out')
+    parser.add_argument('mode', choices=('direct', 'loop'))
+    parser.add_argument('--out', required=True)
     parser.add_argument('--executor', choices=EXECUTORS, default='single')
     parser.add_argument('--seconds', type=float, default=LOOP_SECONDS)
     parser.add_argument('--node', choices=('observer', 'relay'),
                         default='observer')
     args = parser.parse_args(argv)
-    if args.mode == 'imu':
-        threads = imu_threads(seconds=args.seconds if args.seconds != LOOP_SECONDS else 8.0,
-                              rounds=args.rounds)
-        text = imu_report(threads, imu_direct())
-        print(text)
-        if args.out:
-            with open(args.out, 'w') as out:
-                out.write(text + '\n')
-        return 0
-    if args.out is None:
-        parser.error('--out is needed')
     if args.mode == 'direct':
         result = direct()
         with open(args.out, 'w') as out:

@@ -12,19 +12,24 @@ work. Beside them, each part timed alone: the node's ROS-free pipeline
 (:class:`~ext_observer.pipeline.raw_imu.RawImuPipeline`: input checks, stamps, the
 estimator), the core's float step
 (:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`), one real ``publish`` of
-each output with no subscriber; and the functions on the callbacks' path
-that use numpy (:mod:`bench.numpy_use`). Each figure is the best of a few
-passes, µs per IMU sample. Run in a child process by ``python -m bench``.
+each output with no subscriber; the functions on the callbacks' path
+that use numpy (:mod:`bench.numpy_use`); and the functions with the most own
+time in the callbacks on bytes under cProfile. Each figure is the best of a
+few passes (:mod:`bench.timing`), µs per IMU sample. Run in a child process
+by ``python -m bench``.
 """
 
 import argparse
-import json
+import cProfile
 import sys
 import time
 
-from bench.numpy_use import numpy_use_per_step
 from bench.imu_filter_cpu import ImuRelay, load_samples, RawImuRelay
+from bench.machine import save_json
+from bench.numpy_use import numpy_use_per_step
 from bench.rosutil import set_stamp
+from bench.timing import best_pass, best_seconds, top_functions
+from docgen.markdown import table
 
 SAMPLES = 5000
 RATE = 1000  # Hz
@@ -148,9 +153,10 @@ def direct(count=SAMPLES):
         call: ``publish_imu``,
         ``publish_estimate``; ``outputs_per_sample`` of each node (2 when
         both outputs were built); ``numpy_use_per_sample``
-        (:func:`bench.numpy_use.numpy_use_per_step`); ``samples``;
-        ``compiled`` (the node went on with the compiled kernels before
-        the timing).
+        (:func:`bench.numpy_use.numpy_use_per_step`); ``top``, the functions
+        with the most own time per sample in the callbacks on bytes under
+        cProfile; ``samples``; ``compiled`` (the node went on with the
+        compiled kernels before the timing).
 
     """
     import rclpy
@@ -193,42 +199,35 @@ def direct(count=SAMPLES):
                  True)):
             before = silent[label].count
             convert = _serialized if bytes_in else list
-            runs = [_feed(imu_callback, mag_callback,
-                          convert(_messages(lines[label].inputs())))
-                    for _ in range(PASSES)]
-            result[f'{label}_callbacks'] = min(runs[1:])
+            result[f'{label}_callbacks'] = best_pass(lambda: _feed(
+                imu_callback, mag_callback, convert(_messages(lines[label].inputs()))), PASSES)
             result.setdefault('outputs_per_sample', {})[label] = (
                 (silent[label].count - before) / (PASSES * count))
+        profile = cProfile.Profile()
+        profile.runcall(_feed, node.imu_data_raw_serialized_callback,
+                        node.imu_mag_serialized_callback,
+                        _serialized(_messages(lines['imu_filter'].inputs())))
+        result['top'] = top_functions(profile, count, skip=('_feed', '<listcomp>'))
         result['numpy_use_per_sample'] = numpy_use_per_step(
             count, _feed, node.imu_data_raw_callback, node.imu_mag_callback,
             _messages(lines['imu_filter'].inputs()))
         settings = node.parameters.settings
         pipeline = RawImuPipeline(settings, depth=settings['queue_depth'])
-        result['pipeline'] = min([_feed_pipeline(pipeline, lines['parts'].inputs())
-                                  for _ in range(PASSES)][1:])
+        result['pipeline'] = best_pass(
+            lambda: _feed_pipeline(pipeline, lines['parts'].inputs()), PASSES)
         core = AhrsObserver(node.observer.params, use_mag=True)
-        result['core'] = min([_feed_core(core, lines['parts'].inputs())
-                              for _ in range(PASSES)][1:])
+        result['core'] = best_pass(lambda: _feed_core(core, lines['parts'].inputs()), PASSES)
         imu, _ = _messages(lines['parts'].inputs()[:1])[0]
         estimate = node._estimate_msg
-        result['publish_imu'] = _best(lambda: real_imu(imu), count)
-        result['publish_estimate'] = _best(lambda: real_estimate(estimate), count)
+        result['publish_imu'] = 1e6 * best_seconds(lambda: real_imu(imu), count, PASSES)
+        result['publish_estimate'] = 1e6 * best_seconds(lambda: real_estimate(estimate), count,
+                                                        PASSES)
         node.destroy_node()
         relay.node.destroy_node()
         raw_relay.node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
     return result
-
-
-def _best(function, calls, repeat=PASSES):
-    best = float('inf')
-    for _ in range(repeat):
-        start = time.perf_counter()
-        for _ in range(calls):
-            function()
-        best = min(best, (time.perf_counter() - start) / calls)
-    return best * 1e6
 
 
 def main(argv=None):
@@ -243,9 +242,11 @@ def main(argv=None):
                 'raw_relay_callbacks', 'pipeline', 'core', 'publish_imu', 'publish_estimate'):
         print(f'{key}: {result[key]:.1f} µs')
     print(f'numpy on the callbacks\' path: {result["numpy_use_per_sample"] or "none"}')
-    if args.json:
-        with open(args.json, 'w') as out:
-            json.dump(result, out, indent=1)
+    print('own time under cProfile, callbacks on bytes:')
+    print(table(['function', 'own µs per sample', 'calls per sample'],
+                [[f'`{row["function"]}`', f'{row["own_us"]:.2f}', f'{row["calls"]:.2f}']
+                 for row in result['top']]))
+    save_json(args.json, result)
     return 0
 
 

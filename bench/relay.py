@@ -43,11 +43,16 @@ class RelayNode:
         self.steps = 0
         self.estimate_publisher = self.node.create_publisher(
             QuaternionStamped, 'attitude_estimate', depth)
-        self.increment_subscription = self.node.create_subscription(
+        inputs = self._inputs_node(context)
+        self.increment_subscription = inputs.create_subscription(
             Vector3Stamped, 'gyro/increment', self.increment_callback, depth)
-        self.measurement_subscription = self.node.create_subscription(
+        self.measurement_subscription = inputs.create_subscription(
             QuaternionStamped, 'attitude/measurement', self.measurement_callback,
             depth)
+
+    def _inputs_node(self, context):
+        """The node the subscriptions belong to: the relay's own."""
+        return self.node
 
     @staticmethod
     def _key(msg):
@@ -110,22 +115,14 @@ class PollingRelay(RelayNode):
     """
 
     def __init__(self, context, depth=100, period=0.001):
-        from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-        from rclpy.node import Node
-        self.node = Node('relay', context=context)
-        self.inputs = Node('relay_inputs', context=context)
-        self._out = QuaternionStamped
-        self.increments = {}
-        self.measurements = {}
-        self.steps = 0
-        self.estimate_publisher = self.node.create_publisher(
-            QuaternionStamped, 'attitude_estimate', depth)
-        self.increment_subscription = self.inputs.create_subscription(
-            Vector3Stamped, 'gyro/increment', self.increment_callback, depth)
-        self.measurement_subscription = self.inputs.create_subscription(
-            QuaternionStamped, 'attitude/measurement', self.measurement_callback,
-            depth)
+        super().__init__(context, depth)
         self.poll_timer = self.node.create_timer(period, self.poll_callback)
+
+    def _inputs_node(self, context):
+        """A second node, which no executor spins: the timer takes its messages."""
+        from rclpy.node import Node
+        self.inputs = Node('relay_inputs', context=context)
+        return self.inputs
 
     def poll_callback(self):
         """Take and pair every waiting increment and measurement."""

@@ -15,9 +15,11 @@ import time
 import types
 
 import numpy as np
+import psutil
 import pytest
 
 from bench import load, load_dds
+from docgen import load_page
 from ext_observer.broad.data import shown_command
 from bench.procs import REPO
 from ext_observer.broad.data import Trial
@@ -116,7 +118,7 @@ def _results(rows, **more):
     results = {'machine': {'commit': 'abc1234', 'date': 'today', 'cores': 2, 'cpu': 'cpu',
                            'python': '3', 'numpy': '2', 'rclpy': '7', 'rmw': 'rmw',
                            'load_start': 1.0, 'load_end': 2.0},
-               'command': shown_command(['python -m bench.load', '--dds-only', '--json', os.path.join(
+               'command': shown_command(['python -m bench.load', '--json', os.path.join(
                    REPO, 'out', 'load.json')]),
                'seconds': 12.0,
                'dds': {'trial': {'name': '07_made_up', 'samples': COUNT, 'rate': RATE,
@@ -135,7 +137,7 @@ def _rows():
 
 
 def test_the_page_holds_every_case_the_verdicts_and_no_path_of_this_machine():
-    page = load.render(_results(_rows()))
+    page = load_page.render(_results(_rows()))
     lines = page.splitlines()
     table = [line for line in lines if line.startswith('| busy') or line.startswith('| idle')]
     assert len(table) == 2
@@ -144,16 +146,7 @@ def test_the_page_holds_every_case_the_verdicts_and_no_path_of_this_machine():
     assert any('lowest 62.5 %, **not met**' in line for line in lines)
     assert 'out/load.json' in page
     assert REPO not in page
-    assert 'Not run (`--dds-only`)' in page
-
-
-def test_the_batch_half_is_rendered_by_its_own_module_or_said_missing(monkeypatch):
-    monkeypatch.setattr(load, 'batch_half', lambda: (None, lambda rows: f'BATCH {len(rows)}'))
-    page = load.render(_results(_rows(), batch={'rows': [{}, {}]}))
-    assert 'BATCH 2' in page
-    monkeypatch.setattr(load, 'batch_half', lambda: None)
-    page = load.render(_results(_rows(), batch={'rows': [{}, {}]}))
-    assert 'BATCH' not in page and 'not in this tree' in page
+    assert 'raw_imu.md#holes-in-the-stream' in page
 
 
 def test_the_busy_loops_end_by_themselves_and_with_their_context():
@@ -204,9 +197,8 @@ def test_what_the_benchmark_starts_ends_when_it_is_killed(kind):
 def _alive(pid):
     """Running (not a zombie waiting for its parent)."""
     try:
-        with open(f'/proc/{pid}/stat') as f:
-            return f.read().rsplit(')', 1)[1].split()[0] != 'Z'
-    except OSError:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.Error:
         return False
 
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from bench import vehicle, vehicle_sim
+from docgen import vehicle_page
 from bench.vehicle_sim import GRAVITY, Scenario, Segment
 from ext_observer.core.quaternion import multiply, quaternion_from_rotation_vector
 
@@ -201,14 +202,14 @@ def test_every_estimator_runs_on_a_short_drive_and_the_report_renders(tmp_path):
     assert 0.0 <= by[('6D', 'ours')]['metrics']['rest_manoeuvre'] <= 1.0
     summary = vehicle.summarize(rows)
     assert vehicle.ratio(summary, ('short turn', '6D')) > 0.0
-    assert vehicle.rest_table(summary).splitlines()[-1].endswith('% |')
+    assert vehicle_page.rest_table(summary).splitlines()[-1].endswith('% |')
     results = {'rows': rows, 'seeds': 1, 'seconds': 1.0, 'versions': 'v',
                'command': 'python -m bench.vehicle', 'drives': [drive],
                'machine': {'commit': 'abc', 'date': 'd', 'cpu': 'c', 'cores': 2,
                            'python': '3', 'numpy': '2', 'load_start': 1.0},
                'baseline': [{**case, 'measured': {'ours': 1.0, 'VQF': 2.0, 'apparent': 3.0}}
                             for case in vehicle.BASELINE]}
-    text = vehicle.render(results)
+    text = vehicle_page.render(results)
     assert '| short turn |' in text and 'commit `abc`' in text
     assert ('not yet available' in text) == (vehicle.velocity_parameters() == ())
     # Saved results render again (--render), the page written where asked.
@@ -249,7 +250,7 @@ def test_the_summary_averages_the_seeds_and_the_verdicts_read_the_criteria():
     assert verdicts[0][1:] == (vehicle.NOT_YET, 'not yet')
     # The braking drive is no turn: only the two turns are judged by the ratio.
     assert [v[2] for v in verdicts[1:]] == ['goal met', 'not met']
-    table = vehicle.error_table(summary, '6D', 'inclination_manoeuvre', 'inclination_whole',
+    table = vehicle_page.error_table(summary, '6D', 'inclination_manoeuvre', 'inclination_whole',
                                 columns=('ours', vehicle.OURS_VELOCITY, 'VQF'))
     assert '| turn a | 2.50 (2.00) | not yet available | 9.50 (9.00) | 0.26 |' in table
 

@@ -12,6 +12,7 @@ import os
 import numpy as np
 
 from ext_observer.broad import covariance as cv
+from ext_observer.broad.split import held_out_trials, split_of, SPLITS, tuning_trials
 from ext_observer.core.ahrs.ahrs_params import UncertaintyParams
 
 # A trial whose field is rejected for long stretches (a magnet on the sensor).
@@ -40,7 +41,7 @@ def write_page(trials, runs, groups, summary, meta, docs, progress=None):
                                         os.path.join(folder, MAGNET_FIGURE))
     page = os.path.join(docs, 'covariance.md')
     with open(page, 'w', encoding='utf-8') as f:
-        f.write(markdown(summary, meta, figures, docs, magnet))
+        f.write(markdown(summary, meta, figures, docs, magnet, [t.name for t in trials]))
     if progress:
         progress(f'wrote {page} and {", ".join(sorted(figures.values()))}')
     return page
@@ -53,7 +54,7 @@ def _pairs(trials, runs, groups, mode, component, split):
     es, ss = [], []
     for trial in trials:
         run = runs.get(mode, {}).get(trial.name)
-        if run is None or trial.name not in member or cv.split_of(trial.name) != split:
+        if run is None or trial.name not in member or split_of(trial.name) != split:
             continue
         pair = cv.scored_pairs(trial, run).get(component)
         if pair is not None:
@@ -76,7 +77,7 @@ def plot_reliability(trials, runs, groups, path):
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.2), squeeze=False)
     for ax, (mode, component) in zip(axes[0], panels):
         low, high = np.inf, 0.0
-        for split, marker in (('dev', 'o'), ('held-out', 's')):
+        for split, marker in zip(SPLITS, 'os'):
             e, s = _pairs(trials, runs, groups, mode, component, split)
             if e is None:
                 continue
@@ -155,8 +156,8 @@ def _shade(ax, t, mask, color, alpha, label):
 
 # --- the page --------------------------------------------------------------
 
-def markdown(summary, meta, figures, docs, magnet):
-    """The text of ``docs/covariance.md``."""
+def markdown(summary, meta, figures, docs, magnet, names):
+    """The text of ``docs/covariance.md``; ``names``: the trials run."""
     def rel(path):
         return os.path.relpath(path, docs).replace(os.sep, '/')
 
@@ -169,9 +170,9 @@ def markdown(summary, meta, figures, docs, magnet):
               '`RawImuPipeline` as `imu_filter_node` runs it (the node\'s defaults; stamps '
               '1/rate apart, the field after each sample), and each published covariance is '
               'compared with the error against the optical reference over the scored '
-              '(`movement`) samples. Trials are pooled per group; **dev** are the '
-              'even-numbered trials, on which the defaults were chosen, **held-out** the '
-              'odd-numbered ones. The coverage bounds: 90–99 % within 2σ and a mean '
+              '(`movement`) samples. Trials are pooled per group and per side of the split '
+              '(below): **tuning** are the trials on which a default of the estimator was '
+              'chosen, **held-out** the others. The coverage bounds: 90–99 % within 2σ and a mean '
               'of e²/σ² between 0.5 and 2. The last three columns: the share of samples whose '
               'σ says the heading is unknown (30° or more: before a field sets it, or while '
               'the magnetometer calibration has learned too little to judge the field; any '
@@ -201,7 +202,7 @@ def markdown(summary, meta, figures, docs, magnet):
                   'the magnetometer calibration has not converged yet), nothing corrects '
                   'the heading and its σ grows; a used field pulls it back. In 6D it grows '
                   'from the start.', '']
-    lines += list(_CHOICE) + _limits_lines(summary) + list(_REPRODUCE)
+    lines += _choice_lines(names) + _limits_lines(summary) + list(_REPRODUCE)
     return '\n'.join(lines) + '\n'
 
 
@@ -219,15 +220,15 @@ def _limits_lines(summary):
 
 def _model_lines():
     how = {
-        'gyro_noise': 'measured at rest (dev trials)',
-        'gyro_rate_noise': 'tuned on dev',
-        'bias_std': 'tuned on dev', 'bias_time': 'tuned on dev',
-        'bias_init': 'RMS per axis of the biases learned at the first rest (dev)',
-        'acc_noise': 'measured at rest (dev trials)',
-        'mag_noise': 'measured at rest: heading of the field (dev trials)',
-        'inclination_floor': 'tuned on dev',
-        'heading_floor': 'chosen on dev: deepest inside the bounds',
-        'stamp_error': 'tuned on dev'}
+        'gyro_noise': 'measured at rest (even trials)',
+        'gyro_rate_noise': 'tuned on the even trials',
+        'bias_std': 'tuned on the even trials', 'bias_time': 'tuned on the even trials',
+        'bias_init': 'RMS per axis of the biases learned at the first rest (even trials)',
+        'acc_noise': 'measured at rest (even trials)',
+        'mag_noise': 'measured at rest: heading of the field (even trials)',
+        'inclination_floor': 'tuned on the even trials',
+        'heading_floor': 'chosen on the even trials: deepest inside the bounds',
+        'stamp_error': 'tuned on the even trials'}
     lines = ['| parameter (`covariance.*`) | how its default was chosen |', '|---|---|']
     for name in UncertaintyParams.DEFAULTS:
         lines.append(f'| `{name}` | {how[name]} |')
@@ -309,10 +310,10 @@ magnetometer still being calibrated) nothing shrinks `P_h`: it grows
 without bound. A field lost (none for `FIELD_SILENT`, 1 s, `mag_timeout`'s
 default) adds the gyro's scale error to a heading a field set:
 `(GYRO_SCALE_SIGMA ψ)²`, `ψ` the net turn about the vertical since (0.3 %,
-the drift of dev trial 08 without its field, [raw_imu.md](raw_imu.md#the-magnetometers-frame-and-a-lost-field)),
+the drift of tuning trial 08 without its field, [raw_imu.md](raw_imu.md#the-magnetometers-frame-and-a-lost-field)),
 and its axes' errors: `(GYRO_MOTION_SIGMA ρ)²`, `ρ` the whole rotation since,
 about any axis (0.05 %: a body turning back and forth rectifies them into a
-drift with no net turn, 0.085 % of dev trial 34's rotation); the two in
+drift with no net turn, 0.085 % of tuning trial 34's rotation); the two in
 quadrature are the held term `h`. Each field back shrinks `ψ` and `ρ` by
 `1 − κ` as it corrects the heading. Fields that come, used or rejected, add
 nothing to them.
@@ -331,11 +332,11 @@ clears it), `l²` beyond the field's own error (`heading_floor² + quality²`) i
 error of the heading: where it is larger than the model's `V_h`, it is `V_h`. It
 is held while no field comes, and a lost field's scale term then adds to it as σ,
 `(√(l² − floor²) + h)²`: the drift that made the lag goes on,
-the same turn's error. On dev trial 08 the heading falls 8° behind its fields in
+the same turn's error. On tuning trial 08 the heading falls 8° behind its fields in
 30 s of fast turns while the model claims 2°; from 60 s on 96 % of the samples are
 within 2σ with it (79 % without). The time was chosen on the even trials among 3,
-4, 5, 6 and 8 s: the dev heading rows stay within the bounds from 5 s on (at 4 s
-the dev disturbed heading's mean e²/σ² falls to 0.50), and trial 08's lost-field
+4, 5, 6 and 8 s: the even trials' heading rows stay within the bounds from 5 s on (at 4 s
+their disturbed heading's mean e²/σ² falls to 0.50), and trial 08's lost-field
 figures are best at 5 s (the lag held at the loss is what covers them: 0.94 for
 good at 6 s, 0.63 at 8 s). `raw_imu` gives the innovation; replays of logged runs
 (the tuning below) do not count it.
@@ -489,58 +490,69 @@ _MODEL = [
     '',
 ]
 
-_CHOICE = [
-    '## How the defaults were chosen',
-    '',
-    'The 22 trials were split by their number: the 14 even-numbered ones (dev: 02, 04, '
-    '06, 08, 10, 12, 14, 18 undisturbed; 24, 26, 28, 30, 32, 34 disturbed) chose the '
-    'defaults, the 8 odd-numbered ones (held-out: 01, 03, 05, 09, 11, 15; 29, 35) only '
-    'judge them, and the BROAD trials not in this folder are a further held-out set. The '
-    'sensor noises were measured in the rest phases of the dev trials. The other six '
-    '(`gyro_rate_noise`, `bias_std`, `bias_time`, `inclination_floor`, `heading_floor`, '
-    '`stamp_error`) were chosen on the 9D runs of the dev trials (the 6D inclination is '
-    'the same), replaying the logged runs with other values: first by likelihood and '
-    'coarse grids, which showed that a larger `inclination_floor` with a smaller '
-    'rate-dependent part serves the slow and the fast trials alike; then coordinate by '
-    'coordinate (`covariance.tune`, factors 0.7 to 1.4, two rounds), minimizing the '
-    'distance of each dev group\'s two figures from 95 % and 1.1 '
-    '(`covariance.tuning_cost`), and rounded.',
-    '',
-    'Then `heading_floor` was chosen again, on the dev trials alone, by another '
-    'criterion: the value among 0.018 to 0.024 rad (steps of 0.0005) whose dev heading '
-    'rows lie deepest inside the coverage bounds (`covariance.choose_heading_floor`: the '
-    'largest of the smallest `covariance.bound_margin`, each figure\'s distance to its '
-    'nearer bound as a share of its range, the mean on a log scale). The first tuning '
-    'had left the dev disturbed heading at 0.60, near the lower bound of the mean, and '
-    'the held-out undisturbed heading outside it (0.48); the new criterion gives 0.021 '
-    'rad (was 0.0235). **Said plainly:** the criterion was changed after the held-out '
-    'row was seen outside the bounds, so the held-out rows above are weaker evidence '
-    'than a first look would be; the BROAD trials not in this folder are the clean '
-    'check.',
-    '',
-    'Two findings shaped the model. First, the error of a trial scales with how fast the '
-    'body turns (a timing offset between the IMU and the reference explains up to 80 % '
-    'of the error\'s variance on the fast trials), hence `stamp_error` and '
-    '`gyro_rate_noise`. Second, the inclination error is two-dimensional: with a σ equal '
-    'to the RMS error, a Rayleigh-distributed angle is within 2σ 98 % of the time, '
-    'next to the 99 % bound; aiming at 95 % makes the inclination σ about 10 % smaller '
-    'than the RMS error (a mean e²/σ² near 1.25). The heading error is one angle: a σ '
-    'equal to its RMS covers 95 %.',
-    '',
-]
+def _choice_lines(names):
+    """How the defaults were chosen, and the split the rows follow (from the trials' names)."""
+    def numbers(picked):
+        return ', '.join(name.split('_', 1)[0] for name in picked) or 'none'
+
+    return [
+        '## How the defaults were chosen',
+        '',
+        'The defaults were chosen on the 14 even-numbered trials (02, 04, 06, 08, 10, 12, 14, '
+        '18 undisturbed; 24, 26, 28, 30, 32, 34 disturbed). The sensor noises were measured '
+        'in their rest phases. The other six (`gyro_rate_noise`, `bias_std`, `bias_time`, '
+        '`inclination_floor`, `heading_floor`, `stamp_error`) were chosen on their 9D runs '
+        '(the 6D inclination is the same), replaying the logged runs with other values: '
+        'first by likelihood and coarse grids, which showed that a larger '
+        '`inclination_floor` with a smaller rate-dependent part serves the slow and the fast '
+        'trials alike; then coordinate by coordinate (`covariance.tune`, factors 0.7 to 1.4, '
+        'two rounds), minimizing the distance of each group\'s two figures from 95 % and 1.1 '
+        '(`covariance.tuning_cost`), and rounded.',
+        '',
+        'The rows above follow the one split of the trials (`ext_observer/broad/split.py`): '
+        'a trial on which any default of the estimator was chosen is a **tuning** trial: '
+        'these even-numbered ones and those of the estimator\'s own defaults '
+        f'([broad_tuning.md](broad_tuning.md)); here {numbers(tuning_trials(names))}. The '
+        f'**held-out** trials, {numbers(held_out_trials(names))}, had no part in any '
+        'default, and the BROAD trials not in this folder are a further held-out set.',
+        '',
+        'Then `heading_floor` was chosen again, on the even trials alone, by another '
+        'criterion: the value among 0.018 to 0.024 rad (steps of 0.0005) whose heading '
+        'rows lie deepest inside the coverage bounds (`covariance.choose_heading_floor`: the '
+        'largest of the smallest `covariance.bound_margin`, each figure\'s distance to its '
+        'nearer bound as a share of its range, the mean on a log scale). The first tuning '
+        'had left the even trials\' disturbed heading at 0.60, near the lower bound of the '
+        'mean, and the odd trials\' undisturbed heading outside it (0.48); the new criterion '
+        'gives 0.021 rad (was 0.0235). **Said plainly:** the criterion was changed after '
+        'that row of the odd trials (01, 03, 05, 09, 11, 15) was seen outside the bounds, '
+        'so the held-out rows of 09 and 11 are weaker evidence than a first look would be; '
+        'the BROAD trials not in this folder are the clean check.',
+        '',
+        'Two findings shaped the model. First, the error of a trial scales with how fast the '
+        'body turns (a timing offset between the IMU and the reference explains up to 80 % '
+        'of the error\'s variance on the fast trials), hence `stamp_error` and '
+        '`gyro_rate_noise`. Second, the inclination error is two-dimensional: with a σ equal '
+        'to the RMS error, a Rayleigh-distributed angle is within 2σ 98 % of the time, '
+        'next to the 99 % bound; aiming at 95 % makes the inclination σ about 10 % smaller '
+        'than the RMS error (a mean e²/σ² near 1.25). The heading error is one angle: a σ '
+        'equal to its RMS covers 95 %.',
+        '',
+    ]
+
 
 _LIMITS = [
     'The errors differ from trial to trial by more than anything the estimator can see: '
-    'on the dev trials the heading error of two fast-rotation trials (06, 08) is three '
+    'on the tuning trials the heading error of two fast-rotation trials (06, 08) is three '
     'times that of the others with similar motion, and fields that are bent but accepted '
-    'cannot be told from good ones. With 2 to 8 trials per group, a group\'s pooled '
-    'figures follow its worst trials: a σ that covers the dev groups (which hold 06 and '
-    '08) can be larger than held-out trials with smaller errors need (an over-claim: '
+    'cannot be told from good ones. With 2 to 12 trials per group, a group\'s pooled '
+    'figures follow its worst trials: a σ that covers the tuning groups (which hold 06 '
+    'and 08) can be larger than held-out trials with smaller errors need (an over-claim: '
     'nearly all within 2σ, a small mean), or, the other way, too small for a held-out '
-    'trial worse than any on dev. No default was tuned on the held-out trials (the '
-    'criterion for `heading_floor` was changed after seeing them: see above).',
+    'trial worse than any tuning one. No default was tuned on the held-out trials (the '
+    'criterion for `heading_floor` was changed after seeing 09 and 11: see above).',
     '',
 ]
+
 
 _REPRODUCE = [
     '## Reproduce',

@@ -3,7 +3,7 @@ The page ``docs/robustness.md`` and its figure ``figures/robustness.png``.
 
 Written by ``python -m ext_observer broad --stress --docs DIR`` from
 :func:`~ext_observer.broad.stress_run.run_stress`'s output: what each
-variant is, the tables (all trials, tuning half, report half), the ratio of
+variant is, the tables (all trials, the tuning ones, the held-out ones), the ratio of
 ours to VQF, how the run was made and the credit to BROAD.
 """
 
@@ -15,14 +15,14 @@ import numpy as np
 from ext_observer.broad.anchors import BROAD_GYRO_RANGE, MADGWICK_BETA
 from ext_observer.broad.result_keys import FUSION_DEFAULTS, OURS
 from docgen.broad_page import fusion_text, shown_meta
+from ext_observer.broad.split import split_of
 from ext_observer.broad.stress import (BIAS, DESCRIPTIONS, GYRO_RANGE, LABELS, LOW_RATE,
-                                       RATIO_DONE, RATIO_GOAL, trial_number, VARIANTS)
+                                       RATIO_DONE, RATIO_GOAL, VARIANTS)
 from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, modes_of,
                                            ratio_to_vqf, stress_summary, table_rows)
 
 BROAD_URL = 'https://github.com/dlaidig/broad'
-_TITLES = {'all': 'All trials', 'tuning': 'Even-numbered trials (tuning)',
-           'report': 'Odd-numbered trials (report)'}
+_TITLES = {'all': 'All trials', 'tuning': 'Tuning trials', 'held-out': 'Held-out trials'}
 
 
 def _table(header, rows):
@@ -89,7 +89,7 @@ def stress_markdown(out, meta, figure=None, docs_dir='.'):
         lines += [f'## {_TITLES[half]}', '',
                   f'{counts[half]} trials: ' + ', '.join(
                       n.split('_', 1)[0] for n in meta['trials']
-                      if half == 'all' or _half(n) == half) + '.', '']
+                      if half == 'all' or split_of(n) == half) + '.', '']
         lines += _table(header, rows) + ['']
         if half == 'all':
             lines += _ratio_lines(summ, keys) + ['']
@@ -98,11 +98,6 @@ def stress_markdown(out, meta, figure=None, docs_dir='.'):
                 lines += [f'![Mean RMSE per variant and algorithm]({link})', '']
     lines += _times(out, meta) + _reproduce(meta)
     return '\n'.join(lines)
-
-
-def _half(name):
-    number = trial_number(name)
-    return None if number is None else ('tuning' if number % 2 == 0 else 'report')
 
 
 def _variants():
@@ -153,9 +148,12 @@ def _scoring(meta):
     return [
         "**Scoring**, as in [broad.md](broad.md): BROAD's RMSE over the `movement` samples "
         'of each trial, in degrees: in 6D (no magnetometer) the inclination error, in 9D '
-        'the total error; then the mean over the trials. Trials are split by the number '
-        'their name starts with: choose on the even-numbered ones (tuning), report on the '
-        'odd-numbered ones.',
+        'the total error; then the mean over the trials, over all of them and over each '
+        'side of the one split of the trials (`ext_observer/broad/split.py`): a trial on '
+        'which any default of the estimator was chosen is a tuning trial (the estimator\'s '
+        'first defaults: [broad_tuning.md](broad_tuning.md); the start in motion and the '
+        'clipped gyro: the even-numbered trials, [raw_imu.md](raw_imu.md)), the held-out '
+        'trials had no part in any.',
         '',
         f'**Algorithms**, all on the same variant in the same run: {ours}; '
         + (', '.join(anchors) + ', as in [broad.md](broad.md)' if anchors else 'no anchor')
@@ -170,7 +168,7 @@ def _ratio_lines(summ, keys):
     modes = modes_of(summ)
     if OURS not in algorithms_of(summ) or 'VQF' not in algorithms_of(summ):
         return []
-    lines = ['**Ours / VQF** (all trials; tuning half; report half):', '']
+    lines = ['**Ours / VQF** (all trials; tuning trials; held-out trials):', '']
     for key in keys:
         parts = []
         for mode in modes:

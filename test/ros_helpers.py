@@ -5,6 +5,7 @@ import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+import psutil
 import pytest
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -23,6 +24,12 @@ def installed(name):
     if not os.path.exists(path):
         pytest.fail(f'{name} is not installed next to {sys.executable}; run `make test`')
     return path
+
+
+def cpu_seconds(pid):
+    """Return the user + system CPU time of a process (all its threads), s."""
+    times = psutil.Process(pid).cpu_times()
+    return times.user + times.system
 
 
 def unit(y, tolerance=0.1):

@@ -7,7 +7,6 @@ the pipeline end to end, calls the observer's parameter services, and every
 process is ended by the test (SIGINT, checked), or by the fixture on failure.
 """
 
-import os
 import re
 import sys
 import time
@@ -23,7 +22,7 @@ from conftest import CONFIG
 from ext_observer.core import attitude_error, manifold_distance
 from ext_observer.nodes.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, STATUS_NAME
 from ext_observer.nodes.node_common import LEVEL_NAMES
-from ros_helpers import installed, Probe, values_of
+from ros_helpers import cpu_seconds, installed, Probe, values_of
 
 
 def assert_clean_exit(process, code=0):
@@ -38,13 +37,6 @@ def call(spinner, client, request, timeout=10.0):
     future = client.call_async(request)
     spinner.spin_until(future.done, timeout, f'the answer of {client.srv_name}')
     return future.result()
-
-
-def cpu_seconds(pid):
-    """Return the user + system CPU time of a process, s."""
-    with open(f'/proc/{pid}/stat') as stat:
-        fields = stat.read().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def wait_for_nodes(spinner, probe, names, timeout=20.0):

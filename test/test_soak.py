@@ -29,7 +29,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 import pytest
 from rclpy.node import Node
 
-from ros_helpers import installed
+from ros_helpers import cpu_seconds, installed
 
 pytestmark = pytest.mark.soak
 
@@ -76,12 +76,6 @@ def rss_kib(pid):
             if line.startswith('VmRSS:'):
                 return int(line.split()[1])
     raise RuntimeError(f'no VmRSS for {pid}')
-
-
-def cpu_seconds(pid):
-    with open(f'/proc/{pid}/stat') as stat:
-        fields = stat.read().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def test_soak(ros_processes, ros_context, spinner):

@@ -13,6 +13,8 @@ One module per step, each importing only the ones above it in this list:
 
 - :mod:`~ext_observer.broad.result_keys`: the modes and algorithms, in table order;
 - :mod:`~ext_observer.broad.data`: where the data is, the trials, the groups;
+- :mod:`~ext_observer.broad.split`: the trials that chose the defaults and
+  the held-out ones, one rule for every page;
 - :mod:`~ext_observer.broad.scoring`: BROAD's error angles, RMSE, averages;
 - :mod:`~ext_observer.broad.anchors`: the other filters, brought to ENU;
 - :mod:`~ext_observer.broad.run`: ours and the anchors on the trials, scored;
@@ -55,9 +57,10 @@ from ext_observer.broad.scoring import (combined_norms, criteria, error_angles, 
                                         VQF_RATIO_GOAL)
 from ext_observer.broad.stress import (BIAS, bias_of, blocks, clip_gyro, cut_at_movement,
                                        DESCRIPTIONS, downsample, first_movement,
-                                       GYRO_RANGE, half_of, LABELS, LOW_RATE, RATIO_DONE,
-                                       RATIO_GOAL, trial_number, variant, VARIANTS, variants,
-                                       with_bias)
+                                       GYRO_RANGE, LABELS, LOW_RATE, RATIO_DONE,
+                                       RATIO_GOAL, variant, VARIANTS, variants, with_bias)
+from ext_observer.broad.split import (held_out_trials, split_of, SPLITS, trial_number, TUNING,
+                                      tuning_trials)
 from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, MODE_KEYS,
                                            GYRO_RANGES, modes_of, ratio_to_vqf, run_stress,
                                            STRESS_ANCHORS, stress_summary, table_rows,
@@ -80,8 +83,10 @@ __all__ = [
     'MODE_KEYS',
     'RATIO_DONE', 'RATIO_GOAL',
     'STRESS_ANCHORS', 'VARIANTS', 'algorithms_of', 'bias_of', 'blocks', 'clip_gyro',
-    'cut_at_movement', 'downsample', 'first_movement', 'half_counts', 'half_of', 'modes_of',
+    'cut_at_movement', 'downsample', 'first_movement', 'half_counts', 'modes_of',
     'ratio_to_vqf', 'run_stress', 'stress_summary',
     'table_rows', 'text_table', 'trial_number', 'variant', 'variants', 'with_bias',
     'write_stress_json',
+    # The split of the trials.
+    'SPLITS', 'TUNING', 'held_out_trials', 'split_of', 'tuning_trials',
 ]

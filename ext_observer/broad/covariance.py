@@ -13,10 +13,8 @@ sample), keeps each estimate and its covariance, and compares the claimed
 - the mean of ``error² / σ²``,
 
 for each component (inclination; heading in 9D), per group (undisturbed,
-disturbed) and per split: the even-numbered trials chose the defaults of
-:class:`~ext_observer.core.ahrs.ahrs_params.UncertaintyParams` (``dev``), the
-odd-numbered ones did not (``held-out``). The coverage bounds: 90–99 % and
-0.5–2.
+disturbed) and per side of :mod:`ext_observer.broad.split` (``tuning``,
+``held-out``). The coverage bounds: 90–99 % and 0.5–2.
 
 :func:`replay` runs the uncertainty model alone again on what a run logged
 (the estimator's steps do not depend on it), so other parameters are tried
@@ -31,12 +29,12 @@ import multiprocessing
 import numpy as np
 
 from ext_observer.broad.scoring import error_angles
+from ext_observer.broad.split import split_of, SPLITS
 from ext_observer.core.ahrs.ahrs_params import UncertaintyParams
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty
 
 MODES = ('9D', '6D')
 GROUPS = ('undisturbed', 'disturbed')
-SPLITS = ('dev', 'held-out')
 COMPONENTS = ('inclination', 'heading')
 # The coverage bounds: 90–99 % within 2σ, the mean of e²/σ² within 0.5–2.
 FRACTION_RANGE = (0.90, 0.99)
@@ -47,12 +45,6 @@ UNKNOWN_SIGMA = math.radians(30.0)
 # BROAD's magnetometer is in µT; the node takes T.
 TESLA_PER_MICROTESLA = 1e-6
 _START_NS = 1_000_000_000
-
-
-def split_of(name):
-    """``'dev'`` for an even-numbered trial (the defaults were chosen there), or ``'held-out'``."""
-    digits = ''.join(c for c in name.split('_')[0] if c.isdigit())
-    return 'dev' if digits and int(digits) % 2 == 0 else 'held-out'
 
 
 def node_settings(mode, values=None):
@@ -288,7 +280,7 @@ def summarize(trials, runs, groups, variances=None):
                 continue
             v = None if variances is None else variances[mode][trial.name]
             for component, pair in scored_pairs(trial, run, v).items():
-                for split in (split_of(trial.name), 'all'):
+                for split in [s for s in (split_of(trial.name), 'all') if s]:
                     key = (mode, split, member[trial.name], component)
                     pooled.setdefault(key, []).append(pair)
     return {key: calibration_figures(pairs) for key, pairs in pooled.items()}
@@ -320,7 +312,7 @@ def text_table(summary):
 
 def _order(key):
     mode, split, group, component = key
-    return (MODES.index(mode), ('dev', 'held-out', 'all').index(split), GROUPS.index(group),
+    return (MODES.index(mode), (*SPLITS, 'all').index(split), GROUPS.index(group),
             COMPONENTS.index(component))
 
 
@@ -469,8 +461,9 @@ def choose_heading_floor(trials, runs, groups, floors, start=None, ahrs_params=N
 
     For each candidate the logged runs are replayed with it (the other
     parameters at ``start``), and the smallest :func:`bound_margin` over the
-    heading rows is kept; the candidate with the largest wins. Pass the dev
-    trials only: the held-out ones judge the result.
+    heading rows is kept; the candidate with the largest wins. Pass the tuning
+    trials only (:func:`ext_observer.broad.split.tuning_trials`): the held-out
+    ones judge the result.
 
     Returns
     -------
@@ -515,7 +508,8 @@ def tune(trials, runs, groups, names, start=None, factors=(0.7, 0.85, 1.2, 1.4),
     Coordinate search of some :class:`UncertaintyParams` on logged runs.
 
     Each round tries every factor on each name in turn and keeps what lowers
-    :func:`tuning_cost`. Pass the dev trials only: the held-out ones judge
+    :func:`tuning_cost`. Pass the tuning trials only
+    (:func:`ext_observer.broad.split.tuning_trials`): the held-out ones judge
     the result.
 
     Parameters

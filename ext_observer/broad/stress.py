@@ -193,17 +193,3 @@ def variant(trial, key):
 def variants(trial, keys=VARIANTS):
     """Return ``{key: variant(trial, key)}`` for the ``keys`` given."""
     return {key: variant(trial, key) for key in keys}
-
-
-def trial_number(name):
-    """Return the number a BROAD trial's name starts with (``'28_...'``: 28), or None."""
-    head = name.split('_', 1)[0]
-    return int(head) if head.isdigit() else None
-
-
-def half_of(name):
-    """``'tuning'`` for an even-numbered trial, ``'report'`` for an odd one, else None."""
-    number = trial_number(name)
-    if number is None:
-        return None
-    return 'tuning' if number % 2 == 0 else 'report'

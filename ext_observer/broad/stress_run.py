@@ -6,8 +6,8 @@ Each variant of :mod:`ext_observer.broad.stress` goes through the same
 call, the anchors in processes), so the scoring is BROAD's: the RMSE over
 the ``movement`` samples of the 6D inclination and of the 9D total error.
 Then the means per variant, algorithm and mode, over all trials, the
-even-numbered ones (tuning) and the odd-numbered ones (report), and the
-ratio of ours to VQF.
+tuning ones and the held-out ones (:mod:`ext_observer.broad.split`), and
+the ratio of ours to VQF.
 """
 
 import json
@@ -20,8 +20,8 @@ import numpy as np
 from ext_observer.broad.anchors import BROAD_GYRO_RANGE
 from ext_observer.broad.result_keys import ALGORITHMS, FUSION_DEFAULTS, MODES, OURS
 from ext_observer.broad.run import log, run
-from ext_observer.broad.stress import (DESCRIPTIONS, GYRO_RANGE, half_of, LABELS, variant,
-                                       VARIANTS)
+from ext_observer.broad.split import split_of, SPLITS
+from ext_observer.broad.stress import DESCRIPTIONS, GYRO_RANGE, LABELS, variant, VARIANTS
 
 # The anchors run by default: the best (VQF), its plain twin, the usual ROS
 # one (Madgwick, imu_filter_madgwick's algorithm), and Fusion, the one told
@@ -31,8 +31,8 @@ STRESS_ANCHORS = ('VQF', 'BasicVQF', 'Madgwick', 'Fusion', FUSION_DEFAULTS)
 GYRO_RANGES = {key: GYRO_RANGE if key == 'e' else BROAD_GYRO_RANGE for key in VARIANTS}
 # The score each mode is judged on.
 MODE_KEYS = {'6D': 'inclination_rmse_deg', '9D': 'total_rmse_deg'}
-# The halves of the trials: all, even-numbered (tuning), odd-numbered (report).
-HALVES = ('all', 'tuning', 'report')
+# The trials a mean is taken over: all, then each side of the split.
+HALVES = ('all',) + SPLITS
 
 
 def run_stress(trials, keys=VARIANTS, modes=MODES, anchors=STRESS_ANCHORS, jobs=1,
@@ -103,7 +103,7 @@ def stress_summary(scores):
                 means = {}
                 for half in HALVES:
                     values = [s[MODE_KEYS[mode]] for name, s in per_trial.items()
-                              if half == 'all' or half_of(name) == half]
+                              if half == 'all' or split_of(name) == half]
                     values = [v for v in values if math.isfinite(v)]
                     if values:
                         means[half] = float(np.mean(values))
@@ -163,7 +163,7 @@ def _fmt(value):
 
 def text_table(summ, counts):
     """
-    Return the tables printed on stdout: all trials, tuning half, report half.
+    Return the tables printed on stdout: all trials, the tuning ones, the held-out ones.
 
     ``counts`` is ``{half: number of trials}``; a half without trials is left out.
     """
@@ -173,8 +173,8 @@ def text_table(summ, counts):
             continue
         header, rows = table_rows(summ, half)
         widths = [max(len(r[i]) for r in [header] + rows) for i in range(len(header))]
-        title = {'all': 'all trials', 'tuning': 'even-numbered trials (tuning)',
-                 'report': 'odd-numbered trials (report)'}[half]
+        title = {'all': 'all trials', 'tuning': 'tuning trials',
+                 'held-out': 'held-out trials'}[half]
         lines.append(f'mean RMSE (°; 6D inclination, 9D total), {title}, '
                      f'{counts[half]} trials:')
         for row in [header] + rows:
@@ -185,9 +185,8 @@ def text_table(summ, counts):
 
 def half_counts(names):
     """``{half: number of trials}`` of :data:`HALVES` for the trial names."""
-    return {'all': len(names),
-            'tuning': sum(half_of(n) == 'tuning' for n in names),
-            'report': sum(half_of(n) == 'report' for n in names)}
+    return {half: len(names) if half == 'all' else sum(split_of(n) == half for n in names)
+            for half in HALVES}
 
 
 def write_stress_json(path, out, meta):

@@ -23,19 +23,27 @@ def test_missing_data_is_an_error_not_a_traceback(tmp_path, capsys):
     assert 'no HDF5 files' in err and 'make broad-data' in err
 
 
-@pytest.mark.timeout(240)
-def test_command_end_to_end_on_two_short_trials(tmp_path):
-    trials = ['01_undisturbed_slow_rotation_A', '28_disturbed_stationary_magnet_A']
-    folder = broad_data_dir(trials)
-    # 60 s: the first 30 to 48 s of each trial are rest, not scored.
-    out = tmp_path / 'broad.json'
+TRIALS = ['01_undisturbed_slow_rotation_A', '28_disturbed_stationary_magnet_A']
+
+
+def _broad(tmp_path, out, *args):
+    """Run the command on :data:`TRIALS` (``--json out``, ``--docs tmp_path/docs``); its output."""
     docs = tmp_path / 'docs'
     docs.mkdir()
     done = subprocess.run(
-        [sys.executable, '-m', 'ext_observer', 'broad', '--data', folder, '--trials', *trials,
-         '--head', '60', '--no-anchors', '--json', str(out), '--docs', str(docs), '--quiet'],
+        [sys.executable, '-m', 'ext_observer', 'broad', '--data', broad_data_dir(TRIALS),
+         '--trials', *TRIALS, *args, '--json', str(out), '--docs', str(docs), '--quiet'],
         cwd=REPO, capture_output=True, text=True, timeout=230)
     assert done.returncode == 0, done.stderr
+    return done, docs
+
+
+@pytest.mark.timeout(240)
+def test_command_end_to_end_on_two_short_trials(tmp_path):
+    trials = TRIALS
+    # 60 s: the first 30 to 48 s of each trial are rest, not scored.
+    out = tmp_path / 'broad.json'
+    done, docs = _broad(tmp_path, out, '--head', '60', '--no-anchors')
     assert 'ext_observer' in done.stdout and 'time:' in done.stdout
     scores = json.loads(out.read_text())
     assert list(scores) == [broad.OURS]
@@ -56,16 +64,10 @@ def test_command_end_to_end_on_two_short_trials(tmp_path):
 
 @pytest.mark.timeout(240)
 def test_stress_command_end_to_end_on_two_short_trials(tmp_path):
-    trials = ['01_undisturbed_slow_rotation_A', '28_disturbed_stationary_magnet_A']
-    folder = broad_data_dir(trials)
+    trials = TRIALS
     out = tmp_path / 'robustness.json'
-    docs = tmp_path / 'docs'
-    done = subprocess.run(
-        [sys.executable, '-m', 'ext_observer', 'broad', '--stress', '--data', folder,
-         '--trials', *trials, '--head', '50', '--anchors', 'VQF', '--variants', 'b', 'd',
-         '--param', 'tau_bias=100', '--json', str(out), '--docs', str(docs), '--quiet'],
-        cwd=REPO, capture_output=True, text=True, timeout=230)
-    assert done.returncode == 0, done.stderr
+    done, docs = _broad(tmp_path, out, '--stress', '--head', '50', '--anchors', 'VQF',
+                        '--variants', 'b', 'd', '--param', 'tau_bias=100')
     assert 'ours/VQF' in done.stdout and '(d) (c) at 50 Hz' in done.stdout
     assert 'The goal: ours at most 1× VQF' in (docs / 'robustness.md').read_text()
     figures = json.loads(out.read_text())

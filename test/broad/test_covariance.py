@@ -81,7 +81,7 @@ def test_the_benchmark_writes_its_page_and_figures(tmp_path, capsys):
                 data='synthetic')
     summary, runs = report(trials, groups, meta, json_path=str(tmp_path / 'c.json'))
     write_page(trials, runs, groups, summary, meta, str(tmp_path))
-    assert ('9D', 'dev', 'undisturbed', 'heading') in summary
+    assert ('9D', 'tuning', 'undisturbed', 'heading') in summary
     assert ('6D', 'held-out', 'disturbed', 'inclination') in summary
     assert 'within the coverage bounds' in capsys.readouterr().out
     page = (tmp_path / 'covariance.md').read_text()

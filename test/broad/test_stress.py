@@ -12,7 +12,6 @@ import pytest
 
 from ext_observer import broad
 from ext_observer.broad import stress
-from ext_observer.broad.stress_run import half_counts
 
 RATE = 2000.0 / 7.0  # Hz, BROAD's 285.714...
 
@@ -122,13 +121,6 @@ def test_unknown_variant_and_trial_without_movement_are_errors():
     still = broad.Trial('09_still', t.gyr, t.acc, t.mag, t.quat, np.zeros(len(t), bool), RATE)
     with pytest.raises(ValueError, match='no movement'):
         stress.variant(still, 'b')
-
-
-def test_halves_are_even_and_odd_trial_numbers():
-    assert stress.half_of('28_disturbed_stationary_magnet_A') == 'tuning'
-    assert stress.half_of('01_undisturbed_slow_rotation_A') == 'report'
-    assert stress.half_of('synthetic') is None
-    assert half_counts(['01_a', '02_b', '04_c']) == {'all': 3, 'tuning': 2, 'report': 1}
 
 
 # --- end to end ------------------------------------------------------------

@@ -1,37 +1,40 @@
 """
-The raw-IMU part of docs/performance.md: the raw-IMU node's speed goals and section 6.
+The raw-IMU parts of docs/performance.md: the raw-IMU node's and the compiled kernels' goals, sections 6 and 7.
 
 Rendered from what ``python -m bench`` gathers under ``raw_imu`` (see
 ``bench/__main__.py``): ``node_events`` and ``node_single``
 (:func:`bench.imu_filter_cpu.compare`), ``direct``
 (:func:`bench.raw_imu_direct.direct`) and ``batch``
-(:func:`bench.broad_batch.batch`); any of them may be missing or hold an
-``error``. Every verdict is computed here from the figures, never typed.
+(:func:`bench.broad_batch.batch`); and under ``compiled``
+(``python -m bench.compiled_kernels --json``: BROAD, the step per sample, the
+start-up times), whose node row is section 6's ``node_events``. Any of them may be missing or hold an ``error``. Every
+verdict is computed here from the figures, never typed.
 """
 
 import statistics
 
 from bench.broad_batch import BATCH_GOAL
+from bench.compiled_kernels import (BROAD_GOAL, COLD_GOAL_S, COMPILED_NODE_GOAL,
+                                    SCORE_TOLERANCE, STEP_GOAL_US, WARM_GOAL_S, WHOLE_AIM,
+                                    WHOLE_GOAL)
 from bench.machine import load_range
-from bench.imu_filter_cpu import (FLOOR, NODE_GOAL, RAW_RELAY, SERIALIZED_GOAL, SERIALIZED_AIM,
-                           short_text, TYPED, verdict)
+from bench.imu_filter_cpu import (NODE_GOAL, RAW_RELAY, SERIALIZED_GOAL, SERIALIZED_AIM,
+                                  short_text, TYPED, verdict)
+from docgen.compiled_page import BEGIN, END, whole_medians
+from docgen.markdown import table as _table
 
 HEADING = '6. Raw-IMU estimator (imu_filter_node)'
+COMPILED_HEADING = '7. Compiled kernels'
 EXECUTOR_NAMES = {'events': 'EventsExecutor (the default)', 'single': 'SingleThreadedExecutor'}
+NODES = ('imu_filter_node', 'observer_node')
 
 
 def _us(value):
     return '—' if value is None else f'{value:.1f} µs'
 
 
-def _table(header, rows):
-    lines = ['| ' + ' | '.join(header) + ' |', '|' + '|'.join('---' for _ in header) + '|']
-    lines += ['| ' + ' | '.join(str(c) for c in row) + ' |' for row in rows]
-    return '\n'.join(lines)
-
-
 def _ok(part):
-    return part is not None and 'error' not in part
+    return bool(part) and 'error' not in part
 
 
 def _node_measured(node):
@@ -117,7 +120,7 @@ def _anchor(heading):
 
 def _node_rows(node, executor):
     rows = []
-    for label in [t for t in ('imu_filter', TYPED, FLOOR, RAW_RELAY, 'relay')
+    for label in [t for t in ('imu_filter', TYPED, RAW_RELAY, 'relay')
                   if t in node['runs']]:
         runs = node['runs'][label]
         cpu = ', '.join(f'{r["cpu_us_per_sample"]:.0f}' for r in runs)
@@ -146,8 +149,6 @@ def section(raw):
             f'samples; {first["seconds"]:g} s per run, relay and filter runs interleaved, '
             'medians. `python -m bench.imu_filter_cpu --executor events|single --seconds '
             f'{first["seconds"]:g} --rounds N` prints the same table and the verdict; with '
-            f'`--floor` also `{FLOOR}`, the node cut down to the '
-            'estimate\'s arithmetic and its outputs (`bench.imu_filter_cpu.step_only_node`); with '
             f'`--serialized` (the events runs here) also `{TYPED}` (the node with '
             f'`serialized_io` false) and `{RAW_RELAY}` (the relay on bytes, '
             '`bench.imu_filter_cpu.RawImuRelay`).', '',
@@ -262,3 +263,106 @@ def analysis_line(raw):
         text += (f' Round by round the ratio spans {min(ratios):.2f}–{max(ratios):.2f}, '
                  f'against the goal {node["goal"]:g}.')
     return text
+
+
+# --- section 7: the compiled kernels ---------------------------------------
+
+def _broad_rows(b):
+    vqf, two, one = b['VQF, 1 process'], b['compiled, 2 processes'], b['compiled, 1 process']
+    aim = '' if two <= vqf else ' (the aim, ≤ 1×, not reached)'
+    return [(f'the {b["trials"]} dev trials × 9D and 6D from a warm cache: wall time '
+             f'≤ {BROAD_GOAL:g}× VQF\'s in the same run (aim ≤ 1×)',
+             f'{two:.2f} s on 2 processes, {one:.2f} s on 1, VQF {vqf:.2f} s: '
+             f'{two / vqf:.2f}×', verdict(two <= BROAD_GOAL * vqf) + aim),
+            ('the scores unchanged to 1e-9 (compiled against plain)',
+             f'largest difference {b["max_dscore"]:.1e}° (of a quaternion component: '
+             f'{b["max_dq"]:.1e})',
+             verdict(b['max_dscore'] <= SCORE_TOLERANCE))]
+
+
+def _step_row(steps):
+    nine, six = steps['9D update compiled'], steps['6D update compiled']
+    return (f'the core\'s step on floats ≤ {STEP_GOAL_US:g} µs per sample',
+            f'9D (calibration on) {nine:.2f} µs, 6D {six:.2f} µs (`AhrsObserver.update`, '
+            'compiled)', verdict(max(nine, six) <= STEP_GOAL_US))
+
+
+def _node_row(node):
+    medians, ratio = node['medians'], node['ratio']
+    ratios = node.get('round_ratios') or []
+    measured = (f'{ratio:.2f}× (imu_filter {medians["imu_filter"]:.1f} µs, relay '
+                f'{medians["relay"]:.1f} µs; medians of {node["rounds"]}')
+    if ratios:
+        measured += f', rounds {min(ratios):.2f}–{max(ratios):.2f}'
+    measured += ')'
+    text = verdict(ratio <= COMPILED_NODE_GOAL)
+    if ratios and min(ratios) <= COMPILED_NODE_GOAL < max(ratios):
+        text += ' (rounds on both sides of the goal)'
+    return (f'raw-IMU node, 1 kHz IMU + 100 Hz field: CPU per sample ≤ '
+            f'{COMPILED_NODE_GOAL:g}× a '
+            'bare relay\'s (EventsExecutor)', measured, text)
+
+
+def _start_rows(starts):
+    rows = []
+    for name in NODES:
+        key = f'{name} to its first /diagnostics'
+        if key not in starts:
+            continue
+        cold, warm = starts[key]
+        measured = f'cold {cold:.2f} s, warm {warm:.2f} s'
+        compiled = starts.get(f'{name} to the compiled kernels')
+        if compiled:
+            measured += (f' (on the plain kernels until the compiled ones: cold '
+                         f'{compiled[0]:.2f} s, warm {compiled[1]:.2f} s)')
+        rows.append((f'{name}: first start under {COLD_GOAL_S:g} s cold, under '
+                     f'{WARM_GOAL_S:g} s warm', measured,
+                     verdict(cold < COLD_GOAL_S and warm < WARM_GOAL_S)))
+    return rows
+
+
+def compiled_targets_section(compiled, raw):
+    """The compiled kernels' speed targets: each goal, measured, met or not; '' without figures."""
+    rows = []
+    if _ok(compiled):
+        if compiled.get('broad'):
+            rows += _broad_rows(compiled['broad'])
+        if compiled.get('steps'):
+            rows.append(_step_row(compiled['steps']))
+    node = (raw or {}).get('node_events')
+    if _ok(node) and node.get('ratio') is not None:
+        rows.append(_node_row(node))
+    if _ok(compiled) and compiled.get('starts'):
+        rows += _start_rows(compiled['starts'])
+    if _ok(compiled) and compiled.get('whole'):
+        rows.append(_whole_row(compiled['whole']))
+    if not rows:
+        return ''
+    return ('## Targets: the compiled kernels\' speed\n\n'
+            'Figures: [section 7](#7-compiled-kernels) and, for the node, '
+            '[section 6](#6-raw-imu-estimator-imu_filter_node).\n\n'
+            + _table(['goal', 'measured', 'verdict'], rows))
+
+
+def _whole_row(whole):
+    m = whole_medians(whole)
+    ratio = m['ours'] / m['VQF']
+    aim = '' if ratio <= WHOLE_AIM else f' (the aim, ≤ {WHOLE_AIM:g}×, not reached)'
+    return (f'the BROAD command\'s whole-process time, 22 trials × 9D and 6D, warm cache: '
+            f'≤ {WHOLE_GOAL:g}× VQF\'s time for the same work (aim ≤ {WHOLE_AIM:g}×)',
+            f'{m["ours"]:.2f} s, VQF {m["VQF"]:.2f} s: {ratio:.2f}× (medians of '
+            f'{len(whole["VQF"])}, load {whole["load"][0]:.1f}–{whole["load"][1]:.1f}); '
+            f'to its first estimate {m["first estimate"]:.2f} s',
+            verdict(ratio <= WHOLE_GOAL) + aim)
+
+
+def compiled_section(compiled):
+    """Section 7: what ``python -m bench.compiled_kernels`` printed (as in docs/compiled.md)."""
+    if not compiled:
+        return ''
+    if 'error' in compiled:
+        return f'## {COMPILED_HEADING}\n\nNot measured: {compiled["error"]}'
+    body = [line for line in compiled['section'].splitlines() if line not in (BEGIN, END)]
+    return (f'## {COMPILED_HEADING}\n\nThe raw-IMU estimator\'s steps compiled by numba '
+            '([compiled.md](compiled.md): how, and what is not met).\n\n'
+            + '\n'.join(body).strip())

@@ -1,7 +1,15 @@
-"""Render the benchmark's results as Markdown (docs/performance.md)."""
+"""
+The page ``docs/performance.md``, from the results ``python -m bench`` gathers.
 
-from bench import report_compiled, report_raw_imu
+The machine, the speed targets and sections 1 to 5 (the paper observer
+node and the batch core) here; the raw-IMU node's and the compiled
+kernels' (sections 6 and 7) in :mod:`docgen.performance_raw_imu`. Every
+verdict is computed from the figures, never typed.
+"""
+
 from bench.nodes import LATENCY_RATE, SHIPPED, SUSTAINED_MEDIAN_MS, sustained_rate
+from docgen import performance_raw_imu as raw_imu_page
+from docgen.markdown import table as _table
 
 BATCH_TARGET = 20e6  # updates/s at batch size 100 000
 REPRODUCE_TARGET = 5.0  # s
@@ -25,13 +33,6 @@ def _us(value):
 
 def _ms(value):
     return '—' if value is None else f'{value:.2f}' if value < 10 else f'{value:.0f}'
-
-
-def _table(header, rows):
-    lines = ['| ' + ' | '.join(header) + ' |',
-             '|' + '|'.join('---' for _ in header) + '|']
-    lines += ['| ' + ' | '.join(str(c) for c in row) + ' |' for row in rows]
-    return '\n'.join(lines)
 
 
 def machine_section(m, command):
@@ -550,7 +551,7 @@ def analysis_section(r):
                      f'the rest is {listed} per step, and the pairing '
                      '(section 5).')
         lines.append(text)
-    raw_line = report_raw_imu.analysis_line(r.get('raw_imu') or {})
+    raw_line = raw_imu_page.analysis_line(r.get('raw_imu') or {})
     if raw_line:
         lines.append(raw_line)
     if r.get('nodes'):
@@ -571,10 +572,10 @@ def render(r):
     sections = [machine_section(r['machine'], r['command'])]
     sections.append(targets_section(r))
     raw = r.get('raw_imu')
-    if raw and report_raw_imu.targets_section(raw):
-        sections.append(report_raw_imu.targets_section(raw))
-    if report_compiled.targets_section(r.get('compiled'), raw):
-        sections.append(report_compiled.targets_section(r.get('compiled'), raw))
+    if raw and raw_imu_page.targets_section(raw):
+        sections.append(raw_imu_page.targets_section(raw))
+    if raw_imu_page.compiled_targets_section(r.get('compiled'), raw):
+        sections.append(raw_imu_page.compiled_targets_section(r.get('compiled'), raw))
     if r.get('batch'):
         sections.append(batch_section(r['batch']))
     if r.get('nodes') is not None:
@@ -587,9 +588,9 @@ def render(r):
         sections.append(profile_section(r.get('profile_direct'),
                                         r.get('profile_loops', [])))
     if raw:
-        sections.append(report_raw_imu.section(raw))
+        sections.append(raw_imu_page.section(raw))
     if r.get('compiled'):
-        sections.append(report_compiled.section(r['compiled']))
+        sections.append(raw_imu_page.compiled_section(r['compiled']))
     sections.append(analysis_section(r))
     if r.get('notes'):
         sections.append('## Notes\n\n' + '\n'.join(f'- {n}' for n in r['notes']))
