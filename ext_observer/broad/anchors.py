@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from ext_observer.broad.result_keys import ANCHORS, FUSION_DEFAULTS
+from ext_observer.core.constants import STANDARD_GRAVITY
 from ext_observer.core.quaternion import conjugate, multiply
 
 # Packages each anchor needs (PyPI names = import names).
@@ -29,7 +30,6 @@ ANCHOR_PACKAGES = {'VQF': 'vqf', 'BasicVQF': 'vqf', 'Madgwick': 'ahrs',
 MADGWICK_BETA = 0.12
 MAHONY_KP = 0.74
 MAHONY_KI = 0.0012
-STANDARD_GRAVITY = 9.80665  # m/s²; Fusion takes the specific force in g
 # The gyro range of BROAD's sensor (myon aktos-t), rad/s: its files do not
 # state it; the recordings reach 1352 °/s, beyond a 1000 °/s range, and
 # ±2000 °/s is the widest usual one (and that of Fusion's own example).
@@ -201,7 +201,7 @@ def _run_fusion(gyr, acc, mag, rate, use_mag, gyro_range=BROAD_GYRO_RANGE, readm
         bias = imufusion.Bias()
         bias.set_settings(imufusion.BiasSettings(sample_rate=rate))
         gyr_deg = np.array([bias.update(g) for g in gyr_deg]).reshape(gyr_deg.shape)
-    acc_g = acc / STANDARD_GRAVITY
+    acc_g = acc / STANDARD_GRAVITY  # Fusion takes the specific force in g
     q = np.empty((len(gyr), 4))
     if use_mag:
         for k in range(len(gyr)):
