@@ -50,8 +50,7 @@ HOLE_RUN_TIME = 0.5
 # The bridge's error across a hole of T seconds, per axis: this share of the
 # rate's change across it times T, and a rate random walk of this intensity
 # (rad²/s³, its Brownian bridge: q T³ / 12) for the holes whose rates on both
-# sides happen to agree. Fitted on the even-numbered BROAD trials
-# (docs/raw_imu.md#holes-in-the-stream).
+# sides happen to agree. Fitted on the tuning trials (docs/raw_imu.md#holes-in-the-stream).
 HOLE_RATE_CHANGE = 0.26
 HOLE_RATE_WALK = 1.0
 # The walk's Brownian bridge: the integral over T of a rate pinned at both ends
@@ -63,23 +62,22 @@ HOLE_HERMITE_DIVISOR = 12.0
 # field afresh (learns nothing across the hole).
 HOLE_CALIBRATION = math.radians(0.5) ** 2
 # s: how long a moving body's translational acceleration keeps its direction
-# after a hole (shorter than a start's START_CORRELATION: on the even trials
-# 0.3 s recovers the inclination of 200 ms holes faster than 1 s, 6.0° against
-# 7.8° on the fast rotation), and over how long the estimator follows its
-# size (acc_deviation).
+# after a hole (shorter than a start's START_CORRELATION: a hole's restarted
+# mean must trust new samples sooner; docs/broad_tuning.md, "Holes and a
+# clipped gyro"), and over how long the estimator follows its size
+# (acc_deviation).
 HOLE_CORRELATION = 0.3
 HOLE_DEVIATION_TIME = 1.0
 # s: the longest hole whose bridge takes the end correction (hole_end_fix):
-# on the even trials it cuts the error of 50 ms bursts and adds to 200 ms ones.
+# it helps short holes and hurts long ones (docs/broad_tuning.md).
 HOLE_END_TIME = 0.1
 # The share of the linear bridge's error σ left after the end correction.
 HOLE_END_SHARE = 0.5
 # The share of the range's rotation per sample that a clipped axis is taken to
 # miss, summed along a clipped stretch (the rate stays beyond the range): the
 # clip's error σ that weighs the inclination's mean against new samples.
-# Chosen on the even-numbered BROAD trials, gyro clipped at ±250 °/s
-# (docs/raw_imu.md#wherever-the-robot-starts): 1 (the whole range) restarts the mean
-# in fast translation too, where one sample's vertical is worse than the gyro's.
+# Below 1 (the whole range), which would restart the mean in fast translation
+# too, where one sample's vertical is worse than the gyro's (docs/broad_tuning.md).
 CLIP_SHARE = 0.2
 # While the inclination's error σ from holes and clipped samples is above
 # this share of acc_reject, the gyro has not carried the vertical: no
