@@ -217,7 +217,7 @@ def mc_prior_unknown(s, o, norm):
 def mc_prior_kept(s, o):
     """A restart: ``(z, d, τ)`` and their covariance as learned before."""
     mc_prior_x(s, o)
-    copy_into(s, rows(o + MC_P + (CAL_N + 1) * CAL_Z, CAL_N), rows(o + MC_PRIOR_P, 9), 9, 9)
+    copy_into(s, rows(o + MC_P + (CAL_N + 1) * CAL_Z, CAL_N), s, rows(o + MC_PRIOR_P, 9), 9, 9)
 
 
 def mc_prior_loaded(s, o, norm):
@@ -237,7 +237,7 @@ def mc_prior_spread(s, o, z_std, d_std, tau_std):
 
 def mc_prior_x(s, o):
     """``x[3:]`` and the scale from the prior."""
-    copy_into(s, rows(o + MC_X + CAL_Z, 1), rows(o + MC_PRIOR_X, 1), 9, 1)
+    copy_into(s, rows(o + MC_X + CAL_Z, 1), s, rows(o + MC_PRIOR_X, 1), 9, 1)
     s[o + MC_SCALE] = s[o + MC_PRIOR_SCALE]
 
 
@@ -249,16 +249,17 @@ def mc_start_field(s, o, y, norm):
     """
     x, p, yy, t = o + MC_X, o + MC_P, o + MC_YY, o + MC_K
     mc_regressor_into(s, yy, CAL_NY, y)
-    matmul_acc_into(s, rows(x, 1), rows(yy, CAL_NY), rows(x + CAL_D, 1), 3, CAL_NY, 1)
+    matmul_acc_into(s, rows(x, 1), s, rows(yy, CAL_NY), s, rows(x + CAL_D, 1), 3, CAL_NY, 1)
     store3(s, x + CAL_S, add3(y, vec3_at(s, x + CAL_S)))  # s = y + Y d
     pd = rows(p + CAL_N * CAL_D + CAL_Z, CAL_N)  # P[d, 3:]
-    matmul_acc_into(s, rows(p + CAL_Z, CAL_N), rows(yy, CAL_NY), pd, 3, CAL_NY, CAL_N - CAL_Z)
-    copy_into(s, cols(p + CAL_N * CAL_Z, CAL_N), rows(p + CAL_Z, CAL_N), 3, CAL_N - CAL_Z)
+    matmul_acc_into(s, rows(p + CAL_Z, CAL_N), s, rows(yy, CAL_NY), s, pd, 3, CAL_NY,
+                    CAL_N - CAL_Z)
+    copy_into(s, cols(p + CAL_N * CAL_Z, CAL_N), s, rows(p + CAL_Z, CAL_N), 3, CAL_N - CAL_Z)
     # P[s, s] = Y P[d, d] Yᵀ + noise² I, Y P[d, d] in the scratch of K
     fill(s, t, 3 * CAL_NY, 0.0)
     pdd = rows(p + (CAL_N + 1) * CAL_D, CAL_N)
-    matmul_acc_into(s, rows(t, CAL_NY), rows(yy, CAL_NY), pdd, 3, CAL_NY, CAL_NY)
-    matmul_acc_into(s, rows(p, CAL_N), rows(t, CAL_NY), cols(yy, CAL_NY), 3, CAL_NY, 3)
+    matmul_acc_into(s, rows(t, CAL_NY), s, rows(yy, CAL_NY), s, pdd, 3, CAL_NY, CAL_NY)
+    matmul_acc_into(s, rows(p, CAL_N), s, rows(t, CAL_NY), s, cols(yy, CAL_NY), 3, CAL_NY, 3)
     noise = s[o + MC_NOISE] * norm
     add_diagonal(s, p, CAL_N, CAL_S, 3, noise * noise)
 

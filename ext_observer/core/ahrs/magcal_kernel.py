@@ -367,7 +367,7 @@ def mc_hold(s, o, y, f, has_up, u, dt):
     x = o + MC_X
     cand = o + MC_CANDIDATE
     if s[o + MC_HELD] < 0.0:
-        copy_into(s, rows(cand, 1), rows(x + CAL_Z, 1), CAL_ZD, 1)
+        copy_into(s, rows(cand, 1), s, rows(x + CAL_Z, 1), CAL_ZD, 1)
     g = mc_calibrated(s, cand, y[0], y[1], y[2])
     if has_up:
         turned = abs(mc_heading_between(u[0], u[1], u[2], f[0], f[1], f[2], g[0], g[1], g[2]))
@@ -376,7 +376,7 @@ def mc_hold(s, o, y, f, has_up, u, dt):
         turned = abs(mc_heading_between(y[0] / n, y[1] / n, y[2] / n, f[0], f[1], f[2],
                                         g[0], g[1], g[2]))
     if turned > CAL_HOLD_TURN * s[o + MC_HEADING]:
-        copy_into(s, rows(cand, 1), rows(x + CAL_Z, 1), CAL_ZD, 1)
+        copy_into(s, rows(cand, 1), s, rows(x + CAL_Z, 1), CAL_ZD, 1)
         s[o + MC_HELD] = 0.0
     else:
         s[o + MC_HELD] = max_of(s[o + MC_HELD], 0.0) + dt
