@@ -9,7 +9,6 @@ parts of the filter (``CAL_S``, ``CAL_Z``, ``CAL_D``, ``CAL_TAU``). "field"
 is the unit of the fields the calibrator is given (any unit).
 """
 
-from .layout import Layout
 from .record import Group
 
 # --- tuning -------------------------------------------------------------------
@@ -143,14 +142,5 @@ CAL = Group('cal', "one magnetometer calibrator: its Kalman filter, prior, verdi
                 ('c', 'field²', "the calibrated field's covariance J P Jᵀ, 3 × 3", 9),
             ])
 
-# --- the same fields as slots of a flat block (until the kernels take the record) ------
 
-MAGCAL = Layout()
-for _path, _unit, _meaning, _size in CAL.fields():
-    MAGCAL.field(_path[-1], _size)
-    globals()['MC_' + _path[-1].upper()] = MAGCAL.offset(_path[-1])
-MC_COUNTS = MAGCAL.offset('fields')
-MC_SIZE = MAGCAL.size
-
-__all__ = ([name for name in dir() if name.startswith(('MC_', 'CAL_'))]
-           + ['CAL', 'GATE', 'MAGCAL'])
+__all__ = [name for name in dir() if name.startswith('CAL_')] + ['CAL', 'GATE']

@@ -113,7 +113,8 @@ def test_a_skew_block_and_a_diagonal():
 def test_a_product_of_views_is_numpys_and_sums_left_to_right(transposed):
     n, k, m = 3, 4, 5
     a_at, b_at, out_at = 3, 2, 4
-    a_arr, b_arr, out_arr = state(n * k + 2, a_at), state(k * m + 1, b_at), state(n * m + 3, out_at)
+    a_arr, b_arr = state(n * k + 2, a_at), state(k * m + 1, b_at)
+    out_arr = state(n * m + 3, out_at)
     a = np.array(a_arr[a_at:a_at + n * k]).reshape(n, k)
     b_stored = np.array(b_arr[b_at:b_at + k * m]).reshape((m, k) if transposed else (k, m))
     b = b_stored.T if transposed else b_stored
