@@ -238,9 +238,7 @@ def test_a_world_fixed_disturbance_does_not_move_the_calibration():
     assert_allclose(disturbed.soft_iron, clean.soft_iron, atol=1e-3)
 
 
-# The raw-IMU estimator with the calibration off, pinned (first at commit
-# f3564d7, before the calibration was added; again with the changes for where the robot starts
-# to the estimator, made on purpose), on
+# The raw-IMU estimator with the calibration off, pinned: its estimates on
 # synthetic(seconds=12, seed=3) in 9D, samples 1, 500 and 2399 as hex, on
 # floats. A batch (that recording and its 6D run) gives them too: each
 # recording of a batch runs on floats.
@@ -435,12 +433,11 @@ def test_a_passing_magnet_is_gated_and_teaches_nothing():
 # Real magnetometers report the field a little late (BROAD's: about 13 ms, as the calibration
 # learns it on trial 09); while the body turns fast, a field seen τ late is turned by τ ω from
 # the one the gyro predicts. The calibration models it (y = A⁻¹ (s + τ ω × (s − z)),
-# magcal_kernel.py). Ignoring it (tau = 0.0 in mc_update) moved BROAD's 9D mean from 1.59° to
-# 2.05° (trial 09 1.43° → 7.26°) and passed every other test. Synthetic motion like BROAD's
-# fast trials: bursts of rotation up to 10 rad/s about a wandering axis with still breaks, a
-# hard iron, and the field seen a known number of samples late. With the lag modelled the
-# learned delay is the truth's and the offset is right to 0.3 % of the field; without it
-# (mag_cal_delay = 0: no lag learned) the offset is off by more than 0.5 %.
+# magcal_kernel.py; what ignoring it costs on BROAD: docs/broad_tuning.md). Synthetic motion
+# like BROAD's fast trials: bursts of rotation up to 10 rad/s about a wandering axis with
+# still breaks, a hard iron, and the field seen a known number of samples late. With the lag
+# modelled the learned delay is the truth's and the offset is right to 0.3 % of the field;
+# without it (mag_cal_delay = 0: no lag learned) the offset is off by more than 0.5 %.
 
 HARD_IRON = np.array([30.0, -20.0, 15.0])  # µT, about 0.9 of the field
 SECONDS = 60.0
