@@ -7,8 +7,8 @@ a gate for improbable fields, a start-over when the calibration no longer
 fits, a convergence test on the heading error the calibration's uncertainty
 would cause, and the learned calibration applied only once it turns the
 heading by more than a deadband (a loaded one at once). The maths is
-:mod:`~ext_observer.core.ahrs.magcal_kernel`'s (plain functions on a flat
-state, plain or compiled), described in docs/calibration.md.
+:mod:`~ext_observer.core.ahrs.magcal_kernel`'s (plain functions on the
+calibrator's record, plain or compiled), described in docs/calibration.md.
 :class:`MagCalibrator` wraps them; :func:`check_calibration`
 (:mod:`~ext_observer.core.ahrs.magcal_model`) checks a saved calibration.
 
@@ -16,8 +16,10 @@ The caller may refuse a sample (``allow``): :class:`AhrsObserver
 <ext_observer.core.ahrs.ahrs_observer.AhrsObserver>` does for a field its norm/dip test
 rejects once calibrated.
 
-One code path serves one calibrator and a batch: one state block per element
-(``batch`` of them, one for one calibrator), inputs and outputs are Python
+One code path serves one calibrator and a batch: one state per element
+(``batch`` of them, one for one calibrator), each a record of
+:data:`~ext_observer.core.ahrs.magcal_layout.CAL` in its holder
+(:mod:`~ext_observer.core.ahrs.record`); inputs and outputs are Python
 floats, or arrays of shape ``(B,)`` with ``batch=B``. Units: the field in
 any unit (``noise``, ``field_rw`` and ``drift`` are relative to its norm),
 time in s, angular rate in rad/s.
@@ -29,9 +31,7 @@ import sys
 import numpy as np
 
 from . import magcal_kernel
-from .magcal_kernel import (MC_APPLIED, MC_ASSESSED, MC_COEF, MC_CONVERGED,
-                            MC_COUNTS, MC_ENABLED, MC_FRESH, MC_LOADED, MC_READY, MC_SCALE,
-                            MC_SHIFT, MC_WATCHING, MC_X)
+from .magcal_layout import CAL, CAL_Z
 from .magcal_model import check_calibration
 
 __all__ = ['MagCalibrator', 'STATES', 'check_calibration']
@@ -39,11 +39,45 @@ __all__ = ['MagCalibrator', 'STATES', 'check_calibration']
 STATES = ('off', 'learning', 'converged', 'loaded')
 _COUNTS = ('fields', 'used', 'gated', 'refused', 'invalid', 'resets')
 _S, _Z, _D, _T = slice(0, 3), slice(3, 6), slice(6, 11), 11
+# CAL's fields: the slots of its plain records.
+_NAMES = tuple(path[-1] for path, _, _, _ in CAL.fields())
 
 
 def _tuples(columns):
     """The columns of a ``(k, n)`` array as ``n`` k-tuples of floats (the kernel's vectors)."""
     return [tuple(v) for v in columns.T.tolist()]
+
+
+def _value(holder, name):
+    """Field ``name`` of a holder's record: a float, or a vector (an array, or a list)."""
+    if isinstance(holder, np.ndarray):
+        return holder[name][0]
+    return getattr(holder[0], name)
+
+
+def _compiled(kernel):
+    """Whether a kernel module's functions are compiled (numba dispatchers)."""
+    return hasattr(kernel.mc_learn, 'py_func')
+
+
+def _holders(blocks, n, compiled):
+    """The holders given, checked: ``n`` of them, of the kernel's kind."""
+    holders = list(blocks)
+    if len(holders) != n:
+        raise ValueError(f'{len(holders)} blocks given for {n} calibrator(s)')
+    for holder in holders:
+        if compiled:
+            fits = (isinstance(holder, np.ndarray) and holder.shape == (1,)
+                    and holder.dtype == CAL.dtype)
+        else:
+            fits = (isinstance(holder, list) and len(holder) == 1
+                    and getattr(type(holder[0]), '__slots__', None) == _NAMES)
+        if not fits:
+            kind = ('a one-element array of CAL.dtype, for compiled kernels' if compiled
+                    else 'a one-element list of a plain CAL record, for plain kernels')
+            raise ValueError(f'a calibrator\'s block must be the holder of its record ({kind}; '
+                             f'CAL.holder or record.holder_of), got {type(holder).__name__}')
+    return holders
 
 
 class MagCalibrator:
@@ -80,15 +114,14 @@ class MagCalibrator:
         The functions of :mod:`~ext_observer.core.ahrs.magcal_kernel` (default),
         or a module with the same functions and constants (the same file
         loaded again with its functions compiled by ``numba.njit``).
-    state : list or ndarray of float, optional
-        The container of the state: ``batch`` (or one) blocks of
-        ``MC_SIZE`` floats from ``offset`` on (a 1-D float64 array for a
-        compiled kernel). Default: a new Python list.
-    offset : int
-        Where the first block starts in ``state``.
-    blocks : list of (container, int), optional
-        Instead of ``state``: where each element's block is (its container
-        and offset), one per element, e.g. inside each estimator's state.
+    blocks : list of holders, optional
+        Each element's state, one per element: the holder of a record of
+        :data:`~ext_observer.core.ahrs.magcal_layout.CAL` (a one-element
+        structured array of ``CAL.dtype`` for a compiled kernel, a
+        one-element list of ``CAL.plain()`` for the plain one), e.g. the
+        calibration's record inside each estimator's state
+        (:func:`~ext_observer.core.ahrs.record.holder_of`). Default: new
+        holders of the kernel's kind.
 
     Attributes
     ----------
@@ -101,33 +134,25 @@ class MagCalibrator:
 
     def __init__(self, batch=None, enabled=True, noise=0.025, field_rw=0.03, soft_iron=0.05,
                  delay=0.02, heading=math.radians(6.0), deadband=math.radians(15.0),
-                 drift=0.002, kernel=None, state=None, offset=0, blocks=None):
+                 drift=0.002, kernel=None, blocks=None):
         self.batch = batch
         n = 1 if batch is None else int(batch)
         self._n = n
         self._k = k = magcal_kernel if kernel is None else kernel
-        size = int(k.MC_SIZE)
+        compiled = _compiled(k)
         if blocks is None:
-            offset = int(offset)
-            if state is None:
-                state = [0.0] * (offset + n * size)
-            blocks = [(state, offset + i * size) for i in range(n)]
-        blocks = [(s, int(o)) for s, o in blocks]
-        if len(blocks) != n:
-            raise ValueError(f'{len(blocks)} blocks given for {n} calibrator(s)')
-        for s, o in blocks:
-            if o < 0 or len(s) < o + size:
-                raise ValueError(f'a state of {len(s)} floats has no block of {size} at {o}')
-        self._blocks = blocks
-        self._s, self._o = blocks[0]  # one calibrator's
+            blocks = [CAL.holder(compiled) for _ in range(n)]
+        self._blocks = _holders(blocks, n, compiled)
+        self._holder = self._blocks[0]  # one calibrator's
 
         def per(value):
             return np.broadcast_to(np.asarray(value, dtype=float), (n,)).tolist()
 
         on = [1.0 if v else 0.0 for v in np.broadcast_to(np.asarray(enabled, dtype=bool), (n,))]
-        for (s, o), *values in zip(blocks, on, per(noise), per(field_rw), per(soft_iron),
-                                   per(delay), per(heading), per(deadband), per(drift)):
-            k.mc_init(s, o, *values)
+        for holder, *values in zip(self._blocks, on, per(noise), per(field_rw),
+                                   per(soft_iron), per(delay), per(heading), per(deadband),
+                                   per(drift)):
+            k.mc_init_in(holder, *values)
 
     def __getstate__(self):
         # The kernel, a module, by name (copies and pickles share it).
@@ -148,28 +173,26 @@ class MagCalibrator:
         ----------
         kernel : module
             The calibration's kernel (plain, or the compiled module).
-        blocks : list of (state, offset)
-            One per calibrator, each a copy of the block it replaces.
+        blocks : list of holders
+            One per calibrator, each the holder of a copy of the record it
+            replaces, of the kernel's kind (see the class's ``blocks``).
 
         """
-        blocks = [(s, int(o)) for s, o in blocks]
-        if len(blocks) != self._n:
-            raise ValueError(f'{len(blocks)} blocks given for {self._n} calibrator(s)')
+        self._blocks = _holders(blocks, self._n, _compiled(kernel))
+        self._holder = self._blocks[0]
         self._k = kernel
-        self._blocks = blocks
-        self._s, self._o = blocks[0]
 
     # --- state ---------------------------------------------------------------
 
     def reset(self):
         """Forget the calibration: learn from the next field on."""
-        for s, o in self._blocks:
-            self._k.mc_reset(s, o)
+        for holder in self._blocks:
+            self._k.mc_reset_in(holder)
 
     def restart(self):
         """Keep what is learned, follow the field afresh from the next sample."""
-        for s, o in self._blocks:
-            self._k.mc_restart(s, o)
+        for holder in self._blocks:
+            self._k.mc_restart_in(holder)
 
     def load(self, bias, soft_iron, index=None):
         """
@@ -197,8 +220,8 @@ class MagCalibrator:
         state = np.concatenate([unit @ b, [unit[0, 0] - 1.0, unit[1, 1] - 1.0, unit[0, 1],
                                            unit[0, 2], unit[1, 2], 0.0]])
         blocks = self._blocks if index is None else [self._blocks[int(index)]]
-        for s, o in blocks:
-            self._k.mc_load_state(s, o, *state.tolist(), float(scale))
+        for holder in blocks:
+            self._k.mc_load_state_in(holder, *state.tolist(), float(scale))
 
     # --- learning ----------------------------------------------------------
 
@@ -238,7 +261,7 @@ class MagCalibrator:
             u0, u1, u2 = (0.0, 0.0, 0.0) if up is None else up
             if allow is not True:
                 allow = np.asarray(allow, dtype=bool).reshape(-1)[0]
-            return k.mc_learn(self._s, self._o, (float(y0), float(y1), float(y2)),
+            return k.mc_learn_in(self._holder, (float(y0), float(y1), float(y2)),
                               (float(rw), float(rx), float(ry), float(rz)), dt,
                               (float(w0), float(w1), float(w2)), 0.0 if up is None else 1.0,
                               (float(u0), float(u1), float(u2)), 1.0 if allow else 0.0) != 0.0
@@ -258,26 +281,25 @@ class MagCalibrator:
         # element learns; when any element needs the quality now, all have
         # it assessed; when any watches its heading turn, all reconsider
         # applying their calibration.
-        fresh = [s[o + MC_FRESH] != 0.0 for s, o in blocks]
+        fresh = [_value(h, 'fresh') != 0.0 for h in blocks]
         if not all(fresh):
-            for i, (s, o) in enumerate(blocks):
+            for i, h in enumerate(blocks):
                 if fresh[i]:
-                    k.mc_predict(s, o, *r[i], dt)
+                    k.mc_predict_in(h, *r[i], dt)
         used = np.empty(n, dtype=bool)
-        for i, (s, o) in enumerate(blocks):
-            used[i] = k.mc_learn(s, o, y[i], r[i], dt, w[i], has_up, u[i],
+        for i, h in enumerate(blocks):
+            used[i] = k.mc_learn_in(h, y[i], r[i], dt, w[i], has_up, u[i],
                                  1.0 if allow[i] else 0.0) != 0.0
-        assessed = [s[o + MC_ASSESSED] != 0.0 for s, o in blocks]
+        assessed = [_value(h, 'assessed') != 0.0 for h in blocks]
         if any(assessed):
-            for i, (s, o) in enumerate(blocks):
+            for i, h in enumerate(blocks):
                 if not assessed[i]:
-                    k.mc_assess(s, o, dt)
-        watching = [s[o + MC_WATCHING] != 0.0 for s, o in blocks]
+                    k.mc_assess_in(h, dt)
+        watching = [_value(h, 'watching') != 0.0 for h in blocks]
         if any(watching):
-            for i, (s, o) in enumerate(blocks):
+            for i, h in enumerate(blocks):
                 if not watching[i]:
-                    k.mc_reconsider(s, o)
-                    k.mc_cache(s, o)
+                    k.mc_reconsider_in(h)
         return used
 
     # --- outputs -------------------------------------------------------------
@@ -300,25 +322,21 @@ class MagCalibrator:
         """
         y0, y1, y2 = mag
         if self.batch is None:
-            return self._k.mc_apply(self._s, self._o, y0, y1, y2)
-        a00, a01, a02, a10, a11, a12, a20, a21, a22, z0, z1, z2 = self._rows(MC_COEF, 12).T
+            return self._k.mc_apply_in(self._holder, y0, y1, y2)
+        a00, a01, a02, a10, a11, a12, a20, a21, a22, z0, z1, z2 = self._field('coef').T
         return (a00 * y0 + a01 * y1 + a02 * y2 - z0, a10 * y0 + a11 * y1 + a12 * y2 - z1,
                 a20 * y0 + a21 * y1 + a22 * y2 - z2)
 
-    def _slots(self, slot):
-        """The value of a slot, per element: shape (n,)."""
-        return self._rows(slot, 1)[:, 0]
+    def _field(self, name):
+        """Field ``name`` per element: shape (n,), or (n, size) for a vector."""
+        return np.array([_value(h, name) for h in self._blocks], dtype=float)
 
-    def _flags(self, slot):
-        return self._slots(slot) != 0.0
+    def _flags(self, name):
+        return self._field(name) != 0.0
 
     def _x(self):
         """The filter's state, shape (n, 12)."""
-        return self._rows(MC_X, 12)
-
-    def _rows(self, slot, count):
-        """``count`` slots from ``slot`` on, per element: shape (n, count)."""
-        return np.array([s[o + slot:o + slot + count] for s, o in self._blocks], dtype=float)
+        return self._field('x')
 
     def _out(self, v):
         return v[0].item() if self.batch is None else v
@@ -327,36 +345,36 @@ class MagCalibrator:
     def ready(self):
         """Whether :meth:`apply` calibrates (converged or loaded), or the calibrator is off."""
         if self.batch is None:
-            return bool(self._s[self._o + MC_READY] != 0.0)
-        return self._flags(MC_READY)
+            return bool(_value(self._holder, 'ready') != 0.0)
+        return self._flags('ready')
 
     @property
     def applied(self):
         """Whether :meth:`apply` uses the learned (or loaded) calibration, not the identity."""
         if self.batch is None:
-            return bool(self._s[self._o + MC_APPLIED] != 0.0)
-        return self._flags(MC_APPLIED)
+            return bool(_value(self._holder, 'applied') != 0.0)
+        return self._flags('applied')
 
     @property
     def converged(self):
         """Whether the learned calibration has passed the quality threshold."""
-        return self._out(self._flags(MC_ENABLED) & self._flags(MC_CONVERGED))
+        return self._out(self._flags('enabled') & self._flags('converged'))
 
     @property
     def state(self):
         """``'off'``, ``'learning'``, ``'converged'`` or ``'loaded'`` (a list with ``batch``)."""
         states = ['off' if not on else 'loaded' if loaded else
                   'converged' if conv else 'learning'
-                  for on, loaded, conv in zip(self._flags(MC_ENABLED), self._flags(MC_LOADED),
-                                              self._flags(MC_CONVERGED))]
+                  for on, loaded, conv in zip(self._flags('enabled'), self._flags('loaded'),
+                                              self._flags('converged'))]
         return states[0] if self.batch is None else states
 
     @property
     def quality(self):
         """Heading error (rad, 1σ) the calibration's uncertainty causes; inf before any field."""
         if self.batch is None:  # the node's path, read at every field
-            return float(self._k.mc_quality(self._s, self._o))
-        return np.array([float(self._k.mc_quality(s, o)) for s, o in self._blocks])
+            return float(self._k.mc_quality_in(self._holder))
+        return np.array([float(self._k.mc_quality_in(h)) for h in self._blocks])
 
     def heading_turn(self, mag, up):
         """
@@ -376,8 +394,8 @@ class MagCalibrator:
             learned calibration makes of it, rad; 0 before anything is learned.
 
         """
-        k, st, o = self._k, self._s, self._o
-        f0, f1, f2 = k.mc_calibrated(st, o + MC_X + 3, mag[0], mag[1], mag[2])
+        k = self._k
+        f0, f1, f2 = k.mc_calibrated(_value(self._holder, 'x'), CAL_Z, mag[0], mag[1], mag[2])
         n = math.sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2]) or 1.0
         return float(k.mc_heading_between(up[0] / n, up[1] / n, up[2] / n, mag[0], mag[1],
                                           mag[2], f0, f1, f2))
@@ -385,13 +403,12 @@ class MagCalibrator:
     @property
     def counts(self):
         """The counts (see the class's attributes): a dict of int64 arrays (B,) or (1,)."""
-        return {key: self._slots(MC_COUNTS + j).astype(np.int64)
-                for j, key in enumerate(_COUNTS)}
+        return {key: self._field(key).astype(np.int64) for key in _COUNTS}
 
     @property
     def _shift(self):
         """The mean square heading turn of the learned calibration (rad²), shape (n,)."""
-        return self._slots(MC_SHIFT)
+        return self._field('shift')
 
     @property
     def bias(self):
@@ -403,7 +420,7 @@ class MagCalibrator:
     @property
     def soft_iron(self):
         """The soft-iron matrix ``S``, shape (3, 3) or (B, 3, 3)."""
-        s = np.linalg.inv(self._unit_a(self._x()) * self._slots(MC_SCALE)[:, None, None])
+        s = np.linalg.inv(self._unit_a(self._x()) * self._field('scale')[:, None, None])
         return s[0] if self.batch is None else s
 
     def _unit_a(self, x):
@@ -420,5 +437,5 @@ class MagCalibrator:
     def field(self):
         """The calibrated field now, as the filter tracks it (body frame), shape (3,) or (B, 3)."""
         x = self._x()
-        m = (x[:, _S] - x[:, _Z]) * self._slots(MC_SCALE)[:, None]
+        m = (x[:, _S] - x[:, _Z]) * self._field('scale')[:, None]
         return m[0] if self.batch is None else m

@@ -1,13 +1,15 @@
 """
-The magnetometer calibration's tuning and the layout of its state block.
+The magnetometer calibration's tuning, and its state: the record :data:`CAL`.
 
-One calibrator's state is :data:`MC_SIZE` floats from an offset ``o`` of a
-container; the ``MC_*`` constants are the slots, relative to ``o``
-(:mod:`~ext_observer.core.ahrs.magcal_kernel` says what they hold and does the
-maths).
+One calibrator's state is a record of :data:`CAL`'s fields
+(:mod:`~ext_observer.core.ahrs.record`), each declared below with its unit
+and meaning; :mod:`~ext_observer.core.ahrs.magcal_kernel` does the maths on
+it. The filter's state ``x`` and its covariance ``p`` are indexed by the
+parts of the filter (``CAL_S``, ``CAL_Z``, ``CAL_D``, ``CAL_TAU``). "field"
+is the unit of the fields the calibrator is given (any unit).
 """
 
-from .layout import Layout
+from .record import Group
 
 # --- tuning -------------------------------------------------------------------
 
@@ -50,87 +52,95 @@ CAL_SCALE_FLOOR = 0.25
 # Prior standard deviation of a loaded soft iron, times the soft-iron parameter.
 CAL_LOADED_SOFT_SHARE = 0.2
 
-# --- the state block (offsets from o) ------------------------------------------
+# --- the filter's state x (s, z, d, τ) and the rows of its covariance P ---------------
 
-MAGCAL = Layout()
 CAL_N = 12  # the filter's state: s = m + z (3), z (3), d (5), τ
-# Where each part of the filter's state starts (in x, and as rows of P).
+# Where each part starts (in x, and as rows of P).
 CAL_S = 0
 CAL_Z = 3
 CAL_D = 6
 CAL_TAU = 11
 CAL_ZD = 8  # the calibration proper, (z, d)
+CAL_ZDT = CAL_N - CAL_Z  # what a prior holds: (z, d, τ), x[CAL_Z:]
 CAL_NY = 5  # d, and the columns of Y(y), with D(d) y = Y(y) d
-MC_X = MAGCAL.field('x', CAL_N)  # (s, z, d, τ): s at 0-2, z at 3-5, d at 6-10, τ at 11
-MC_P = MAGCAL.field('p', CAL_N * CAL_N)  # its covariance, 12 × 12 row-major
-# What a fresh start starts from: x[3:] (9), the scale, the covariance of
-# x[3:] (9 × 9, row-major) and whether there is a prior and whether it has
-# a covariance (restart: yes; load: no, a tighter prior about it).
-MC_PRIOR_X = MAGCAL.field('prior_x', 9)
-MC_PRIOR_SCALE = MAGCAL.field('prior_scale')
-MC_PRIOR_P = MAGCAL.field('prior_p', 81)
-MC_HAS_PRIOR = MAGCAL.field('has_prior')
-MC_PRIOR_COV = MAGCAL.field('prior_cov')
-MC_SCALE = MAGCAL.field('scale')  # A = scale · (I + D)
-MC_FRESH = MAGCAL.field('fresh')  # initialize at the next valid field
-MC_LOADED = MAGCAL.field('loaded')
-MC_CONVERGED = MAGCAL.field('converged')
-MC_IDENTITY = MAGCAL.field('identity')  # the field as given is applied
-MC_ENABLED = MAGCAL.field('enabled')
-MC_QUALITY = MAGCAL.field('quality')
-MC_STALE = MAGCAL.field('stale')  # the quality is assessed when asked for
-MC_LEARNED = MAGCAL.field('learned')  # learning steps, for the occasional symmetrization of P
-MC_REFUSED_SHARE = MAGCAL.field('refused_share')
-MC_NIS = MAGCAL.field('nis')  # mean normalized innovation squared
-MC_CANDIDATE = MAGCAL.field('candidate', 8)  # (z, d) when the quality first passed
-MC_HELD = MAGCAL.field('held')  # time since then (s); -1: not below
-MC_SHIFT = MAGCAL.field('shift')  # mean square heading turn of the calibration (rad²)
-MC_WATCHED = MAGCAL.field('watched')  # samples watched
-MC_FIELD_SCALE = MAGCAL.field('field_scale')  # the field's norm, for the noises
-# The counts (MC_COUNTS, in this order): fields given, used, gated
-# (improbable), refused (by the caller), invalid (non-finite or zero),
-# resets (started over).
-MC_FIELDS = MAGCAL.field('fields')
-MC_USED = MAGCAL.field('used')
-MC_GATED = MAGCAL.field('gated')
-MC_REFUSED = MAGCAL.field('refused')
-MC_INVALID = MAGCAL.field('invalid')
-MC_RESETS = MAGCAL.field('resets')
-MC_COUNTS = MC_FIELDS
-# What mc_apply uses: A row-major (9), then z (3); the identity where not applied.
-MC_COEF = MAGCAL.field('coef', 12)
-MC_READY = MAGCAL.field('ready')  # converged or loaded, or off
-MC_APPLIED = MAGCAL.field('applied')
-# The latest sample learned from, for the quality assessed lazily.
-MC_SEEN_Y = MAGCAL.field('seen_y', 3)
-MC_SEEN_UP = MAGCAL.field('seen_up', 3)
-MC_SEEN_HAS_UP = MAGCAL.field('seen_has_up')
-MC_SEEN_LIVE = MAGCAL.field('seen_live')
-# What the latest mc_learn did: assessed the quality, watched the heading turn.
-MC_ASSESSED = MAGCAL.field('assessed')
-MC_WATCHING = MAGCAL.field('watching')
-# The parameters (MagCalibrator's).
-MC_NOISE = MAGCAL.field('noise')
-MC_FIELD_RW = MAGCAL.field('field_rw')
-MC_SOFT_IRON = MAGCAL.field('soft_iron')
-MC_DELAY = MAGCAL.field('delay')
-MC_HEADING = MAGCAL.field('heading')
-MC_DEADBAND = MAGCAL.field('deadband')
-MC_DRIFT = MAGCAL.field('drift')
-# Scratch: A⁻¹ (3 × 3), H (3 × 12) and A⁻¹ H, P Hᵀ (12 × 3), the
-# innovation covariance S and its inverse (3 × 3), the gain K (12 × 3),
-# Y(y) (3 × 5), J P (3 × 8) and the calibrated field's covariance (3 × 3).
-MC_AI = MAGCAL.field('ai', 9)
-MC_H = MAGCAL.field('h', 36)
-MC_AH = MAGCAL.field('ah', 36)
-MC_PH = MAGCAL.field('ph', 36)
-MC_S = MAGCAL.field('s', 9)
-MC_SI = MAGCAL.field('si', 9)
-MC_K = MAGCAL.field('k', 36)
-MC_YY = MAGCAL.field('yy', 15)
-MC_JP = MAGCAL.field('jp', 24)
-MC_C = MAGCAL.field('c', 9)
-MC_SIZE = MAGCAL.size
 
-__all__ = ([name for name in dir() if name.startswith(('MC_', 'CAL_'))]
-           + ['GATE', 'MAGCAL'])
+# --- the state -------------------------------------------------------------------
+
+CAL = Group('cal', "one magnetometer calibrator: its Kalman filter, prior, verdicts, counts, "
+            "parameters and scratch", [
+                # The filter on x = (s, z, d, τ): A = I + D(d) and the offset z
+                # calibrate a field y as A y − z = m, with s = m + z = A y.
+                ('x', 'field (s, z), 1 (d), s (τ)', 's at 0-2, z at 3-5, d at 6-10, τ at 11',
+                 CAL_N),
+                ('p', "x's units²", "x's covariance, 12 × 12 row-major", CAL_N * CAL_N),
+                # What a fresh start starts from (a restart: what was learned, with its
+                # covariance; a load: a saved calibration, a tighter prior about it).
+                ('prior_x', 'field (z), 1 (d), s (τ)', "the prior's (z, d, τ)", CAL_ZDT),
+                ('prior_scale', '1', "the prior's scale"),
+                ('prior_p', "prior_x's units²", "prior_x's covariance, 9 × 9 row-major",
+                 CAL_ZDT * CAL_ZDT),
+                ('has_prior', 'flag', 'a fresh start starts from the prior'),
+                ('prior_cov', 'flag', 'the prior has a covariance (a restart)'),
+                ('scale', '1', 'the calibrated field is scale · (A y − z)'),
+                # Where the calibration stands.
+                ('fresh', 'flag', 'the filter starts afresh at the next valid field'),
+                ('loaded', 'flag', 'a saved calibration was loaded'),
+                ('converged', 'flag', 'the quality passed the threshold and held'),
+                ('identity', 'flag', 'the field as given is applied, not the calibration'),
+                ('enabled', 'flag', 'the calibrator is on'),
+                ('quality', 'rad', "heading error (1σ) from the calibration's uncertainty"),
+                ('stale', 'flag', 'the quality is assessed when asked for'),
+                ('learned', 'count', 'learning steps, for the occasional symmetrization of p'),
+                ('refused_share', '1', 'share of the fields refused while turning, low-passed'),
+                ('nis', '1', 'mean normalized innovation squared'),
+                ('candidate', 'field (z), 1 (d)', '(z, d) when the quality first passed',
+                 CAL_ZD),
+                ('held', 's', 'time since, the quality below the threshold; -1: not below'),
+                ('shift', 'rad²', 'mean square heading turn of the calibration'),
+                ('watched', 'count', 'samples whose heading turn was watched'),
+                ('field_scale', 'field', "the field's norm the noises scale with"),
+                # The counts, in MagCalibrator's order.
+                ('fields', 'count', 'fields given'),
+                ('used', 'count', 'fields learned from'),
+                ('gated', 'count', 'fields refused as improbable (the gate)'),
+                ('refused', 'count', 'fields refused by the caller'),
+                ('invalid', 'count', 'fields not finite, or zero'),
+                ('resets', 'count', 'start-overs (the calibration no longer fitted)'),
+                # What mc_apply uses: the identity where not applied.
+                ('coef', '1 (A), field (z)', 'scale · A row-major, then scale · z', 12),
+                ('ready', 'flag', 'converged or loaded, or the calibrator off'),
+                ('applied', 'flag', 'mc_apply applies the calibration, not the identity'),
+                # The latest sample learned from, for the quality assessed lazily.
+                ('seen_y', 'field', 'its field, body frame', 3),
+                ('seen_up', '1', "the world's vertical then, body frame (unit)", 3),
+                ('seen_has_up', 'flag', 'seen_up is known'),
+                ('seen_live', 'flag', 'its field was learned from (not a fresh start)'),
+                # What the latest mc_learn did.
+                ('assessed', 'flag', 'it assessed the quality'),
+                ('watching', 'flag', 'it watched the heading turn'),
+                # The parameters (MagCalibrator's).
+                ('noise', '1', "the field's noise per sample and axis, over its norm"),
+                ('field_rw', '1/√s', "the field's random walk in the world, over its norm"),
+                ('soft_iron', '1', 'prior standard deviation of each element of S − I'),
+                ('delay', 's', "prior standard deviation of the field's lag behind the gyro"),
+                ('heading', 'rad', 'converged when the quality is below this'),
+                ('deadband', 'rad', 'applied once it turns the heading by more (RMS)'),
+                ('drift', '1/√s', "the offset's random walk, over the field's norm"),
+                # Scratch of the filter's steps.
+                ('ai', '1', 'A⁻¹, 3 × 3', 9),
+                ('h', '1 (s, z), field (d), field/s (τ)',
+                 'H, the Jacobian of A ŷ = s + τ ω × (s − z), 3 × 12', 3 * CAL_N),
+                ('ah', "as h", "A⁻¹ H, the measurement's Jacobian, 3 × 12", 3 * CAL_N),
+                ('ph', "x's units · field", 'P (A⁻¹ H)ᵀ, 12 × 3', 3 * CAL_N),
+                ('s', 'field²', 'the innovation covariance S, 3 × 3', 9),
+                ('si', '1/field²', 'S⁻¹', 9),
+                ('k', "x's units / field", 'the gain K, 12 × 3 (a start: Y(y) P[d, d], 3 × 5)',
+                 3 * CAL_N),
+                ('yy', 'field', 'Y(y), 3 × 5', 3 * CAL_NY),
+                ('jp', 'field² (z), field (d)', 'J P[zd, zd], 3 × 8, with J = [−I, Y(y)]',
+                 3 * CAL_ZD),
+                ('c', 'field²', "the calibrated field's covariance J P Jᵀ, 3 × 3", 9),
+            ])
+
+
+__all__ = [name for name in dir() if name.startswith('CAL_')] + ['CAL', 'GATE']

@@ -1,14 +1,17 @@
 """
-Vector and small-matrix algebra for the kernels: 3-vectors as tuples, matrices on the flat state.
+Vector and small-matrix algebra for the kernels: 3-vectors as tuples, matrices in array fields.
 
 A 3-vector is a tuple ``(x, y, z)``; a 3 × 3 matrix held in registers is a
-9-tuple, row-major. A matrix on the flat state ``s`` is a view
-``(offset, row stride, column stride)``: :func:`rows` for one stored
-row-major, :func:`cols` for the transpose of one. Each sum runs left to
-right in the order its formula is written, so a kernel written with these
-helpers gives the same bits as the products written out by hand. The same
-subset of Python as the kernels (:mod:`~ext_observer.core.ahrs.compiled`
-compiles them, and numba inlines them into their callers).
+9-tuple, row-major. A matrix stored in an array ``a`` (a field of a record,
+such as a covariance ``c.p``; a list when plain) is read and written at a
+local index ``at`` of it; a product or a copy names each matrix by its
+array and a view ``(at, row stride, column stride)`` into it: :func:`rows`
+for one stored row-major, :func:`cols` for the transpose of one. Each sum
+runs left to right in the order its formula is written, so a kernel written
+with these helpers gives the same bits as the products written out by hand.
+The same subset of Python as the kernels
+(:mod:`~ext_observer.core.ahrs.compiled` compiles them, and numba inlines
+them into their callers).
 """
 
 import math
@@ -25,12 +28,12 @@ def finite_or_zero(a):
 
 
 def rows(at, width):
-    """The view of a row-major matrix ``width`` wide stored at ``at``."""
+    """The view of a row-major matrix ``width`` wide stored from index ``at`` of its array."""
     return (at, width, 1)
 
 
 def cols(at, width):
-    """The transpose of the row-major matrix ``width`` wide stored at ``at``."""
+    """The transpose of the row-major matrix ``width`` wide stored from index ``at``."""
     return (at, 1, width)
 
 
@@ -205,17 +208,22 @@ def column3_into(s, at, width, v):
     s[at + 2 * width] = v[2]
 
 
-def matmul_acc_into(s, out, a, b, n, k, m):
-    """``OUT += A B``, product by product onto each entry (views on ``s``)."""
+def matmul_acc_into(out, out_view, a, a_view, b, b_view, n, k, m):
+    """
+    ``OUT += A B`` (``n × k`` times ``k × m``), product by product onto each entry.
+
+    Each matrix is an array and a view into it (:func:`rows`, :func:`cols`);
+    the arrays may be one and the same.
+    """
     for i in range(n):
         for j in range(m):
-            ai = a[0] + a[1] * i
-            bj = b[0] + b[2] * j
-            o = out[0] + out[1] * i + out[2] * j
-            acc = s[o]
+            ai = a_view[0] + a_view[1] * i
+            bj = b_view[0] + b_view[2] * j
+            o = out_view[0] + out_view[1] * i + out_view[2] * j
+            acc = out[o]
             for t in range(k):
-                acc += s[ai + a[2] * t] * s[bj + b[1] * t]
-            s[o] = acc
+                acc += a[ai + a_view[2] * t] * b[bj + b_view[1] * t]
+            out[o] = acc
 
 
 def fill(s, at, count, value):
@@ -224,11 +232,12 @@ def fill(s, at, count, value):
         s[at + k] = value
 
 
-def copy_into(s, out, a, n, m):
-    """``OUT = A`` (``n × m``, views on ``s``; :func:`cols` for a transpose)."""
+def copy_into(out, out_view, a, a_view, n, m):
+    """``OUT = A`` (``n × m``; arrays and views, :func:`cols` for a transpose)."""
     for i in range(n):
         for j in range(m):
-            s[out[0] + out[1] * i + out[2] * j] = s[a[0] + a[1] * i + a[2] * j]
+            out[out_view[0] + out_view[1] * i + out_view[2] * j] = \
+                a[a_view[0] + a_view[1] * i + a_view[2] * j]
 
 
 def diagonal_into(s, at, width, first, count, value):

@@ -48,7 +48,7 @@ def test_scalars():
         assert sm.finite_or_zero(bad) == 0.0
 
 
-def test_reading_and_writing_the_flat_state():
+def test_reading_and_writing_an_array():
     s = state(40)
     assert sm.vec3_at(s, 5) == (s[5], s[6], s[7])
     assert sm.col3_at(s, 4, 6) == (s[4], s[10], s[16])
@@ -112,22 +112,38 @@ def test_a_skew_block_and_a_diagonal():
 @pytest.mark.parametrize('transposed', [False, True])
 def test_a_product_of_views_is_numpys_and_sums_left_to_right(transposed):
     n, k, m = 3, 4, 5
-    s = state(n * k + k * m + n * m + 6)
-    a_at, b_at, out_at = 3, 3 + n * k, 3 + n * k + k * m
-    a = np.array(s[a_at:a_at + n * k]).reshape(n, k)
-    b_stored = np.array(s[b_at:b_at + k * m]).reshape((m, k) if transposed else (k, m))
+    a_at, b_at, out_at = 3, 2, 4
+    a_arr, b_arr = state(n * k + 2, a_at), state(k * m + 1, b_at)
+    out_arr = state(n * m + 3, out_at)
+    a = np.array(a_arr[a_at:a_at + n * k]).reshape(n, k)
+    b_stored = np.array(b_arr[b_at:b_at + k * m]).reshape((m, k) if transposed else (k, m))
     b = b_stored.T if transposed else b_stored
     b_view = sm.cols(b_at, k) if transposed else sm.rows(b_at, m)
-    # OUT += A B onto what is there, product by product
-    t = list(s)
-    sm.matmul_acc_into(t, sm.rows(out_at, m), sm.rows(a_at, k), b_view, n, k, m)
+    # OUT += A B onto what is there, product by product; A and B only read
+    t, a_before, b_before = list(out_arr), list(a_arr), list(b_arr)
+    sm.matmul_acc_into(t, sm.rows(out_at, m), a_arr, sm.rows(a_at, k), b_arr, b_view, n, k, m)
     got = np.array(t[out_at:out_at + n * m]).reshape(n, m)
-    before = np.array(s[out_at:out_at + n * m]).reshape(n, m)
+    before = np.array(out_arr[out_at:out_at + n * m]).reshape(n, m)
     np.testing.assert_allclose(got, before + a @ b, rtol=1e-12)
     written = (before[2, 4] + a[2, 0] * b[0, 4] + a[2, 1] * b[1, 4] + a[2, 2] * b[2, 4]
                + a[2, 3] * b[3, 4])
     assert got[2, 4] == written
-    assert t[:out_at] == s[:out_at] and t[out_at + n * m:] == s[out_at + n * m:]
+    assert t[:out_at] == out_arr[:out_at] and t[out_at + n * m:] == out_arr[out_at + n * m:]
+    assert a_arr == a_before and b_arr == b_before
+
+
+def test_a_product_within_one_array_is_the_product_of_its_parts():
+    # OUT, A and B in one array (a covariance's blocks): the same as apart.
+    n, k, m = 3, 4, 2
+    s = state(n * k + k * m + n * m)
+    a_at, b_at, out_at = 3, 3 + n * k, 3 + n * k + k * m
+    t = list(s)
+    sm.matmul_acc_into(t, sm.rows(out_at, m), t, sm.rows(a_at, k), t, sm.rows(b_at, m),
+                       n, k, m)
+    apart = list(s)
+    sm.matmul_acc_into(apart, sm.rows(out_at, m), list(s), sm.rows(a_at, k), list(s),
+                       sm.rows(b_at, m), n, k, m)
+    assert t == apart and t[:out_at] == s[:out_at] and t != s
 
 
 def test_twelve_long_sums_and_combinations():
@@ -155,15 +171,19 @@ def test_twelve_long_sums_and_combinations():
 
 
 def test_a_copy_and_a_transposed_copy():
-    s = state(12 + 12)
+    s, source = state(12 + 4), state(12, 2)
     t = list(s)
-    sm.copy_into(t, sm.rows(15, 4), sm.rows(3, 4), 3, 4)
-    assert t[15:27] == s[3:15]
+    sm.copy_into(t, sm.rows(3, 4), source, sm.rows(2, 4), 3, 4)
+    assert t[3:15] == source[2:14] and t[:3] == s[:3] and t[15:] == s[15:]
     t = list(s)
-    sm.copy_into(t, sm.cols(15, 3), sm.rows(3, 4), 3, 4)
-    np.testing.assert_array_equal(np.array(t[15:27]).reshape(4, 3),
-                                  np.array(s[3:15]).reshape(3, 4).T)
-    assert t[:15] == s[:15]
+    sm.copy_into(t, sm.cols(3, 3), source, sm.rows(2, 4), 3, 4)
+    np.testing.assert_array_equal(np.array(t[3:15]).reshape(4, 3),
+                                  np.array(source[2:14]).reshape(3, 4).T)
+    assert t[:3] == s[:3] and t[15:] == s[15:]
+    # Within one array.
+    t = list(s)
+    sm.copy_into(t, sm.rows(9, 3), t, sm.rows(3, 3), 2, 3)
+    assert t[9:15] == s[3:9] and t[:9] == s[:9]
 
 
 def test_the_helpers_are_compiled_with_the_kernels():
