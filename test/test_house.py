@@ -5,7 +5,7 @@ import pathlib
 
 import pytest
 
-from ext_observer.core.ahrs import magcal_layout, uncertainty_kernel
+from ext_observer.core.ahrs import uncertainty_kernel
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.ahrs_state import KERNEL_PARAMETERS, STATE
 from ext_observer.core.ahrs.record import Group
@@ -37,8 +37,7 @@ def _hand_numbered(folder):
 def test_the_kernels_slots_come_from_their_layout_tables():
     found = _hand_numbered(PACKAGE / 'core')
     assert len(found) <= 10, '\n'.join(found)
-    for module, layout, size in ((magcal_layout, magcal_layout.MAGCAL, magcal_layout.MC_SIZE),
-                                 (uncertainty_kernel, uncertainty_kernel.UNCERTAINTY,
+    for module, layout, size in ((uncertainty_kernel, uncertainty_kernel.UNCERTAINTY,
                                   uncertainty_kernel.U_SIZE)):
         spans = sorted(layout.fields.values())
         assert spans[0][0] == 0 and layout.size == size

@@ -32,11 +32,11 @@ from .gravity_kernel import ahrs_update_acc
 from .hole_kernel import (HOLE_CALIBRATION, calibration_restart, clip_after, forget_wait,
                           hole_after, hole_end_fix, hole_ends, hole_rate, hole_slope,
                           hole_starts, hole_variance, restart_mean, restart_weighted)
-from .bias_kernel import bias_forget
+from .bias_kernel import bias_forget, bias_variance
 from .magcal_kernel import mc_apply
 from .field_kernel import (ahrs_update_mag, field_clipped,
                            field_doubt, field_forget)
-from .velocity_kernel import velocity_step
+from .velocity_kernel import velocity_sample, velocity_step
 from .record import Group
 
 # The coefficients of the current intervals (NaN: not computed yet).
@@ -128,17 +128,7 @@ def ahrs_coefficients(s, dt):
 
 # --- the three steps ---------------------------------------------------------------
 
-def ahrs_update(state, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
-    """
-    :func:`ahrs_step` on a holder (``state[0]`` the record): what Python calls per sample.
-
-    numba takes a one-element array from Python far faster than a record
-    (:mod:`~ext_observer.core.ahrs.record`).
-    """
-    return ahrs_step(state[0], gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt)
-
-
-def ahrs_step(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
+def ahrs_update(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
     """One IMU sample: gyro, then accelerometer, then magnetometer (``has_mag``); the estimate."""
     hole = False
     if dt != s.coef.dt:
@@ -154,7 +144,7 @@ def ahrs_step(s, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
         if has_mag and s.par.has_cal != 0.0:
             # Identity until the calibration is converged or loaded (the
             # field step below calibrates the field as given: once).
-            fx, fy, fz = mc_apply(s.cal.flat, 0, mx, my, mz)
+            fx, fy, fz = mc_apply(s.cal, mx, my, mz)
         w, x, y, z = first_attitude(ax, ay, az, has_mag and s.par.use_mag != 0.0, fx, fy, fz,
                                     s.par.use_mag != 0.0)
         s.est.q[0] = w
@@ -320,7 +310,7 @@ def _propagate(s, rx, ry, rz, gx, gy, gz, dt):
 
 # --- a whole recording -----------------------------------------------------------------
 
-def ahrs_run(state, gyr, acc, mag, count, has_mag, dt, out):
+def ahrs_run_in(state, gyr, acc, mag, count, has_mag, dt, out):
     """
     ``count`` samples at one interval ``dt``: ``out[k]`` the estimate after sample ``k``.
 
@@ -334,9 +324,49 @@ def ahrs_run(state, gyr, acc, mag, count, has_mag, dt, out):
         g = gyr[k]
         a = acc[k]
         m = mag[k]  # the caller passes any (N, 3) when has_mag is false
-        ahrs_step(s, g[0], g[1], g[2], a[0], a[1], a[2], has_mag, m[0], m[1], m[2], dt)
+        ahrs_update(s, g[0], g[1], g[2], a[0], a[1], a[2], has_mag, m[0], m[1], m[2], dt)
         o = out[k]
         o[0] = s.est.q[0]
         o[1] = s.est.q[1]
         o[2] = s.est.q[2]
         o[3] = s.est.q[3]
+
+
+# --- what Python calls: on a holder --------------------------------------------------
+# numba takes a one-element array from Python in a fraction of a microsecond,
+# a record in tens of microseconds (it types the record's dtype at every call:
+# record.py); so the wrapper hands each step the holder, whose [0] is the record.
+
+def ahrs_update_in(state, gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt):
+    """:func:`ahrs_update` on the record in ``state``."""
+    return ahrs_update(state[0], gx, gy, gz, ax, ay, az, has_mag, mx, my, mz, dt)
+
+
+def ahrs_reset_in(state):
+    """:func:`ahrs_reset` on the record in ``state``."""
+    ahrs_reset(state[0])
+
+
+def ahrs_update_acc_in(state, ax, ay, az):
+    """:func:`~ext_observer.core.ahrs.gravity_kernel.ahrs_update_acc` on the record in ``state``."""
+    ahrs_update_acc(state[0], ax, ay, az)
+
+
+def ahrs_update_mag_in(state, mx, my, mz, dt):
+    """:func:`~ext_observer.core.ahrs.field_kernel.ahrs_update_mag` on the record in ``state``."""
+    ahrs_update_mag(state[0], mx, my, mz, dt)
+
+
+def ahrs_unbridged_in(state, gx, gy, gz, dt):
+    """:func:`ahrs_unbridged` on the record in ``state``."""
+    return ahrs_unbridged(state[0], gx, gy, gz, dt)
+
+
+def velocity_sample_in(state, vx, vy, vz, dt):
+    """:func:`~ext_observer.core.ahrs.velocity_kernel.velocity_sample` on the record in ``state``."""
+    velocity_sample(state[0], vx, vy, vz, dt)
+
+
+def bias_variance_in(state, i, j):
+    """:func:`~ext_observer.core.ahrs.bias_kernel.bias_variance` of the record in ``state``."""
+    return bias_variance(state[0], i, j)

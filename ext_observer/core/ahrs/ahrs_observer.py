@@ -20,6 +20,7 @@ from .ahrs_params import AhrsParams
 from .compiled import kernels
 from .magcal import MagCalibrator
 from .ahrs_state import KERNEL_PARAMETERS, STATE
+from .record import holder_of
 from .velocity_kernel import VELOCITY_TIMEOUT
 
 __all__ = [
@@ -32,6 +33,8 @@ __all__ = [
 ]
 
 MODES = ('6D', '9D')
+# Where the estimate's flag and q̂ start in a compiled holder's float64 view.
+_INIT, _Q = STATE.offset('est.init'), STATE.offset('est.q')
 
 
 class AhrsObserver:
@@ -130,8 +133,7 @@ class AhrsObserver:
                 soft_iron=p.mag_cal_soft_iron, delay=p.mag_cal_delay,
                 heading=p.mag_cal_heading, deadband=p.mag_cal_deadband,
                 drift=p.mag_cal_drift, kernel=self._kernels.magcal,
-                blocks=[(h[0].cal.flat if not self.compiled else h['cal']['flat'][0], 0)
-                        for h in self._states])
+                blocks=[holder_of(h, 'cal') for h in self._states])
             # Slightly early, so that a field rate at mag_cal_rate learns from each.
             period = 0.999 / float(np.max(p.mag_cal_rate))
             for h in self._states:
@@ -142,6 +144,7 @@ class AhrsObserver:
         # The kernels hold modules: a copy or a pickle asks for them again.
         state = self.__dict__.copy()
         del state['_kernels']
+        state.pop('_flat_view', None)
         return state
 
     def __setstate__(self, state):
@@ -174,8 +177,7 @@ class AhrsObserver:
         self.compiled = kernels.compiled
         if self.calibration is not None:
             self.calibration.use_kernel(
-                kernels.magcal, [(h[0].cal.flat if not self.compiled else h['cal']['flat'][0], 0)
-                                 for h in states])
+                kernels.magcal, [holder_of(h, 'cal') for h in states])
 
     @property
     def kernels(self):
@@ -200,7 +202,7 @@ class AhrsObserver:
     def reset(self):
         """Forget everything: the next accelerometer sample initializes."""
         for h in self._states:
-            self._kernels.ahrs.ahrs_reset(h[0])
+            self._kernels.ahrs.ahrs_reset_in(h)
 
     def field(self, name):
         """
@@ -212,7 +214,15 @@ class AhrsObserver:
         :mod:`~ext_observer.core.ahrs.ahrs_state` (docs/layout.md).
         """
         if self.batch is None:
-            return STATE.get(self._states[0][0], name)
+            h = self._states[0]
+            if self.compiled:
+                # A float64 view of the holder at the field's offset: a
+                # tenth of what reading the record's field from Python costs.
+                at, (_, size) = STATE.offset(name), STATE.path(name)
+                flat = self._flat(h)
+                return float(flat[at]) if size == 1 else tuple(
+                    float(v) for v in flat[at:at + size])
+            return STATE.get(h[0], name)
         values = [STATE.get(h[0], name) for h in self._states]
         if isinstance(values[0], tuple):
             return tuple(np.array(v) for v in zip(*values))
@@ -232,6 +242,13 @@ class AhrsObserver:
         for i, h in enumerate(self._states):
             STATE.set(h[0], name, float(values[i]))
 
+    def _flat(self, holder):
+        """A float64 view of a compiled holder's memory (kept while the holder is)."""
+        cached = self.__dict__.get('_flat_view')
+        if cached is None or cached[0] is not holder:
+            cached = self._flat_view = (holder, holder.view(np.float64).reshape(-1))
+        return cached[1]
+
     def _flag(self, name):
         if self.batch is None:
             return bool(STATE.get(self._states[0][0], name) != 0.0)
@@ -240,12 +257,18 @@ class AhrsObserver:
     @property
     def initialized(self):
         """Whether the first accelerometer sample has initialized the estimate (``q`` not None)."""
-        return any(h[0].est.init != 0.0 if not self.compiled else h['est']['init'][0] != 0.0
-                   for h in self._states)
+        if self.batch is None:
+            return self.field('est.init') != 0.0
+        return any(STATE.get(h[0], 'est.init') != 0.0 for h in self._states)
 
     @property
     def q(self):
         """The ambient estimate ``(w, x, y, z)``; None before the first sample."""
+        if self.batch is None and self.compiled:  # the node's path: read at every field
+            flat = self._flat(self._states[0])
+            if flat[_INIT] == 0.0:
+                return None
+            return float(flat[_Q]), float(flat[_Q + 1]), float(flat[_Q + 2]), float(flat[_Q + 3])
         if not self.initialized:
             return None
         return self.field('est.q')
@@ -274,11 +297,11 @@ class AhrsObserver:
     @property
     def bias_std(self):
         """σ of the gyro bias estimate per body axis (rad/s): its Kalman filter's."""
-        k = self._kernels.bias
+        variance = self._kernels.ahrs.bias_variance_in
         if self.batch is None:
-            s = self._states[0][0]
-            return tuple(math.sqrt(max(float(k.bias_variance(s, i, i)), 0.0)) for i in range(3))
-        return tuple(np.array([math.sqrt(max(float(k.bias_variance(h[0], i, i)), 0.0))
+            h = self._states[0]
+            return tuple(math.sqrt(max(float(variance(h, i, i)), 0.0)) for i in range(3))
+        return tuple(np.array([math.sqrt(max(float(variance(h, i, i)), 0.0))
                                for h in self._states]) for i in range(3))
 
     @property
@@ -363,7 +386,7 @@ class AhrsObserver:
         remove ``dv/dt + ω × v`` from the specific force (the velocity aid,
         :mod:`~ext_observer.core.ahrs.velocity_kernel`); ``dt`` None: the first.
         """
-        self._each(self._kernels.velocity.velocity_sample, v, -1.0 if dt is None else float(dt))
+        self._each(self._kernels.ahrs.velocity_sample_in, v, -1.0 if dt is None else float(dt))
 
     @property
     def calibration_state(self):
@@ -426,7 +449,7 @@ class AhrsObserver:
 
         """
         dt = self._interval(dt)
-        step = self._kernels.ahrs.ahrs_update
+        step = self._kernels.ahrs.ahrs_update_in
         if self.batch is None:
             s = self._states[0]
             if mag is None:
@@ -483,7 +506,7 @@ class AhrsObserver:
                                     and out.flags.writeable):
             raise ValueError(f'out must be a writable C-contiguous float64 array of shape '
                              f'({count}, 4)')
-        run = self._kernels.ahrs.ahrs_run
+        run = self._kernels.ahrs.ahrs_run_in
         s = self._states[0]
         if self.compiled:
             if out is None:
@@ -508,20 +531,20 @@ class AhrsObserver:
         """
         if self.batch is not None:
             raise ValueError('unbridged takes one estimate, not a batch')
-        return self._kernels.ahrs.ahrs_unbridged(self._states[0][0], float(gyr[0]), float(gyr[1]),
+        return self._kernels.ahrs.ahrs_unbridged_in(self._states[0], float(gyr[0]), float(gyr[1]),
                                                  float(gyr[2]), float(dt))
 
     def _each(self, func, vector, *extra):
         if self.batch is None:
-            func(self._states[0][0], *vector, *extra)
+            func(self._states[0], *vector, *extra)
             return
         v = np.asarray(vector, dtype=float).reshape(len(vector), self._n)
         for i, h in enumerate(self._states):
-            func(h[0], *(float(c) for c in v[:, i]), *extra)
+            func(h, *(float(c) for c in v[:, i]), *extra)
 
     def update_acc(self, acc):
         """Correct the inclination from the world-frame filtered specific force."""
-        self._each(self._kernels.gravity.ahrs_update_acc, acc)
+        self._each(self._kernels.ahrs.ahrs_update_acc_in, acc)
 
     def update_mag(self, mag, dt=None):
         """
@@ -545,5 +568,5 @@ class AhrsObserver:
         elif dt != self._mag_dt:
             check_dt(dt)
             self._mag_dt = dt
-        self._each(self._kernels.field.ahrs_update_mag, mag, float(dt))
+        self._each(self._kernels.ahrs.ahrs_update_mag_in, mag, float(dt))
 

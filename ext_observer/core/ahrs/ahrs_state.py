@@ -4,7 +4,7 @@ The raw-IMU estimator's state: its groups, each declared beside the code that ow
 ``STATE`` is what one estimate keeps (:mod:`~ext_observer.core.ahrs.record`):
 the parameters (``par``, set once by the wrapper), the coefficients of the
 current intervals (``coef``) and the estimate with what it remembers, one
-group per concept, then the magnetometer calibration's state (``cal``). A
+group per concept, then the magnetometer calibration's state (``cal``, :mod:`~ext_observer.core.ahrs.magcal_layout`'s ``CAL``). A
 kernel reads ``s.rest.time`` or ``s.bias.rate[0]``; docs/layout.md lists
 every field with its unit and meaning (``python -m ext_observer.core.ahrs.ahrs_state``
 prints the table).
@@ -18,11 +18,11 @@ from .clip_and_rest import GYRO, REST
 from .field_kernel import CAL_FEED, FIELD
 from .gravity_kernel import INC
 from .hole_kernel import HOLE
-from .magcal_layout import MC_SIZE
+from .magcal_layout import CAL
 from .record import Group
 from .velocity_kernel import VEL
 
-__all__ = ['CAL', 'KERNEL_PARAMETERS', 'PAR', 'STATE']
+__all__ = ['KERNEL_PARAMETERS', 'PAR', 'STATE']
 
 # The AhrsParams the kernels read, by the same name (the calibration's are its own).
 KERNEL_PARAMETERS = ('alpha', 'tau_acc', 'tau_acc_gain', 'tau_mag', 'tau_bias', 'bias_max',
@@ -39,9 +39,6 @@ PAR = Group('par', "The parameters: AhrsParams's of the same name, and what the 
     ('cal_period', 's', 'learn from a field at most this often'),
     ('motion_bias', '1', 'the bias is learned in motion (tau_bias > 0)'),
     ('velocity_timeout', 's', 'an older velocity is not used'),
-])
-CAL = Group('cal', "The magnetometer calibration's state (magcal_layout)", [
-    ('flat', '', "the calibrator's slots", MC_SIZE),
 ])
 STATE = Group('ahrs', "One estimate's state", [
     PAR, COEF, EST, REST, GYRO, BIAS, INC, REJ, VEL, HOLE, FIELD, CAL_FEED, CAL])

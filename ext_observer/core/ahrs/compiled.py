@@ -61,7 +61,7 @@ class CompiledUnavailable(RuntimeError):
 
 
 # The kernel modules a wrapper calls, by their short names (ahrs: ahrs_kernel.py).
-_WRAPPED = ('ahrs', 'gravity', 'field', 'bias', 'velocity', 'hole', 'magcal', 'uncertainty')
+_WRAPPED = ('ahrs', 'magcal', 'uncertainty')
 
 
 class Kernels:
@@ -70,12 +70,12 @@ class Kernels:
 
     Attributes
     ----------
-    ahrs, gravity, field, bias, velocity, hole, magcal, uncertainty : module
-        The kernel modules the wrappers call:
-        :mod:`~ext_observer.core.ahrs.ahrs_kernel`, ``gravity_kernel``,
-        ``field_kernel``, ``bias_kernel``, ``velocity_kernel``,
-        ``hole_kernel``, ``magcal_kernel`` and ``uncertainty_kernel`` (their
-        compiled twins when compiled).
+    ahrs, magcal, uncertainty : module
+        The kernel modules the wrappers call (their ``*_in`` functions, on
+        holders): :mod:`~ext_observer.core.ahrs.ahrs_kernel`,
+        :mod:`~ext_observer.core.ahrs.magcal_kernel` and
+        :mod:`~ext_observer.core.ahrs.uncertainty_kernel` (their compiled
+        twins when compiled).
     sample_step : callable
         :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step`, the
         node's call per sample; once :func:`ext_observer.pipeline.kernel_cache.load`

@@ -16,7 +16,7 @@ import math
 from .ahrs_filters import gain, rotate, rotation_matrix
 from .bias_kernel import bias_measure
 from .hole_kernel import forget_wait
-from .magcal_kernel import MC_APPLIED, MC_READY, mc_apply, mc_field, mc_learn
+from .magcal_kernel import mc_apply, mc_field, mc_learn
 from .small_matrix import vec3_at
 from .record import Group
 
@@ -221,7 +221,7 @@ def _follow_references(s, norm, dip, use, dt):
 
 def _waits(s):
     """Whether the heading waits for the calibration (the body has moved, none is ready)."""
-    return s.cal.flat[MC_READY] == 0.0 and s.cal_feed.moved != 0.0 and s.field.mag_used != 0.0
+    return s.cal.ready == 0.0 and s.cal_feed.moved != 0.0 and s.field.mag_used != 0.0
 
 
 def _calibration_wait(s, psi, use):
@@ -238,7 +238,7 @@ def _calibration_wait(s, psi, use):
             _wait(s, psi)
         return False, psi
     if s.field.wait_n != 0.0:
-        if s.cal.flat[MC_APPLIED] == 0.0:
+        if s.cal.applied == 0.0:
             half = 0.5 * s.field.wait_turn
             _turn_heading(s, math.cos(half), math.sin(half))
             d = psi - s.field.wait_turn
@@ -410,13 +410,13 @@ def field_calibrate(s, mx, my, mz, dt):
     """Teach the calibration this field (at most every ``cal_period``); the field to use."""
     s.cal_feed.wait += dt
     if _after_clip(s) or s.cal_feed.wait < s.par.cal_period:
-        return mc_apply(s.cal.flat, 0, mx, my, mz)  # learn at most at mag_cal_rate
-    applied = s.cal.flat[MC_APPLIED] != 0.0
+        return mc_apply(s.cal, mx, my, mz)  # learn at most at mag_cal_rate
+    applied = s.cal.applied != 0.0
     allow = True
     has_ref = s.field.has_ref != 0.0
-    if has_ref and s.cal.flat[MC_READY] != 0.0:
+    if has_ref and s.cal.ready != 0.0:
         # A field the norm/dip test rejects does not teach.
-        cx, cy, cz = mc_apply(s.cal.flat, 0, mx, my, mz)
+        cx, cy, cz = mc_apply(s.cal, mx, my, mz)
         norm, dip, _, _ = _field_angles(s, cx, cy, cz)
         allow = not _off_references(s, norm, dip)
     w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
@@ -425,17 +425,17 @@ def field_calibrate(s, mx, my, mz, dt):
     up = (2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
           (w * w - x * x - y * y + z * z) / n2)
     turn = (s.cal_feed.turn[0], s.cal_feed.turn[1], s.cal_feed.turn[2], s.cal_feed.turn[3])
-    mc_learn(s.cal.flat, 0, (mx, my, mz), turn, s.cal_feed.wait, vec3_at(s.cal_feed.rate, 0), 1.0, up,
+    mc_learn(s.cal, (mx, my, mz), turn, s.cal_feed.wait, vec3_at(s.cal_feed.rate, 0), 1.0, up,
              1.0 if allow else 0.0)
     s.cal_feed.turn[0] = 1.0
     for i in range(1, 4):
         s.cal_feed.turn[i] = 0.0
     s.cal_feed.wait = 0.0
-    switched = s.cal.flat[MC_APPLIED] != 0.0 and (not applied or s.cal_feed.loaded != 0.0)
+    switched = s.cal.applied != 0.0 and (not applied or s.cal_feed.loaded != 0.0)
     s.cal_feed.loaded = 0.0
     if switched and has_ref:
         _calibration_applied(s, w, x, y, z)
-    return mc_apply(s.cal.flat, 0, mx, my, mz)
+    return mc_apply(s.cal, mx, my, mz)
 
 
 def _after_clip(s):
@@ -453,7 +453,7 @@ def _calibration_applied(s, w, x, y, z):
     The calibration's field is the noise of many fields averaged; then the
     heading follows the calibrated fields, with the refinement's gain.
     """
-    fx, fy, fz = mc_field(s.cal.flat, 0)
+    fx, fy, fz = mc_field(s.cal)
     hx, hy, hz = rotate(w, x, y, z, fx, fy, fz)
     half = 0.5 * math.atan2(hx, hy)
     _turn_heading(s, math.cos(half), math.sin(half))

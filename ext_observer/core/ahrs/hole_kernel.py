@@ -103,7 +103,7 @@ def forget_wait(s):
 def calibration_restart(s):
     """The magnetometer calibration follows the field afresh: it learns nothing across a gap."""
     if s.par.has_cal != 0.0:
-        mc_restart(s.cal.flat, 0)
+        mc_restart(s.cal)
         s.cal_feed.turn[0] = 1.0
         for i in range(1, 4):
             s.cal_feed.turn[i] = 0.0

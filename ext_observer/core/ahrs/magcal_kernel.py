@@ -31,11 +31,6 @@ FUNCTIONS = ('mc_init', 'mc_reset', 'mc_forget', 'mc_restart', 'mc_load_state', 
              'mc_init_in', 'mc_reset_in', 'mc_restart_in', 'mc_load_state_in', 'mc_learn_in',
              'mc_predict_in', 'mc_assess_in', 'mc_reconsider_in', 'mc_apply_in', 'mc_quality_in')
 
-# The estimator's field step reads these two fields as slots of the calibration's block
-# in its flat state, until it reads its nested record (s.cal.ready, s.cal.applied).
-MC_READY = CAL.dtype.fields['ready'][1] // 8
-MC_APPLIED = CAL.dtype.fields['applied'][1] // 8
-
 __all__ = ['CAL', 'FUNCTIONS', 'GATE'] + list(FUNCTIONS)
 
 

@@ -63,6 +63,13 @@ class Group:
         self._plain_class = None
         self._dtype = None
         self._paths = None
+        self._offsets = None
+
+    def __getstate__(self):
+        # The made class and the caches are made again where unpickled.
+        state = self.__dict__.copy()
+        state['_plain_class'] = state['_dtype'] = state['_paths'] = state['_offsets'] = None
+        return state
 
     # --- the two containers -----------------------------------------------------
 
@@ -130,11 +137,17 @@ class Group:
 
     def offset(self, name):
         """Where field ``name`` starts among the group's floats (its first, for a vector)."""
+        found = self._offsets.get(name) if self._offsets is not None else None
+        if found is not None:
+            return found
         path, _ = self.path(name)
         dtype, at = self.dtype, 0
         for n in path:
             sub, byte = dtype.fields[n][:2]
             dtype, at = sub, at + byte
+        if self._offsets is None:
+            self._offsets = {}
+        self._offsets[name] = at // 8
         return at // 8
 
     def reader(self, holder):

@@ -21,7 +21,7 @@ the compiled kernels, one crossing from Python per sample.
 import math
 
 from .ahrs_filters import rotate
-from .ahrs_kernel import ahrs_step
+from .ahrs_kernel import ahrs_update
 from .bias_kernel import bias_variance
 from .layout import Layout
 
@@ -348,7 +348,7 @@ def sample_step(state, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
         return SAMPLE_NOT_STARTED, 0.0, 0.0, 0.0, 0.0
     if not (dt > 0.0 and dt < math.inf):
         return SAMPLE_BAD_DT, 0.0, 0.0, 0.0, 0.0
-    w, x, y, z = ahrs_step(s, gx, gy, gz, ax, ay, az, False, 0.0, 0.0, 0.0, dt)
+    w, x, y, z = ahrs_update(s, gx, gy, gz, ax, ay, az, False, 0.0, 0.0, 0.0, dt)
     n2 = w * w + x * x + y * y + z * z
     if not math.isfinite(n2):
         return SAMPLE_NON_FINITE, w, x, y, z

@@ -28,7 +28,7 @@ from ext_observer.core.ahrs.field_kernel import (HEADING_LOST, _doubt_gain, _tur
 from ext_observer.core.ahrs.bias_kernel import bias_measure
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.ahrs_state import STATE
-from ext_observer.core.ahrs.magcal_layout import MAGCAL, MC_READY, MC_REFUSED, MC_USED
+from ext_observer.core.ahrs.magcal_layout import CAL
 
 DT = 0.01
 LEVEL = (0.0, 0.0, 9.81)
@@ -43,9 +43,8 @@ def record(est):
 
 
 def calibration(est):
-    """The calibration's block of the estimate's state (``cal.flat``), plain or compiled."""
-    holder = est.state
-    return holder['cal']['flat'][0] if isinstance(holder, np.ndarray) else holder[0].cal.flat
+    """The calibration's record in the estimate's state (``cal``), plain or compiled."""
+    return record(est).cal
 
 
 def snapshot(s):
@@ -210,7 +209,7 @@ def test_fields_waited_for_are_applied_when_the_calibration_finds_the_sensor_cal
         yaw += rate * DT
         est.update((0.0, 0.0, rate), LEVEL, None, DT)
         assert yaw < 1.0
-    assert calibration(est)[MC_READY] == 0.0 and s.field.wait_n == 0.0
+    assert calibration(est).ready == 0.0 and s.field.wait_n == 0.0
     used = s.field.mag_used
     assert used == 20.0
     turned = world_field(NORM, DIP, 0.4)
@@ -224,7 +223,7 @@ def test_fields_waited_for_are_applied_when_the_calibration_finds_the_sensor_cal
         assert s.field.wait_n == k + 1.0
         assert s.field.wait_turn == pytest.approx(turn, abs=1e-12)
     assert s.field.mag_used == used
-    calibration(est)[MC_READY] = 1.0
+    calibration(est).ready = 1.0
     yaw += rate * DT
     since = s.cal_feed.since + DT
     q = est.update((0.0, 0.0, rate), LEVEL, body_field(turned, yaw), DT)
@@ -289,10 +288,10 @@ def test_each_calibration_step_hands_the_calibration_its_turn_time_rate_vertical
         ahrs_update_mag(s, *raw, DT)
         if wait < period:
             assert s.cal_feed.wait == pytest.approx(wait, abs=1e-15)
-            assert np.array_equal(s.cal.flat, before.cal.flat)
+            assert CAL.flat(s.cal) == CAL.flat(before.cal)
             continue
         shadow = copy.deepcopy(before)
-        c = np.array(magcal_kernel.mc_apply(shadow.cal.flat, 0, *raw))
+        c = np.array(magcal_kernel.mc_apply(shadow.cal, *raw))
         w = rotate(*before.est.q, *c)
         h = math.hypot(w[0], w[1])
         norm, dip = math.hypot(h, w[2]), math.atan2(w[2], h)
@@ -301,11 +300,11 @@ def test_each_calibration_step_hands_the_calibration_its_turn_time_rate_vertical
         allow = before.field.has_ref == 0.0 or (abs(norm - ref_n) <= params.mag_norm_th * ref_n
                                              and abs(dip - ref_d) <= params.mag_dip_th)
         assert allow != strong, (k, norm / ref_n, dip - ref_d)
-        magcal_kernel.mc_learn(shadow.cal.flat, 0, tuple(raw), tuple(before.cal_feed.turn),
+        magcal_kernel.mc_learn(shadow.cal, tuple(raw), tuple(before.cal_feed.turn),
                                wait, tuple(before.cal_feed.rate), 1.0,
                                tuple(up_of(before.est.q)), 1.0 if allow else 0.0)
-        assert len(s.cal.flat) == MAGCAL.size
-        a, b = np.array(s.cal.flat), np.array(shadow.cal.flat)
+        a, b = np.array(CAL.flat(s.cal)), np.array(CAL.flat(shadow.cal))
+        assert len(a) == CAL.size
         bad = ~np.isclose(a, b, rtol=1e-9, atol=0.0)
         assert not bad.any(), (k, np.flatnonzero(bad), a[bad], b[bad])
         assert list(s.cal_feed.turn) == [1.0, 0.0, 0.0, 0.0]
@@ -313,7 +312,7 @@ def test_each_calibration_step_hands_the_calibration_its_turn_time_rate_vertical
         steps += 1
         refused += strong
     assert steps in (47, 48) and refused == steps // 3
-    assert s.cal.flat[MC_REFUSED] == refused and s.cal.flat[MC_USED] >= 30.0
+    assert s.cal.refused == refused and s.cal.used >= 30.0
 
 
 def test_a_calibration_applied_while_running_restarts_the_references_from_its_field():
@@ -433,7 +432,6 @@ def test_the_calibration_learns_nothing_from_a_clipped_stretch():
                        compiled=False)
     field = world_field(NORM, DIP)
     yaw = 0.0
-    fields = MAGCAL.offset('fields')
 
     def step(rate):
         nonlocal yaw
@@ -442,15 +440,15 @@ def test_the_calibration_learns_nothing_from_a_clipped_stretch():
 
     for _ in range(100):
         step(0.5)
-    before = calibration(est)[fields]
+    before = calibration(est).fields
     assert before > 0.0
     for _ in range(30):
         step(1.5 * RANGE)
     assert est.clipped == 30
-    assert calibration(est)[fields] == before
+    assert calibration(est).fields == before
     for _ in range(10):
         step(0.5)
-    assert calibration(est)[fields] > before
+    assert calibration(est).fields > before
 
 
 def test_after_a_hole_the_heading_comes_back_from_the_field_as_its_doubt_allows():
