@@ -1,10 +1,11 @@
 """
-The arithmetic the raw-IMU estimator's steps share, on floats and its flat state.
+The arithmetic the raw-IMU estimator's steps share, on floats and the state's arrays.
 
 Rotating a vector by a quaternion, ``R(q̂)``'s rows, a first-order gain
 from a time constant, a first attitude from gravity (and the field), and
-the second-order Butterworth low-pass whose states live in the flat state
-(the accelerometer's and ``R``'s). Plain Python that numba compiles, as
+the second-order Butterworth low-pass whose states are arrays of the state
+(the accelerometer's ``inc.lp`` and ``R``'s ``bias.r_lp``), and the kernels'
+one quaternion product and deviation from gravity. Plain Python that numba compiles, as
 :mod:`~ext_observer.core.ahrs.ahrs_kernel`.
 """
 

@@ -1,22 +1,24 @@
 """
-The raw-IMU estimator's steps as functions on one flat state: the one source.
+The raw-IMU estimator's steps as functions on its state with names: the one source.
 
 :class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver` keeps the state of one
-estimate in a flat container ``s`` (the slots below, then the magnetometer
-calibration's block, :mod:`~ext_observer.core.ahrs.magcal_kernel`) and runs the
-functions of this module on it. They are written in the part of Python that
-numba's ``nopython`` mode compiles: float arithmetic, ``math``, indexing,
-loops, tuples and calls to each other. So the same source runs
+estimate in a record ``s`` (:data:`~ext_observer.core.ahrs.ahrs_state.STATE`:
+``s.rest.time``, ``s.bias.rate[0]``; this module owns the coefficients
+``COEF`` and the estimate ``EST``) and runs the functions of this module on
+it. They are written in the part of Python that numba's ``nopython`` mode
+compiles: float arithmetic, ``math``, attribute and index access, loops,
+tuples and calls to each other. So the same source runs
 
-- as it is, on a Python ``list`` of floats (no compiler needed), and
+- as it is, on a plain record (no compiler needed), and
 - compiled, when numba is installed (:mod:`~ext_observer.core.ahrs.compiled`
-  loads this file a second time and compiles every function), on a float64
-  numpy array:
+  loads this file a second time and compiles every function), on a numpy
+  structured record:
 
-one estimator, not two copies to keep in sync; the two agree to rounding
-(``test_compiled.py``). Flags are stored as 0.0 or 1.0, ``None`` as a flag
-of its own (``S_INIT``: the estimate exists; ``S_HAS_REF``: the field
-references exist).
+one estimator, not two copies to keep in sync; the two agree to the bit
+(``test_compiled.py``). Flags are stored as 0.0 or 1.0 (``est.init``: the
+estimate exists; ``field.has_ref``: the field references exist). What
+Python calls takes the record's holder (the ``*_in`` functions at the end:
+:mod:`~ext_observer.core.ahrs.record`).
 
 The maths, step by step, is docs/raw_imu.md's ("The estimator, step by
 step"); here each function says which step it is. Quaternions ``(w, x, y, z)``,

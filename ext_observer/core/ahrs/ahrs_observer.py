@@ -4,7 +4,7 @@ Attitude from a raw IMU, gyro + accelerometer (+ magnetometer): :class:`AhrsObse
 The estimate ``q̂`` lives in R⁴ as in the paper's observer, held near S³ by
 the extension term and never renormalized. Each sample runs three steps,
 gyro, accelerometer (inclination) and magnetometer (heading only), written
-once on a flat state in :mod:`~ext_observer.core.ahrs.ahrs_kernel` (plain or
+once on a state with names in :mod:`~ext_observer.core.ahrs.ahrs_kernel` (plain or
 compiled: the same estimates); this class wraps them for one estimate or a
 batch of ``(B,)`` arrays. The steps, the credit to VQF and the conventions
 (``(w, x, y, z)``, sensor → ENU, SI units) are docs/raw_imu.md's
@@ -42,9 +42,9 @@ class AhrsObserver:
     The raw-IMU estimator on floats (one estimate) or on ``(B,)`` arrays.
 
     The steps are the functions of :mod:`~ext_observer.core.ahrs.ahrs_kernel` on
-    one flat state per estimate: compiled by numba when it is installed
-    (:mod:`~ext_observer.core.ahrs.compiled`), plain Python otherwise, one source
-    and the same results to rounding. With ``batch``, the estimates step one
+    one state per estimate (:data:`~ext_observer.core.ahrs.ahrs_state.STATE`):
+    compiled by numba when it is installed (:mod:`~ext_observer.core.ahrs.compiled`),
+    plain Python otherwise, one source and the same results to the bit. With ``batch``, the estimates step one
     after the other.
 
     Parameters

@@ -1,7 +1,7 @@
 """
 What the gyro's own samples say: a rate at the sensor's range, and a body at rest.
 
-Functions on the estimator's flat state (:mod:`~ext_observer.core.ahrs.ahrs_layout`),
+Functions on the estimator's state (``REST`` and ``GYRO``, declared here),
 in the compiled subset of Python as :mod:`~ext_observer.core.ahrs.ahrs_kernel`,
 which calls them on every gyro sample: :func:`clipped_variance` finds the
 clipped axes (from ``gyro_range``, or a rate stuck at its peak) and

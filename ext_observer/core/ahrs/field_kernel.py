@@ -1,7 +1,7 @@
 """
 The field step: the heading corrected from the magnetometer, disturbed fields rejected.
 
-Functions on the estimator's flat state (:mod:`~ext_observer.core.ahrs.ahrs_layout`),
+Functions on the estimator's state (``FIELD`` and ``CAL_FEED``, declared here),
 in the part of Python numba compiles, as :mod:`~ext_observer.core.ahrs.ahrs_kernel`,
 whose sample step calls :func:`ahrs_update_mag` for each field. The field is
 judged by its norm and dip against references that follow it (VQF's
