@@ -5,7 +5,7 @@ import pathlib
 
 import pytest
 
-from ext_observer.core.ahrs import ahrs_kernel, ahrs_layout, magcal_layout, uncertainty_kernel
+from ext_observer.core.ahrs import ahrs_kernel, ahrs_layout, magcal_layout
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
 
 PACKAGE = pathlib.Path(__file__).resolve().parent.parent / 'ext_observer'
@@ -36,9 +36,7 @@ def test_the_kernels_slots_come_from_their_layout_tables():
     found = _hand_numbered(PACKAGE / 'core')
     assert len(found) <= 10, '\n'.join(found)
     for module, layout, size in ((ahrs_layout, ahrs_layout.AHRS, ahrs_layout.A_SIZE),
-                                 (magcal_layout, magcal_layout.MAGCAL, magcal_layout.MC_SIZE),
-                                 (uncertainty_kernel, uncertainty_kernel.UNCERTAINTY,
-                                  uncertainty_kernel.U_SIZE)):
+                                 (magcal_layout, magcal_layout.MAGCAL, magcal_layout.MC_SIZE)):
         spans = sorted(layout.fields.values())
         assert spans[0][0] == 0 and layout.size == size
         # Contiguous: each field starts where the one before ends.

@@ -157,13 +157,13 @@ def test_the_one_call_sample_step_refuses_what_it_cannot_run():
     assert not cov.any()  # nothing written
     # The guard: |q̂̄q̂ − 1| above max_residual fails, at it passes.
     turn = (3.0, -2.0, 1.0) + ROLLED
-    _, *q = step(copy.copy(est.flat_state), copy.copy(tracker.state), cov, *turn, 0.01, 1.0)
+    _, *q = step(copy.copy(est.flat_state), copy.deepcopy(tracker.state), cov, *turn, 0.01, 1.0)
     residual = abs(sum(v * v for v in q) - 1.0)
     assert residual > 0.0
     for max_residual, expected in ((residual, uncertainty_kernel.SAMPLE_OK),
                                    (0.5 * residual, uncertainty_kernel.SAMPLE_RESIDUAL)):
-        outcome = step(copy.copy(est.flat_state), copy.copy(tracker.state), cov, *turn, 0.01,
-                       max_residual)[0]
+        outcome = step(copy.copy(est.flat_state), copy.deepcopy(tracker.state), cov, *turn,
+                       0.01, max_residual)[0]
         assert outcome == expected
 
 
@@ -179,26 +179,27 @@ def test_a_starts_variance_is_its_documented_model_then_decays_sample_by_sample(
     tracker = AttitudeUncertainty.for_estimator(AhrsParams(tau_acc=0.2), use_mag=False)
     dt = 0.01
     tracker.start(dt)
-    u = tracker.state
+    u = tracker.state[0]
     K, C = uncertainty_kernel, uncertainty_kernel.START_CORRELATION
-    u[K.U_START_T] = u[K.U_START_N] = u[K.U_START_M] = u[K.U_START_V] = u[K.U_START_F] = 0.0
+    st = u.start
+    st.time = st.count = st.mean = st.var = st.first = 0.0
     forces = [first] + [then] * 40
     errors = [max((fz - GRAVITY) ** 2, 0.5 * (fx * fx + fy * fy)) / GRAVITY ** 2
               for fx, fy, fz in forces]
-    tau, k = u[K.U_TAU_ACC], u[K.U_K_ACC]   # the accelerometer's low-pass (0.25 s here)
+    tau, k = u.par.tau_acc, u.coef.k_acc   # the accelerometer's low-pass (0.25 s here)
     assert k == pytest.approx(1.0 - math.exp(-dt / tau), rel=1e-12)
     phases = []
     for n, f in enumerate(forces, start=1):
-        t, before = u[K.U_START_T], u[K.U_START_V]
+        t, before = st.time, st.var
         K.uncertainty_start(u, dt, *f)
         if t < tau:
             a = math.atan(math.sqrt(max(np.mean(errors[:n]), errors[0])))
-            assert u[K.U_START_V] == pytest.approx(a * a * C / (C + t), rel=1e-9), n
+            assert st.var == pytest.approx(a * a * C / (C + t), rel=1e-9), n
         else:
-            assert u[K.U_START_V] == pytest.approx((1.0 - k) ** 2 * before, rel=1e-12), n
+            assert st.var == pytest.approx((1.0 - k) ** 2 * before, rel=1e-12), n
         phases.append(t < tau)
     assert abs(sum(phases) - round(tau / dt)) <= 1 and not phases[-1]
-    assert u[K.U_START_V] > 1e-6
+    assert st.var > 1e-6
 
 
 def test_the_published_variances_are_the_sum_of_their_parts_and_b_the_larger():
@@ -206,30 +207,31 @@ def test_the_published_variances_are_the_sum_of_their_parts_and_b_the_larger():
     # variance B the larger of its own and the estimator's, exactly (also
     # when equal).
     K = uncertainty_kernel
-    u = [0.0] * K.U_SIZE
-    parts = dict(U_PT=1.0, U_START_V=2.0, U_TILT_FLOOR=4.0, U_STAMP2=8.0, U_WH2=16.0,
-                 U_PH=32.0, U_UNKNOWN=64.0, U_HEADING_SET=1.0, U_HEADING_FLOOR=128.0,
-                 U_CALIBRATION=256.0, U_WZ2=512.0, U_HS=3.0)
+    u = K.UNC.plain()
+    parts = {'axes.pt': 1.0, 'start.var': 2.0, 'par.tilt_floor': 4.0, 'par.stamp2': 8.0,
+             'rate.wh2': 16.0, 'axes.ph': 32.0, 'head.unknown': 64.0, 'head.heading_set': 1.0,
+             'par.heading_floor': 128.0, 'head.calibration': 256.0, 'rate.wz2': 512.0,
+             'head_start.sigma': 3.0}
     for name, value in parts.items():
-        u[getattr(K, name)] = value
+        K.UNC.set(u, name, value)
     t, h = K.uncertainty_variances(u)
     assert t == 1.0 + 2.0 + 4.0 + 0.5 * 8.0 * 16.0
     assert h == 32.0 + 64.0 + 1.0 * (128.0 + 256.0) + 8.0 * 512.0 + 3.0 * 3.0
     # The fields' lag: counted where its square beyond the field's own error
     # (floor and calibration) says more; a lost field's scale and axes terms
     # (in quadrature) then add as σ.
-    u[K.U_YAW_HELD] = -1000.0
-    u[K.U_ROTATION_HELD] = 3000.0
+    u.held.yaw = -1000.0
+    u.held.rotation = 3000.0
     held = math.hypot(K.GYRO_SCALE_SIGMA * 1000.0, K.GYRO_MOTION_SIGMA * 3000.0)
-    u[K.U_LAG] = 60.0  # 3600 − 384 < 4489: nothing
+    u.head.lag = 60.0  # 3600 − 384 < 4489: nothing
     assert K.uncertainty_variances(u)[1] == h + held * held
-    u[K.U_LAG] = -100.0
+    u.head.lag = -100.0
     assert K.uncertainty_variances(u)[1] == pytest.approx(
         (math.sqrt(10000.0 - 384.0) + held) ** 2, rel=1e-15)
     for before, var, after in ((2e-6, 1e-6, 2e-6), (1e-6, 2e-6, 2e-6), (1e-6, 1e-6, 1e-6)):
-        u[K.U_B] = before
+        u.axes.b = before
         K.uncertainty_bias(u, var)
-        assert u[K.U_B] == after
+        assert u.axes.b == after
 
 
 def test_a_lost_fields_rotation_counts_every_axis_unsigned_and_a_used_field_shrinks_it():
@@ -240,28 +242,28 @@ def test_a_lost_fields_rotation_counts_every_axis_unsigned_and_a_used_field_shri
     K = uncertainty_kernel
     tracker = AttitudeUncertainty(use_mag=True)
     tracker.start(0.01)
-    u = tracker._u
+    u = tracker.state[0]
     dt, rates = 0.01, ((0.0, 0.0, 2.0), (3.0, 0.0, -4.0), (-3.0, 0.0, 0.0))
     for _ in range(int(K.FIELD_SILENT / dt) + 1):
-        K.uncertainty_step(u, dt, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
-    assert u[K.U_ROTATION_HELD] == 0.0
+        K.uncertainty_propagate(u, dt, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
+    assert u.held.rotation == 0.0
     for g in rates:
-        K.uncertainty_step(u, dt, *g, 1.0, 0.0, 0.0, 0.0, 0.0)
-    assert u[K.U_ROTATION_HELD] == pytest.approx(dt * (2.0 + 5.0 + 3.0), rel=1e-12)
-    assert u[K.U_YAW_HELD] == pytest.approx(dt * (2.0 - 4.0), rel=1e-12)
+        K.uncertainty_propagate(u, dt, *g, 1.0, 0.0, 0.0, 0.0, 0.0)
+    assert u.held.rotation == pytest.approx(dt * (2.0 + 5.0 + 3.0), rel=1e-12)
+    assert u.held.yaw == pytest.approx(dt * (2.0 - 4.0), rel=1e-12)
     tracker.field(0.01, 0.25)
-    assert u[K.U_ROTATION_HELD] == pytest.approx(0.75 * dt * 10.0, rel=1e-12)
-    assert u[K.U_FIELD_AGE] == 0.0
+    assert u.held.rotation == pytest.approx(0.75 * dt * 10.0, rel=1e-12)
+    assert u.held.field_age == 0.0
 
 
 def test_a_holes_step_corrects_the_inclination_variance_as_the_steps_it_missed():
     uk = uncertainty_kernel
     tracker = AttitudeUncertainty(use_mag=False)
-    u = tracker._u
+    u = tracker.state[0]
     uk.uncertainty_coefficients(u, 0.01)
-    u[uk.U_PT], u[uk.U_CT], u[uk.U_B] = 1e-3, 1e-5, 0.0
+    u.axes.pt, u.axes.ct, u.axes.b = 1e-3, 1e-5, 0.0
     uk.uncertainty_hole(u, 0.02, 0.0, True)  # two steps missed: three in all
-    a = (1.0 - u[uk.U_K_ACC]) ** 2
-    g = u[uk.U_GYRO_NOISE]
-    assert u[uk.U_PT] == pytest.approx(a * a * 1e-3 + g * g * 0.02)
-    assert u[uk.U_CT] == pytest.approx(a * 1e-5)
+    a = (1.0 - u.coef.k_acc) ** 2
+    g = u.par.gyro_noise
+    assert u.axes.pt == pytest.approx(a * a * 1e-3 + g * g * 0.02)
+    assert u.axes.ct == pytest.approx(a * 1e-5)
