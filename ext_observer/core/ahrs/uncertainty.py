@@ -394,22 +394,11 @@ class AttitudeUncertainty:
         ``var`` the rotation it may have hidden (rad² per axis) and ``t0``
         the weight the inclination's mean restarted with (negative: kept),
         :meth:`AhrsObserver.unbridged
-        <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.unbridged>`'s. The
-        angles' variances grow by it and by the gyro's noise and bias over
-        the hole, the inclination's only where its mean was kept (else it
-        restarts as after a bridged hole); the heading's up to that of an
-        unknown heading. The hole counts as time without a field. One
-        estimate (floats).
+        <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.unbridged>`'s
+        (:func:`~ext_observer.core.ahrs.uncertainty_kernel.covariance_unbridged`).
+        One estimate (floats).
         """
-        u = self._u
-        if t0 >= 0.0:
-            self._kernel.uncertainty_restart(self._holder[0], float(t0))
-        g = u.par.gyro_noise
-        grow = g * g * dt + u.axes.b * dt * dt + var
-        if t0 < 0.0:
-            u.axes.pt = u.axes.pt + grow
-        u.axes.ph = min(u.axes.ph + grow, HEADING_UNKNOWN)
-        u.held.field_age = u.held.field_age + dt
+        self._kernel.covariance_unbridged(self._holder, float(dt), float(var), float(t0))
 
     def field(self, dt, gain, calibration=0.0, reference=math.nan, dip=math.nan,
               innovation=math.nan):

@@ -403,6 +403,30 @@ def covariance_step(uh, dt, gx, gy, gz, w, x, y, z, rest, bias_var, clip_var, ex
         uncertainty_start(u, dt, fx, fy, fz)
 
 
+def covariance_unbridged(uh, dt, var, t0):
+    """
+    A hole of ``dt`` s the estimator did not bridge (over ``max_dt``): what it leaves.
+
+    ``var`` the rotation it may have hidden (rad² per axis) and ``t0`` the
+    weight the inclination's mean restarted with (negative: kept),
+    :func:`~ext_observer.core.ahrs.ahrs_kernel.ahrs_unbridged`'s. The angles'
+    variances grow by it and by the gyro's noise and bias over the hole, the
+    inclination's only where its mean was kept (else it restarts as after a
+    bridged hole); the heading's up to :data:`HEADING_UNKNOWN`. The hole
+    counts as time without a field. One estimate (floats).
+    """
+    u = uh[0]
+    if t0 >= 0.0:
+        uncertainty_restart(u, t0)
+    e = u.axes
+    g = u.par.gyro_noise
+    grow = g * g * dt + e.b * dt * dt + var
+    if t0 < 0.0:
+        e.pt = e.pt + grow
+    e.ph = min(e.ph + grow, HEADING_UNKNOWN)
+    u.held.field_age = u.held.field_age + dt
+
+
 def sample_step(s, uh, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
     """
     The usual raw-IMU sample of an estimate that exists, in one call.

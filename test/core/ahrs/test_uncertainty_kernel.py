@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from ext_observer.core.ahrs import uncertainty_kernel
+from ext_observer.core.ahrs import compiled as compiled_module, uncertainty_kernel
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.ahrs_params import UncertaintyParams
 from ext_observer.core.ahrs.uncertainty import AttitudeUncertainty, GRAVITY
@@ -267,3 +267,45 @@ def test_a_holes_step_corrects_the_inclination_variance_as_the_steps_it_missed()
     g = u.par.gyro_noise
     assert u.axes.pt == pytest.approx(a * a * 1e-3 + g * g * 0.02)
     assert u.axes.ct == pytest.approx(a * 1e-5)
+
+
+@pytest.mark.parametrize('compiled', [False, pytest.param(True, marks=pytest.mark.skipif(
+    not compiled_module.compiled_available(), reason='numba is not installed'))])
+def test_an_unbridged_holes_covariance_grows_by_its_rotation_the_heading_at_most_unknown(
+        compiled):
+    # covariance_unbridged: the gyro's noise and the bias over the hole and
+    # the rotation it may have hidden; the tilt's only where the
+    # inclination's mean was kept (t0 < 0), else the mean restarts; the
+    # heading's capped at an unknown heading's; the hole is time without a
+    # field. Plain and compiled alike, to the bit.
+    K = uncertainty_kernel
+    dt, var = 3.0, 0.01
+    out = {}
+    for t0 in (-1.0, 0.5):
+        tracker = AttitudeUncertainty(use_mag=False)
+        if compiled:
+            tracker.use_kernels(compiled_module.kernels(True))
+        tracker.start(0.01)
+        u = tracker.state[0]
+        before = K.UNC.flat(u)
+        tracker.unbridged(dt, var, t0)
+        g = K.UNC.get(u, 'par.gyro_noise')
+        grow = g * g * dt + K.UNC.get(u, 'axes.b') * dt * dt + var
+        get = dict(zip(['.'.join(p) for p, *_ in K.UNC.fields()], before)).get
+        assert K.UNC.get(u, 'axes.ph') == get('axes.ph') + grow
+        assert K.UNC.get(u, 'held.field_age') == get('held.field_age') + dt
+        if t0 < 0.0:
+            assert K.UNC.get(u, 'axes.pt') == get('axes.pt') + grow
+        else:
+            assert K.UNC.get(u, 'axes.pt') == K.UNC.get(u, 'coef.r_acc')
+            assert K.UNC.get(u, 'start.time') == t0
+        tracker.unbridged(1e3, 10.0, t0)
+        assert K.UNC.get(u, 'axes.ph') == K.HEADING_UNKNOWN
+        out[t0] = K.UNC.flat(u)
+    if compiled:
+        for t0, values in out.items():
+            plain = AttitudeUncertainty(use_mag=False)
+            plain.start(0.01)
+            plain.unbridged(dt, var, t0)
+            plain.unbridged(1e3, 10.0, t0)
+            assert K.UNC.flat(plain.state[0]) == values
