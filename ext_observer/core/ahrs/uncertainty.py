@@ -20,6 +20,7 @@ import numpy as np
 from . import uncertainty_kernel as _plain
 from .ahrs_filters import rotate
 from .ahrs_params import UncertaintyParams
+from .compiled import entry_point
 from .record import Group
 from .uncertainty_kernel import GRAVITY, HEADING_UNKNOWN, INNOVATION_TIME, UNC
 
@@ -148,6 +149,7 @@ class AttitudeUncertainty:
         p = self.params
         self._kernel = _plain
         self._compiled = False
+        self._variances = _plain.covariance_variances
         # The per-sample state and its constants: a record of UNC in a
         # holder (what the kernels take); self._u reads and writes it.
         self._holder = UNC.holder(False)
@@ -201,6 +203,14 @@ class AttitudeUncertainty:
         UNC.copy(self._holder[0], holder[0])
         self._holder, self._u = holder, _record(holder)
         self._kernel, self._compiled = kernels.uncertainty, kernels.compiled
+        self._variances = (self._first_variances if kernels.compiled
+                           else kernels.uncertainty.covariance_variances)
+
+    def _first_variances(self, holder):
+        """The compiled variances; from now on their code called past numba's dispatch."""
+        out = self._kernel.covariance_variances(holder)
+        self._variances = entry_point(self._kernel.covariance_variances)
+        return out
 
     @property
     def state(self):
@@ -574,12 +584,12 @@ class AttitudeUncertainty:
     @property
     def tilt_variance(self):
         """Variance of the tilt about each horizontal world axis, rad²."""
-        return self._kernel.covariance_variances(self._holder)[0]
+        return self._variances(self._holder)[0]
 
     @property
     def heading_variance(self):
         """Variance of the heading (about the world vertical), rad²."""
-        return self._kernel.covariance_variances(self._holder)[1]
+        return self._variances(self._holder)[1]
 
     @property
     def inclination_std(self):
@@ -602,6 +612,6 @@ class AttitudeUncertainty:
             ``(V_t, 0, 0, 0, V_t, 0, 0, 0, V_h)``, rad².
 
         """
-        t, h = self._kernel.covariance_variances(self._holder)
+        t, h = self._variances(self._holder)
         z = 0.0 * t
         return (t, z, z, z, t, z, z, z, h)
