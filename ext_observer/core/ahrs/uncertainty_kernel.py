@@ -125,15 +125,13 @@ START_CORRELATION = 1.0
 # rad²: a start's share below this is forgotten (a millionth of a degree).
 _START_FORGOTTEN = 1e-16
 # σ of the gyro's scale error (relative): without a field, the heading drifts
-# by this share of the net rotation about the vertical (BROAD's dev trial 08
-# turns ten times one way without one and drifts 0.33 % of it; MEMS
-# datasheets give 0.1 to 1 %).
+# by this share of the net rotation about the vertical (MEMS datasheets give
+# 0.1 to 1 %; docs/broad_tuning.md#the-covariances-constants).
 GYRO_SCALE_SIGMA = 0.003
 # σ of the heading's drift per radian of rotation about any axis, without a
 # field: the gyro's axis and cross-axis errors, which a body turning back and
-# forth rectifies into a drift with no net turn (BROAD's dev trial 34 drifts
-# 9° steadily in 70 s, 0.085 % of the 10650° it turns: 0.03 % puts all of it
-# within 2σ with the other terms, 0.02 % 97 %; 0.05 % leaves a margin).
+# forth rectifies into a drift with no net turn
+# (docs/broad_tuning.md#the-covariances-constants).
 GYRO_MOTION_SIGMA = 0.0005
 # The model's one bias variance per axis is the mean of the bias filter's three
 # (its covariance's trace over the axes it sums).
@@ -144,8 +142,8 @@ FIELD_SILENT = 1.0
 # s: the fields' innovation is averaged over this long before its square is
 # counted in the heading's variance: long enough to average the fields' noise
 # and their calibration's orientation-dependent error, short enough to follow
-# a lag that builds up within seconds (dev trial 08's fast turns: 8° in 30 s
-# while the model claimed 2°). Chosen on the even trials among 3 to 8 s.
+# a lag that builds up within seconds
+# (docs/broad_tuning.md#the-covariances-constants).
 INNOVATION_TIME = 5.0
 
 
