@@ -4,7 +4,8 @@ The uncertainty's kernel (``uncertainty_kernel.py``) against its documented mode
 The heading variance's growth with the gyro's noise, the model written as
 2 × 2 matrices per axis against the kernel's scalar arithmetic, the
 node's sample in one call (``sample_step``) against the steps one at a
-time and what it refuses, a start's variance and the published sums. The
+time and what it refuses, a start's variance and the published sums, an
+unbridged hole, the named state and many recordings at once. The
 covariance end to end (the pipeline, the node, its coverage bounds on
 BROAD): test_covariance.py.
 """
@@ -309,3 +310,53 @@ def test_an_unbridged_holes_covariance_grows_by_its_rotation_the_heading_at_most
             plain.unbridged(dt, var, t0)
             plain.unbridged(1e3, 10.0, t0)
             assert K.UNC.flat(plain.state[0]) == values
+
+
+def test_the_state_is_named_float64_fields_each_with_its_unit_and_meaning():
+    K = uncertainty_kernel
+    fields = K.UNC.fields()
+    assert {path[0] for path, *_ in fields} == {
+        'par', 'coef', 'axes', 'rate', 'head', 'start', 'head_start', 'held'}
+    assert all(isinstance(unit, str) and meaning and size == 1
+               for _, unit, meaning, size in fields)
+    assert K.UNC.size == len(fields) and K.UNC.dtype.itemsize == 8 * len(fields)
+    # The holders the kernels take: a one-element structured array, [plain record].
+    compiled, plain = K.UNC.holder(True), K.UNC.holder(False)
+    assert compiled.shape == (1,) and len(plain) == 1
+    assert K.UNC.flat(compiled[0]) == K.UNC.flat(plain[0]) == [0.0] * len(fields)
+
+
+def test_many_recordings_at_once_step_as_each_alone():
+    # AttitudeUncertainty on arrays (B,) (a replay of many recordings): the
+    # same covariance_step, the start's share counted recording by
+    # recording after it: to the bit what each recording's own tracker does
+    # on floats.
+    rng = np.random.default_rng(11)
+    use_mag = np.array([True, False, True])
+    count, dt = 300, 0.01
+    many = AttitudeUncertainty(use_mag=use_mag)
+    alone = [AttitudeUncertainty(use_mag=bool(m)) for m in use_mag]
+    first = np.array(ROLLED)[:, None] + rng.normal(0.0, 0.5, (3, 3))
+    many.start(dt, tuple(first))
+    for b, tracker in enumerate(alone):
+        tracker.start(dt, tuple(float(v) for v in first[:, b]))
+    for k in range(count):
+        gyr = rng.normal(0.0, 0.5, (3, 3))
+        q = rng.normal(0.0, 1.0, (4, 3))
+        acc = np.array(ROLLED)[:, None] + rng.normal(0.0, 1.0, (3, 3))
+        rest = rng.random(3) < 0.3
+        bias_var = rng.random(3) * 1e-5
+        clip_var = np.where(rng.random(3) < 0.1, 1e-4, 0.0)
+        many.step(dt, tuple(gyr), tuple(q), rest, bias_var, clip_var, tuple(acc))
+        for b, tracker in enumerate(alone):
+            tracker.step(dt, tuple(gyr[:, b]), tuple(q[:, b]), bool(rest[b]),
+                         float(bias_var[b]), float(clip_var[b]), tuple(acc[:, b]))
+        if k % 50 == 49:  # a field for the 9D ones (gain 0, no dip: nothing for the 6D one)
+            gain, dip = use_mag * 0.2, np.where(use_mag, 1.0, np.nan)
+            many.field(dt, gain, 0.01, np.nan, dip)
+            for b, tracker in enumerate(alone):
+                tracker.field(dt, float(gain[b]), 0.01, math.nan, float(dip[b]))
+    for b, tracker in enumerate(alone):
+        assert many.tilt_variance[b] == tracker.tilt_variance
+        assert many.heading_variance[b] == tracker.heading_variance
+        assert many.state[0].start.var[b] == tracker.state[0].start.var > 0.0
