@@ -81,7 +81,7 @@ _FLOATS_CLASSES = {}
 
 
 def _floats(group, holder, offset):
-    """The ``ctypes`` structure of ``group`` at byte ``offset`` of ``holder``, and its sub-groups'."""
+    """The ``ctypes`` structure of ``group`` at byte ``offset`` of ``holder``, sub-groups too."""
     cls = _FLOATS_CLASSES.get(group)
     if cls is None:
         # The group's fields; a sub-group's span is padding here, its own
