@@ -1,11 +1,10 @@
-"""The package's structure: layouts and state groups declared once."""
+"""The package's structure: the state groups declared once, read by name."""
 
 import ast
 import pathlib
 
 import pytest
 
-from ext_observer.core.ahrs import uncertainty_kernel
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.ahrs_state import KERNEL_PARAMETERS, STATE
 from ext_observer.core.ahrs.record import Group
@@ -34,24 +33,50 @@ def _hand_numbered(folder):
     return found
 
 
-def test_the_kernels_slots_come_from_their_layout_tables():
-    found = _hand_numbered(PACKAGE / 'core')
-    assert len(found) <= 10, '\n'.join(found)
-    for module, layout, size in ((uncertainty_kernel, uncertainty_kernel.UNCERTAINTY,
-                                  uncertainty_kernel.U_SIZE)):
-        spans = sorted(layout.fields.values())
-        assert spans[0][0] == 0 and layout.size == size
-        # Contiguous: each field starts where the one before ends.
-        assert all(a + n == b for (a, n), (b, _) in zip(spans, spans[1:]))
-        assert spans[-1][0] + spans[-1][1] == size
-        # Every slot constant of the module is the offset of a field (or the size).
-        offsets = {offset for offset, _ in spans} | {size}
-        tree = ast.parse(pathlib.Path(module.__file__).read_text(encoding='utf-8'))
-        assigned = {t.id for node in tree.body if isinstance(node, ast.Assign)
-                    for t in node.targets if isinstance(t, ast.Name)}
-        for name in assigned:
-            if name.startswith(SLOT_PREFIXES) and name != 'MC0':
-                assert getattr(module, name) in offsets, name
+def test_no_slot_constants_are_left_in_the_core():
+    assert _hand_numbered(PACKAGE / 'core') == []
+
+
+# The names the kernels give a holder (whose [0] is a state record).
+HOLDERS = ('state', 'uh', 'holder')
+
+
+def _state_subscripts(source):
+    """
+    Where a kernel subscripts a state record (``s[S_Q + 2]``) or a holder at other than ``[0]``.
+
+    A record is a function's argument that the function reads fields of
+    (``s.rest.time``); an argument only subscripted is an array or a tuple.
+    """
+    found = []
+    for function in ast.walk(ast.parse(source)):
+        if not isinstance(function, ast.FunctionDef):
+            continue
+        names = {a.arg for a in function.args.args}
+        records = {n.value.id for n in ast.walk(function) if isinstance(n, ast.Attribute)
+                   and isinstance(n.value, ast.Name) and n.value.id in names}
+        for node in ast.walk(function):
+            if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name):
+                name = node.value.id
+                zero = isinstance(node.slice, ast.Constant) and node.slice.value == 0
+                if name in records or (name in HOLDERS and not zero):
+                    found.append(f'{node.lineno}: {ast.unparse(node)}')
+    return found
+
+
+def test_no_kernel_reads_or_writes_the_state_by_an_index():
+    from ext_observer.core.ahrs import compiled
+    found = {}
+    for name, path in zip(compiled.KERNEL_SOURCES, compiled.kernel_paths()):
+        hits = _state_subscripts(pathlib.Path(path).read_text(encoding='utf-8'))
+        if hits:
+            found[name] = hits
+    assert found == {}, found
+    # The check sees what it looks for.
+    assert _state_subscripts('def f(s, state):\n    s[S_LP + 3] = state[1] + s.est.q[0]\n') == [
+        '2: s[S_LP + 3]', '2: state[1]']
+    assert _state_subscripts('def f(s, at):\n    return s[at + 1]\n') == []  # an array
+    assert _state_subscripts('def f(state):\n    s = state[0]\n    s.inc.lp[3] = 1.0\n') == []
 
 
 def test_the_estimators_state_is_its_groups_each_declared_once_every_field_with_its_meaning():

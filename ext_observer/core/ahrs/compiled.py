@@ -42,7 +42,7 @@ __all__ = ['CompiledUnavailable', 'ENV', 'KERNEL_SOURCES', 'Kernels', 'PLAIN_COS
            'kernels', 'plain_warning', 'source_digest', 'wanted', 'warn_if_plain']
 
 # The files of the kernels: every function of them is compiled.
-KERNEL_SOURCES = ('layout.py', 'small_matrix.py',
+KERNEL_SOURCES = ('small_matrix.py',
             'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
             'ahrs_filters.py', 'bias_kernel.py', 'clip_and_rest.py',
             'hole_kernel.py', 'velocity_kernel.py', 'accel_rejection.py', 'field_kernel.py',

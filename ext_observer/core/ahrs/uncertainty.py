@@ -13,6 +13,7 @@ rad, s, rad/s, m/s²; every quantity a float, or an array ``(B,)`` for many
 recordings at once.
 """
 
+import ctypes
 import math
 
 import numpy as np
@@ -20,29 +21,19 @@ import numpy as np
 from . import uncertainty_kernel as _plain
 from .ahrs_filters import rotate
 from .ahrs_params import UncertaintyParams
-from .uncertainty_kernel import (
-    GRAVITY, U_ACC_NOISE, U_B, U_BIAS_STD, U_BIAS_TIME, U_CALIBRATION, U_CH, U_CT, U_DT,
-    U_GYRO_NOISE, U_GYRO_RATE_NOISE, U_HEADING_FLOOR, U_HEADING_SET, U_HS, U_HS_REST, U_HS_TAN,
-    U_HS_W0, U_K_ACC, U_K_REST, U_LAG, U_PH,
-    U_PHI, U_PT, U_Q_BIAS, U_Q_GYRO, U_Q_RATE, U_R_ACC, U_R_GYRO, U_SIZE, U_STAMP2,
-    U_START_F, U_START_M, U_START_N, U_START_T, U_START_V, U_TAU_ACC,
-    U_TAU_REST, U_TILT_FLOOR, U_UNKNOWN, U_WH2, U_WZ2, U_FIELD_AGE, U_YAW_HELD,
-    U_ROTATION_HELD, INNOVATION_TIME)
+from .compiled import entry_point
+from .record import Group
+from .uncertainty_kernel import HEADING_UNKNOWN, INNOVATION_TIME, UNC
 
 __all__ = [
     'AttitudeUncertainty',
-    'GRAVITY',
     'HEADING_UNKNOWN',
     'covariance_out',
 ]
 
-# Variance of a heading known to be nothing better than uniform on (−π, π], rad².
-HEADING_UNKNOWN = math.pi * math.pi / 3.0
 _FLOAT64 = np.dtype(np.float64)
-# The slots uncertainty_start writes.
-_START_SLOTS = (U_START_T, U_START_N, U_START_M, U_START_F, U_START_V)
-# The slots of the heading's share of the start.
-_HS_SLOTS = (U_HS_W0, U_HS_TAN, U_HS_REST, U_HS)
+# UNC's sub-groups by name.
+_GROUPS = {m.name: m for m in UNC.members if isinstance(m, Group)}
 
 
 def covariance_out(array):
@@ -60,23 +51,50 @@ def covariance_out(array):
     return array
 
 
-class _Slot:
-    """An attribute kept in the tracker's flat state ``_u``: a float, or an array ``(B,)``."""
+def _names(group):
+    """The names of a group's fields (not its sub-groups')."""
+    return [m[0] for m in group.members if not isinstance(m, Group)]
 
-    def __init__(self, index, flag=False):
-        self.index = index
-        self.flag = flag
 
-    def __get__(self, obj, owner=None):
-        if obj is None:
-            return self
-        value = obj._u[self.index]
-        if obj._compiled:  # a float64 array: a Python float (or bool) out
-            return float(value) != 0.0 if self.flag else float(value)
-        return value
+def _check_dt(dt):
+    if not (math.isfinite(dt) and dt > 0.0):
+        raise ValueError(f'dt must be positive and finite, got {dt}')
 
-    def __set__(self, obj, value):
-        obj._u[self.index] = value
+
+def _record(holder):
+    """
+    A holder's record, read and written by attribute (``u.axes.pt``).
+
+    The plain record itself; for a compiled holder, a ``ctypes`` structure
+    per group over the holder's memory (its sub-groups as attributes): its
+    fields read and written as Python floats by C code, faster than a
+    float64 array's items and several times faster than numpy's access to a
+    structured record's fields by name.
+    """
+    if isinstance(holder, np.ndarray):
+        return _floats(UNC, holder, 0)
+    return holder[0]
+
+
+_FLOATS_CLASSES = {}
+
+
+def _floats(group, holder, offset):
+    """The ``ctypes`` structure of ``group`` at byte ``offset`` of ``holder``, sub-groups too."""
+    cls = _FLOATS_CLASSES.get(group)
+    if cls is None:
+        # The group's fields; a sub-group's span is padding here, its own
+        # structure an attribute.
+        fields = [(f'_{m.name}_span', ctypes.c_double * m.size) if isinstance(m, Group)
+                  else (m[0], ctypes.c_double if m[3] == 1 else ctypes.c_double * m[3])
+                  for m in group.members]
+        cls = _FLOATS_CLASSES[group] = type(f'{group.name}_floats', (ctypes.Structure,),
+                                            {'_fields_': fields})
+    record = cls.from_buffer(holder, offset)
+    for m in group.members:
+        if isinstance(m, Group):
+            setattr(record, m.name, _floats(m, holder, offset + group.dtype.fields[m.name][1]))
+    return record
 
 
 class AttitudeUncertainty:
@@ -106,25 +124,6 @@ class AttitudeUncertainty:
 
     """
 
-    # The per-sample state and its constants live in the flat container
-    # ``_u`` (uncertainty_kernel's layout); these names read and write it.
-    _tilt_floor = _Slot(U_TILT_FLOOR)
-    _heading_floor = _Slot(U_HEADING_FLOOR)
-    _stamp2 = _Slot(U_STAMP2)
-    _dt = _Slot(U_DT)
-    _r_acc = _Slot(U_R_ACC)
-    _q_gyro = _Slot(U_Q_GYRO)
-    _pt = _Slot(U_PT)
-    _ct = _Slot(U_CT)
-    _ph = _Slot(U_PH)
-    _ch = _Slot(U_CH)
-    _b = _Slot(U_B)
-    _unknown = _Slot(U_UNKNOWN)
-    _calibration = _Slot(U_CALIBRATION)
-    heading_set = _Slot(U_HEADING_SET, flag=True)
-    _wz2 = _Slot(U_WZ2)
-    _wh2 = _Slot(U_WH2)
-
     def __init__(self, params=None, tau_acc=2.05, tau_mag=15.0, tau_rest=0.5, use_mag=True):
         self.params = params if params is not None else UncertaintyParams()
         for name, tau in (('tau_acc', tau_acc), ('tau_mag', tau_mag), ('tau_rest', tau_rest)):
@@ -135,16 +134,19 @@ class AttitudeUncertainty:
         p = self.params
         self._kernel = _plain
         self._compiled = False
-        self._u = [0.0] * U_SIZE
-        u = self._u
-        u[U_TAU_ACC], u[U_TAU_REST] = self._tau[0], self._tau[2]
-        u[U_GYRO_NOISE], u[U_GYRO_RATE_NOISE] = p.gyro_noise, p.gyro_rate_noise
-        u[U_BIAS_STD], u[U_BIAS_TIME], u[U_ACC_NOISE] = p.bias_std, p.bias_time, p.acc_noise
-        # What is added on output, rad² (the stamp's per (rad/s)²).
-        self._tilt_floor = 0.5 * p.inclination_floor ** 2
-        self._heading_floor = p.heading_floor ** 2
-        self._stamp2 = p.stamp_error ** 2
-        self._dt = math.nan  # no coefficients yet
+        self._variances = _plain.covariance_variances
+        # The per-sample state and its constants: a record of UNC in a
+        # holder (what the kernels take); self._u reads and writes it.
+        self._holder = UNC.holder(False)
+        self._u = _record(self._holder)
+        par = self._u.par
+        par.tau_acc, par.tau_rest = self._tau[0], self._tau[2]
+        par.gyro_noise, par.gyro_rate_noise = p.gyro_noise, p.gyro_rate_noise
+        par.bias_std, par.bias_time, par.acc_noise = p.bias_std, p.bias_time, p.acc_noise
+        par.tilt_floor = 0.5 * p.inclination_floor ** 2
+        par.heading_floor = p.heading_floor ** 2
+        par.stamp2 = p.stamp_error ** 2
+        self._u.coef.dt = math.nan  # no coefficients yet
         self._field_dt = None
         self._gain_dt = None
         self.reset()
@@ -162,7 +164,7 @@ class AttitudeUncertainty:
 
         As :meth:`AhrsObserver.use_kernels
         <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.use_kernels>`: the state is
-        copied into the new kernels' container; the variances go on as they
+        copied into the new kernels' holder; the variances go on as they
         would have. The compiled kernels take one estimate (floats), not
         arrays ``(B,)``.
 
@@ -178,17 +180,49 @@ class AttitudeUncertainty:
         """
         if kernels.uncertainty is self._kernel:
             return
-        if kernels.compiled and any(np.ndim(v) for v in list(self._u) + [self.use_mag]):
+        if kernels.compiled and (np.ndim(self.use_mag) or any(
+                np.ndim(UNC.get(self._holder[0], '.'.join(path)))
+                for path, _, _, _ in UNC.fields())):
             raise ValueError('the compiled kernels take one estimate, not arrays')
-        u = kernels.container(U_SIZE)
-        for i, value in enumerate(self._u):
-            u[i] = value if not kernels.compiled else float(value)
-        self._u, self._kernel, self._compiled = u, kernels.uncertainty, kernels.compiled
+        holder = UNC.holder(kernels.compiled)
+        UNC.copy(self._holder[0], holder[0])
+        self._holder, self._u = holder, _record(holder)
+        self._kernel, self._compiled = kernels.uncertainty, kernels.compiled
+        self._variances = (self._first_variances if kernels.compiled
+                           else kernels.uncertainty.covariance_variances)
+
+    def _first_variances(self, holder):
+        """The compiled variances; from now on their code called past numba's dispatch."""
+        out = self._kernel.covariance_variances(holder)
+        self._variances = entry_point(self._kernel.covariance_variances)
+        return out
 
     @property
     def state(self):
-        """The flat state (uncertainty_kernel's layout): what :func:`sample_step` steps."""
-        return self._u
+        """
+        The holder of the state: what the kernels take.
+
+        A record of :data:`~ext_observer.core.ahrs.uncertainty_kernel.UNC`
+        in a one-element structured array with the compiled kernels,
+        ``[record]`` with the plain ones: what
+        :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step` steps.
+        """
+        return self._holder
+
+    @property
+    def heading_set(self):
+        """Whether a field has corrected the heading since the start (bool, or an array)."""
+        value = self._u.head.heading_set
+        return float(value) != 0.0 if self._compiled else value
+
+    @heading_set.setter
+    def heading_set(self, value):
+        self._u.head.heading_set = value
+
+    @property
+    def _dt(self):
+        """The interval of the coefficients, s (NaN: none yet)."""
+        return float(self._u.coef.dt)
 
     # --- state -------------------------------------------------------------
 
@@ -197,18 +231,22 @@ class AttitudeUncertainty:
         self.started = False
         self.heading_set = False
         self.last_field = None
-        self._pt = self._ct = self._ph = self._ch = self._b = 0.0
-        self._unknown = 0.0
-        self._calibration = 0.0
-        self._wh2 = self._wz2 = 0.0
+        u = self._u
+        e = u.axes
+        e.pt = e.ct = e.ph = e.ch = e.b = 0.0
+        u.head.unknown = 0.0
+        u.head.calibration = 0.0
+        u.rate.wh2 = u.rate.wz2 = 0.0
         self._clear_start()
 
     def _clear_start(self):
         u = self._u
-        u[U_START_T] = u[U_START_N] = u[U_START_M] = u[U_START_F] = u[U_START_V] = 0.0 * u[U_PT]
-        u[U_YAW_HELD] = u[U_ROTATION_HELD] = u[U_FIELD_AGE] = u[U_LAG] = 0.0 * u[U_PT]
-        for i in _HS_SLOTS:
-            u[i] = 0.0 * u[U_PT]
+        zero = 0.0 * u.axes.pt
+        for name in ('start', 'held', 'head_start'):
+            record = getattr(u, name)
+            for field in _names(_GROUPS[name]):
+                setattr(record, field, zero)
+        u.head.lag = zero
 
     def start(self, dt, acc=None):
         """
@@ -225,17 +263,19 @@ class AttitudeUncertainty:
         """
         self._coefficients(dt)
         p = self.params
+        u = self._u
+        e = u.axes
         self.started = True
         self.heading_set = self.use_mag & False
-        self._pt = self._r_acc
-        self._ct = self._ch = 0.0 * self._pt
-        self._b = p.bias_init * p.bias_init + 0.0 * self._pt
+        e.pt = u.coef.r_acc
+        e.ct = e.ch = 0.0 * e.pt
+        e.b = p.bias_init * p.bias_init + 0.0 * e.pt
         # 9D: only the reference is unknown, the drift starts now; 6D: the
         # heading is the start's, one sample's drift.
-        self._ph = (1 - self.use_mag) * self._q_gyro
-        self._unknown = self.use_mag * HEADING_UNKNOWN
-        self._calibration = 0.0
-        self._wh2 = self._wz2 = 0.0
+        e.ph = (1 - self.use_mag) * u.coef.q_gyro
+        u.head.unknown = self.use_mag * HEADING_UNKNOWN
+        u.head.calibration = 0.0
+        u.rate.wh2 = u.rate.wz2 = 0.0
         self._clear_start()
         if acc is not None:
             # The estimate was taken from this sample: only its norm shows.
@@ -244,33 +284,35 @@ class AttitudeUncertainty:
 
     def _start_sample(self, dt, f):
         """The start's share for a world-frame specific force ``f`` (floats, or arrays ``(B,)``)."""
-        u, kernel = self._u, self._kernel
+        kernel = self._kernel
         fx, fy, fz = f
         if self._compiled or not np.ndim(fx):
-            if u[U_START_V] != 0.0 or u[U_START_T] < u[U_TAU_ACC]:
-                kernel.uncertainty_start(u, float(dt), float(fx), float(fy), float(fz))
+            kernel.covariance_start(self._holder, float(dt), float(fx), float(fy), float(fz))
             return
         # Many recordings: the same kernel on each one's floats.
-        columns = {i: np.array(np.broadcast_to(u[i], np.shape(fx)), dtype=float)
-                   for i in _START_SLOTS}
-        if not (columns[U_START_V].any() or (columns[U_START_T] < u[U_TAU_ACC]).any()):
+        u = self._u
+        names = _names(_GROUPS['start'])
+        columns = {n: np.array(np.broadcast_to(getattr(u.start, n), np.shape(fx)), dtype=float)
+                   for n in names}
+        if not (columns['var'].any() or (columns['time'] < u.par.tau_acc).any()):
             return
-        one = list(u)
+        holder = UNC.holder(False)
+        one = holder[0]
+        for group in ('par', 'coef'):  # the constants and coefficients: floats
+            for n in _names(_GROUPS[group]):
+                setattr(getattr(one, group), n, getattr(getattr(u, group), n))
         for b in range(len(fx)):
-            for i in _START_SLOTS:
-                one[i] = float(columns[i][b])
-            if one[U_START_V] != 0.0 or one[U_START_T] < one[U_TAU_ACC]:
-                kernel.uncertainty_start(one, float(dt), float(fx[b]), float(fy[b]),
-                                         float(fz[b]))
-            for i in _START_SLOTS:
-                columns[i][b] = one[i]
-        for i in _START_SLOTS:
-            u[i] = columns[i]
+            for n in names:
+                setattr(one.start, n, float(columns[n][b]))
+            kernel.covariance_start(holder, float(dt), float(fx[b]), float(fy[b]), float(fz[b]))
+            for n in names:
+                columns[n][b] = getattr(one.start, n)
+        for n in names:
+            setattr(u.start, n, columns[n])
 
     def _coefficients(self, dt):
-        if not (math.isfinite(dt) and dt > 0.0):
-            raise ValueError(f'dt must be positive and finite, got {dt}')
-        self._kernel.uncertainty_coefficients(self._u, float(dt))
+        _check_dt(dt)
+        self._kernel.covariance_coefficients(self._holder, float(dt))
 
     # --- the steps ---------------------------------------------------------
 
@@ -278,7 +320,9 @@ class AttitudeUncertainty:
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
-        (:func:`~ext_observer.core.ahrs.uncertainty_kernel.uncertainty_step`.)
+        And what the estimator said of the sample: its bias variance, a
+        clipped rate, a hole bridged, the start's share
+        (:func:`~ext_observer.core.ahrs.uncertainty_kernel.covariance_step`).
 
         Parameters
         ----------
@@ -301,9 +345,8 @@ class AttitudeUncertainty:
             rad² (:attr:`AhrsObserver.clip_variance
             <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.clip_variance>`).
         acc : sequence of 3, optional
-            The specific force, m/s², body: how unsure the start still is
-            (one estimate, floats). None: nothing of the start is counted
-            (as at rest).
+            The specific force, m/s², body: how unsure the start still is.
+            None: nothing of the start is counted (as at rest).
         hole : tuple of 3 float, optional
             A hole the estimator bridged: ``(extra, var, t0)``, the seconds
             beyond ``dt`` (the usual interval, whose coefficients the step
@@ -314,29 +357,30 @@ class AttitudeUncertainty:
             uncertainty_restart`).
 
         """
-        if dt != self._u[U_DT]:
-            self._coefficients(dt)
+        if dt != self._u.coef.dt:
+            _check_dt(dt)
         gx, gy, gz = gyr
         w, x, y, z = q
+        extra, hole_var, hole_t0 = ((float(hole[0]), float(hole[1]), float(hole[2]))
+                                    if hole is not None else (0.0, 0.0, -1.0))
+        ax, ay, az = acc if acc is not None else (0.0, 0.0, 0.0)
         if self._compiled:
-            self._kernel.uncertainty_step(self._u, float(dt), float(gx), float(gy), float(gz),
-                                          float(w), float(x), float(y), float(z),
-                                          1.0 if rest else 0.0)
-        else:
-            self._kernel.uncertainty_step(self._u, dt, gx, gy, gz, w, x, y, z, rest)
-        if hole is not None and hole[2] >= 0.0:
-            self._kernel.uncertainty_restart(self._u, float(hole[2]))
-        if bias_var is not None:
-            self._kernel.uncertainty_bias(
-                self._u, float(bias_var) if self._compiled else bias_var)
-        if clip_var is not None and np.any(clip_var):
-            self._kernel.uncertainty_clipped(
-                self._u, float(clip_var) if self._compiled else clip_var)
-        if hole is not None:
-            self._kernel.uncertainty_hole(self._u, float(hole[0]), float(hole[1]),
-                                          hole[2] < 0.0)
-        if acc is not None:
-            self._start_sample(dt, rotate(w, x, y, z, *acc))
+            self._kernel.covariance_step(
+                self._holder, float(dt), float(gx), float(gy), float(gz), float(w), float(x),
+                float(y), float(z), 1.0 if rest else 0.0,
+                0.0 if bias_var is None else float(bias_var),
+                0.0 if clip_var is None else float(clip_var), extra, hole_var, hole_t0,
+                float(ax), float(ay), float(az), acc is not None)
+            return
+        # Many recordings count the start one by one, after the step (the
+        # kernel's order: the start's share last).
+        many = acc is not None and any(np.ndim(v) for v in (w, x, y, z, ax, ay, az))
+        self._kernel.covariance_step(
+            self._holder, dt, gx, gy, gz, w, x, y, z, rest,
+            0.0 if bias_var is None else bias_var, 0.0 if clip_var is None else clip_var,
+            extra, hole_var, hole_t0, ax, ay, az, acc is not None and not many)
+        if many:
+            self._start_sample(dt, rotate(w, x, y, z, ax, ay, az))
 
     def unbridged(self, dt, var, t0):
         """
@@ -345,22 +389,11 @@ class AttitudeUncertainty:
         ``var`` the rotation it may have hidden (rad² per axis) and ``t0``
         the weight the inclination's mean restarted with (negative: kept),
         :meth:`AhrsObserver.unbridged
-        <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.unbridged>`'s. The
-        angles' variances grow by it and by the gyro's noise and bias over
-        the hole, the inclination's only where its mean was kept (else it
-        restarts as after a bridged hole); the heading's up to that of an
-        unknown heading. The hole counts as time without a field. One
-        estimate (floats).
+        <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.unbridged>`'s
+        (:func:`~ext_observer.core.ahrs.uncertainty_kernel.covariance_unbridged`).
+        One estimate (floats).
         """
-        st = self._u
-        if t0 >= 0.0:
-            self._kernel.uncertainty_restart(st, float(t0))
-        g = st[U_GYRO_NOISE]
-        grow = g * g * dt + st[U_B] * dt * dt + var
-        if t0 < 0.0:
-            st[U_PT] = st[U_PT] + grow
-        st[U_PH] = min(st[U_PH] + grow, HEADING_UNKNOWN)
-        st[U_FIELD_AGE] = st[U_FIELD_AGE] + dt
+        self._kernel.covariance_unbridged(self._holder, float(dt), float(var), float(t0))
 
     def field(self, dt, gain, calibration=0.0, reference=math.nan, dip=math.nan,
               innovation=math.nan):
@@ -411,20 +444,20 @@ class AttitudeUncertainty:
             self._k_lag = 1.0 - math.exp(-dt / INNOVATION_TIME)
         used = gain > 0.0
         a = 1.0 - gain
-        # Each slot read and written once (a compiled state is an array).
-        st = self._u
-        unknown = st[U_UNKNOWN]
+        u = self._u
+        e, head, held = u.axes, u.head, u.held
+        unknown = head.unknown
         # A correction pulls the whole heading error, the reference's part
         # included, to the field's; without one both stay.
-        st[U_PH] = a * a * (st[U_PH] + used * unknown) + gain * gain * self._r_mag
-        st[U_CH] = a * st[U_CH]
-        st[U_YAW_HELD] = a * st[U_YAW_HELD]
-        st[U_ROTATION_HELD] = a * st[U_ROTATION_HELD]
-        st[U_FIELD_AGE] = 0.0 * st[U_FIELD_AGE]
+        e.ph = a * a * (e.ph + used * unknown) + gain * gain * self._r_mag
+        e.ch = a * e.ch
+        held.yaw = a * held.yaw
+        held.rotation = a * held.rotation
+        held.field_age = 0.0 * held.field_age
         unknown = (1 - used) * unknown
         self.heading_set = self.heading_set | used
         c2 = calibration * calibration
-        ref = reference + st[U_HEADING_FLOOR]
+        ref = reference + u.par.heading_floor
         if isinstance(c2, float):
             c2 = c2 if c2 <= HEADING_UNKNOWN else HEADING_UNKNOWN
         else:
@@ -435,8 +468,8 @@ class AttitudeUncertainty:
         else:
             given = (ref == ref) & ~np.asarray(used)
             unknown = np.where(given, np.minimum(ref, HEADING_UNKNOWN), unknown)
-        st[U_UNKNOWN] = unknown
-        st[U_CALIBRATION] = used * c2 + (1 - used) * st[U_CALIBRATION]
+        head.unknown = unknown
+        head.calibration = used * c2 + (1 - used) * head.calibration
         self._lag(a, used, innovation)
         self._heading_start(gain, dip)
 
@@ -453,8 +486,8 @@ class AttitudeUncertainty:
         one whose innovation is not given, teaches nothing. The lag is held
         while no field comes: the heading keeps the error it had.
         """
-        st, k = self._u, self._k_lag
-        lag = (a > 0.0) * st[U_LAG]
+        head, k = self._u.head, self._k_lag
+        lag = (a > 0.0) * head.lag
         # l ← (1 − k) l + k ψ, where a used field gave ψ
         if isinstance(lag, float) and not np.ndim(innovation):
             if used and innovation == innovation:
@@ -462,7 +495,7 @@ class AttitudeUncertainty:
         else:
             given = np.asarray(used) & np.isfinite(innovation)
             lag = np.where(given, lag + k * (np.nan_to_num(innovation) - lag), lag)
-        st[U_LAG] = float(lag) if self._compiled else lag
+        head.lag = float(lag) if self._compiled else lag
 
     def _heading_start(self, gain, dip):
         """
@@ -485,24 +518,24 @@ class AttitudeUncertainty:
         Before any field, and in 6D, nothing (the heading is unknown, or
         the start's own).
         """
-        st = self._u
-        w0, tan, rest = st[U_HS_W0], st[U_HS_TAN], st[U_HS_REST]
+        hs, start = self._u.head_start, self._u.start
+        w0, tan, rest = hs.weight, hs.tan_dip, hs.since
         if not (np.ndim(dip) or np.ndim(gain) or np.ndim(w0)):
             # One estimate (the node's path): floats.
             if dip != dip:
                 return
             t = abs(math.tan(dip))
-            one = math.atan(math.sqrt(max(st[U_START_M], st[U_START_F])))
+            one = math.atan(math.sqrt(max(start.mean, start.first)))
             if tan == 0.0:  # the first field: the heading was taken from it
                 w0, rest = 1.0, 0.0
             else:
                 w0 = w0 * (1.0 - gain)
-                rest = (1.0 - gain) * rest + gain * t * math.sqrt(st[U_START_V])
-            st[U_HS_W0], st[U_HS_TAN], st[U_HS_REST] = w0, t, rest
-            st[U_HS] = w0 * t * one + rest
+                rest = (1.0 - gain) * rest + gain * t * math.sqrt(start.var)
+            hs.weight, hs.tan_dip, hs.since = w0, t, rest
+            hs.sigma = w0 * t * one + rest
             return
-        one = np.arctan(np.sqrt(np.maximum(st[U_START_M], st[U_START_F])))
-        now = np.sqrt(st[U_START_V])
+        one = np.arctan(np.sqrt(np.maximum(start.mean, start.first)))
+        now = np.sqrt(start.var)
         with np.errstate(invalid='ignore'):
             t = np.abs(np.tan(dip))
         seen = np.isfinite(t)
@@ -512,9 +545,9 @@ class AttitudeUncertainty:
         w0 = np.where(first, 1.0, w0 * (1.0 - k))
         rest = np.where(first, 0.0, np.where(seen, (1.0 - k) * rest + k * t * now, rest))
         tan = np.where(seen, t, tan)
-        hs = w0 * tan * one + rest
-        for i, v in ((U_HS_W0, w0), (U_HS_TAN, tan), (U_HS_REST, rest), (U_HS, hs)):
-            st[i] = float(v) if self._compiled or not np.ndim(v) else v
+        sigma = w0 * tan * one + rest
+        for name, v in (('weight', w0), ('tan_dip', tan), ('since', rest), ('sigma', sigma)):
+            setattr(hs, name, float(v) if self._compiled or not np.ndim(v) else v)
 
     def heading_gain(self, count, dt=None):
         """
@@ -536,12 +569,12 @@ class AttitudeUncertainty:
     @property
     def tilt_variance(self):
         """Variance of the tilt about each horizontal world axis, rad²."""
-        return self._kernel.uncertainty_variances(self._u)[0]
+        return self._variances(self._holder)[0]
 
     @property
     def heading_variance(self):
         """Variance of the heading (about the world vertical), rad²."""
-        return self._kernel.uncertainty_variances(self._u)[1]
+        return self._variances(self._holder)[1]
 
     @property
     def inclination_std(self):
@@ -564,6 +597,6 @@ class AttitudeUncertainty:
             ``(V_t, 0, 0, 0, V_t, 0, 0, 0, V_h)``, rad².
 
         """
-        t, h = self._kernel.uncertainty_variances(self._u)
+        t, h = self._variances(self._holder)
         z = 0.0 * t
         return (t, z, z, z, t, z, z, z, h)

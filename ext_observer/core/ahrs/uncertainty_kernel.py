@@ -1,14 +1,23 @@
 """
-The covariance's step as functions on one flat state, and the raw-IMU sample in one call.
+The covariance's state with names, its step as functions on it, and the raw-IMU sample in one call.
 
 :class:`~ext_observer.core.ahrs.uncertainty.AttitudeUncertainty` keeps its
-per-sample state in a flat container ``u`` (the slots below) and runs
-:func:`uncertainty_step` on it: the same source plain (a Python ``list``,
-whose items may also be numpy arrays ``(B,)`` for many recordings at once:
-the arithmetic has no branch on them) or compiled by numba on a float64
-array (:mod:`~ext_observer.core.ahrs.compiled` joins this file to the
-estimator's kernels), as :mod:`~ext_observer.core.ahrs.ahrs_kernel` is. The
-model is docs/covariance.md's ("The model").
+per-sample state in a record of :data:`UNC` (a
+:class:`~ext_observer.core.ahrs.record.Group`: ``u.axes.pt``, ``u.start.var``,
+...) and runs these functions on it: the same source plain (a plain
+record, whose fields may also be numpy arrays ``(B,)`` for many
+recordings at once: the arithmetic of :func:`covariance_step` and
+:func:`covariance_variances` has no branch on them) or compiled by numba on
+a structured record (:mod:`~ext_observer.core.ahrs.compiled` joins this file
+to the estimator's kernels), as :mod:`~ext_observer.core.ahrs.ahrs_kernel`
+is. The model is docs/covariance.md's ("The model").
+
+The ``uncertainty_*`` functions take the record ``u``; what Python calls
+(``covariance_*`` and :func:`sample_step`) takes a holder ``uh`` (a
+one-element structured array compiled, ``[record]`` plain) and starts with
+``u = uh[0]``. :func:`covariance_step` is the covariance's step of one
+sample, its sub-steps in their one order, for the node's
+:func:`sample_step` and the wrapper's steps alike.
 
 :func:`sample_step` is what the node runs for the usual sample of an
 estimate that exists: the estimator's step
@@ -20,82 +29,83 @@ the compiled kernels, one crossing from Python per sample.
 
 import math
 
-from .ahrs_filters import rotate
+from ..constants import STANDARD_GRAVITY
+from .ahrs_filters import gravity_deviation, rotate
 from .ahrs_kernel import ahrs_update
 from .bias_kernel import bias_variance
-from .layout import Layout
+from .record import Group
 
-# Standard gravity, m/s²: turns the accelerometer's noise into a direction.
-GRAVITY = 9.80665
+# Variance of a heading known to be nothing better than uniform on (−π, π], rad².
+HEADING_UNKNOWN = math.pi * math.pi / 3.0
 
-# --- the layout ----------------------------------------------------------------
+# --- the state -----------------------------------------------------------------
 
-UNCERTAINTY = Layout()
-# Constants (set once by the wrapper): the estimator's time constants (s),
-# the noises of UncertaintyParams, and what is added on output (rad²; the
-# stamp's per (rad/s)²).
-U_TAU_ACC = UNCERTAINTY.field('tau_acc')
-U_TAU_REST = UNCERTAINTY.field('tau_rest')
-U_GYRO_NOISE = UNCERTAINTY.field('gyro_noise')
-U_GYRO_RATE_NOISE = UNCERTAINTY.field('gyro_rate_noise')
-U_BIAS_STD = UNCERTAINTY.field('bias_std')
-U_BIAS_TIME = UNCERTAINTY.field('bias_time')
-U_ACC_NOISE = UNCERTAINTY.field('acc_noise')
-U_TILT_FLOOR = UNCERTAINTY.field('tilt_floor')
-U_HEADING_FLOOR = UNCERTAINTY.field('heading_floor')
-U_STAMP2 = UNCERTAINTY.field('stamp2')
-# Coefficients of the interval U_DT (NaN: none yet).
-U_DT = UNCERTAINTY.field('dt')
-U_K_ACC = UNCERTAINTY.field('k_acc')
-U_K_REST = UNCERTAINTY.field('k_rest')
-U_R_ACC = UNCERTAINTY.field('r_acc')
-U_R_GYRO = UNCERTAINTY.field('r_gyro')
-U_Q_GYRO = UNCERTAINTY.field('q_gyro')
-U_Q_RATE = UNCERTAINTY.field('q_rate')
-U_PHI = UNCERTAINTY.field('phi')
-U_Q_BIAS = UNCERTAINTY.field('q_bias')
-# The state: per axis [[P, C], [C, B]] (tilt t, heading h, one B), the
-# reference's variance, the calibration's, whether a field set the heading,
-# the rate's squared world components (vertical, horizontal).
-U_PT = UNCERTAINTY.field('pt')
-U_CT = UNCERTAINTY.field('ct')
-U_PH = UNCERTAINTY.field('ph')
-U_CH = UNCERTAINTY.field('ch')
-U_B = UNCERTAINTY.field('b')
-U_UNKNOWN = UNCERTAINTY.field('unknown')
-U_CALIBRATION = UNCERTAINTY.field('calibration')
-U_HEADING_SET = UNCERTAINTY.field('heading_set')
-U_WZ2 = UNCERTAINTY.field('wz2')
-U_WH2 = UNCERTAINTY.field('wh2')
-# The start (wherever the robot starts): s since it, samples and the mean of ((|f| − g)/g)² seen
-# since, and the variance per horizontal axis the running mean of the
-# specific force still owes to the motion (rad²).
-U_START_T = UNCERTAINTY.field('start_t')
-U_START_N = UNCERTAINTY.field('start_n')
-U_START_M = UNCERTAINTY.field('start_m')
-U_START_V = UNCERTAINTY.field('start_v')
-U_START_F = UNCERTAINTY.field('start_f')  # the first sample's ((|f| − g)/g)²
-# The heading's share of the start (9D): a field's heading is its horizontal
-# part in the estimate's frame, which a tilt error ε turns by up to
-# ε·|tan(dip)|. The weight the heading still gives the field it was taken
-# from at the start, |tan(dip)| of the references, the share of the fields
-# since (σ, rad) and the whole σ published (rad).
-U_HS_W0 = UNCERTAINTY.field('hs_w0')
-U_HS_TAN = UNCERTAINTY.field('hs_tan')
-U_HS_REST = UNCERTAINTY.field('hs_rest')
-U_HS = UNCERTAINTY.field('hs')
-# A field lost: s since the last field (used or not), and the rotation about
-# the world vertical (rad, signed) the gyro alone carried the heading through
-# since it was lost; the fields back shrink it as they correct the heading.
-U_FIELD_AGE = UNCERTAINTY.field('field_age')
-U_YAW_HELD = UNCERTAINTY.field('yaw_held')
-# The same, the whole rotation (rad, about any axis, unsigned).
-U_ROTATION_HELD = UNCERTAINTY.field('rotation_held')
-# The heading's lag behind the fields (rad, signed): the innovation of the
-# fields that corrected the heading (their heading in the estimate's frame),
-# low-passed over INNOVATION_TIME; a full correction (gain 1) clears it.
-U_LAG = UNCERTAINTY.field('lag')
-U_SIZE = UNCERTAINTY.size
+UNC = Group('unc', "the attitude covariance's constants, its interval's coefficients and state", [
+    Group('par', 'constants, set once by the wrapper', [
+        ('tau_acc', 's', "the inclination correction's time constant (tau_acc + tau_acc_gain)"),
+        ('tau_rest', 's', "the time constant of the bias learned at rest"),
+        ('gyro_noise', 'rad/s/√Hz', "the gyro's white noise density"),
+        ('gyro_rate_noise', '(rad/s per rad/s)/√Hz', "the gyro's noise proportional to the rate"),
+        ('bias_std', 'rad/s', "σ of the bias's wander from the learned one"),
+        ('bias_time', 's', 'the correlation time of that wander'),
+        ('acc_noise', 'm/s²/√Hz', "the accelerometer's noise density"),
+        ('tilt_floor', 'rad²', 'added on output to the tilt variance per horizontal axis'),
+        ('heading_floor', 'rad²', 'added on output to the variance of a heading a field set'),
+        ('stamp2', 's²', "the stamp's error squared: added on output per (rad/s)² of rate"),
+    ]),
+    Group('coef', 'the coefficients of the interval dt (NaN: none yet)', [
+        ('dt', 's', 'the interval'),
+        ('k_acc', '', "the inclination correction's gain"),
+        ('k_rest', '', "the gain of the bias learned at rest"),
+        ('r_acc', 'rad²', "one sample's inclination measurement variance: (acc_noise / g)² / dt"),
+        ('r_gyro', '(rad/s)²', "one sample's rate variance: gyro_noise² / dt"),
+        ('q_gyro', 'rad²', "the gyro's white noise over dt"),
+        ('q_rate', 'rad² s²', "the noise proportional to the rate over dt, per (rad/s)²"),
+        ('phi', '', "the bias error's decay over dt: exp(−dt / bias_time)"),
+        ('q_bias', '(rad/s)²', "the bias's wander over dt"),
+    ]),
+    Group('axes', 'per axis [[P, C], [C, B]] of the angle and bias errors (tilt t, heading h)', [
+        ('pt', 'rad²', "P of the tilt, per horizontal axis"),
+        ('ct', 'rad²/s', "C of the tilt: its angle and bias errors' covariance"),
+        ('ph', 'rad²', "P of the heading"),
+        ('ch', 'rad²/s', "C of the heading"),
+        ('b', '(rad/s)²', "B, the bias error's variance (one for every axis)"),
+    ]),
+    Group('rate', "the last sample's rate in the world frame, squared", [
+        ('wz2', '(rad/s)²', 'its vertical component squared'),
+        ('wh2', '(rad/s)²', 'its horizontal components squared'),
+    ]),
+    Group('head', 'what the heading rests on (9D)', [
+        ('heading_set', '', 'whether a field has corrected the heading since the start (0 or 1)'),
+        ('unknown', 'rad²', "the variance of the field the heading was taken from"),
+        ('calibration', 'rad²', "the magnetometer calibration's heading variance"),
+        ('lag', 'rad', "the heading's lag behind the fields (signed): the innovation of the "
+         'fields that corrected the heading, low-passed over INNOVATION_TIME; a full '
+         'correction clears it'),
+    ]),
+    Group('start', 'the start (wherever the robot starts): what its mean owes the motion', [
+        ('time', 's', 'since the start (or since the inclination\'s mean restarted)'),
+        ('count', '', 'samples seen since'),
+        ('mean', '', 'the mean of ((|f| − g)/g)² seen since (uncertainty_start says how)'),
+        ('first', '', "the first sample's ((|f| − g)/g)²"),
+        ('var', 'rad²', 'the variance per horizontal axis the running mean still owes the motion'),
+    ]),
+    Group('head_start', "the heading's share of the start (9D): a field's heading is its "
+          "horizontal part in the estimate's frame, which a tilt error ε turns by up to "
+          'ε·|tan(dip)|', [
+              ('weight', '', 'the weight the heading still gives the field it was taken from at '
+               'the start'),
+              ('tan_dip', '', '|tan(dip)| of the references (0: no field yet)'),
+              ('since', 'rad', 'the share of the fields since (σ)'),
+              ('sigma', 'rad', 'the whole share published (σ)'),
+          ]),
+    Group('held', 'a field lost: the rotation the gyro alone carried the heading through', [
+        ('field_age', 's', 'since the last field (used or not)'),
+        ('yaw', 'rad', 'about the world vertical since the field was lost (signed); the fields '
+         'back shrink it as they correct the heading'),
+        ('rotation', 'rad', 'the same, the whole rotation (about any axis, unsigned)'),
+    ]),
+])
 
 # sample_step's outcomes: 0 the step ran; else the estimator stepped but the
 # estimate failed the guard (the caller reinitializes), or nothing ran: the
@@ -113,15 +123,13 @@ START_CORRELATION = 1.0
 # rad²: a start's share below this is forgotten (a millionth of a degree).
 _START_FORGOTTEN = 1e-16
 # σ of the gyro's scale error (relative): without a field, the heading drifts
-# by this share of the net rotation about the vertical (BROAD's dev trial 08
-# turns ten times one way without one and drifts 0.33 % of it; MEMS
-# datasheets give 0.1 to 1 %).
+# by this share of the net rotation about the vertical (MEMS datasheets give
+# 0.1 to 1 %; docs/broad_tuning.md#the-covariances-constants).
 GYRO_SCALE_SIGMA = 0.003
 # σ of the heading's drift per radian of rotation about any axis, without a
 # field: the gyro's axis and cross-axis errors, which a body turning back and
-# forth rectifies into a drift with no net turn (BROAD's dev trial 34 drifts
-# 9° steadily in 70 s, 0.085 % of the 10650° it turns: 0.03 % puts all of it
-# within 2σ with the other terms, 0.02 % 97 %; 0.05 % leaves a margin).
+# forth rectifies into a drift with no net turn
+# (docs/broad_tuning.md#the-covariances-constants).
 GYRO_MOTION_SIGMA = 0.0005
 # The model's one bias variance per axis is the mean of the bias filter's three
 # (its covariance's trace over the axes it sums).
@@ -132,30 +140,31 @@ FIELD_SILENT = 1.0
 # s: the fields' innovation is averaged over this long before its square is
 # counted in the heading's variance: long enough to average the fields' noise
 # and their calibration's orientation-dependent error, short enough to follow
-# a lag that builds up within seconds (dev trial 08's fast turns: 8° in 30 s
-# while the model claimed 2°). Chosen on the even trials among 3 to 8 s.
+# a lag that builds up within seconds
+# (docs/broad_tuning.md#the-covariances-constants).
 INNOVATION_TIME = 5.0
 
 
 def uncertainty_coefficients(u, dt):
     """The coefficients of the interval ``dt`` (s, positive and finite: checked by the caller)."""
-    u[U_DT] = dt
-    u[U_K_ACC] = 1.0 - math.exp(-dt / u[U_TAU_ACC])
-    u[U_K_REST] = 1.0 - math.exp(-dt / u[U_TAU_REST])
-    a = u[U_ACC_NOISE] / GRAVITY
-    u[U_R_ACC] = a * a / dt
-    g = u[U_GYRO_NOISE]
-    u[U_R_GYRO] = g * g / dt  # one sample's rate variance
-    u[U_Q_GYRO] = g * g * dt
-    r = u[U_GYRO_RATE_NOISE]
-    u[U_Q_RATE] = r * r * dt
-    phi = math.exp(-dt / u[U_BIAS_TIME])
-    u[U_PHI] = phi
-    b = u[U_BIAS_STD]
-    u[U_Q_BIAS] = b * b * (1.0 - phi * phi)
+    p, c = u.par, u.coef
+    c.dt = dt
+    c.k_acc = 1.0 - math.exp(-dt / p.tau_acc)
+    c.k_rest = 1.0 - math.exp(-dt / p.tau_rest)
+    a = p.acc_noise / STANDARD_GRAVITY  # the accelerometer's noise as a direction
+    c.r_acc = a * a / dt
+    g = p.gyro_noise
+    c.r_gyro = g * g / dt
+    c.q_gyro = g * g * dt
+    r = p.gyro_rate_noise
+    c.q_rate = r * r * dt
+    phi = math.exp(-dt / p.bias_time)
+    c.phi = phi
+    b = p.bias_std
+    c.q_bias = b * b * (1.0 - phi * phi)
 
 
-def uncertainty_step(u, dt, gx, gy, gz, w, x, y, z, rest):
+def uncertainty_propagate(u, dt, gx, gy, gz, w, x, y, z, rest):
     """
     One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
@@ -164,46 +173,48 @@ def uncertainty_step(u, dt, gx, gy, gz, w, x, y, z, rest):
     estimate after the step (any nonzero norm), ``rest`` 1.0 (or True)
     where the estimator detected rest and learned the bias, else 0.0.
     """
-    if dt != u[U_DT]:
+    if dt != u.coef.dt:
         uncertainty_coefficients(u, dt)
+    c, e = u.coef, u.axes
     w2 = gx * gx + gy * gy + gz * gz
-    q_theta = u[U_Q_GYRO] + u[U_Q_RATE] * w2
-    b = u[U_B]
-    phi = u[U_PHI]
+    q_theta = c.q_gyro + c.q_rate * w2
+    b = e.b
+    phi = c.phi
     # [θ, β] ← F [θ, β] with F = [[1, dt], [0, φ]]: F P Fᵀ + Q, per axis.
     bdt = b * dt
-    pt = u[U_PT] + (2.0 * u[U_CT] + bdt) * dt + q_theta
-    ph = u[U_PH] + (2.0 * u[U_CH] + bdt) * dt + q_theta
-    ct = phi * (u[U_CT] + bdt)
-    ch = phi * (u[U_CH] + bdt)
-    b = phi * phi * b + u[U_Q_BIAS]
+    pt = e.pt + (2.0 * e.ct + bdt) * dt + q_theta
+    ph = e.ph + (2.0 * e.ch + bdt) * dt + q_theta
+    ct = phi * (e.ct + bdt)
+    ch = phi * (e.ch + bdt)
+    b = phi * phi * b + c.q_bias
     # At rest the bias is the low-passed rate: β ← (1 − k_r) β + k_r n.
-    kr = u[U_K_REST] * rest
+    kr = c.k_rest * rest
     a = 1.0 - kr
-    b = a * a * b + kr * kr * u[U_R_GYRO]
+    b = a * a * b + kr * kr * c.r_gyro
     ct = a * ct
     ch = a * ch
-    # The inclination correction of every sample.
-    k = u[U_K_ACC]
+    # The inclination correction of every sample: P ← (1 − k)² P + k² R.
+    k = c.k_acc
     a = 1.0 - k
-    u[U_PT] = a * a * pt + k * k * u[U_R_ACC]
-    u[U_CT] = a * ct
-    u[U_PH] = ph
-    u[U_CH] = ch
-    u[U_B] = b
+    e.pt = a * a * pt + k * k * c.r_acc
+    e.ct = a * ct
+    e.ph = ph
+    e.ch = ch
+    e.b = b
     # The rate about the world vertical: the third row of R(q), over |q|².
     n2 = w * w + x * x + y * y + z * z
     wz = (2.0 * (x * z - w * y) * gx + 2.0 * (y * z + w * x) * gy
           + (w * w - x * x - y * y + z * z) * gz) / n2
     wz2 = wz * wz
-    u[U_WZ2] = wz2
-    age = u[U_FIELD_AGE] + dt
-    u[U_FIELD_AGE] = age
-    # (A product, not a branch: the state's slots may be arrays.)
+    u.rate.wz2 = wz2
+    held = u.held
+    age = held.field_age + dt
+    held.field_age = age
+    # (A product, not a branch: the fields may be arrays.)
     lost = (age > FIELD_SILENT) * dt
-    u[U_YAW_HELD] = u[U_YAW_HELD] + lost * wz
-    u[U_ROTATION_HELD] = u[U_ROTATION_HELD] + lost * w2 ** 0.5
-    u[U_WH2] = w2 - wz2
+    held.yaw = held.yaw + lost * wz
+    held.rotation = held.rotation + lost * w2 ** 0.5
+    u.rate.wh2 = w2 - wz2
 
 
 def uncertainty_bias(u, var):
@@ -211,11 +222,12 @@ def uncertainty_bias(u, var):
     The estimator's own bias variance (rad²/s², its Kalman filter's, per axis): at least that.
 
     The model's ``B`` never claims a bias better known than the estimator's
-    learning in motion does (a start, a gyro that clipped).
+    learning in motion does (a start, a gyro that clipped). ``var`` 0: no
+    change (``B`` is not negative).
     """
-    b = u[U_B]
+    b = u.axes.b
     # The larger, exactly, also on arrays (no branch).
-    u[U_B] = var * (var > b) + b * (var <= b)
+    u.axes.b = var * (var > b) + b * (var <= b)
 
 
 def uncertainty_clipped(u, var):
@@ -225,8 +237,8 @@ def uncertainty_clipped(u, var):
     The estimator's ``(range dt)²`` per clipped axis: the rate beyond the
     range is unknown (0 for a sample that did not clip: nothing changes).
     """
-    u[U_PT] = u[U_PT] + var
-    u[U_PH] = u[U_PH] + var
+    u.axes.pt = u.axes.pt + var
+    u.axes.ph = u.axes.ph + var
 
 
 def uncertainty_hole(u, extra, var, tilt):
@@ -242,14 +254,15 @@ def uncertainty_hole(u, extra, var, tilt):
     too (``1 + extra / dt`` of them): what was there before it is corrected
     as by as many.
     """
-    a = (1.0 - u[U_K_ACC]) ** (extra / u[U_DT])
-    u[U_PT] = a * a * u[U_PT]
-    u[U_CT] = a * u[U_CT]
-    g = u[U_GYRO_NOISE]
-    grow = g * g * extra + u[U_B] * extra * extra + var
+    e = u.axes
+    a = (1.0 - u.coef.k_acc) ** (extra / u.coef.dt)
+    e.pt = a * a * e.pt
+    e.ct = a * e.ct
+    g = u.par.gyro_noise
+    grow = g * g * extra + e.b * extra * extra + var
     if tilt:
-        u[U_PT] = u[U_PT] + grow
-    u[U_PH] = u[U_PH] + grow
+        e.pt = e.pt + grow
+    e.ph = e.ph + grow
 
 
 def uncertainty_restart(u, t0):
@@ -261,11 +274,16 @@ def uncertainty_restart(u, t0):
     (:func:`uncertainty_start`), and the propagated variance is the
     accelerometer's own.
     """
-    u[U_START_T] = t0
-    u[U_START_N] = 0.0
-    u[U_START_M] = 0.0
-    u[U_PT] = u[U_R_ACC]
-    u[U_CT] = 0.0
+    u.start.time = t0
+    u.start.count = 0.0
+    u.start.mean = 0.0
+    u.axes.pt = u.coef.r_acc
+    u.axes.ct = 0.0
+
+
+def uncertainty_starting(u):
+    """Whether the start still counts: its running mean still owes something, or still runs."""
+    return u.start.var != 0.0 or u.start.time < u.par.tau_acc
 
 
 def uncertainty_start(u, dt, fx, fy, fz):
@@ -286,57 +304,140 @@ def uncertainty_start(u, dt, fx, fy, fz):
     A body at rest keeps the accelerometer's own deviation (its noise and
     scale error): a small σ. Floats only (one estimate).
     """
-    t = u[U_START_T]
-    if t < u[U_TAU_ACC]:
-        n = u[U_START_N] + 1.0
-        dz = fz - GRAVITY
-        e = max(dz * dz, 0.5 * (fx * fx + fy * fy)) / (GRAVITY * GRAVITY)
-        m = u[U_START_M] + (e - u[U_START_M]) / n
+    st = u.start
+    t = st.time
+    if t < u.par.tau_acc:
+        n = st.count + 1.0
+        e = gravity_deviation(fx, fy, fz)
+        m = st.mean + (e - st.mean) / n
         if n == 1.0:
-            u[U_START_F] = e
-        u[U_START_N] = n
-        u[U_START_M] = m
-        a = math.atan(math.sqrt(max(m, u[U_START_F])))
-        u[U_START_V] = a * a * START_CORRELATION / (START_CORRELATION + t)
+            st.first = e
+        st.count = n
+        st.mean = m
+        a = math.atan(math.sqrt(max(m, st.first)))
+        st.var = a * a * START_CORRELATION / (START_CORRELATION + t)
     else:
-        k = u[U_K_ACC]
-        v = (1.0 - k) * (1.0 - k) * u[U_START_V]
-        u[U_START_V] = v if v > _START_FORGOTTEN else 0.0
-    u[U_START_T] = t + dt
+        k = u.coef.k_acc
+        v = (1.0 - k) * (1.0 - k) * st.var
+        st.var = v if v > _START_FORGOTTEN else 0.0
+    st.time = t + dt
 
 
 def uncertainty_variances(u):
     """The published variances: ``(V_t, V_h)``, rad² (tilt per horizontal axis, heading)."""
-    t = u[U_PT] + u[U_START_V] + u[U_TILT_FLOOR] + 0.5 * u[U_STAMP2] * u[U_WH2]
-    scale = GYRO_SCALE_SIGMA * u[U_YAW_HELD]
-    axes = GYRO_MOTION_SIGMA * u[U_ROTATION_HELD]
-    held = u[U_HEADING_SET] * (scale * scale + axes * axes) ** 0.5
-    field = u[U_HEADING_SET] * (u[U_HEADING_FLOOR] + u[U_CALIBRATION])
-    h = (u[U_PH] + u[U_UNKNOWN] + field + u[U_STAMP2] * u[U_WZ2] + u[U_HS] * u[U_HS])
+    p, e, hd = u.par, u.axes, u.head
+    t = e.pt + u.start.var + p.tilt_floor + 0.5 * p.stamp2 * u.rate.wh2
+    scale = GYRO_SCALE_SIGMA * u.held.yaw
+    axes = GYRO_MOTION_SIGMA * u.held.rotation
+    held = hd.heading_set * (scale * scale + axes * axes) ** 0.5
+    field = hd.heading_set * (p.heading_floor + hd.calibration)
+    hs = u.head_start.sigma
+    h = (e.ph + hd.unknown + field + p.stamp2 * u.rate.wz2 + hs * hs)
     # The fields' lag beyond their own error (the floor, the calibration's σ)
     # is the heading's: where it says more, the lost field's drift is the same
     # turn's (a scale error), added as σ (products, not branches: arrays).
-    lag = u[U_LAG] * u[U_LAG] - field
+    lag = hd.lag * hd.lag - field
     more = lag > h
     lag = more * lag
     return t, h + held * held + more * ((lag ** 0.5 + held) ** 2 - h - held * held)
 
 
-def sample_step(state, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
+# --- what Python calls: a holder ------------------------------------------------
+
+def covariance_coefficients(uh, dt):
+    """:func:`uncertainty_coefficients` of the holder's record."""
+    uncertainty_coefficients(uh[0], dt)
+
+
+def covariance_start(uh, dt, fx, fy, fz):
+    """:func:`uncertainty_start` of the holder's record while the start counts (one estimate)."""
+    u = uh[0]
+    if uncertainty_starting(u):
+        uncertainty_start(u, dt, fx, fy, fz)
+
+
+def covariance_variances(uh):
+    """:func:`uncertainty_variances` of the holder's record: ``(V_t, V_h)``, rad²."""
+    return uncertainty_variances(uh[0])
+
+
+def covariance_step(uh, dt, gx, gy, gz, w, x, y, z, rest, bias_var, clip_var, extra, hole_var,
+                    hole_t0, ax, ay, az, with_acc):
+    """
+    The covariance's step of one IMU sample: its sub-steps in their one order.
+
+    The propagation over ``dt`` (the usual interval, s) with the rate
+    ``g`` (rad/s, body) to the estimate ``(w, x, y, z)`` after the step
+    (any nonzero norm), the bias at ``rest`` (1.0 or True; else 0.0)
+    (:func:`uncertainty_propagate`); a hole's restart of the inclination's
+    mean (``hole_t0`` s, where ``hole_t0 ≥ 0``; :func:`uncertainty_restart`);
+    the estimator's bias variance ``bias_var`` ((rad/s)², 0: none;
+    :func:`uncertainty_bias`); a clipped sample's ``clip_var`` (rad², 0:
+    none; :func:`uncertainty_clipped`); a hole bridged, ``extra`` s beyond
+    ``dt`` with the bridge's variance ``hole_var`` (rad², 0: no hole;
+    :func:`uncertainty_hole`); and, with ``with_acc`` true, the start's
+    share of the specific force ``a`` (m/s², body; :func:`uncertainty_start`).
+
+    The start's share reads and writes only ``u.start`` (and constants); the
+    others only ``u.axes``: its place in the order changes no bit. The rate,
+    the estimate, ``rest``, ``bias_var`` and ``clip_var`` may be arrays
+    ``(B,)`` (plain); the hole's arguments and ``with_acc`` are floats, and
+    with arrays ``with_acc`` is false (the wrapper counts the start
+    recording by recording).
+    """
+    u = uh[0]
+    uncertainty_propagate(u, dt, gx, gy, gz, w, x, y, z, rest)
+    if hole_var != 0.0 and hole_t0 >= 0.0:
+        uncertainty_restart(u, hole_t0)
+    uncertainty_bias(u, bias_var)
+    uncertainty_clipped(u, clip_var)
+    if hole_var != 0.0:
+        uncertainty_hole(u, extra, hole_var, hole_t0 < 0.0)
+    if with_acc and uncertainty_starting(u):
+        fx, fy, fz = rotate(w, x, y, z, ax, ay, az)
+        uncertainty_start(u, dt, fx, fy, fz)
+
+
+def covariance_unbridged(uh, dt, var, t0):
+    """
+    A hole of ``dt`` s the estimator did not bridge (over ``max_dt``): what it leaves.
+
+    ``var`` the rotation it may have hidden (rad² per axis) and ``t0`` the
+    weight the inclination's mean restarted with (negative: kept),
+    :func:`~ext_observer.core.ahrs.ahrs_kernel.ahrs_unbridged`'s. The angles'
+    variances grow by it and by the gyro's noise and bias over the hole, the
+    inclination's only where its mean was kept (else it restarts as after a
+    bridged hole); the heading's up to :data:`HEADING_UNKNOWN`. The hole
+    counts as time without a field. One estimate (floats).
+    """
+    u = uh[0]
+    if t0 >= 0.0:
+        uncertainty_restart(u, t0)
+    e = u.axes
+    g = u.par.gyro_noise
+    grow = g * g * dt + e.b * dt * dt + var
+    if t0 < 0.0:
+        e.pt = e.pt + grow
+    e.ph = min(e.ph + grow, HEADING_UNKNOWN)
+    u.held.field_age = u.held.field_age + dt
+
+
+def sample_step(state, uh, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
     """
     The usual raw-IMU sample of an estimate that exists, in one call.
 
     The estimator's step without a field (``state``: the estimate's holder,
     :mod:`~ext_observer.core.ahrs.record`), the guard (the estimate
     finite, ``|q̂̄q̂ − 1| ≤ max_residual``), and where it passes the
-    covariance's step (``u``) and the 3×3 covariance written into ``cov``
-    (9 slots, row-major: ``diag(V_t, V_t, V_h)``).
+    covariance's step (:func:`covariance_step` on the holder ``uh``) and
+    the 3×3 covariance written into ``cov`` (9 slots, row-major:
+    ``diag(V_t, V_t, V_h)``).
 
     Returns
     -------
     outcome : int
         ``SAMPLE_OK``; ``SAMPLE_NON_FINITE`` or ``SAMPLE_RESIDUAL`` (the
-        estimator stepped; ``u`` and ``cov`` are untouched); nothing ran:
+        estimator stepped; ``uh`` and ``cov`` are untouched); nothing ran:
         ``SAMPLE_BAD_DT`` (``dt`` not positive and finite) or
         ``SAMPLE_NOT_STARTED`` (no estimate yet: the first step initializes).
     w, x, y, z : float
@@ -356,21 +457,14 @@ def sample_step(state, u, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
         return SAMPLE_RESIDUAL, w, x, y, z
     # The usual interval: dt itself, or the one a hole's step kept.
     step_dt = s.coef.dt
-    uncertainty_step(u, step_dt, gx, gy, gz, w, x, y, z, 1.0 if s.rest.detected != 0.0 else 0.0)
-    hole = s.hole.var
-    if hole != 0.0 and s.hole.t0 >= 0.0:
-        uncertainty_restart(u, s.hole.t0)
-    if u[U_START_V] != 0.0 or u[U_START_T] < u[U_TAU_ACC]:
-        fx, fy, fz = rotate(w, x, y, z, ax, ay, az)
-        uncertainty_start(u, step_dt, fx, fy, fz)
+    bias_var = 0.0
     if s.par.motion_bias != 0.0:
-        uncertainty_bias(u, (bias_variance(s, 0, 0) + bias_variance(s, 1, 1)
-                             + bias_variance(s, 2, 2)) / BIAS_TRACE_AXES)
-    if s.gyro.clipped != 0.0:
-        uncertainty_clipped(u, s.gyro.clipped)
-    if hole != 0.0:
-        uncertainty_hole(u, dt - step_dt, hole, s.hole.t0 < 0.0)
-    t, h = uncertainty_variances(u)
+        bias_var = (bias_variance(s, 0, 0) + bias_variance(s, 1, 1)
+                    + bias_variance(s, 2, 2)) / BIAS_TRACE_AXES
+    covariance_step(uh, step_dt, gx, gy, gz, w, x, y, z, 1.0 if s.rest.detected != 0.0 else 0.0,
+                    bias_var, s.gyro.clipped, dt - step_dt, s.hole.var, s.hole.t0,
+                    ax, ay, az, True)
+    t, h = uncertainty_variances(uh[0])
     zero = 0.0 * t
     cov[0] = t
     cov[1] = zero
