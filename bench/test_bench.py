@@ -3,7 +3,7 @@ Checks of the benchmark's own logic (no ROS, no timing): ``pytest bench``.
 
 The matching of estimates to steps decides "lost" and the latencies, so it
 is tested on made-up records; the goals' verdicts on made-up figures (the
-page they go to: test/docgen/test_performance_page.py).
+page they go to: test/test_performance_page.py).
 """
 
 import numpy as np
