@@ -126,19 +126,11 @@ def _raw_imu(quick, log_dir):
     with tempfile.TemporaryDirectory(prefix='bench-') as tmp:
         for index, (key, args) in enumerate(RAW_IMU_QUICK if quick else RAW_IMU):
             log(f'raw IMU: python -m {" ".join(args)} ...')
-            out = os.path.join(tmp, f'{key}.json')
             extra = ['--log-dir', log_dir] if log_dir and key.startswith('node') else []
             # The direct timing starts a node in this process's child: a
             # domain of its own.
-            with reserved_domain_id(30 + index) as domain_id:
-                done = subprocess.run([sys.executable, '-m', *args, *extra, '--json', out],
-                                      cwd=REPO, env=ros_env(domain_id), stdout=sys.stderr)
-            if os.path.exists(out):
-                with open(out) as f:
-                    result[key] = json.load(f)
-            else:
-                result[key] = {'error': f'`python -m {" ".join(args)}` ended with exit '
-                                        f'code {done.returncode} and no result'}
+            result[key] = _json_result(args, extra, os.path.join(tmp, f'{key}.json'), 30 + index,
+                                       sys.stderr)
     return result
 
 
@@ -146,18 +138,24 @@ def _compiled(quick):
     """The compiled kernels' figures: ``python -m bench.compiled_kernels --json`` (node CPU: section 6's)."""
     args = ['bench.compiled_kernels'] + (['--sections', 'steps'] if quick else [])
     log(f'compiled kernels: python -m {" ".join(args)} ...')
-    # Relative to the repository, as the page shows the command (a reader can rerun it).
-    out = os.path.join('out', 'bench_compiled.json')
     os.makedirs(os.path.join(REPO, 'out'), exist_ok=True)
-    if os.path.exists(os.path.join(REPO, out)):
-        os.remove(os.path.join(REPO, out))
-    with reserved_domain_id(40) as domain_id:
-        done = subprocess.run([sys.executable, '-m', *args, '--json', out], cwd=REPO,
-                              env=ros_env(domain_id), stdout=subprocess.DEVNULL)
-    if not os.path.exists(os.path.join(REPO, out)):
+    # Relative to the repository, as the page shows the command (a reader can rerun it).
+    return _json_result(args, [], os.path.join('out', 'bench_compiled.json'), 40,
+                        subprocess.DEVNULL)
+
+
+def _json_result(args, extra, out, index, stdout):
+    """``python -m args extra --json out`` in a ROS domain of its own: its results, or why none."""
+    path = os.path.join(REPO, out)
+    if os.path.exists(path):
+        os.remove(path)
+    with reserved_domain_id(index) as domain_id:
+        done = subprocess.run([sys.executable, '-m', *args, *extra, '--json', out], cwd=REPO,
+                              env=ros_env(domain_id), stdout=stdout)
+    if not os.path.exists(path):
         return {'error': f'`python -m {" ".join(args)}` ended with exit code '
                          f'{done.returncode} and no result'}
-    with open(os.path.join(REPO, out)) as f:
+    with open(path) as f:
         return json.load(f)
 
 

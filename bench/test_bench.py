@@ -3,7 +3,7 @@ Checks of the benchmark's own logic (no ROS, no timing): ``pytest bench``.
 
 The matching of estimates to steps decides "lost" and the latencies, so it
 is tested on made-up records; the goals' verdicts on made-up figures (the
-page they go to: test/docgen/test_performance_page.py).
+page they go to: test/test_performance_page.py).
 """
 
 import numpy as np
@@ -182,62 +182,3 @@ def test_a_target_that_got_fewer_outputs_back_is_flagged():
     line = goal_line(result)
     assert line.endswith('(outputs short of the samples, fewest: relay 5294 of 8000; a target '
                          'that dropped samples did less work per sample)')
-
-
-def test_the_magcal_yardstick_recovers_a_known_calibration_from_known_attitudes():
-    """bench.calibration's least-squares yardstick: ``A y − c`` is the field again, up to scale."""
-    from bench.calibration import oracle_calibration
-    from ext_observer.core.quaternion import random_unit_quaternions
-    rng = np.random.default_rng(3)
-    q = random_unit_quaternions(rng, (400,))
-    w, x, y, z = q.T
-    r = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-                  2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-                  2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-                 axis=1).reshape(-1, 3, 3)
-    world = np.array([0.0, 16.0, -41.0])
-    field = np.einsum('nji,j->ni', r, world)  # Rᵀ m_w, body frame
-    soft = np.array([[1.08, 0.05, -0.03], [0.05, 0.95, 0.02], [-0.03, 0.02, 1.04]])
-    bias = np.array([30.0, -50.0, 20.0])
-    raw = field @ soft.T + bias + rng.normal(scale=0.3, size=field.shape)
-    raw[::50] += 40.0  # a magnet near the path: the robust refit drops these
-    a, c = oracle_calibration(q, raw)
-    calibrated = raw @ a.T - c
-    scale = np.median(np.linalg.norm(calibrated, axis=1) / np.linalg.norm(field, axis=1))
-    good = np.ones(len(raw), dtype=bool)
-    good[::50] = False
-    error = np.linalg.norm(calibrated[good] / scale - field[good], axis=1)
-    assert np.max(error) < 0.05 * np.linalg.norm(world)
-    np.testing.assert_allclose(a / scale, np.linalg.inv(soft), atol=0.01)
-
-
-def test_the_magcal_floor_is_the_start_error_held_for_t_then_the_undistorted_figure():
-    """bench.calibration --floor on a synthetic trial with a known field and attitude."""
-    from bench.calibration import floor_figures
-    from ext_observer.broad.data import Trial
-    rate, n = 100.0, 10000  # 100 s, all of it movement
-    angle = np.linspace(0.0, 20.0, n)  # a turn about the vertical
-    quat = np.stack([np.cos(angle / 2), 0 * angle, 0 * angle, np.sin(angle / 2)], axis=1)
-    world = np.array([0.0, 20.0, -40.0])
-    c, s = np.cos(angle), np.sin(angle)
-    mag = np.stack([c * world[0] + s * world[1], -s * world[0] + c * world[1],
-                    np.full(n, world[2])], axis=1)  # Rᵀ m_w
-    gyr = np.zeros((n, 3))
-    gyr[:, 2] = 20.0 / (n / rate)
-    trial = Trial('synthetic', gyr, np.tile([0.0, 0.0, 9.81], (n, 1)), mag, quat,
-                  np.ones(n, dtype=bool), rate)
-    f = floor_figures([trial], levels=(0.0, 3.0), undistorted=1.0)
-    assert f['movement_s'] == [100.0]
-    # No offset: only the ±10 % soft iron turns the field, by a few degrees;
-    # a 3 |m| offset leaves the heading nearly uniform (RMS about 104°).
-    assert f['start_error_deg'][0.0] < 10.0 < 60.0 < f['start_error_deg'][3.0]
-    e2 = f['start_error_deg'][3.0] ** 2
-    for t, bound in f['floor'][3.0].items():
-        assert bound == pytest.approx(np.sqrt((t * e2 + (100.0 - t) * 1.0) / 100.0))
-    bounds = list(f['floor'][3.0].values())
-    assert bounds == sorted(bounds) and bounds[0] > 2.0
-    # Twice the undistorted figure is reached after needed_s of a wrong heading.
-    t = f['needed_s'][3.0]
-    assert 0.0 < t < 0.1
-    assert np.sqrt((t * e2 + (100.0 - t)) / 100.0) == pytest.approx(2.0, rel=1e-6)
-    assert f['turned_deg'][1.0] == pytest.approx(np.degrees(0.2), rel=0.05)

@@ -14,6 +14,7 @@ from ext_observer.broad.anchors import (BROAD_GYRO_RANGE, FUSION_README, MADGWIC
 from ext_observer.broad.data import DEFAULT_DIRS, ENV_VAR, shown_command, shown_path
 from ext_observer.broad.result_keys import (algorithms_in, ANCHORS, FUSION_DEFAULTS, MODES, OURS,
                                       OURS_PLAIN)
+from docgen.markdown import table as markdown_table
 from ext_observer.broad.report import fmt
 from ext_observer.broad.scoring import criteria, group_means, summary, VQF_RATIO_GOAL
 
@@ -77,14 +78,6 @@ def _group_label(group, level):
         return 'all trials'
     label = group.replace('_', ' ')
     return f'↳ {label}' if level >= 2 else f'**{label}**'
-
-
-def _table(header, rows, numeric=True):
-    """A Markdown table; numeric columns (all but the first) right-aligned."""
-    align = ['---'] + ['---:' if numeric else '---'] * (len(header) - 1)
-    lines = ['| ' + ' | '.join(header) + ' |', '|' + '|'.join(align) + '|']
-    lines += ['| ' + ' | '.join(row) + ' |' for row in rows]
-    return lines
 
 
 def markdown(result, groups, meta, figures, docs_dir, tuning=None):
@@ -218,7 +211,7 @@ def _summary(page):
              'ratio to VQF. The done-criteria: ours below BasicVQF, Madgwick, Mahony '
              'and Fusion on the undisturbed and on the disturbed 9D averages, at most '
              '1.1× VQF (goal), and at most 1.1× VQF in 6D inclination.', '']
-    lines += _table(['algorithm'] + [c[3] for c in columns], rows) + ['']
+    lines += [markdown_table(['algorithm'] + [c[3] for c in columns], rows, numeric=True)] + ['']
     lines += _criteria_lines(criteria(summary(page.result, page.groups)))
     if 'groups' in page.figures:
         lines += [f'![Mean RMSE per group and algorithm]({page.link(page.figures["groups"])})',
@@ -265,7 +258,7 @@ def _group_tables(page):
             n = len([t for t in page.groups['members'][group] if t in page.meta['trials']])
             rows.append([f'{_group_label(group, level)} ({n})']
                         + [fmt(table[a].get(group)) for a in page.detailed])
-        lines += _table(['group (n)'] + page.detailed, rows) + ['']
+        lines += [markdown_table(['group (n)'] + page.detailed, rows, numeric=True)] + ['']
     return lines
 
 
@@ -285,7 +278,7 @@ def _heading_and_inclination(page):
     return (['## 9D: heading and inclination', '',
              'The two parts of the 9D error, mean over the trials of each group '
              '(degrees): heading / inclination.', '']
-            + _table(['group'] + page.detailed, rows) + [''])
+            + [markdown_table(['group'] + page.detailed, rows, numeric=True)] + [''])
 
 
 def _trial_figure(page):
@@ -315,7 +308,7 @@ def _norms(page):
              'Our estimate lives in R⁴ and nothing on its path renormalizes it; the '
              'extension term −α∇V holds it near S³. Over every sample of every trial '
              '(not only the scored ones), the raw output of `estimate_batch`:', '']
-    lines += _table(['variant', 'mode', 'mean', 'max', 'samples'], rows) + ['']
+    lines += [markdown_table(['variant', 'mode', 'mean', 'max', 'samples'], rows, numeric=True)] + ['']
     if 'plain' not in norms:
         lines += ['(Run with `--plain` to add the variant without the extension term.)', '']
     return lines
@@ -349,7 +342,7 @@ def _run_time(page):
              f'Wall clock on {meta["machine"]}'
              + (f' (1-minute load average {load[0]} at the start, {load[1]} at the end: '
                 'the machine is shared)' if load[0] is not None else '') + ':', '']
-            + _table(['algorithm', 'time', 'note'], rows, numeric=False) + [''])
+            + [markdown_table(['algorithm', 'time', 'note'], rows)] + [''])
 
 
 def _per_trial(page):
@@ -367,7 +360,7 @@ def _per_trial(page):
     return (['## Per trial', '',
              '9D total RMSE and 6D inclination RMSE of each trial (degrees).', '',
              '<details><summary>Table per trial</summary>', '']
-            + _table(header, rows) + ['', '</details>', ''])
+            + [markdown_table(header, rows, numeric=True)] + ['', '</details>', ''])
 
 
 def _anchor_frames():
@@ -378,14 +371,14 @@ def _anchor_frames():
             'NWU→ENU, NED→ENU; also the conjugate and the scalar-last reading) was '
             'scored on a trial and the chosen one is the only one with a small '
             'inclination and, in 9D, a small total error; '
-            '`test_anchors.py::test_anchor_frames_on_a_static_sensor` keeps it so.', ''] + _table(
+            '`test_anchors.py::test_anchor_frames_on_a_static_sensor` keeps it so.', ''] + [markdown_table(
         ['anchor', 'output', 'to ENU'], [
             ['VQF, BasicVQF', 'sensor → ENU', 'identity'],
             ['Madgwick (`ahrs`)', 'sensor → NWU', 'R_z(+90°) ⊗ q'],
             ['Mahony (`ahrs`)', 'sensor → ENU', 'identity'],
             ['Fusion (`imufusion`), both rows', 'sensor → NWU (default convention)',
              'R_z(+90°) ⊗ q'],
-        ], numeric=False) + ['']
+        ])] + ['']
 
 
 def _defaults(page, tuning):

@@ -15,6 +15,7 @@ import numpy as np
 from ext_observer.broad.anchors import BROAD_GYRO_RANGE, MADGWICK_BETA
 from ext_observer.broad.result_keys import FUSION_DEFAULTS, OURS
 from docgen.broad_page import fusion_text, shown_meta
+from docgen.markdown import table as markdown_table
 from ext_observer.broad.split import split_of
 from ext_observer.broad.stress import (BIAS, DESCRIPTIONS, GYRO_RANGE, LABELS, LOW_RATE,
                                        RATIO_DONE, RATIO_GOAL, VARIANTS)
@@ -23,12 +24,6 @@ from ext_observer.broad.stress_run import (algorithms_of, half_counts, HALVES, m
 
 BROAD_URL = 'https://github.com/dlaidig/broad'
 _TITLES = {'all': 'All trials', 'tuning': 'Tuning trials', 'held-out': 'Held-out trials'}
-
-
-def _table(header, rows):
-    lines = ['| ' + ' | '.join(header) + ' |',
-             '|' + '|'.join(['---'] + ['---:'] * (len(header) - 1)) + '|']
-    return lines + ['| ' + ' | '.join(row) + ' |' for row in rows]
 
 
 def stress_markdown(out, meta, figure=None, docs_dir='.'):
@@ -90,7 +85,7 @@ def stress_markdown(out, meta, figure=None, docs_dir='.'):
                   f'{counts[half]} trials: ' + ', '.join(
                       n.split('_', 1)[0] for n in meta['trials']
                       if half == 'all' or split_of(n) == half) + '.', '']
-        lines += _table(header, rows) + ['']
+        lines += [markdown_table(header, rows, numeric=True)] + ['']
         if half == 'all':
             lines += _ratio_lines(summ, keys) + ['']
             if figure:
@@ -200,8 +195,8 @@ def _times(out, meta):
         rows.append([f'({key})', f'{out["rates"][key]:.1f}', str(out['samples'][key]),
                      f'{seconds.get(OURS, float("nan")):.1f}',
                      f'{seconds.get("anchors_wall", 0.0):.1f}', f'{seconds["wall"]:.1f}'])
-    lines += _table(['variant', 'rate (Hz)', 'samples (per mode)', 'ours (s)',
-                     'anchors (s)', 'total (s)'], rows) + ['']
+    lines += [markdown_table(['variant', 'rate (Hz)', 'samples (per mode)', 'ours (s)',
+                     'anchors (s)', 'total (s)'], rows, numeric=True)] + ['']
     return lines
 
 

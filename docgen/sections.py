@@ -3,7 +3,7 @@ The generated sections of the docs pages: one replaced between its two markers.
 
 The one writer of such sections: the parameter tables
 (:mod:`docgen.parameter_tables`) and the benchmarks' sections
-(``bench.compiled_kernels``, ``bench.calibration``) all go through :func:`replaced`.
+(:mod:`docgen.compiled_page`) all go through :func:`replaced`.
 """
 
 __all__ = ['replace_section', 'replaced']

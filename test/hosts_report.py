@@ -14,6 +14,8 @@ import os
 import re
 import sys
 
+from ext_observer.source_tree import docgen
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PAGE = os.path.join(REPO, 'docs', 'across_machines.md')
 FIGURES = os.path.join(REPO, 'docs', 'figures')
@@ -38,10 +40,8 @@ def percent(value):
     return '–' if value is None else f'{100 * value:.1f} %'
 
 
-def table(header, rows):
-    lines = ['| ' + ' | '.join(header) + ' |', '|' + ' --- |' * len(header)]
-    lines += ['| ' + ' | '.join(str(cell) for cell in row) + ' |' for row in rows]
-    return '\n'.join(lines)
+# The docs' one table writer (docgen/, beside the package in a clone).
+table = docgen('markdown').table
 
 
 # Blocks ----------------------------------------------------------------------------
