@@ -226,18 +226,36 @@ def _update(path, render, check):
     return 0
 
 
+# docs/layout.md's table of the estimator's state (every field, its unit and meaning).
+LAYOUT_PAGE = 'layout.md'
+_STATE_BEGIN = ('<!-- generated from STATE in ext_observer/core/ahrs/ahrs_state.py by python -m '
+                'ext_observer docs -->')
+_STATE_END = '<!-- end of the state table -->'
+
+
+def render_state(text):
+    """``text`` (docs/layout.md) with its table of the estimator's state regenerated."""
+    from ext_observer.core.ahrs.ahrs_state import table
+    section = f'{_STATE_BEGIN}\n{table()}\n{_STATE_END}'
+    return replaced(text, section, _STATE_BEGIN, _STATE_END, where=LAYOUT_PAGE)
+
+
 def main(argv=None):
     """Regenerate (or, with ``--check``, compare) the page; return the exit code."""
     parser = argparse.ArgumentParser(
         prog='python -m ext_observer docs',
         description=f'Regenerate the parameter tables of DIR/{PAGE} and the node '
-                    f'sections of the params file from the parameter specs of the nodes.')
+                    f'sections of the params file from the parameter specs of the nodes, '
+                    f'and the table of the estimator\'s state in DIR/{LAYOUT_PAGE}.')
     parser.add_argument('--docs', default='docs', metavar='DIR',
                         help='the docs folder (default docs)')
     parser.add_argument('--check', action='store_true',
                         help='write nothing; exit 1 if the page differs from the specs')
     args = parser.parse_args(argv)
     code = _update(os.path.join(args.docs, PAGE), render, args.check)
+    layout = os.path.join(args.docs, LAYOUT_PAGE)
+    if code != 2 and os.path.exists(layout):
+        code = max(code, _update(layout, render_state, args.check))
     root = os.path.dirname(os.path.abspath(args.docs))
     for config in (CONFIG, IMU_FILTER_CONFIG):
         path = os.path.join(root, config)

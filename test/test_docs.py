@@ -190,6 +190,19 @@ def test_parameter_tables_equal_the_specs():
         'run  python -m ext_observer docs  (or make docs) and commit the page')
 
 
+def test_the_state_table_equals_the_state():
+    from docgen.parameter_tables import LAYOUT_PAGE, render_state
+    from ext_observer.core.ahrs.ahrs_state import STATE
+
+    text = _read(os.path.join(DOCS, LAYOUT_PAGE))
+    assert render_state(text) == text, (
+        f'the state table of docs/{LAYOUT_PAGE} differs from ahrs_state.STATE: '
+        'run  python -m ext_observer docs  (or make docs) and commit the page')
+    # Every field, with its unit and meaning, is on the page.
+    for path, unit, meaning, size in STATE.fields():
+        assert f'| `{".".join(path)}` | {size} | {unit} | {meaning} |' in text
+
+
 def test_docs_command_checks_and_regenerates(tmp_path, capsys):
     from ext_observer.__main__ import main
     from docgen.parameter_tables import PAGE
