@@ -29,15 +29,16 @@ import math
 
 from .ahrs_filters import first_attitude, gain, quat_multiply, rotate, rotation_matrix
 from .accel_rejection import acc_rejection_reset
-from .clip_and_rest import clipped_variance, detect_rest
-from .gravity_kernel import ahrs_update_acc
+from .clip_and_rest import clipped_variance, detect_rest, gyro_reset, rest_reset
+from .gravity_kernel import ahrs_update_acc, inc_reset
 from .hole_kernel import (HOLE_CALIBRATION, calibration_restart, clip_after, forget_wait,
                           hole_after, hole_end_fix, hole_ends, hole_rate, hole_slope,
-                          hole_starts, hole_variance, restart_mean, restart_weighted)
-from .bias_kernel import bias_forget, bias_variance
+                          hole_reset, hole_starts, hole_variance, restart_mean,
+                          restart_weighted)
+from .bias_kernel import bias_reset, bias_variance
 from .magcal_kernel import mc_apply
-from .field_kernel import (ahrs_update_mag, field_clipped,
-                           field_doubt, field_forget)
+from .field_kernel import (ahrs_update_mag, cal_feed_reset, field_clipped, field_doubt,
+                           field_reset)
 from .velocity_kernel import velocity_sample, velocity_step
 from .record import Group
 
@@ -70,38 +71,20 @@ NORM_GRADIENT = 4.0
 
 def ahrs_reset(s):
     """Forget the estimate: the next accelerometer sample initializes."""
+    # Each group by the code that owns it (what a group keeps across a
+    # reset, its owner says: the rest filters and the field references'
+    # values stay, the learned calibration stays).
     s.est.init = 0.0
     for i in range(4):
         s.est.q[i] = 0.0
-    for i in range(3):
-        s.bias.rate[i] = 0.0
-    s.rest.detected = 0.0
-    s.rest.time = 0.0
-    s.field.mag_dist = 0.0
-    s.field.has_ref = 0.0
-    s.field.cand_time = 0.0
-    s.field.mag_used = 0.0
-    s.field.rejected = 0.0
-    forget_wait(s)
-    bias_forget(s)
-    s.inc.start = 0.0
-    s.inc.start_n = 0.0
-    s.gyro.clipped = 0.0
-    s.inc.acc_dev = 0.0
-    s.hole.t0 = 0.0
-    s.inc.sigma = 0.0
-    s.gyro.clip_left = 0.0
-    hole_ends(s)
+    bias_reset(s)
+    rest_reset(s)
+    gyro_reset(s)
+    inc_reset(s)
+    hole_reset(s)
     acc_rejection_reset(s)
-    field_forget(s)
-    # The learned calibration stays; the field is followed afresh.
-    calibration_restart(s)
-    if s.par.has_cal != 0.0:
-        for i in range(3):
-            s.cal_feed.rate[i] = 0.0
-        s.cal_feed.moved = 0.0  # the body has not turned yet
-        s.cal_feed.since = math.inf  # time since a calibration was applied
-        s.cal_feed.loaded = 0.0
+    field_reset(s)
+    cal_feed_reset(s)
 
 
 def ahrs_coefficients(s, dt):

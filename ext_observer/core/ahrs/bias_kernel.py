@@ -28,6 +28,13 @@ BIAS = Group('bias', 'The gyro bias and its Kalman filter in motion', [
 _GATE = 9.0
 
 
+def bias_reset(s):
+    """Forget the bias: zero, with its first covariance (a reset of the estimate)."""
+    for i in range(3):
+        s.bias.rate[i] = 0.0
+    bias_forget(s)
+
+
 def bias_forget(s):
     """Nothing known of the bias beyond its estimate: σ = bias_sigma_init per axis."""
     p0 = s.par.bias_sigma_init * s.par.bias_sigma_init

@@ -35,6 +35,18 @@ GYRO = Group('gyro', "The gyro's recent rates and a clipped gyro", [
     ('clip_left', 's', 'of the recovery from a clipped sample still to run'),
 ])
 
+def rest_reset(s):
+    """Not at rest, no time below the thresholds (the low-passed rate and force stay)."""
+    s.rest.detected = 0.0
+    s.rest.time = 0.0
+
+
+def gyro_reset(s):
+    """No clipped sample to weigh, no recovery to run (the rates and counts stay)."""
+    s.gyro.clipped = 0.0
+    s.gyro.clip_left = 0.0
+
+
 # σ of the bias learned at rest (rad/s), VQF's value: the low-passed rate of
 # a body at rest is a far better measurement than any correction in motion.
 _REST_BIAS_SIGMA = math.radians(0.03)

@@ -15,7 +15,7 @@ import math
 
 from .ahrs_filters import gain, rotate, rotation_matrix
 from .bias_kernel import bias_measure
-from .hole_kernel import forget_wait
+from .hole_kernel import calibration_restart, forget_wait
 from .magcal_kernel import mc_apply, mc_field, mc_learn
 from .small_matrix import vec3_at
 from .record import Group
@@ -267,6 +267,28 @@ def _heading_gain(s, use, has_cal, dt):
     # κ = max(k_mag, 1/n, 1 − exp(−dt / max(t_min, t/2)))
     follow = 1.0 - math.exp(-dt / max(_REFINE_SHORTEST, _REFINE_SHARE * since))
     return max(max(k_mag, 1.0 / max(used, 1.0)), follow) if use else 0.0
+
+
+def field_reset(s):
+    """A new estimate: no field judged yet, no references (their values stay), nothing waiting."""
+    s.field.mag_dist = 0.0
+    s.field.has_ref = 0.0
+    s.field.cand_time = 0.0
+    s.field.mag_used = 0.0
+    s.field.rejected = 0.0
+    forget_wait(s)
+    field_forget(s)
+
+
+def cal_feed_reset(s):
+    """The calibration follows the field afresh (what it learned stays); nothing turned or applied."""
+    calibration_restart(s)
+    if s.par.has_cal != 0.0:
+        for i in range(3):
+            s.cal_feed.rate[i] = 0.0
+        s.cal_feed.moved = 0.0  # the body has not turned yet
+        s.cal_feed.since = math.inf  # time since a calibration was applied
+        s.cal_feed.loaded = 0.0
 
 
 def field_forget(s):

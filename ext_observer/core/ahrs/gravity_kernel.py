@@ -28,6 +28,14 @@ INC = Group('inc', "The inclination's filters: the world-frame specific force", 
 ])
 
 
+def inc_reset(s):
+    """The inclination's filters start again: the running mean first, nothing owed."""
+    s.inc.start = 0.0
+    s.inc.start_n = 0.0
+    s.inc.acc_dev = 0.0
+    s.inc.sigma = 0.0
+
+
 def ahrs_update_acc(s, ax, ay, az):
     """Correct the inclination from the world-frame filtered specific force."""
     # Rest detection needs the accelerometer's deviation from its mean.

@@ -94,6 +94,12 @@ def restart_mean(s):
     s.inc.lp[5] = 0.0
 
 
+def hole_reset(s):
+    """No hole open, none being bridged (the count stays)."""
+    s.hole.t0 = 0.0
+    hole_ends(s)
+
+
 def forget_wait(s):
     """Forget the turn the fields of a wait for the calibration would have given the heading."""
     s.field.wait_turn = 0.0

@@ -14,24 +14,13 @@ equations").
 
 import math
 
-from .magcal_filter import mc_inv3, mc_predict, mc_start, mc_symmetrize, mc_update
-from .magcal_layout import (CAL, CAL_D, CAL_HOLD, CAL_HOLD_TURN, CAL_INF, CAL_N,
+from .magcal_filter import mc_predict, mc_start, mc_update
+from .magcal_layout import (CAL_D, CAL_HOLD, CAL_HOLD_TURN, CAL_INF, CAL_N,
                             CAL_NIS_EXPECTED, CAL_NY, CAL_REFUSED_SHARE, CAL_REFUSED_TAU,
                             CAL_SHIFT_SAMPLES, CAL_SIGNIFICANT, CAL_TINY, CAL_TURNING2,
-                            CAL_WATCH, CAL_WILD, CAL_Z, CAL_ZD, CAL_ZDT, GATE)
+                            CAL_WATCH, CAL_WILD, CAL_Z, CAL_ZD, CAL_ZDT)
 from .small_matrix import (col3_at, column3_into, copy_into, cross3, dot3, fill,
                            finite_or_zero, max_of, quad3_at, rows, store3, vec3_at, vec5_at)
-
-# The functions, for a caller that compiles them (each one, before any call).
-FUNCTIONS = ('mc_init', 'mc_reset', 'mc_forget', 'mc_restart', 'mc_load_state', 'mc_learn',
-             'mc_admit', 'mc_lost', 'mc_start_over', 'mc_remember', 'mc_predict', 'mc_start',
-             'mc_update', 'mc_assess', 'mc_field_covariance', 'mc_j_times', 'mc_heading_error',
-             'mc_hold', 'mc_watch', 'mc_reconsider', 'mc_cache', 'mc_apply', 'mc_quality',
-             'mc_field', 'mc_inv3', 'mc_heading_between', 'mc_calibrated', 'mc_symmetrize',
-             'mc_init_in', 'mc_reset_in', 'mc_restart_in', 'mc_load_state_in', 'mc_learn_in',
-             'mc_predict_in', 'mc_assess_in', 'mc_reconsider_in', 'mc_apply_in', 'mc_quality_in')
-
-__all__ = ['CAL', 'FUNCTIONS', 'GATE'] + list(FUNCTIONS)
 
 
 # --- state -------------------------------------------------------------------
