@@ -228,8 +228,9 @@ class RawImuEstimator:
         Run one IMU sample: the usual one (an estimate exists) in one call.
 
         :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step` runs the
-        core's step, the guard and the covariance's; any other sample goes
-        the general way (the same results).
+        core's step, the guard and the covariance's: the one path of a
+        sample. Where no estimate exists yet, or the step failed the guard,
+        the sample starts the estimate instead (:meth:`_initialize`).
 
         Parameters
         ----------
@@ -263,7 +264,7 @@ class RawImuEstimator:
                 core.bias = self._held_bias
             return ((w, x, y, z) if self._frame is None
                     else multiply_floats(self._frame, (w, x, y, z))), None
-        state, reason = self._general_step(  # failed the guard, or did not run
+        state, reason = self._initialize(  # no estimate yet, or it failed the guard
             gyr, acc, dt, 'step_failed' if outcome is None else _SAMPLE_REASONS.get(outcome))
         if covariance is not None:
             covariance[:] = self.uncertainty.covariance
@@ -271,13 +272,18 @@ class RawImuEstimator:
             core.bias = self._held_bias
         return state, reason
 
-    def _general_step(self, gyr, acc, dt, reason=None):
-        """The step one call at a time; with a ``reason``, the step failed: start again."""
+    def _initialize(self, gyr, acc, dt, reason=None):
+        """
+        Start the estimate from this sample (and the latest field); with a ``reason``, start again.
+
+        Without a reason the estimate did not exist (the first sample): its
+        first step initializes it, and a first state that fails the guard
+        starts it once more, with that reason.
+        """
         core = self.core
-        starting = not core.initialized
         if reason is None:
             try:
-                q = core.update(gyr, acc, self.latest_field if starting else None, dt)
+                q = core.update(gyr, acc, self.latest_field, dt)
             except (ValueError, OverflowError, ZeroDivisionError):
                 reason = 'step_failed'
             else:
@@ -286,15 +292,7 @@ class RawImuEstimator:
             core.reset()
             core.bias = self._start_bias
             q = core.update(gyr, acc, self.latest_field, dt)
-            starting = True
-        if starting:
-            self._start(dt, acc)
-        else:
-            hole, step_dt = core.hole_variance, core.step_interval
-            self.uncertainty.step(step_dt, gyr, q, core.rest, core.bias_variance,
-                                  core.clip_variance, acc,
-                                  (dt - step_dt, hole, core.hole_restart) if hole != 0.0
-                                  else None)
+        self._start(dt, acc)
         # The state property's value, from the q the step returned.
         return (q if self._frame is None else multiply_floats(self._frame, q)), reason
 

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from conftest import REPO
+from general_steps import general_step
 from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.pipeline.batch import estimate_batch
@@ -181,8 +182,8 @@ def _pipeline_run(pipeline, gyr, acc, mag, rate, in_place, general=False, switch
             started = est.core.initialized
             outcome, steps = pipeline.pairer.add_sample(stamp, tuple(gyr[k]), tuple(acc[k]))
             for step in steps:
-                state, reason = est._general_step(tuple(gyr[k]), tuple(acc[k]),
-                                                  (step.end - step.stamp) * 1e-9)
+                state, reason = general_step(est, tuple(gyr[k]), tuple(acc[k]),
+                                             (step.end - step.stamp) * 1e-9)
                 assert reason is None or not started
                 states.append(state)
                 covariances.append(est.uncertainty.covariance)

@@ -15,6 +15,7 @@ import math
 import numpy as np
 import pytest
 
+from general_steps import general_step
 from ext_observer.core.ahrs import hole_kernel
 from ext_observer.core.ahrs.ahrs_filters import rotate, steady
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
@@ -212,7 +213,7 @@ def test_the_general_steps_follow_a_hole_as_the_one_call_sample_does():
             stamp = 1_000_000_000 + round(t * 1e9)
             if general:
                 for step in pipeline.pairer.add_sample(stamp, g, a)[1]:
-                    state, _ = est._general_step(g, a, (step.end - step.stamp) * 1e-9)
+                    state, _ = general_step(est, g, a, (step.end - step.stamp) * 1e-9)
                     out.append(tuple(state) + tuple(est.uncertainty.covariance))
             else:
                 estimate = pipeline.imu(stamp, g, a)[1]
