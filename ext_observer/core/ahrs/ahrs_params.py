@@ -127,8 +127,8 @@ class AhrsParams(Tunables):
     TABLE = AHRS_TABLE
 
 
-# The defaults were chosen on the even-numbered BROAD trials (docs/covariance.md
-# says how, and what they give on the odd ones). Those > 0 keep every
+# The defaults were chosen on BROAD's tuning trials (ext_observer/broad/split.py;
+# docs/covariance.md says how, and what they give on the held-out ones). Those > 0 keep every
 # variance positive; the others may be 0 (off).
 UNCERTAINTY_TABLE = (
     # Angle random walk, measured at rest (0.006 °/s/√Hz).
