@@ -300,10 +300,6 @@ class ImuFilterNode(EstimatorNode):
             if self.tf_broadcaster is not None:
                 self._broadcast(header, state)
         if self._publish_imu:
-            if covariance is not None:
-                # The array is float64 in this machine's order (little endian).
-                covariance = (covariance.tobytes() if order
-                              else covariance.astype('>f8').tobytes())
             self.imu_publisher.publish(self._imu_data.filled(
                 raw, order, body, w, x, y, z, covariance,
                 without_gravity(acc, self.observer.q) if self._remove_gravity else None))
