@@ -6,19 +6,23 @@ out, read and written by the node) and one with it false (rclpy's message
 objects), take the same BROAD samples; every ``imu/data`` and
 ``attitude_estimate`` they publish is compared byte for byte (all but the
 alignment padding after ``frame_id``, which Fast CDR leaves unwritten in a
-typed message), and their estimates to the bit.
+typed message), and their estimates to the bit; with the debug topics and
+``/tf``, those too (the two paths make their headers apart).
 """
 
+import struct
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
-from geometry_msgs.msg import QuaternionStamped
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.node import Node
 from sensor_msgs.msg import Imu, MagneticField
+from std_msgs.msg import Bool
 
 from broad_replay import fields_tesla, load, stamps, TRIALS
+from ext_observer.nodes import imu_filter_node
 from ext_observer.nodes.imu_filter_node import ImuFilterNode
 from ext_observer.recordings import cdr
 from imu_driver import BEST_EFFORT
@@ -27,6 +31,8 @@ from ros_helpers import overrides
 SAMPLES = 400
 MAG_EVERY = 4
 PATHS = ('serialized', 'typed')
+DEBUG_TOPICS = {'imu/rpy/filtered': Vector3Stamped, 'imu/rpy/raw': Vector3Stamped,
+                'imu/steady_state': Bool}
 
 
 def meaningful(raw):
@@ -59,6 +65,34 @@ class Feeder(Node):
             store[cdr.imu_layout(raw)[2] if len(raw) > 200
                   else cdr.decode_orientation(raw, cdr.QUATERNION_TYPE)[0]] = raw
         return callback
+
+    def keep_debug_topics(self):
+        """Keep each node's debug topics too, as bytes in the order received."""
+        self.debug = {p: {topic: [] for topic in DEBUG_TOPICS} for p in PATHS}
+        for p in PATHS:
+            for topic, msg_type in DEBUG_TOPICS.items():
+                self.create_subscription(msg_type, f'/{p}/{topic}',
+                                         self.debug[p][topic].append, 1000, raw=True)
+
+
+class KeptTransforms:
+    """Stands in for tf2_ros's broadcaster (not on PyPI): keeps what it is sent."""
+
+    def __init__(self):
+        self.sent = []
+
+    def sendTransform(self, t):  # noqa: N802 (tf2_ros's name)
+        # Its fields, the floats as bytes (to the bit).
+        v, r = t.transform.translation, t.transform.rotation
+        self.sent.append((t.header.stamp.sec, t.header.stamp.nanosec, t.header.frame_id,
+                          t.child_frame_id, struct.pack('<7d', v.x, v.y, v.z,
+                                                        r.x, r.y, r.z, r.w)))
+
+
+def header_part(raw):
+    """A message that starts with a Header: its stamp (ns) and the bytes that count."""
+    sec, nanosec = struct.unpack_from('<iI', raw, 4)
+    return sec * 1_000_000_000 + nanosec, meaningful(raw)
 
 
 def lockstep(spinner, nodes, publishers, make, what):
@@ -100,16 +134,30 @@ def field_msg(stamp, field):
     {'orientation_covariance_mode': 'fixed', 'orientation_stddev': 0.2,
      'remove_gravity_vector': True, 'frame_id': 'odom', 'publish_debug_topics': True},
 ], ids=['defaults', 'fixed-gravity-debug'])
-def test_serialized_and_typed_paths_publish_the_same_bytes(ros_context, spinner, settings):
+def test_serialized_and_typed_paths_publish_the_same_bytes(ros_context, spinner, settings,
+                                                          monkeypatch):
+    debug = settings.get('publish_debug_topics', False)
+    if debug:
+        # /tf through a broadcaster of each node's own, whether tf2_ros imports or not.
+        monkeypatch.setattr(imu_filter_node, 'transform_broadcaster',
+                            lambda node: (KeptTransforms(), None))
     nodes = [spinner.add(ImuFilterNode(context=ros_context, namespace=p,
                                        parameter_overrides=overrides(
-                                           serialized_io=p == 'serialized', **settings)))
+                                           serialized_io=p == 'serialized', publish_tf=debug,
+                                           **settings)))
              for p in PATHS]
     feeder = spinner.add(Feeder(ros_context))
+    if debug:
+        feeder.keep_debug_topics()
     spinner.spin_until(lambda: all(n._publish_imu and n._publish_estimate for n in nodes)
                        and all(p.get_subscription_count() == 1 for p in feeder.imu + feeder.mag)
                        and all(feeder.count_publishers(f'/{p}/attitude_estimate') == 1
-                               for p in PATHS), 10.0, 'the endpoints')
+                               for p in PATHS)
+                       and (not debug or all(
+                           publisher.get_subscription_count() == 1 for n in nodes
+                           for publisher in (n.rpy_filtered_publisher, n.rpy_raw_publisher,
+                                             n.steady_state_publisher))),
+                       10.0, 'the endpoints')
     data = load(TRIALS[0])
     gyr, acc, mag = data['gyr'], data['acc'], fields_tesla(data)
     times = stamps(SAMPLES, float(data['rate']))
@@ -140,6 +188,22 @@ def test_serialized_and_typed_paths_publish_the_same_bytes(ros_context, spinner,
     else:
         assert covariance[0] > 0 and covariance[0] != 0.0025
     assert serialized.undecodable == {'increment': 0, 'measurement': 0}
+    if debug:
+        # The debug topics and /tf: the same messages, in the same order.
+        spinner.spin_until(lambda: all(len(kept) == SAMPLES - 1 for p in PATHS
+                                       for kept in feeder.debug[p].values()),
+                           10.0, 'every debug output')
+        for topic in ('imu/rpy/filtered', 'imu/rpy/raw'):
+            mine, theirs = ([header_part(raw) for raw in feeder.debug[p][topic]]
+                            for p in PATHS)
+            assert [stamp for stamp, _ in theirs] == list(times[1:]), topic
+            assert mine == theirs, topic
+        # std_msgs/Bool: its one byte after the encapsulation (padding may follow).
+        mine, theirs = ([raw[4] for raw in feeder.debug[p]['imu/steady_state']]
+                        for p in PATHS)
+        assert mine == theirs
+        mine, theirs = (n.tf_broadcaster.sent for n in nodes)
+        assert len(theirs) == SAMPLES - 1 and mine == theirs
 
 
 def test_undecodable_bytes_are_counted_not_crashing(ros_context, spinner):

@@ -125,6 +125,9 @@ class ImuFilterNode(EstimatorNode):
         # The velocity aid's odom or velocity topic (velocity_source).
         self.velocity_input = VelocityTopic(self, settings)
         self._estimate_msg = QuaternionStamped()
+        # The output adapters of the two paths (Inputs, below).
+        self._typed = _TypedPath(self._estimate_msg)
+        self._serialized = _SerializedPath()
         self._status_steps = self._status_fields = 0
         self._said = set()
         self._field_lost = False
@@ -213,62 +216,27 @@ class ImuFilterNode(EstimatorNode):
                 'fields_used': processed['measurement']}
 
     # Inputs ---------------------------------------------------------------
+    #
+    # One body per input, _imu_sample and _field_sample, for both paths: the
+    # typed (rclpy's message objects) and the serialized (CDR bytes). What
+    # differs is confined to the input adapters, the subscription callbacks
+    # (the message or its bytes decoded: stamp, vectors, where the covariance
+    # goes), and to the output adapters, _TypedPath and _SerializedPath (the
+    # frame, and the outputs: the message filled in place, or bytes).
 
     def imu_data_raw_callback(self, msg):
         """Take one IMU sample; publish the estimate of the step it closes."""
         # nanoseconds_from_stamp and vector_from_msg, written out: this runs
         # for every sample (the fields of a message are Python ints and floats).
         header_stamp = msg.header.stamp
-        stamp = header_stamp.sec * 1_000_000_000 + header_stamp.nanosec
-        if self._frames['imu'] is None:
-            self._frames['imu'] = msg.header.frame_id
         v, a = msg.angular_velocity, msg.linear_acceleration
         # The estimated covariance is written straight into the message that
         # goes out (its own float64 array): no copy.
-        covariance = msg.orientation_covariance if self._covariance_estimated else None
-        state = self._run(stamp, (v.x, v.y, v.z), (a.x, a.y, a.z), covariance)
-        if state is None:
-            return
-        w, x, y, z = state
-        if self._publish_estimate:
-            out = self._estimate_msg
-            out.header.stamp = header_stamp
-            q = out.quaternion
-            q.w, q.x, q.y, q.z = w, x, y, z
-            self.estimate_publisher.publish(out)
-        if self.rpy_filtered_publisher is not None:
-            self._publish_debug(msg.header, state, (a.x, a.y, a.z))
-        if self.tf_broadcaster is not None:
-            self._broadcast(msg.header, state)
-        if self._publish_imu:
-            # The sample itself goes out, its header, rates and covariances
-            # passed through (as imu_filter_madgwick does): the message is
-            # this node's once its callback has run.
-            n = (w * w + x * x + y * y + z * z) ** 0.5
-            q = msg.orientation
-            q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
-            if covariance is None:
-                # In place: the message's own float64 array (cheaper than a new one).
-                msg.orientation_covariance[:] = self._orientation_covariance
-            if self._remove_gravity:
-                a.x, a.y, a.z = without_gravity((a.x, a.y, a.z), self.observer.q)
-            self.imu_publisher.publish(msg)
-
-    def _run(self, stamp, gyr, acc, covariance):
-        """Run the pipeline on a sample and report what it did; return the state or None."""
-        # No clock is read: the steps wait for nothing.
-        outcome, estimate = self.pipeline.imu(stamp, gyr, acc, covariance)
-        if outcome == BACKWARD_JUMP:
-            self._backward_jump(stamp, reset=False)
-        self.stream.sample(stamp)
-        if estimate is None:
-            return None
-        if estimate.step.gap:
-            self._forward_gap(estimate.step, reset=False)
-        if estimate.reason is not None:
-            self._reinitialized(estimate.reason, estimate.step.stamp, 'the sample',
-                                count=False)
-        return estimate.state
+        self._imu_sample(self._typed, msg,
+                         header_stamp.sec * 1_000_000_000 + header_stamp.nanosec,
+                         (v.x, v.y, v.z), (a.x, a.y, a.z),
+                         msg.orientation_covariance if self._covariance_estimated else None,
+                         header_stamp)
 
     def imu_data_raw_serialized_callback(self, raw):
         """
@@ -283,30 +251,69 @@ class ImuFilterNode(EstimatorNode):
         except Undecodable as error:
             self._undecodable('increment', error)
             return
+        self._imu_sample(self._serialized, raw, stamp, gyr, acc,
+                         self._covariance_out if self._covariance_estimated else None,
+                         stamp, order, body)
+
+    def _imu_sample(self, path, sample, stamp, gyr, acc, covariance, out_stamp, order=None,
+                    body=None):
+        """
+        Run the pipeline on one IMU sample and publish its outputs.
+
+        Parameters
+        ----------
+        path : _TypedPath or _SerializedPath
+            The output adapter.
+        sample : sensor_msgs.msg.Imu or bytes
+            The input, as the subscription gave it.
+        stamp : int
+            ns.
+        gyr, acc : tuple of 3 float
+            rad/s, m/s².
+        covariance : array of 9 float64 or None
+            Where the estimate's covariance goes; None: the fixed one.
+        out_stamp : builtin_interfaces.msg.Time or int
+            The stamp as the outputs carry it: the message's own, or ``stamp``.
+        order, body : int or None
+            The bytes' layout (:func:`~ext_observer.recordings.cdr.imu_layout`);
+            None for a message.
+
+        """
         if self._frames['imu'] is None:
-            self._frames['imu'] = frame_id(raw)
-        covariance = self._covariance_out if self._covariance_estimated else None
-        state = self._run(stamp, gyr, acc, covariance)
-        if state is None:
+            self._frames['imu'] = path.frame(sample)
+        # No clock is read: the steps wait for nothing.
+        outcome, estimate = self.pipeline.imu(stamp, gyr, acc, covariance)
+        if outcome == BACKWARD_JUMP:
+            self._backward_jump(stamp, reset=False)
+        self.stream.sample(stamp)
+        if estimate is None:
             return
+        if estimate.step.gap:
+            self._forward_gap(estimate.step, reset=False)
+        if estimate.reason is not None:
+            self._reinitialized(estimate.reason, estimate.step.stamp, 'the sample',
+                                count=False)
+        state = estimate.state
         w, x, y, z = state
         if self._publish_estimate:
-            self.estimate_publisher.publish(self._estimate_bytes(stamp, w, x, y, z))
+            self.estimate_publisher.publish(path.estimate(out_stamp, w, x, y, z))
         if self.rpy_filtered_publisher is not None or self.tf_broadcaster is not None:
-            header = Header(frame_id=frame_id(raw))
-            header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+            header = path.header(sample, stamp)
             if self.rpy_filtered_publisher is not None:
                 self._publish_debug(header, state, acc)
             if self.tf_broadcaster is not None:
                 self._broadcast(header, state)
         if self._publish_imu:
-            if covariance is not None:
-                # The array is float64 in this machine's order (little endian).
-                covariance = (covariance.tobytes() if order
-                              else covariance.astype('>f8').tobytes())
-            self.imu_publisher.publish(self._imu_data.filled(
-                raw, order, body, w, x, y, z, covariance,
+            # The sample itself goes out, its header, rates and covariances
+            # passed through (as imu_filter_madgwick does).
+            self.imu_publisher.publish(path.imu_data(
+                sample, order, body, w, x, y, z, covariance,
                 without_gravity(acc, self.observer.q) if self._remove_gravity else None))
+
+    def imu_mag_callback(self, msg):
+        """Take a magnetic field (T) and correct the heading with it at once."""
+        self._field_sample(self._typed, msg, nanoseconds_from_stamp(msg.header.stamp),
+                           vector_from_msg(msg.magnetic_field))
 
     def imu_mag_serialized_callback(self, raw):
         """Take a magnetic field (T) as CDR bytes and correct the heading with it."""
@@ -315,8 +322,12 @@ class ImuFilterNode(EstimatorNode):
         except Undecodable as error:
             self._undecodable('measurement', error)
             return
+        self._field_sample(self._serialized, raw, stamp, field)
+
+    def _field_sample(self, path, sample, stamp, field):
+        """Correct the heading with a field; ``sample`` the message or its bytes."""
         if self._frames['mag'] is None:
-            self._frames['mag'] = frame_id(raw)
+            self._frames['mag'] = path.frame(sample)
         self.pipeline.field(stamp, field)
 
     def _undecodable(self, kind, error):
@@ -358,13 +369,6 @@ class ImuFilterNode(EstimatorNode):
         v.x, v.y, v.z = rpy_from_quaternion(raw_attitude(acc, field, estimator.frame))
         self.rpy_raw_publisher.publish(rpy)
         self.steady_state_publisher.publish(Bool(data=bool(estimator.core.rest)))
-
-    def imu_mag_callback(self, msg):
-        """Take a magnetic field (T) and correct the heading with it at once."""
-        if self._frames['mag'] is None:
-            self._frames['mag'] = msg.header.frame_id
-        self.pipeline.field(nanoseconds_from_stamp(msg.header.stamp),
-                            vector_from_msg(msg.magnetic_field))
 
     def compile_timer_callback(self):
         """Go on with the compiled kernels once the background compile has them."""
@@ -411,9 +415,8 @@ class ImuFilterNode(EstimatorNode):
                                         0.0, 0.0, variance]
         self._covariance_estimated = settings['covariance_estimated']
         self._remove_gravity = settings['remove_gravity_vector']
-        self._estimate_msg.header.frame_id = settings['frame_id']
-        self._estimate_bytes = EstimateBytes(settings['frame_id'])
-        self._imu_data = ImuData(settings['orientation_stddev'])
+        self._typed.configure(settings['frame_id'], self._orientation_covariance)
+        self._serialized.configure(settings['frame_id'], settings['orientation_stddev'])
 
     def _apply_parameters(self, settings, changed):
         super()._apply_parameters(settings, changed)
@@ -597,6 +600,93 @@ class ImuFilterNode(EstimatorNode):
         (self.get_logger().info if bias is not None else self.get_logger().warning)(
             f'~/save_calibration: {response.message}')
         return response
+
+
+# The output adapters: the same calls, the typed path's outputs messages and
+# the serialized path's bytes. Both have frame(sample), header(sample, stamp)
+# (for the debug topics and /tf), estimate(out_stamp, w, x, y, z) and
+# imu_data(sample, order, body, w, x, y, z, covariance, acc), which return
+# what goes out; configure(frame, ...) takes the settings those depend on.
+
+class _TypedPath:
+    """
+    The typed path's output adapter: rclpy's message objects.
+
+    ``imu/data`` is the input message itself, filled in place: the message is
+    the node's once its callback has run.
+    """
+
+    def __init__(self, estimate):
+        self._estimate = estimate  # the QuaternionStamped, reused
+        # Its parts, read once: this runs for every sample.
+        self._estimate_header, self._estimate_quaternion = estimate.header, estimate.quaternion
+        self._fixed_covariance = None
+
+    def configure(self, frame, fixed_covariance):
+        """Take the estimate's frame_id and the fixed covariance (9 floats)."""
+        self._estimate_header.frame_id = frame
+        self._fixed_covariance = fixed_covariance
+
+    @staticmethod
+    def frame(msg):
+        """The message's ``header.frame_id``."""
+        return msg.header.frame_id
+
+    @staticmethod
+    def header(msg, stamp):
+        """The header of the debug topics and ``/tf``: the message's own."""
+        return msg.header
+
+    def estimate(self, stamp, w, x, y, z):
+        """``attitude_estimate``; ``stamp`` the message's own (``builtin_interfaces/Time``)."""
+        self._estimate_header.stamp = stamp
+        q = self._estimate_quaternion
+        q.w, q.x, q.y, q.z = w, x, y, z
+        return self._estimate
+
+    def imu_data(self, msg, order, body, w, x, y, z, covariance, acc):
+        """
+        ``imu/data``: the message with the normalized orientation written in.
+
+        ``covariance`` None: the fixed one written in (else the estimate has
+        written its own there); ``acc``, the acceleration to write, or None.
+        """
+        n = (w * w + x * x + y * y + z * z) ** 0.5
+        q = msg.orientation
+        q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
+        if covariance is None:
+            # In place: the message's own float64 array (cheaper than a new one).
+            msg.orientation_covariance[:] = self._fixed_covariance
+        if acc is not None:
+            a = msg.linear_acceleration
+            a.x, a.y, a.z = acc
+        return msg
+
+
+class _SerializedPath:
+    """
+    The serialized path's output adapter: CDR bytes.
+
+    Its ``estimate`` and ``imu_data`` are :mod:`ext_observer.recordings.cdr`'s
+    writers themselves (no call of its own on the way).
+    """
+
+    frame = staticmethod(frame_id)
+
+    def __init__(self):
+        self.estimate = self.imu_data = None
+
+    def configure(self, frame, orientation_stddev):
+        """Take the estimate's frame_id and the fixed covariance's σ (rad)."""
+        self.estimate = EstimateBytes(frame)
+        self.imu_data = ImuData(orientation_stddev).filled
+
+    @staticmethod
+    def header(raw, stamp):
+        """The header of the debug topics and ``/tf``, made from the bytes."""
+        header = Header(frame_id=frame_id(raw))
+        header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+        return header
 
 
 def main(args=None):

@@ -27,6 +27,7 @@ Stamps are integer nanoseconds.
 """
 
 import struct
+import sys
 
 __all__ = ['FIELD_TYPE', 'IMU_TYPE', 'ImuData', 'QUATERNION_TYPE', 'REFERENCE_TYPES',
            'QuaternionStamped', 'Undecodable', 'decode_field', 'decode_imu',
@@ -45,6 +46,8 @@ _HEAD = (struct.Struct('>iII'), struct.Struct('<iII'))  # sec, nanosec, len(fram
 _VECTOR = (struct.Struct('>3d'), struct.Struct('<3d'))
 _QUATERNION = (struct.Struct('>4d'), struct.Struct('<4d'))
 _STAMP = struct.Struct('<iI')
+_NATIVE = 1 if sys.byteorder == 'little' else 0  # this machine's byte order, as ``order``
+_NINE = struct.Struct('=9d')  # in this machine's byte order
 # angular_velocity, its covariance (skipped), linear_acceleration.
 _RATES = (struct.Struct('>3d72x3d'), struct.Struct('<3d72x3d'))
 # sensor_msgs/Imu after the header, bytes.
@@ -210,17 +213,23 @@ class ImuData:
         ``covariance``: 9 floats, row-major, rad²; None: ``orientation_stddev``'s.
         """
         return self.filled(raw, order, body, w, x, y, z,
-                           None if covariance is None else self._nine[order](*covariance))
+                           None if covariance is None else _NINE.pack(*covariance))
 
     def filled(self, raw, order, body, w, x, y, z, covariance=None, acc=None):
         """
-        The same with ``covariance`` as 72 bytes in the sample's byte order.
+        The same with ``covariance`` as an estimator writes it.
 
-        ``acc``: the linear acceleration to write instead of the sample's (m/s²).
+        ``covariance``: 9 float64 in this machine's byte order, as any buffer
+        (a numpy array, bytes): its memory goes out as it is where the sample
+        is in this machine's order too, else swapped to the sample's. ``acc``:
+        the linear acceleration to write instead of the sample's (m/s²).
         """
+        if covariance is None:
+            covariance = self._covariance[order]
+        elif order != _NATIVE:
+            covariance = self._nine[order](*_NINE.unpack(covariance))
         n = (w * w + x * x + y * y + z * z) ** 0.5
-        parts = [raw[:body], _QUATERNION[order].pack(x / n, y / n, z / n, w / n),
-                 self._covariance[order] if covariance is None else covariance]
+        parts = [raw[:body], _QUATERNION[order].pack(x / n, y / n, z / n, w / n), covariance]
         if acc is None:
             parts.append(raw[body + _IMU_GYR:])
         else:

@@ -37,3 +37,23 @@ def test_codecs_agree_with_rosbags():
             assert cdr.decode_orientation(raw, cdr.IMU_TYPE) == (stamp, None)
     with pytest.raises(cdr.Undecodable):
         cdr.decode_imu(cdr.encode_imu(1, 'imu', (0, 0, 0), (0, 0, 9.8))[:200])
+
+
+def test_imu_data_writes_the_estimators_covariance_in_the_samples_byte_order():
+    rng = np.random.default_rng(2)
+    covariance = rng.normal(size=9)     # float64, this machine's order, as an estimator writes it
+    q, acc = tuple(rng.normal(size=4)), tuple(rng.normal(size=3))
+    raw = cdr.encode_imu(1_000_000_123, 'imu_link', (0.1, 0.2, 0.3), (0.0, 0.0, 9.8))
+    for little in (True, False):
+        sample = bytes(TYPESTORE.serialize_cdr(TYPESTORE.deserialize_cdr(raw, cdr.IMU_TYPE),
+                                               cdr.IMU_TYPE, little_endian=little))
+        order, body = cdr.imu_layout(sample)[:2]
+        imu_data = cdr.ImuData(0.1)
+        filled = imu_data.filled(sample, order, body, *q, covariance, acc)
+        msg = TYPESTORE.deserialize_cdr(filled, cdr.IMU_TYPE)
+        assert msg.orientation_covariance.tobytes() == covariance.tobytes()
+        assert (msg.linear_acceleration.x, msg.linear_acceleration.z) == (acc[0], acc[2])
+        assert msg.angular_velocity.y == 0.2
+        # The same as 9 floats given to the message's writer.
+        assert imu_data.filled(sample, order, body, *q, covariance) == imu_data(
+            sample, order, body, *q, list(covariance))
