@@ -295,6 +295,13 @@ def main(argv=None):
     parser.add_argument('--bin', default=os.path.dirname(sys.executable),
                         help='folder of the executables (default: next to this Python)')
     args = parser.parse_args(argv)
+    # The nodes start as from a terminal: SIGINT and SIGTERM at their
+    # defaults, also where this command runs as a background job of a
+    # script (SIGINT ignored, and so in every child).
+    for signum in SIGNALS.values():
+        if signal.getsignal(signum) is signal.SIG_IGN:
+            signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT
+                          else signal.SIG_DFL)
     for name in EXECUTABLES:
         if not os.path.exists(os.path.join(args.bin, name)):
             parser.error(f'{name} is not in {args.bin}: make venv installs it')
