@@ -8,14 +8,14 @@ loop (:func:`~ext_observer.nodes.node_common.run_node`) asks :func:`received`
 before it starts ROS, before it spins and between two spins, then stops the
 executor, destroys the node and shuts rclpy down, in that order. A second
 signal, while the node ends, ends the process at once (the signal's default
-action). Imports the standard library only: the executables install the
-handlers before they import rclpy, numpy or numba
-(:mod:`~ext_observer.nodes.executables`).
+action). Imports ``os`` and ``signal`` only (not even ``threading``: each
+millisecond before the handlers is one in which a signal meets Python's
+defaults): the executables install them before they import rclpy, numpy or
+numba (:mod:`~ext_observer.nodes.executables`).
 """
 
 import os
 import signal
-import threading
 
 __all__ = ['SIGNALS', 'install', 'received']
 
@@ -44,11 +44,12 @@ def install():
     terminal. Only the main thread can set handlers: from another thread
     this does nothing.
     """
-    if threading.current_thread() is not threading.main_thread():
-        return
     for signum in SIGNALS:
         if signal.getsignal(signum) is not _handler:
-            signal.signal(signum, _handler)
+            try:
+                signal.signal(signum, _handler)
+            except ValueError:  # not the main thread
+                return
 
 
 def received():
