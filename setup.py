@@ -26,12 +26,14 @@ setup(
     maintainer_email='maintainers@example.com',
     description='Attitude observers on S3 with a transversally stable extension',
     license='Apache-2.0',
+    # Each executable installs its stop signals' handlers before it imports its
+    # node (ext_observer/nodes/executables.py).
     entry_points={
         'console_scripts': [
-            'gyro_node = ext_observer.nodes.gyro_node:main',
-            'observer_node = ext_observer.nodes.observer_node:main',
-            'imu_filter_node = ext_observer.nodes.imu_filter_node:main',
-            'monitor_node = ext_observer.nodes.monitor_node:main',
+            'gyro_node = ext_observer.nodes.executables:gyro_node',
+            'observer_node = ext_observer.nodes.executables:observer_node',
+            'imu_filter_node = ext_observer.nodes.executables:imu_filter_node',
+            'monitor_node = ext_observer.nodes.executables:monitor_node',
         ],
     },
 )

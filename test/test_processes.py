@@ -8,6 +8,7 @@ process is ended by the test (SIGINT, checked), or by the fixture on failure.
 """
 
 import re
+import signal
 import sys
 import time
 
@@ -178,11 +179,10 @@ def as_background_job(argv):
 
 
 def test_ctrl_c_on_busy_nodes_exits_cleanly(ros_processes, ros_context, spinner):
-    # At 2 kHz a callback is publishing most of the time, and rclpy's signal
-    # thread shuts the context down under it, racing the KeyboardInterrupt
-    # (the gyro runs as a background job: run_node gave SIGINT back to
-    # Python). Before either, a publish fails with RCLError: without the care
-    # in run_node, most such gyros died with a traceback.
+    # At 2 kHz a callback is publishing most of the time when Ctrl-C comes:
+    # the node stops between two callbacks, its context still up (the gyro
+    # runs as a background job, started with SIGINT ignored: run_node
+    # handles it).
     probe = spinner.add(Probe(ros_context))
     observer = ros_processes([installed('observer_node'), '--ros-args',
                               '-p', 'queue_depth:=100'])
@@ -207,23 +207,108 @@ class Node_(Node):
 
     def __init__(self):
         super().__init__(self.NODE_NAME)
-        python = signal.getsignal(signal.SIGINT) is signal.default_int_handler
-        print(f'python handles SIGINT: {python}', flush=True)
+        handled = signal.getsignal(signal.SIGINT) not in (signal.SIG_IGN, signal.SIG_DFL)
+        print(f'the node handles SIGINT: {handled}', flush=True)
         self.create_timer(0.01, lambda: None)
 
 sys.exit(run_node(Node_, ['background']))
 '''
 
 
-def test_a_background_jobs_ctrl_c_raises_keyboard_interrupt_in_the_spin(ros_processes):
+def test_a_background_jobs_node_ends_on_ctrl_c(ros_processes):
     # Started with SIGINT ignored, a node had only rclpy's signal thread to
-    # end it; run_node gives SIGINT back to Python first, so that Ctrl-C
-    # raises KeyboardInterrupt as in a terminal.
+    # end it; run_node handles SIGINT itself, so that Ctrl-C ends it as in a
+    # terminal.
     process = ros_processes(as_background_job([sys.executable, '-c',
                                                SIGINT_OF_A_BACKGROUND_JOB]))
-    wait_for_output(process, 'python handles SIGINT:', 30.0)
-    assert 'python handles SIGINT: True' in process.output
+    wait_for_output(process, 'the node handles SIGINT:', 30.0)
+    assert 'the node handles SIGINT: True' in process.output
     process.interrupt(timeout=10.0)
+    assert_clean_exit(process)
+
+
+def numpy_loaded(pid):
+    """Whether numpy's compiled core is mapped in process ``pid`` (it imports)."""
+    with open(f'/proc/{pid}/maps') as maps:
+        return '_multiarray_umath' in maps.read()
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_stop_signal_while_the_node_imports_ends_it_cleanly(ros_processes, signum):
+    # The executable sets its stop handlers before it imports its node: a
+    # signal among the imports (numpy loaded, rclpy and the node's modules
+    # still to come) stops it before it starts, with exit code 0. Python's
+    # own handling raised KeyboardInterrupt there (a traceback), and
+    # SIGTERM killed the process.
+    process = ros_processes([installed('imu_filter_node')])
+    pid = process.process.pid
+    deadline = time.monotonic() + 30.0
+    while not numpy_loaded(pid):
+        assert process.process.poll() is None, process.output
+        assert time.monotonic() < deadline, f'numpy not loaded within 30 s:\n{process.output}'
+        time.sleep(0.002)
+    process.process.send_signal(signum)
+    process.wait(timeout=20.0)
+    assert_clean_exit(process)
+    assert '[imu_filter]' not in process.output, 'the node had started'
+
+
+STOP_ORDER = '''
+import sys
+from rclpy.node import Node
+from std_msgs.msg import Float64
+from ext_observer.nodes.node_common import run_node
+
+class Node_(Node):
+    NODE_NAME = 'ordered'
+
+    def __init__(self):
+        super().__init__(self.NODE_NAME)
+        self.publisher = self.create_publisher(Float64, 'x', 10)
+        self.create_timer(0.001, self.timer_callback)
+        self.context.on_shutdown(lambda: print('context shut down', flush=True))
+        self.steps = 0
+
+    def timer_callback(self):
+        self.publisher.publish(Float64(data=1.0))
+        self.steps += 1
+        if self.steps == 100:
+            print('spinning', flush=True)
+
+    def destroy_node(self):
+        print(f'destroy_node, context up: {self.context.ok()}', flush=True)
+        super().destroy_node()
+
+sys.exit(run_node(Node_, ['ordered'] + sys.argv[1:]))
+'''
+
+
+@pytest.mark.parametrize('executor', [[], ['--executor', 'single']])
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_stop_signal_shuts_the_context_down_last(ros_processes, executor, signum):
+    # A node publishing at 1 kHz: the signal stops the executor, the node is
+    # destroyed with the context still up, and only then does the context go
+    # down. With rclpy's own handlers it went down first, under the spinning
+    # executor and the callback publishing.
+    process = ros_processes([sys.executable, '-c', STOP_ORDER] + executor)
+    wait_for_output(process, 'spinning', 30.0)
+    process.process.send_signal(signum)
+    process.wait(timeout=20.0)
+    assert_clean_exit(process)
+    output = process.output
+    assert 'destroy_node, context up: True' in output, output
+    assert output.index('destroy_node') < output.index('context shut down'), output
+
+
+@pytest.mark.parametrize('executor', [[], ['--executor', 'single']])
+def test_sigterm_on_a_running_node_exits_cleanly(ros_processes, ros_context, spinner,
+                                                 executor):
+    probe = spinner.add(Probe(ros_context))
+    process = ros_processes([installed('imu_filter_node')] + executor)
+    wait_for_nodes(spinner, probe, ['imu_filter'])
+    spinner.spin_for(0.3)
+    process.process.send_signal(signal.SIGTERM)
+    process.wait(timeout=20.0)
     assert_clean_exit(process)
 
 
@@ -248,7 +333,7 @@ class Node_(Node):
         if sys.argv[1] == 'thread':
             self.publisher.publish(Float64(data=1.0))
             return
-        # What Ctrl-C does while a callback runs: the context goes down.
+        # The context goes down while a callback runs.
         rclpy.shutdown()
         self.publisher.publish(Float64(data=1.0))
 
@@ -262,10 +347,10 @@ sys.exit(run_node(Node_, ['busy'] + sys.argv[2:]))
 @pytest.mark.parametrize('executor', [[], ['--executor', 'single']])
 @pytest.mark.parametrize('how', ['callback', 'thread'])
 def test_run_node_ends_cleanly_when_the_context_goes_down(ros_processes, how, executor):
-    # The race of Ctrl-C, made certain: publishing after the shutdown raises
-    # RCLError inside spin, which run_node takes as the end it is. And a
-    # shutdown from another thread (rclpy 7.1's EventsExecutor hangs when
-    # shut down from another thread unless spun with a finite timeout).
+    # A shutdown from a callback: publishing after it raises RCLError inside
+    # spin, which run_node takes as the end it is. And a shutdown from
+    # another thread (rclpy 7.1's EventsExecutor hangs when shut down from
+    # another thread unless spun with a finite timeout).
     process = ros_processes([sys.executable, '-c', SHUTDOWN_UNDER_A_CALLBACK, how]
                             + executor)
     process.wait(timeout=20.0)

@@ -10,7 +10,6 @@ status) in :mod:`ext_observer.nodes.estimator_node_base`.
 """
 
 import gc
-import signal
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -19,8 +18,10 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import (DurabilityPolicy, qos_check_compatible, qos_policy_name_from_kind,
                        QoSCompatibility, ReliabilityPolicy)
+from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
+from ext_observer.nodes import stop_signals
 from ext_observer.nodes.ros_parameters import NodeParameters, ParameterError
 from ext_observer.pipeline.parameter_specs import ParameterSpec
 
@@ -266,10 +267,11 @@ LEVEL_NAMES = {
 
 # Executors of the nodes' main (``--executor``); the first is the default.
 EXECUTORS = ('events', 'single')
-# Spin timeout of the EventsExecutor loop, s. rclpy 7.1's EventsExecutor
-# busy-waits in spin() and never returns from it at shutdown; spun until a
-# future with a finite timeout it sleeps, and returns.
-EVENTS_SPIN_TIMEOUT = 0.1
+# Longest spin of the nodes' loop, s: how long a stop signal may wait to be
+# seen when no callback runs. rclpy 7.1's EventsExecutor also busy-waits in
+# spin() and never returns from it at shutdown; spun until a future with a
+# finite timeout it sleeps, and returns.
+SPIN_TIMEOUT = 0.1
 
 
 def executor_from_args(args):
@@ -309,60 +311,58 @@ def executor_from_args(args):
     return kind
 
 
-def _spin(node, kind):
+def _executor(node, kind):
+    """Return a new executor of ``kind`` with ``node`` added."""
+    if kind == 'single':
+        executor = SingleThreadedExecutor(context=node.context)
+    else:
+        from rclpy.experimental import EventsExecutor
+        executor = EventsExecutor(context=node.context)
+    executor.add_node(node)
+    return executor
+
+
+def _spin(executor, node, kind):
+    """Spin until a stop signal or until the context is down."""
     context = node.context
+    if kind == 'single':
+        # Bounds each spin_once below: spin_once(timeout_sec) would make a
+        # timer at every wait (4 % more CPU per message at 1 kHz here).
+        node.create_timer(SPIN_TIMEOUT, lambda: None)
     # What start-up built lives as long as the process: out of the collector's
     # reach, a full collection does not walk it (200 ms here: a hole of 200
     # samples at 1 kHz).
     gc.freeze()
-    if kind == 'single':
-        executor = SingleThreadedExecutor(context=context)
-    else:
-        from rclpy.experimental import EventsExecutor
-        executor = EventsExecutor(context=context)
-    executor.add_node(node)
-    try:
+    while stop_signals.received() is None and context.ok():
         if kind == 'single':
-            executor.spin()
+            executor.spin_once()
         else:
             # Until a future that never completes: the executor's own loop
             # runs every callback of the timeout, where spin_once returned to
             # Python after each (a wake-up and the GIL twice per message).
-            while context.ok():
-                executor.spin_until_future_complete(Future(), timeout_sec=EVENTS_SPIN_TIMEOUT)
-    finally:
-        executor.shutdown()
-
-
-def python_sigint():
-    """
-    Give SIGINT back to Python where the process started with it ignored.
-
-    A node started as a shell's background job (``observer_node &`` in a
-    script, and so every node of a test suite run in the background)
-    inherits SIGINT ignored: Python installs no KeyboardInterrupt, and only
-    rclpy's own handler, from ``rclpy.init`` on, ends the node. With
-    Python's handler back, Ctrl-C ends it the way it does in a terminal.
-    """
-    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+            executor.spin_until_future_complete(Future(), timeout_sec=SPIN_TIMEOUT)
 
 
 def run_node(node_class, args=None):
     """
-    Run one node until Ctrl-C or shutdown; the body of each node's ``main``.
+    Run one node until a stop signal or shutdown; the body of each node's ``main``.
 
-    As ``demo_nodes_py``'s talker: spin inside ``try``, treat
-    ``KeyboardInterrupt`` and ``ExternalShutdownException`` as a normal end
-    (and any error raised once the context is down: Ctrl-C shuts it down
-    under whatever spin was doing, publishing or taking a message), and
-    always destroy the node and shut rclpy down.
+    As ``demo_nodes_py``'s talker, the node is always destroyed and rclpy
+    shut down, and ``ExternalShutdownException`` is a normal end. SIGINT
+    (Ctrl-C) and SIGTERM only ask the node to stop
+    (:mod:`~ext_observer.nodes.stop_signals`; rclpy is initialized without
+    its own signal handlers): whenever one comes, while the process imports,
+    starts, spins or runs a callback, the loop ends at the next check, the
+    executor is shut down, then the node is destroyed, and only then is
+    the context shut down; the exit code is 0.
 
     The executor is chosen on the command line, before ``--ros-args``:
     ``--executor events`` (the default: ``rclpy.experimental.EventsExecutor``
     spun with ``spin_until_future_complete(future, timeout_sec=0.1)`` on a
-    future that never completes, in a loop while the context is up) or ``--executor single`` (``SingleThreadedExecutor``, what
-    ``rclpy.spin`` uses).
+    future that never completes, in a loop) or ``--executor single``
+    (``SingleThreadedExecutor``, what ``rclpy.spin`` uses, spun with
+    ``spin_once()`` in a loop, a timer of the node waking it every 0.1 s);
+    the loop runs while no stop signal came and the context is up.
 
     Parameters
     ----------
@@ -378,35 +378,47 @@ def run_node(node_class, args=None):
         refused at start-up.
 
     """
+    # Here too for a main called otherwise than by its executable
+    # (python -m, a script): the signals from now on.
+    stop_signals.install()
     argv = sys.argv if args is None else args
     try:
         kind = executor_from_args(argv)
     except ValueError as error:
         rclpy.logging.get_logger(node_class.NODE_NAME).fatal(f'not starting: {error}')
         return 2
-    python_sigint()
-    rclpy.init(args=args)
-    node = None
+    if stop_signals.received() is not None:
+        return 0
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = executor = None
     exit_code = 0
     try:
-        node = node_class()
-        _spin(node, kind)
+        if stop_signals.received() is None:
+            node = node_class()
+        if stop_signals.received() is None:
+            executor = _executor(node, kind)
+            _spin(executor, node, kind)
     except (KeyboardInterrupt, ExternalShutdownException):
+        # KeyboardInterrupt: where the stop handlers could not be installed
+        # (run_node outside the main thread).
         pass
     except ParameterError as error:
         rclpy.logging.get_logger(node_class.NODE_NAME).fatal(
             f'invalid parameters, not starting: {error}')
         exit_code = 2
     except Exception as error:
-        # Ctrl-C shuts the context down at once, under whatever spin was
-        # doing: a callback publishing fails with RCLError, a message being
-        # taken with RuntimeError. That is the end we asked for; with the
-        # context still up, the error is real.
+        # A shutdown of the context from a callback or another thread comes
+        # under whatever spin was doing: a callback publishing fails with
+        # RCLError, a message being taken with RuntimeError. That is the end
+        # asked for; with the context still up, the error is real.
         if rclpy.ok():
             raise
         rclpy.logging.get_logger(node_class.NODE_NAME).debug(
             f'stopped under a callback: {error!r}')
     finally:
+        if executor is not None:
+            executor.shutdown()
+            executor = None
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

@@ -54,11 +54,13 @@ def cache_ready():
         return False
 
 
-def load():
+def load(stopped=None):
     """
     The compiled kernels, everything a node calls compiled (or loaded from the cache).
 
-    Raises ``CompiledUnavailable`` without numba.
+    With ``stopped`` (a ``threading.Event``), returns None if it is set
+    while another process holds the cache's lock. Raises
+    ``CompiledUnavailable`` without numba.
     """
     global _LOADED
     if _LOADED is not None:
@@ -68,7 +70,8 @@ def load():
     # One process compiles at a time: one that waited finds the cache filled
     # and loads from it.
     with open(lock_path, 'a') as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not _lock(lock, stopped):
+            return None
         k = compiled.kernels(True)
         _warm_up(k)
         k.sample_step = compiled.entry_point(k.uncertainty.sample_step)
@@ -80,6 +83,20 @@ def load():
     k.load_seconds = time.perf_counter() - start
     _LOADED = k
     return k
+
+
+def _lock(lock, stopped):
+    """Take the cache's lock; with ``stopped``, give up (False) once it is set."""
+    if stopped is None:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return True
+    while True:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            if stopped.wait(0.05):
+                return False
 
 
 def preload(node=True):
@@ -244,15 +261,26 @@ class BackgroundCompile:
                 self.error = (f'the compiler exited with {self._child.returncode}'
                               + (f': {lines[-1]}' if lines else ''))
                 return
+        # Neither importing numba (llvmlite loading its library) nor loading
+        # the kernels can be interrupted: stop() waits for them, and each
+        # starts only if the node is not ending.
+        try:
+            importlib.import_module('numba')
+        except ImportError:
+            pass    # load() says why
+        if self._stopped.is_set():
+            return
         previous = sys.getswitchinterval()
         sys.setswitchinterval(self.SWITCH_INTERVAL)
         try:
-            k = load()
+            k = load(self._stopped)
         except Exception as exc:  # numba missing or failing
             self.error = f'loading the compiled kernels failed: {exc}'
             return
         finally:
             sys.setswitchinterval(previous)
+        if k is None:
+            return
         self.seconds = time.monotonic() - self._start
         self._kernels = k
 
@@ -268,17 +296,24 @@ class BackgroundCompile:
         self._taken = True
         return self._kernels
 
-    def stop(self, timeout=2.0):
-        """End the child if it still runs; wait for the thread (at most ``timeout`` s)."""
+    def stop(self, timeout=60.0):
+        """
+        End the child if it still runs; wait for the thread (at most ``timeout`` s).
+
+        Returns whether the thread has ended. The wait covers an import of
+        numba and a load from the cache on a loaded machine (seconds): a
+        process that exits while this thread is inside either can abort.
+        """
         self._stopped.set()
         if self._child is not None and self._child.poll() is None:
             self._child.terminate()
             try:
-                self._child.wait(timeout)
+                self._child.wait(5.0)
             except subprocess.TimeoutExpired:
                 self._child.kill()
                 self._child.wait()
         self._thread.join(timeout)
+        return not self._thread.is_alive()
 
 
 def main(argv=None):

@@ -2,8 +2,13 @@
 How a node gets its kernels (``pipeline/kernel_cache.py``): the start plan
 from ``EXT_OBSERVER_COMPILED`` and what this process has, the kernels a
 process will run. (A node starting plain and switching mid-run, through
-DDS: ``test_raw_imu_through_dds.py``.)
+DDS: ``test_raw_imu_through_dds.py``.) Stopping a background compile waits
+for what cannot be interrupted.
 """
+
+import fcntl
+import threading
+import time
 
 import pytest
 
@@ -34,3 +39,35 @@ def test_a_cache_without_numba_is_never_ready(monkeypatch):
 
     monkeypatch.setattr(compiled, 'compiled_name', unavailable)
     assert kernel_cache.cache_ready() is False
+
+
+def test_stop_waits_for_a_load_it_cannot_interrupt(monkeypatch):
+    # Importing numba and loading the kernels cannot be cut short; a node
+    # that exits while its thread is inside them can abort. stop() waits.
+    monkeypatch.setattr(kernel_cache, 'cache_ready', lambda: True)
+
+    def slow_load(stopped=None):
+        time.sleep(2.5)     # whatever stopped says, as an import
+        return object()
+
+    monkeypatch.setattr(kernel_cache, 'load', slow_load)
+    compile_ = kernel_cache.BackgroundCompile()
+    assert not compile_.compiling
+    time.sleep(0.2)
+    start = time.monotonic()
+    assert compile_.stop() is True
+    assert not compile_.running
+    assert time.monotonic() - start > 1.5
+
+
+@pytest.mark.skipif(not compiled.compiled_available(), reason='numba is not installed')
+def test_a_stopped_load_does_not_wait_for_another_process_lock(monkeypatch):
+    monkeypatch.setattr(kernel_cache, '_LOADED', None)
+    lock_path, _ = kernel_cache._paths()
+    stopped = threading.Event()
+    with open(lock_path, 'a') as held:
+        fcntl.flock(held, fcntl.LOCK_EX)    # another open file: as another process
+        threading.Timer(0.3, stopped.set).start()
+        start = time.monotonic()
+        assert kernel_cache.load(stopped) is None
+        assert time.monotonic() - start < 5.0
