@@ -142,7 +142,7 @@ CTRL_C_STARTS ?= 250
 CTRL_C_ARGS ?=
 
 ctrl-c-stress: $(RUNTIME_STAMP)
-	$(PY) -m bench.ctrl_c --starts $(CTRL_C_STARTS) $(CTRL_C_ARGS)
+	$(PY) stress/ctrl_c.py --starts $(CTRL_C_STARTS) $(CTRL_C_ARGS)
 
 # Faults that matter (docs/tests.md#mutation): `make mutation-list`
 # applies each mutant of mutation/mutants.toml in a copy of the tree and runs

@@ -1,7 +1,7 @@
 """
 Ctrl-C and SIGTERM at random moments: does every node end, cleanly?
 
-``python -m bench.ctrl_c --starts N --seed S`` starts the installed
+``python stress/ctrl_c.py --starts N --seed S`` starts the installed
 ``imu_filter_node`` and ``observer_node`` (next to this Python) one at a
 time, on both executors, and sends each SIGINT or SIGTERM at a random moment
 0.05–4 s after its start (some while it still imports), with the machine
@@ -276,7 +276,7 @@ def _commit():
 
 def main(argv=None):
     """Run the starts, print the table; exit 1 if any start did not end cleanly."""
-    parser = argparse.ArgumentParser(prog='python -m bench.ctrl_c', description=__doc__.split(
+    parser = argparse.ArgumentParser(prog='python stress/ctrl_c.py', description=__doc__.split(
         '\n\n')[0].strip())
     parser.add_argument('--starts', type=int, default=40, help='node starts (default 40)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the plan (default 0)')
@@ -305,7 +305,7 @@ def main(argv=None):
     for name in EXECUTABLES:
         if not os.path.exists(os.path.join(args.bin, name)):
             parser.error(f'{name} is not in {args.bin}: make venv installs it')
-    command = 'python -m bench.ctrl_c ' + shlex.join(sys.argv[1:] if argv is None else argv)
+    command = 'python stress/ctrl_c.py ' + shlex.join(sys.argv[1:] if argv is None else argv)
     runs = plan(args.starts, args.seed, args.signals, args.load)
     rng = random.Random(args.seed + 1)
     for run in runs:
