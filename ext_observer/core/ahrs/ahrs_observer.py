@@ -17,7 +17,7 @@ import numpy as np
 
 from .frames import check_dt, initial_attitude, WORLD_FRAMES, world_from_enu
 from .ahrs_params import AhrsParams
-from .compiled import kernels
+from .compiled import entry_point, kernels
 from .magcal import MagCalibrator
 from .ahrs_state import KERNEL_PARAMETERS, STATE
 from .record import holder_of
@@ -145,6 +145,7 @@ class AhrsObserver:
         state = self.__dict__.copy()
         del state['_kernels']
         state.pop('_flat_view', None)
+        state.pop('_update_entry', None)
         return state
 
     def __setstate__(self, state):
@@ -449,7 +450,7 @@ class AhrsObserver:
 
         """
         dt = self._interval(dt)
-        step = self._kernels.ahrs.ahrs_update_in
+        step = self._update_step()
         if self.batch is None:
             s = self._states[0]
             if mag is None:
@@ -469,6 +470,22 @@ class AhrsObserver:
                 out[i] = step(s, g[0, i], g[1, i], g[2, i], a[0, i], a[1, i], a[2, i], True,
                               m[0, i], m[1, i], m[2, i], dt)
         return tuple(out.T.copy())
+
+    def _update_step(self):
+        """
+        The kernels' ``ahrs_update_in``; compiled, once compiled, its machine code called directly.
+
+        Past numba's look at every argument's type (a third of a call's
+        cost for the state's nested record), as the node's ``sample_step``
+        (:func:`~ext_observer.core.ahrs.compiled.entry_point`).
+        """
+        cached = self.__dict__.get('_update_entry')
+        if cached is not None and cached[0] is self._kernels:
+            return cached[1]
+        step = self._kernels.ahrs.ahrs_update_in
+        if self.compiled and len(getattr(step, 'signatures', ())) == 1:
+            self._update_entry = (self._kernels, entry_point(step))
+        return step
 
     def run(self, gyr, acc, mag=None, dt=None, out=None):
         """
