@@ -458,7 +458,7 @@ def test_the_launch_file_is_imu_tools_shape_and_installed_by_setup():
     assert ast.literal_eval(calls['DeclareLaunchArgument'].args[0]) == 'params_file'
     assert "'config'" in ast.unparse(tree) and "'imu_filter.yaml'" in ast.unparse(tree)
     setup = open(os.path.join(REPO, 'setup.py')).read()
-    assert "'imu_filter_node = ext_observer.nodes.imu_filter_node:main'" in setup
+    assert "'imu_filter_node = ext_observer.nodes.executables:imu_filter_node'" in setup
     assert "glob('launch/*.launch.py')" in setup
 
 
