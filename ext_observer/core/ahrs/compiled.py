@@ -35,7 +35,6 @@ import tempfile
 import time
 import types
 
-import numpy as np
 
 __all__ = ['CompiledUnavailable', 'ENV', 'KERNEL_SOURCES', 'Kernels', 'PLAIN_COST',
            'cache_folder', 'compiled_available', 'compiled_name', 'entry_point', 'kernel_paths',
@@ -79,9 +78,9 @@ class Kernels:
     sample_step : callable
         :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step`, the
         node's call per sample; once :func:`ext_observer.pipeline.kernel_cache.load`
-        has compiled it, the machine code of its one signature (float64
-        arrays and floats) called directly, without numba's dispatch on the
-        arguments' types (half the cost of a call).
+        has compiled it, the machine code of its one signature (the two
+        holders, the covariance array and floats) called directly, without
+        numba's dispatch on the arguments' types (half the cost of a call).
     compiled : bool
     load_seconds : float
         How long getting them took (compiling, or loading numba's cache).
@@ -93,10 +92,6 @@ class Kernels:
         self.sample_step = self.uncertainty.sample_step
         self.compiled = compiled
         self.load_seconds = load_seconds
-
-    def container(self, size):
-        """A zeroed state of ``size`` slots: a float64 array compiled, a list plain."""
-        return np.zeros(size) if self.compiled else [0.0] * size
 
 
 _PLAIN = None
