@@ -35,7 +35,6 @@ import tempfile
 import time
 import types
 
-
 __all__ = ['CompiledUnavailable', 'ENV', 'KERNEL_SOURCES', 'Kernels', 'PLAIN_COST',
            'cache_folder', 'compiled_available', 'compiled_name', 'entry_point', 'kernel_paths',
            'kernels', 'plain_warning', 'source_digest', 'wanted', 'warn_if_plain']
