@@ -161,14 +161,7 @@ class Group:
         """
         if isinstance(holder, np.ndarray):
             flat = holder.view(np.float64).reshape(-1)
-            offsets = {}
-
-            def read(name):
-                at = offsets.get(name)
-                if at is None:
-                    at = offsets[name] = self.offset(name)
-                return float(flat[at])
-            return read
+            return lambda name: float(flat[self.offset(name)])
         record = holder[0]
         return lambda name: self.get(record, name)
 
