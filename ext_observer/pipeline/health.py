@@ -16,15 +16,15 @@ from ext_observer.core.ahrs.ahrs_state import STATE
 __all__ = ['HEALTH_STATES', 'HealthWatch', 'NO_STATE', 'health_text']
 
 # Each state: its name, and whether it is active, from the HealthWatch ``w``,
-# a reader ``s`` of the estimator's state and the pipeline ``p``. Meanings: docs/diagnostics.md.
+# the estimator's state ``s`` (a view by attribute) and the pipeline ``p``. Meanings: docs/diagnostics.md.
 _STATES = (
     ('initializing', lambda w, s, p: w.initializing),
-    ('at_rest', lambda w, s, p: s('rest.detected') != 0.0),
-    ('accelerometer_rejected', lambda w, s, p: s('rej.time') > 0.0),
-    ('field_rejected', lambda w, s, p: s('field.mag_dist') != 0.0),
+    ('at_rest', lambda w, s, p: s.rest.detected != 0.0),
+    ('accelerometer_rejected', lambda w, s, p: s.rej.time > 0.0),
+    ('field_rejected', lambda w, s, p: s.field.mag_dist != 0.0),
     ('gyro_clipped', lambda w, s, p: w.recovering),
     ('field_lost', lambda w, s, p: field_lost(p)),
-    ('velocity_aided', lambda w, s, p: s('vel.used') != 0.0),
+    ('velocity_aided', lambda w, s, p: s.vel.used != 0.0),
 )
 # The names, in the order of their bits in ``Recording.health`` (bit i: HEALTH_STATES[i]).
 HEALTH_STATES = tuple(name for name, _ in _STATES)
@@ -57,15 +57,15 @@ class HealthWatch:
         self._handed_over = False
         self._clips = 0
         self._start = 0.0
-        self._holder = self._read = None
+        self._holder = self._view = None
 
     def __call__(self, pipeline):
         """Return the active states, a tuple in :data:`HEALTH_STATES`' order."""
         # The state read through a view: asked at every sample of a recording.
         holder = pipeline.estimator.core.state
         if holder is not self._holder:
-            self._holder, self._read = holder, STATE.reader(holder)
-        s = self._read
+            self._holder, self._view = holder, STATE.view(holder)
+        s = self._view
         self._follow(s)
         return tuple(name for name, active in _STATES if active(self, s, pipeline))
 
@@ -74,24 +74,24 @@ class HealthWatch:
         return sum(_BITS[name] for name in self(pipeline))
 
     def _follow(self, s):
-        """Update :attr:`initializing` and :attr:`recovering` from the state (a reader)."""
-        clips = s('gyro.clips')
-        clipped = clips != self._clips or s('gyro.clipped') != 0.0
+        """Update :attr:`initializing` and :attr:`recovering` from the state (a view)."""
+        clips = s.gyro.clips
+        clipped = clips != self._clips or s.gyro.clipped != 0.0
         self._clips = clips
-        if s('est.init') == 0.0:
+        if s.est.init == 0.0:
             self.initializing, self.recovering = True, False
             self._handed_over = False
             self._start = 0.0
             return
-        start = s('inc.start')
+        start = s.inc.start
         if start < self._start and not clipped:
             # The mean restarted without a clip: the estimator restarted
             # (a reset between two calls, a hole in the stream).
             self._handed_over = False
         self._start = start
-        starting = start < s('par.tau_acc')
+        starting = start < s.par.tau_acc
         # A clip's recovery: the kernel's, tau_acc after the last clipped sample.
-        self.recovering = s('gyro.clip_left') > 0.0
+        self.recovering = s.gyro.clip_left > 0.0
         if not starting:
             self._handed_over = True
         self.initializing = not self._handed_over

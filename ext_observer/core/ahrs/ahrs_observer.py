@@ -33,8 +33,6 @@ __all__ = [
 ]
 
 MODES = ('6D', '9D')
-# Where the estimate's flag and q̂ start in a compiled holder's float64 view.
-_INIT, _Q = STATE.offset('est.init'), STATE.offset('est.q')
 
 
 class AhrsObserver:
@@ -144,7 +142,7 @@ class AhrsObserver:
         # The kernels hold modules: a copy or a pickle asks for them again.
         state = self.__dict__.copy()
         del state['_kernels']
-        state.pop('_flat_view', None)
+        state.pop('_record_view', None)
         state.pop('_update_entry', None)
         return state
 
@@ -215,15 +213,7 @@ class AhrsObserver:
         :mod:`~ext_observer.core.ahrs.ahrs_state` (docs/layout.md).
         """
         if self.batch is None:
-            h = self._states[0]
-            if self.compiled:
-                # A float64 view of the holder at the field's offset: a
-                # tenth of what reading the record's field from Python costs.
-                at, (_, size) = STATE.offset(name), STATE.path(name)
-                flat = self._flat(h)
-                return float(flat[at]) if size == 1 else tuple(
-                    float(v) for v in flat[at:at + size])
-            return STATE.get(h[0], name)
+            return STATE.get(self._view(self._states[0]), name)
         values = [STATE.get(h[0], name) for h in self._states]
         if isinstance(values[0], tuple):
             return tuple(np.array(v) for v in zip(*values))
@@ -243,11 +233,11 @@ class AhrsObserver:
         for i, h in enumerate(self._states):
             STATE.set(h[0], name, float(values[i]))
 
-    def _flat(self, holder):
-        """A float64 view of a compiled holder's memory (kept while the holder is)."""
-        cached = self.__dict__.get('_flat_view')
+    def _view(self, holder):
+        """The holder's record by attribute (``STATE.view``), kept while the holder is."""
+        cached = self.__dict__.get('_record_view')
         if cached is None or cached[0] is not holder:
-            cached = self._flat_view = (holder, holder.view(np.float64).reshape(-1))
+            cached = self._record_view = (holder, STATE.view(holder))
         return cached[1]
 
     def _flag(self, name):
@@ -265,11 +255,12 @@ class AhrsObserver:
     @property
     def q(self):
         """The ambient estimate ``(w, x, y, z)``; None before the first sample."""
-        if self.batch is None and self.compiled:  # the node's path: read at every field
-            flat = self._flat(self._states[0])
-            if flat[_INIT] == 0.0:
+        if self.batch is None:  # the node's path: read at every field
+            est = self._view(self._states[0]).est
+            if est.init == 0.0:
                 return None
-            return float(flat[_Q]), float(flat[_Q + 1]), float(flat[_Q + 2]), float(flat[_Q + 3])
+            q = est.q
+            return float(q[0]), float(q[1]), float(q[2]), float(q[3])
         if not self.initialized:
             return None
         return self.field('est.q')

@@ -20,6 +20,8 @@ numba takes a one-element array from Python ten times faster than a
 record, so the kernels that Python calls per sample take a holder.
 """
 
+import ctypes
+
 import numpy as np
 
 __all__ = ['Group', 'holder_of']
@@ -64,11 +66,13 @@ class Group:
         self._dtype = None
         self._paths = None
         self._offsets = None
+        self._ctypes_class = None
 
     def __getstate__(self):
         # The made class and the caches are made again where unpickled.
         state = self.__dict__.copy()
         state['_plain_class'] = state['_dtype'] = state['_paths'] = state['_offsets'] = None
+        state['_ctypes_class'] = None
         return state
 
     # --- the two containers -----------------------------------------------------
@@ -150,20 +154,20 @@ class Group:
         self._offsets[name] = at // 8
         return at // 8
 
-    def reader(self, holder):
+    def view(self, holder):
         """
-        A fast reader of one-float fields of a holder's record: ``read(name) -> float``.
+        A holder's record, read and written by attribute from Python (``v.rest.time``).
 
-        Compiled, a float64 view of the holder's memory at each field's
-        offset (a record's field costs a microsecond from Python, the view's
-        item a tenth); plain, the attribute. For code outside the kernels
-        that reads the state at every sample.
+        Plain, the record itself. Compiled, a ``ctypes`` structure per group
+        over the holder's memory (sub-groups as attributes): its fields read
+        and written as Python floats by C code, several times faster than
+        numpy's access to a structured record's fields by name. Made once per
+        holder by the code that keeps one: for Python that reads the state
+        at every sample (the kernels take the holder itself).
         """
         if isinstance(holder, np.ndarray):
-            flat = holder.view(np.float64).reshape(-1)
-            return lambda name: float(flat[self.offset(name)])
-        record = holder[0]
-        return lambda name: self.get(record, name)
+            return _ctypes_view(self, holder, 0)
+        return holder[0]
 
     def get(self, record, name):
         """Field ``name`` of a record: a float (a vector: a tuple of floats)."""
@@ -227,6 +231,24 @@ def holder_of(holder, name):
     if isinstance(holder, np.ndarray):
         return holder[name]
     return [getattr(holder[0], name)]
+
+
+def _ctypes_view(group, holder, offset):
+    """The ``ctypes`` structure of ``group`` at byte ``offset`` of ``holder``, sub-groups too."""
+    cls = group._ctypes_class
+    if cls is None:
+        # The group's fields; a sub-group's span is padding here, its own
+        # structure an attribute.
+        fields = [(f'_{m.name}_span', ctypes.c_double * m.size) if isinstance(m, Group)
+                  else (m[0], ctypes.c_double if m[3] == 1 else ctypes.c_double * m[3])
+                  for m in group.members]
+        cls = group._ctypes_class = type(f'{group.name}_view', (ctypes.Structure,),
+                                         {'_fields_': fields})
+    view = cls.from_buffer(holder, offset)
+    for m in group.members:
+        if isinstance(m, Group):
+            setattr(view, m.name, _ctypes_view(m, holder, offset + group.dtype.fields[m.name][1]))
+    return view
 
 
 def _flat_void(record):

@@ -13,7 +13,6 @@ rad, s, rad/s, m/s²; every quantity a float, or an array ``(B,)`` for many
 recordings at once.
 """
 
-import ctypes
 import math
 
 import numpy as np
@@ -61,42 +60,6 @@ def _check_dt(dt):
         raise ValueError(f'dt must be positive and finite, got {dt}')
 
 
-def _record(holder):
-    """
-    A holder's record, read and written by attribute (``u.axes.pt``).
-
-    The plain record itself; for a compiled holder, a ``ctypes`` structure
-    per group over the holder's memory (its sub-groups as attributes): its
-    fields read and written as Python floats by C code, faster than a
-    float64 array's items and several times faster than numpy's access to a
-    structured record's fields by name.
-    """
-    if isinstance(holder, np.ndarray):
-        return _floats(UNC, holder, 0)
-    return holder[0]
-
-
-_FLOATS_CLASSES = {}
-
-
-def _floats(group, holder, offset):
-    """The ``ctypes`` structure of ``group`` at byte ``offset`` of ``holder``, sub-groups too."""
-    cls = _FLOATS_CLASSES.get(group)
-    if cls is None:
-        # The group's fields; a sub-group's span is padding here, its own
-        # structure an attribute.
-        fields = [(f'_{m.name}_span', ctypes.c_double * m.size) if isinstance(m, Group)
-                  else (m[0], ctypes.c_double if m[3] == 1 else ctypes.c_double * m[3])
-                  for m in group.members]
-        cls = _FLOATS_CLASSES[group] = type(f'{group.name}_floats', (ctypes.Structure,),
-                                            {'_fields_': fields})
-    record = cls.from_buffer(holder, offset)
-    for m in group.members:
-        if isinstance(m, Group):
-            setattr(record, m.name, _floats(m, holder, offset + group.dtype.fields[m.name][1]))
-    return record
-
-
 class AttitudeUncertainty:
     """
     The variance of the raw-IMU estimate's inclination and heading, step by step.
@@ -138,7 +101,7 @@ class AttitudeUncertainty:
         # The per-sample state and its constants: a record of UNC in a
         # holder (what the kernels take); self._u reads and writes it.
         self._holder = UNC.holder(False)
-        self._u = _record(self._holder)
+        self._u = UNC.view(self._holder)
         par = self._u.par
         par.tau_acc, par.tau_rest = self._tau[0], self._tau[2]
         par.gyro_noise, par.gyro_rate_noise = p.gyro_noise, p.gyro_rate_noise
@@ -186,7 +149,7 @@ class AttitudeUncertainty:
             raise ValueError('the compiled kernels take one estimate, not arrays')
         holder = UNC.holder(kernels.compiled)
         UNC.copy(self._holder[0], holder[0])
-        self._holder, self._u = holder, _record(holder)
+        self._holder, self._u = holder, UNC.view(holder)
         self._kernel, self._compiled = kernels.uncertainty, kernels.compiled
         self._variances = (self._first_variances if kernels.compiled
                            else kernels.uncertainty.covariance_variances)
