@@ -141,7 +141,7 @@ hosts-report: $(RUNTIME_STAMP)
 CTRL_C_STARTS ?= 250
 CTRL_C_ARGS ?=
 
-ctrl-c-stress: $(RUNTIME_STAMP)
+ctrl-c-stress: $(TEST_STAMP)
 	$(PY) stress/ctrl_c.py --starts $(CTRL_C_STARTS) $(CTRL_C_ARGS)
 
 # Faults that matter (docs/tests.md#mutation): `make mutation-list`

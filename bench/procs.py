@@ -28,22 +28,24 @@ _PORT_BASE = 32768  # domain_coordinator's convention
 
 
 @contextlib.contextmanager
-def reserved_domain_id(start=0):
+def reserved_domain_id(start=0, domains=DOMAIN_RANGE):
     """
-    Reserve a ROS_DOMAIN_ID in 40–60 for the duration of the context.
+    Reserve a ROS_DOMAIN_ID (of ``domains``: 40–60) for the duration of the context.
 
     Parameters
     ----------
     start : int
         Index in the range to try first (so consecutive targets get fresh
         ids and never see a previous target's lingering endpoints).
+    domains : range
+        The ids to choose from (another command's own range: stress/ctrl_c.py).
 
     Yields
     ------
     domain_id : int
 
     """
-    ids = list(DOMAIN_RANGE)
+    ids = list(domains)
     ids = ids[start % len(ids):] + ids[:start % len(ids)]
     for domain_id in ids:
         sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -57,7 +59,7 @@ def reserved_domain_id(start=0):
         finally:
             sock.close()
         return
-    raise RuntimeError(f'no free ROS_DOMAIN_ID in {DOMAIN_RANGE}')
+    raise RuntimeError(f'no free ROS_DOMAIN_ID in {domains}')
 
 
 def cpu_seconds(pid):

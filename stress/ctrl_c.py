@@ -23,7 +23,6 @@ import random
 import shlex
 import shutil
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -31,6 +30,9 @@ import tempfile
 import time
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, REPO)
+from bench.procs import reserved_domain_id  # noqa: E402 (the repository's, found above)
+
 EXECUTABLES = ('imu_filter_node', 'observer_node')
 EXECUTORS = ('events', 'single')
 SIGNALS = {'int': signal.SIGINT, 'term': signal.SIGTERM}
@@ -44,7 +46,6 @@ DUMP_SECONDS = 5.0
 # with domain_coordinator's convention (a TCP port at 32768 + id) so that a
 # test run on the same machine never picks the same one.
 DOMAINS = range(61, 101)
-_PORT_BASE = 32768
 # What an abort or a crash leaves in the output.
 FATAL = ('Fatal Python error', 'Destroying callback manager', 'terminate called',
          'Segmentation fault', 'core dumped')
@@ -52,24 +53,6 @@ CRASH_SIGNALS = (signal.SIGABRT, signal.SIGSEGV, signal.SIGBUS, signal.SIGILL, s
 # Where a compiling child of imu_filter_node says whose it is
 # (ext_observer.pipeline.kernel_cache).
 COMPILE_PARENT = 'EXT_OBSERVER_COMPILE_PARENT'
-
-
-@contextlib.contextmanager
-def reserved_domain():
-    """Hold a free ROS_DOMAIN_ID of :data:`DOMAINS` for the context."""
-    for domain in DOMAINS:
-        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        try:
-            sock.bind(('', _PORT_BASE + domain))
-        except OSError:
-            sock.close()
-            continue
-        try:
-            yield domain
-        finally:
-            sock.close()
-        return
-    raise RuntimeError(f'no free ROS_DOMAIN_ID in {DOMAINS}')
 
 
 @contextlib.contextmanager
@@ -315,7 +298,7 @@ def main(argv=None):
     cores = os.cpu_count() or 1
     start = time.monotonic()
     done = []
-    with reserved_domain() as domain, contextlib.ExitStack() as stack:
+    with reserved_domain_id(domains=DOMAINS) as domain, contextlib.ExitStack() as stack:
         busy = None
         for run in runs:
             if run['load'] == 'busy' and busy is None:
