@@ -15,7 +15,9 @@ import pytest
 
 from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs.ahrs_params import AhrsParams
+from ext_observer.core.ahrs import accel_rejection as ar
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
+from ext_observer.core.ahrs.ahrs_state import STATE
 from ext_observer.core.ahrs.clip_and_rest import detect_rest
 
 G = 9.81
@@ -119,3 +121,59 @@ def test_plain_and_compiled_agree_to_the_bit_through_a_rejection_and_its_end():
     plain, _ = _run(gyr, acc, params)
     compiled, _ = _run(gyr, acc, params, compiled=True)
     assert np.array_equal(plain, compiled)
+
+
+# Known answers of the step's helpers, on a plain record (fast, for mutmut).
+
+def test_the_angle_between_two_vectors_of_any_norm():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a, b = rng.normal(size=3) * 3.0, rng.normal(size=3) * 0.2
+        expected = math.acos(np.dot(a, b) / np.linalg.norm(a) / np.linalg.norm(b))
+        assert ar._angle(*a, *b) == pytest.approx(expected, abs=1e-12)
+    assert ar._angle(0.0, 0.0, 2.0, 0.0, 3.0, 0.0) == pytest.approx(math.pi / 2)
+
+
+def test_the_tilting_rate_is_the_horizontal_part_of_the_rate_less_the_bias():
+    s = STATE.plain()
+    s.par.tau_acc = 1.5
+    s.est.q[:] = [math.cos(0.3), math.sin(0.3), 0.0, 0.0]  # rolled 0.6 rad about x
+    s.rest.gyr_lp[:] = [0.4, 0.7, 1.1]
+    s.bias.rate[:] = [0.05, -0.1, 0.2]
+    s.rej.tilt = 0.25
+    r = np.array([0.35, 0.8, 0.9])  # the low-passed rate less the bias, body frame
+    c, sn = math.cos(0.6), math.sin(0.6)
+    w = np.array([[1.0, 0.0, 0.0], [0.0, c, -sn], [0.0, sn, c]]) @ r  # in the world frame
+    dt = 0.01
+    k = dt / (2.0 * 1.5 + dt)
+    expected = 0.25 + k * (math.hypot(w[0], w[1]) - 0.25)
+    assert ar._tilting(s, dt) == pytest.approx(expected, rel=1e-12)
+    assert s.rej.tilt == pytest.approx(expected, rel=1e-12)
+
+
+def test_a_reset_forgets_the_carried_vertical_the_rejection_and_the_tilt():
+    s = STATE.plain()
+    s.rej.carried[:] = [0.1, 0.2, 0.9]
+    s.rej.time, s.rej.tilt = 0.7, 0.3
+    ar.acc_rejection_reset(s)
+    assert list(s.rej.carried) == [0.0, 0.0, 0.0] and s.rej.time == 0.0 and s.rej.tilt == 0.0
+
+
+def test_a_force_rejected_too_long_becomes_the_vertical_it_shows():
+    s = STATE.plain()
+    s.par.acc_reject, s.par.acc_reject_time, s.par.tau_acc = 0.1, 20.0, 2.0
+    s.coef.k_acc = 0.0  # no correction: u moves only towards the force
+    s.bias.p[:] = [1e-12, 0.0, 0.0, 1e-12, 0.0, 1e-12]  # a bias sure enough to carry u
+    s.rej.carried[:] = [0.0, 0.0, 1.0]
+    s.est.q[:] = [1.0, 0.0, 0.0, 0.0]
+    f = (0.0, 3.0, 9.3)  # 0.31 rad off the vertical: rejected
+    ar.acc_rotation(s, *f, 0.5, False)
+    assert s.rej.time == 0.5 and list(s.rej.carried)[:2] == [0.0, 0.0]
+    s.rej.time = 19.99
+    ar.acc_rotation(s, *f, 0.02, False)  # 20.01 s > acc_reject_time: taken as gravity
+    # u is the force's direction, then one step (k = dt / 10 s, no tilting) towards the vertical.
+    n, k = math.hypot(3.0, 9.3), 0.02 / 10.0
+    uy, uz = (1.0 - k) * 3.0 / n, 9.3 / n + k * (1.0 - 9.3 / n)
+    assert s.rej.time == 0.0 and s.rej.carried[0] == 0.0
+    assert list(s.rej.carried)[1:] == pytest.approx([uy / math.hypot(uy, uz),
+                                                     uz / math.hypot(uy, uz)], rel=1e-12)

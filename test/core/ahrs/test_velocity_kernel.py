@@ -20,6 +20,7 @@ from ext_observer.core.ahrs import compiled as compiled_module
 from ext_observer.core.ahrs import velocity_kernel as vk
 from ext_observer.core.ahrs.ahrs_params import AhrsParams
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
+from ext_observer.core.ahrs.ahrs_state import STATE
 
 G = 9.81
 RATE = 100.0
@@ -268,3 +269,70 @@ def test_a_bag_with_a_velocity_topic_runs_aided(tmp_path, msgtype):
     # The command: a topic of another type is refused, naming it.
     assert bag_main([str(tmp_path / 'in'), '--out', str(tmp_path / 'o2'), '--no-mag',
                      '--velocity-topic', 'imu/data_raw']) == 2
+
+
+# Known answers of the kernel's three functions, on a plain record (fast,
+# for mutmut): every field each writes, per axis with values that differ.
+
+def _record(timeout=0.5):
+    s = STATE.plain()
+    s.par.velocity_timeout = timeout
+    s.rest.acc_still = 1.0
+    s.bias.rate[:] = [0.01, -0.02, 0.03]
+    return s
+
+
+def test_a_velocity_sample_keeps_its_derivative_over_its_own_interval():
+    s = _record()
+    vk.velocity_sample(s, 1.0, 2.0, 3.0, -1.0)  # the first: no derivative yet
+    assert (s.vel.n, list(s.vel.v), list(s.vel.dv), s.vel.age) == (1.0, [1.0, 2.0, 3.0],
+                                                                   [0.0, 0.0, 0.0], 0.0)
+    s.vel.age = 0.3
+    vk.velocity_sample(s, 1.5, 1.0, 3.25, 0.25)
+    assert s.vel.n == 2.0 and s.vel.age == 0.0 and list(s.vel.v) == [1.5, 1.0, 3.25]
+    assert list(s.vel.dv) == [2.0, -4.0, 1.0]
+    # At the timeout it is still a derivative; beyond it, or without an interval, none.
+    vk.velocity_sample(s, 2.0, 1.0, 3.25, 0.5)
+    assert s.vel.n == 2.0 and list(s.vel.dv) == [1.0, 0.0, 0.0]
+    for dt in (0.5000001, 0.0, -0.1):
+        before = list(s.vel.dv)
+        vk.velocity_sample(s, 3.0, 1.0, 3.25, dt)
+        assert s.vel.n == 1.0 and list(s.vel.dv) == before, dt
+        s.vel.n = 2.0
+
+
+def test_a_fresh_velocity_gives_its_kinematic_acceleration_per_axis():
+    s = _record()
+    vk.velocity_sample(s, 2.0, -1.0, 0.5, -1.0)
+    vk.velocity_sample(s, 2.5, -1.5, 1.0, 0.25)  # dv = (2, -2, 2)
+    g = (0.31, -0.52, 0.73)
+    assert vk.velocity_step(s, *g, 0.01) == 1.0
+    wx, wy, wz = g[0] - 0.01, g[1] + 0.02, g[2] - 0.03
+    vx, vy, vz = 2.5, -1.5, 1.0
+    expected = [2.0 + wy * vz - wz * vy, -2.0 + wz * vx - wx * vz, 2.0 + wx * vy - wy * vx]
+    assert list(s.vel.acc) == expected
+    assert s.vel.used == 1.0 and s.vel.age == 0.01
+    assert s.rest.acc_still == 0.0  # a moving body is not at rest
+    assert vk.velocity_removed(s, 1.0, 2.0, 9.0) == (1.0 - expected[0], 2.0 - expected[1],
+                                                     9.0 - expected[2])
+
+
+def test_a_slow_velocity_leaves_rest_alone_and_an_old_one_is_not_used():
+    s = _record(timeout=0.1)
+    vk.velocity_sample(s, 0.05, 0.0, 0.05, -1.0)
+    vk.velocity_sample(s, 0.05, 0.05, 0.0, 0.05)  # |v| 0.07 m/s: below MOVING_SPEED
+    assert vk.velocity_step(s, 0.0, 0.0, 0.0, 0.06) == 1.0 and s.rest.acc_still == 1.0
+    assert vk.velocity_step(s, 0.0, 0.0, 0.0, 0.04) == 1.0  # aged to the timeout: used
+    assert vk.velocity_step(s, 0.0, 0.0, 0.0, 0.01) == 0.0  # beyond it: not
+    assert s.vel.used == 0.0 and s.vel.age == pytest.approx(0.11)
+    assert vk.velocity_removed(s, 1.0, 2.0, 3.0) == (1.0, 2.0, 3.0)
+
+
+def test_without_a_derivative_or_a_velocity_nothing_is_removed():
+    s = _record()
+    assert vk.velocity_step(s, 1.0, 1.0, 1.0, 0.01) == 0.0  # never a velocity
+    assert s.vel.age == 0.0 and s.vel.used == 0.0  # untouched: the state as without the aid
+    vk.velocity_sample(s, 5.0, 0.0, 0.0, -1.0)
+    s.vel.used = 1.0
+    assert vk.velocity_step(s, 1.0, 1.0, 1.0, 0.01) == 0.0  # one velocity: no derivative yet
+    assert s.vel.used == 0.0 and s.vel.age == 0.01 and s.rest.acc_still == 1.0
