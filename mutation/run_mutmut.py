@@ -93,7 +93,9 @@ MODULES = {
 # packages are left out of the subsets (minutes each, or not about the
 # mutated code): by name.
 DESELECT = ('ros_context or spinner or fixed_mode or estimate_mode or diagnostics_before '
-            'or benchmark or replay_reproduces or known_distributions')
+            'or benchmark or replay_reproduces or known_distributions'
+            # a case compiled (numba would compile mutmut's trampolines; its plain case goes too)
+            ' or a_lasting_innovation_is_a_lag')
 # mutmut runs, per mutant, every test of the subset that reaches the
 # mutated function, and a kernel's step is reached by all of them: a
 # survivor costs the whole subset. The tests of a subset that take a second
