@@ -155,3 +155,27 @@ def test_the_coefficients_are_a_butterworth_at_1_over_2_pi_tau_and_first_order_g
     # sample; a correction rate's noise density bias_sigma_motion² tau_bias.
     assert s.coef.bias_q == pytest.approx(1e-4 * dt / tau_bias, rel=1e-12)
     assert s.coef.bias_r == pytest.approx(1e-4 * tau_bias, rel=1e-12)
+
+
+def test_the_kernels_quaternion_product_is_the_cores():
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        a, b = rng.normal(size=4), rng.normal(size=4)
+        np.testing.assert_allclose(f.quat_multiply(*a, *b), quat.multiply(a, b), rtol=1e-13,
+                                   atol=1e-15)
+
+
+def test_the_deviation_from_gravity_is_the_larger_of_the_vertical_and_the_horizontal_share():
+    from ext_observer.core.constants import STANDARD_GRAVITY as G
+    # Vertical: (f_z − g)²/g²; horizontal: (f_x² + f_y²)/2/g²; the larger counts.
+    assert f.gravity_deviation(0.0, 0.0, G) == 0.0
+    assert f.gravity_deviation(0.0, 0.0, G + 2.0) == pytest.approx(4.0 / G ** 2, rel=1e-14)
+    assert f.gravity_deviation(0.0, 0.0, G - 2.0) == pytest.approx(4.0 / G ** 2, rel=1e-14)
+    assert f.gravity_deviation(3.0, 1.0, G + 0.5) == pytest.approx(5.0 / G ** 2, rel=1e-14)
+    assert f.gravity_deviation(0.3, 0.1, G + 0.5) == pytest.approx(0.25 / G ** 2, rel=1e-14)
+
+
+def test_a_first_order_step_moves_each_component_by_its_gain():
+    v = [1.0, -2.0, 4.0]
+    out = f.first_order_step(v, 0.25, 3.0, 2.0, 0.0)
+    assert out == (1.5, -1.0, 3.0) and v == [1.5, -1.0, 3.0]
