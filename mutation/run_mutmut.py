@@ -94,8 +94,9 @@ MODULES = {
 # mutated code): by name.
 DESELECT = ('ros_context or spinner or fixed_mode or estimate_mode or diagnostics_before '
             'or benchmark or replay_reproduces or known_distributions'
-            # a case compiled (numba would compile mutmut's trampolines; its plain case goes too)
-            ' or a_lasting_innovation_is_a_lag or the_calibrations_own_numbers_are_the_pinned')
+            # the cases run compiled (numba would compile mutmut's trampolines):
+            # parametrized [True] or [compiled...], or named so
+            ' or [True] or compiled')
 # mutmut runs, per mutant, every test of the subset that reaches the
 # mutated function, and a kernel's step is reached by all of them: a
 # survivor costs the whole subset. The tests of a subset that take a second
