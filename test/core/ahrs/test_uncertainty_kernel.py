@@ -364,3 +364,34 @@ def test_many_recordings_at_once_step_as_each_alone():
         assert many.tilt_variance[b] == tracker.tilt_variance
         assert many.heading_variance[b] == tracker.heading_variance
         assert many.state[0].start.var[b] == tracker.state[0].start.var > 0.0
+
+
+def test_a_bridged_hole_grows_the_variances_by_its_noise_its_bias_and_its_bridge():
+    # Known answer of uncertainty_hole through the one step order (covariance_step):
+    # beyond the usual step, g² T + B T² + var, on the inclination only where its
+    # mean was kept; what was there before is corrected by the steps the hole missed.
+    K = uncertainty_kernel
+    u = K.UNC.plain()
+    u.par.gyro_noise, u.coef.k_acc, u.coef.dt = 2e-3, 0.01, 0.01
+    u.axes.pt, u.axes.ct, u.axes.ph, u.axes.b = 4e-4, 1e-6, 9e-4, 2.5e-5
+    before = copy.deepcopy(u)
+    extra, var = 0.05, 3e-5
+    K.uncertainty_hole(u, extra, var, True)
+    a = (1.0 - 0.01) ** (extra / 0.01)
+    grow = 2e-3 ** 2 * extra + 2.5e-5 * extra ** 2 + var
+    assert u.axes.pt == pytest.approx(a * a * 4e-4 + grow, rel=1e-14)
+    assert u.axes.ct == pytest.approx(a * 1e-6, rel=1e-14)
+    assert u.axes.ph == pytest.approx(9e-4 + grow, rel=1e-14)
+    kept = copy.deepcopy(before)
+    K.uncertainty_hole(kept, extra, var, False)  # the mean restarted: the tilt only shrinks
+    assert kept.axes.pt == pytest.approx(a * a * 4e-4, rel=1e-14)
+    # covariance_step adds the hole only where there is one.
+    holes = []
+    for hole_var in (0.0, var):
+        w = copy.deepcopy(before)
+        K.covariance_step([w], 0.01, 0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                          extra, hole_var, -1.0, 0.0, 0.0, 9.8, False)
+        holes.append((w.axes.ph, w.axes.b))
+    (without, b), (with_hole, _) = holes  # the bias's variance as the step left it
+    assert with_hole - without == pytest.approx(2e-3 ** 2 * extra + b * extra ** 2 + var,
+                                                rel=1e-9)
