@@ -242,7 +242,7 @@ class AhrsObserver:
 
     def _flag(self, name):
         if self.batch is None:
-            return bool(STATE.get(self._states[0][0], name) != 0.0)
+            return bool(self.field(name) != 0.0)
         return np.array([STATE.get(h[0], name) != 0.0 for h in self._states])
 
     @property
@@ -312,7 +312,7 @@ class AhrsObserver:
 
     def _count(self, name):
         if self.batch is None:
-            return int(STATE.get(self._states[0][0], name))
+            return int(self.field(name))
         return np.array([int(STATE.get(h[0], name)) for h in self._states])
 
     @property
