@@ -135,7 +135,10 @@ def _raw_imu(quick, log_dir):
 
 
 def _compiled(quick):
-    """The compiled kernels' figures: ``python -m bench.compiled_kernels --json`` (node CPU: section 6's)."""
+    """The compiled kernels' figures: ``python -m bench.compiled_kernels --json``.
+
+    The node's CPU is section 6's.
+    """
     args = ['bench.compiled_kernels'] + (['--sections', 'steps'] if quick else [])
     log(f'compiled kernels: python -m {" ".join(args)} ...')
     os.makedirs(os.path.join(REPO, 'out'), exist_ok=True)

@@ -16,7 +16,8 @@ from ext_observer.core.ahrs.ahrs_state import STATE
 __all__ = ['HEALTH_STATES', 'HealthWatch', 'NO_STATE', 'health_text']
 
 # Each state: its name, and whether it is active, from the HealthWatch ``w``,
-# the estimator's state ``s`` (a view by attribute) and the pipeline ``p``. Meanings: docs/diagnostics.md.
+# the estimator's state ``s`` (a view by attribute) and the pipeline ``p``.
+# Meanings: docs/diagnostics.md.
 _STATES = (
     ('initializing', lambda w, s, p: w.initializing),
     ('at_rest', lambda w, s, p: s.rest.detected != 0.0),
