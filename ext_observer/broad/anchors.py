@@ -19,12 +19,12 @@ import math
 
 import numpy as np
 
-from ext_observer.broad.result_keys import ANCHORS, FUSION_DEFAULTS
+from ext_observer.broad.result_keys import ANCHORS, FUSION_DEFAULTS, OFFLINE_VQF
 from ext_observer.core.constants import STANDARD_GRAVITY
 from ext_observer.core.quaternion import conjugate, multiply
 
 # Packages each anchor needs (PyPI names = import names).
-ANCHOR_PACKAGES = {'VQF': 'vqf', 'BasicVQF': 'vqf', 'Madgwick': 'ahrs',
+ANCHOR_PACKAGES = {'VQF': 'vqf', 'BasicVQF': 'vqf', OFFLINE_VQF: 'vqf', 'Madgwick': 'ahrs',
                    'Mahony': 'ahrs', 'Fusion': 'imufusion', FUSION_DEFAULTS: 'imufusion'}
 # BROAD's trial-agnostic best parameters for Madgwick and Mahony.
 MADGWICK_BETA = 0.12
@@ -124,6 +124,14 @@ def _run_vqf(gyr, acc, mag, rate, use_mag, basic=False):
     return _to_enu(out['quat9D' if use_mag else 'quat6D'], IDENTITY)
 
 
+def _run_offline_vqf(gyr, acc, mag, rate, use_mag):
+    import vqf
+    # offlineVQF: the same output convention as VQF's (above); it takes the
+    # whole recording at once.
+    out = vqf.offlineVQF(gyr, acc, mag if use_mag else None, 1.0 / rate)
+    return _to_enu(out['quat9D' if use_mag else 'quat6D'], IDENTITY)
+
+
 def _run_madgwick(gyr, acc, mag, rate, use_mag):
     from ahrs.filters import Madgwick
     # ahrs' Madgwick: (w, x, y, z), sensor → NWU (gravity reference +z, the
@@ -218,6 +226,7 @@ def _run_fusion(gyr, acc, mag, rate, use_mag, gyro_range=BROAD_GYRO_RANGE, readm
 _RUNNERS = {
     'VQF': lambda *a: _run_vqf(*a[:5], basic=False),
     'BasicVQF': lambda *a: _run_vqf(*a[:5], basic=True),
+    OFFLINE_VQF: lambda *a: _run_offline_vqf(*a[:5]),
     'Madgwick': lambda *a: _run_madgwick(*a[:5]),
     'Mahony': lambda *a: _run_mahony(*a[:5]),
     'Fusion': lambda *a: _run_fusion(*a, readme=True),

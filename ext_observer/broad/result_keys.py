@@ -11,8 +11,11 @@ OURS = 'ext_observer'
 OURS_PLAIN = 'ext_observer_plain'
 # Fusion at its package defaults, beside 'Fusion' at its README's settings.
 FUSION_DEFAULTS = 'Fusion (package defaults)'
+# VQF's offline form (``vqf.offlineVQF``): each sample's estimate from the
+# whole recording, the anchor of our smoothed estimate.
+OFFLINE_VQF = 'offline VQF'
 # The anchors, in the order of the tables.
-ANCHORS = ('VQF', 'BasicVQF', 'Madgwick', 'Mahony', 'Fusion', FUSION_DEFAULTS)
+ANCHORS = ('VQF', 'BasicVQF', OFFLINE_VQF, 'Madgwick', 'Mahony', 'Fusion', FUSION_DEFAULTS)
 ALGORITHMS = (OURS, OURS_PLAIN) + ANCHORS
 
 
