@@ -12,6 +12,7 @@ batch of ``(B,)`` arrays. The steps, the credit to VQF and the conventions
 """
 
 import math
+import operator
 
 import numpy as np
 
@@ -33,6 +34,20 @@ __all__ = [
 ]
 
 MODES = ('6D', '9D')
+
+
+# A reader per field name, for one estimate's view (AhrsObserver.field):
+# the node reads several fields at every sample.
+_READERS = {}
+
+
+def _reader(name):
+    """``view -> value`` of one state field: a float, a vector a tuple of floats."""
+    path, size = STATE.path(name)
+    get = operator.attrgetter('.'.join(path))
+    if size == 1:
+        return lambda view: float(get(view))
+    return lambda view: tuple(float(v) for v in get(view))
 
 
 class AhrsObserver:
@@ -213,7 +228,10 @@ class AhrsObserver:
         :mod:`~ext_observer.core.ahrs.ahrs_state` (docs/layout.md).
         """
         if self.batch is None:
-            return STATE.get(self._view(self._states[0]), name)
+            read = _READERS.get(name)
+            if read is None:
+                read = _READERS[name] = _reader(name)
+            return read(self._view(self._states[0]))
         values = [STATE.get(h[0], name) for h in self._states]
         if isinstance(values[0], tuple):
             return tuple(np.array(v) for v in zip(*values))
