@@ -3,9 +3,9 @@ How good the raw-IMU estimate is now: a variance for its inclination and one for
 
 :class:`AttitudeUncertainty` runs beside
 :class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver` and is told, after
-each step, what the estimator did (interval, rate, rest, the heading gain
-of a field); from that alone it propagates the variance of the attitude
-error, as an error-state Kalman filter's covariance step does, with the
+each step, what the estimator did (interval, rate, rest, an inclination held
+on the gyro, the heading gain of a field); from that alone it propagates the
+variance of the attitude error, as an error-state Kalman filter's covariance step does, with the
 estimator's fixed gains. The model and its equations: docs/covariance.md
 ("The model"). :data:`~ext_observer.core.ahrs.ahrs_params.UNCERTAINTY_TABLE` its parameters; the per-sample
 arithmetic is :mod:`~ext_observer.core.ahrs.uncertainty_kernel`'s. Units
