@@ -390,8 +390,9 @@ def covariance_step(uh, dt, gx, gy, gz, w, x, y, z, rest, held, bias_var, clip_v
     The propagation over ``dt`` (the usual interval, s) with the rate
     ``g`` (rad/s, body) to the estimate ``(w, x, y, z)`` after the step
     (any nonzero norm), the bias at ``rest`` (1.0 or True; else 0.0), the
-    inclination ``held`` on the gyro (1.0; else 0.0) (:func:`uncertainty_propagate`); a hole's restart of the inclination's
-    mean (``hole_t0`` s, where ``hole_t0 ≥ 0``; :func:`uncertainty_restart`);
+    inclination ``held`` on the gyro (1.0; else 0.0) (:func:`uncertainty_propagate`);
+    a hole's restart of the inclination's mean (``hole_t0`` s, where
+    ``hole_t0 ≥ 0``; :func:`uncertainty_restart`);
     the estimator's bias variance ``bias_var`` ((rad/s)², 0: none;
     :func:`uncertainty_bias`); a clipped sample's ``clip_var`` (rad², 0:
     none; :func:`uncertainty_clipped`); a hole bridged, ``extra`` s beyond
