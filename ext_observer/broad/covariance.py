@@ -78,7 +78,8 @@ def run_trial(trial, mode, values=None):
         ``reference`` and ``dip`` (what the sample's field told the
         uncertainty model: NaN without one; ``gain0``, ``calibration0``,
         ``reference0`` and ``dip0`` for the field the start used),
-        ``rejected`` (a field came and did not correct the heading),
+        ``rejected`` (a field came and did not correct the heading), ``held``
+        (the inclination held on the gyro, the specific force rejected),
         ``bias_var`` (the estimator's bias variance, NaN when it learns no
         bias in motion), ``clip_var`` (what a sample at the gyro's range
         added to the variances), ``dt``.
@@ -93,7 +94,7 @@ def run_trial(trial, mode, values=None):
                                                'reference', 'dip', 'gain0', 'calibration0',
                                                'reference0', 'dip0', 'bias_var', 'clip_var')}
     out['state'] = np.full((n, 4), np.nan)
-    for key in ('rest', 'rejected', 'started'):
+    for key in ('rest', 'rejected', 'started', 'held'):
         out[key] = np.zeros(n, dtype=bool)
     gyr, acc = trial.gyr.tolist(), trial.acc.tolist()
     mag = (trial.mag * TESLA_PER_MICROTESLA).tolist() if mode == '9D' else None
@@ -107,6 +108,7 @@ def run_trial(trial, mode, values=None):
             out['tilt'][k], out['heading'][k] = estimate.covariance[0], estimate.covariance[8]
             out['started'][k] = not was_started or estimate.reason is not None
             out['rest'][k] = core.rest
+            out['held'][k] = core.held
             bias_var = core.bias_variance
             out['bias_var'][k] = math.nan if bias_var is None else bias_var
             out['clip_var'][k] = core.clip_variance
@@ -165,6 +167,7 @@ def replay(runs, params=None, ahrs_params=None):
     acc = (np.stack([stack(f'acc{j}', 0.0) for j in range(3)], axis=1)
            if all('acc0' in r for r in runs) else None)
     rest, started = stack('rest', 0.0), stack('started', 0.0)
+    held = stack('held', 0.0) if all('held' in r for r in runs) else None
     bias_var = stack('bias_var', np.nan) if all('bias_var' in r for r in runs) else None
     if bias_var is not None and not np.isfinite(bias_var).any():
         bias_var = None
@@ -197,7 +200,8 @@ def replay(runs, params=None, ahrs_params=None):
             tracker.step(dt, gyr[k], states[k], rest[k] > 0.5,
                          None if bias_var is None else np.nan_to_num(bias_var[k]),
                          None if clip_var is None else np.nan_to_num(clip_var[k]),
-                         None if acc is None else acc[k])
+                         None if acc is None else acc[k],
+                         held=None if held is None else held[k] > 0.5)
         cov = tracker.covariance
         tilt[k], heading[k] = cov[0], cov[8]
         apply(1, k)

@@ -85,6 +85,9 @@ class AhrsObserver:
         The gyro bias estimate (rad/s), body frame.
     rest : bool or ndarray
         Whether rest is detected.
+    held : bool or ndarray
+        Whether the last step held the inclination on the gyro (the specific
+        force rejected: ``accel_rejection``).
     mag_disturbed : bool or ndarray
         Whether the last magnetometer sample was rejected.
     calibration : MagCalibrator or None
@@ -367,6 +370,11 @@ class AhrsObserver:
     def rest(self):
         """Whether rest is detected."""
         return self._flag('rest.detected')
+
+    @property
+    def held(self):
+        """Whether the last step held the inclination on the gyro (the specific force rejected)."""
+        return self._flag('rej.time')
 
     @property
     def mag_disturbed(self):

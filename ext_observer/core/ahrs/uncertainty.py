@@ -3,9 +3,9 @@ How good the raw-IMU estimate is now: a variance for its inclination and one for
 
 :class:`AttitudeUncertainty` runs beside
 :class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver` and is told, after
-each step, what the estimator did (interval, rate, rest, the heading gain
-of a field); from that alone it propagates the variance of the attitude
-error, as an error-state Kalman filter's covariance step does, with the
+each step, what the estimator did (interval, rate, rest, an inclination held
+on the gyro, the heading gain of a field); from that alone it propagates the
+variance of the attitude error, as an error-state Kalman filter's covariance step does, with the
 estimator's fixed gains. The model and its equations: docs/covariance.md
 ("The model"). :data:`~ext_observer.core.ahrs.ahrs_params.UNCERTAINTY_TABLE` its parameters; the per-sample
 arithmetic is :mod:`~ext_observer.core.ahrs.uncertainty_kernel`'s. Units
@@ -279,7 +279,8 @@ class AttitudeUncertainty:
 
     # --- the steps ---------------------------------------------------------
 
-    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None, acc=None, hole=None):
+    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None, acc=None, hole=None,
+             held=None):
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
@@ -318,6 +319,11 @@ class AttitudeUncertainty:
             and the seconds the restarted inclination mean weighs the old as
             (negative: not restarted; :func:`~ext_observer.core.ahrs.uncertainty_kernel.
             uncertainty_restart`).
+        held : bool or ndarray, optional
+            Whether the estimator held the inclination on the gyro, the
+            specific force rejected (:attr:`AhrsObserver.held
+            <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.held>`): no
+            correction from it. None: not held.
 
         """
         if dt != self._u.coef.dt:
@@ -330,7 +336,7 @@ class AttitudeUncertainty:
         if self._compiled:
             self._kernel.covariance_step(
                 self._holder, float(dt), float(gx), float(gy), float(gz), float(w), float(x),
-                float(y), float(z), 1.0 if rest else 0.0,
+                float(y), float(z), 1.0 if rest else 0.0, 1.0 if held else 0.0,
                 0.0 if bias_var is None else float(bias_var),
                 0.0 if clip_var is None else float(clip_var), extra, hole_var, hole_t0,
                 float(ax), float(ay), float(az), acc is not None)
@@ -339,7 +345,7 @@ class AttitudeUncertainty:
         # kernel's order: the start's share last).
         many = acc is not None and any(np.ndim(v) for v in (w, x, y, z, ax, ay, az))
         self._kernel.covariance_step(
-            self._holder, dt, gx, gy, gz, w, x, y, z, rest,
+            self._holder, dt, gx, gy, gz, w, x, y, z, rest, 0.0 if held is None else held,
             0.0 if bias_var is None else bias_var, 0.0 if clip_var is None else clip_var,
             extra, hole_var, hole_t0, ax, ay, az, acc is not None and not many)
         if many:
