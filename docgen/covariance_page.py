@@ -318,7 +318,10 @@ about any axis (0.05 %: a body turning back and forth rectifies them into a
 drift with no net turn, 0.085 % of tuning trial 34's rotation); the two in
 quadrature are the held term `h`. Each field back shrinks `ψ` and `ρ` by
 `1 − κ` as it corrects the heading. Fields that come, used or rejected, add
-nothing to them.
+nothing to them. What the gyro alone added since the last field, `P_h`'s
+growth and `h²`, is what the first field back hands the estimator as the
+heading's doubt: the fields back correct it at that doubt's Kalman gain
+(raw_imu.md, "A field lost"), and κ above is that gain.
 
 **The heading's lag behind the fields.** What the model propagates is the error its
 noises explain; a drift it does not model (a gyro's scale error in fast turns, a

@@ -78,6 +78,11 @@ def build_parser():
                         help='instead: is the published orientation covariance honest? (our '
                              'estimator through the node\'s pipeline; with --docs, '
                              'DOCS_DIR/covariance.md and its figures)')
+    parser.add_argument('--field-gap', metavar='START:END',
+                        help='with --covariance, instead of its table: each trial in 9D with '
+                             'the field gone from START to END s into it (e.g. 60:120): the '
+                             "heading's mean e²/σ² with the field, within 2σ without it, its "
+                             'RMS error after the return against the run without a gap')
     parser.add_argument('--stress', action='store_true',
                         help='instead: the robustness benchmark, each trial (a) as recorded, '
                              '(b) cut at its first movement sample, (c) (b) plus a 1 °/s gyro '
@@ -158,7 +163,12 @@ def main(argv=None):
 
 def _covariance(args, argv, source, folder, trials, groups, progress):
     """The covariance benchmark (``--covariance``) on the trials read."""
-    from ext_observer.broad.covariance import report
+    from ext_observer.broad.covariance import field_gap, gap_table, parse_gap, report
+    if args.field_gap is not None:
+        gap = parse_gap(args.field_gap)
+        print(gap_table(field_gap(trials, groups, gap, workers=args.workers,
+                                  progress=progress), gap))
+        return 0
     meta = dict(source, command=shown_command(['python -m ext_observer broad', *argv]),
                 data=shown_path(folder), machine=_machine())
     # The covariance is the node's: its pipeline and uncertainty model count too.
@@ -231,6 +241,14 @@ def _check(args, anchors):
         return '--stress and --covariance are two benchmarks: one at a time'
     if (args.variants or args.param) and not args.stress:
         return '--variants and --param go with --stress'
+    if args.field_gap is not None:
+        if not args.covariance or args.docs:
+            return '--field-gap goes with --covariance (and writes no page)'
+        from ext_observer.broad.covariance import parse_gap
+        try:
+            parse_gap(args.field_gap)
+        except ValueError as error:
+            return f'--field-gap: {error}'
     try:
         _params(args.param)
     except ValueError as error:

@@ -224,7 +224,8 @@ IMU_FILTER_OWN = (
                   'A field lost: after this long without one (s, on the IMU\'s stamps) the '
                   'node warns (/diagnostics and the log, once per episode) and runs 6D, '
                   "the gyro holding the heading, its variance growing; the field's return "
-                  'brings the heading back at the rate of tau_mag, without a step '
+                  'brings the heading back at the Kalman gain of that variance, then of '
+                  'tau_mag, without a step '
                   '(docs/raw_imu.md#the-magnetometers-frame-and-a-lost-field). 0 = never warn.',
                   (0.0, 3600.0)),
     ParameterSpec('calibration_file', 'mag_calibration.yaml',

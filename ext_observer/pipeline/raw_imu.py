@@ -183,8 +183,12 @@ class RawImuEstimator:
                      r[6] * field[0] + r[7] * field[1] + r[8] * field[2])
         if dt is not None and 0.0 < self._mag_timeout < dt:
             # A field back after a loss: its gain is that of a regular
-            # interval, so that the heading returns at tau_mag's rate, not in one step.
+            # interval, so that the heading does not return in one step; the
+            # heading's doubt is what the gyro alone added since the last
+            # field, which the fields back correct with their Kalman gain.
             dt = self._field_dt
+            if self.core.initialized and self.uncertainty.started:
+                self.core.field_back(float(self.uncertainty.held_variance))
         elif dt is not None:
             self._field_dt = dt
         bx, by, bz = self._mag_bias

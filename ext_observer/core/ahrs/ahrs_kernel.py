@@ -37,8 +37,8 @@ from .hole_kernel import (HOLE_CALIBRATION, calibration_restart, clip_after, for
                           restart_weighted)
 from .bias_kernel import bias_reset, bias_variance
 from .magcal_kernel import mc_apply
-from .field_kernel import (ahrs_update_mag, cal_feed_reset, field_clipped, field_doubt,
-                           field_reset)
+from .field_kernel import (ahrs_update_mag, cal_feed_reset, field_back, field_clipped,
+                           field_doubt, field_reset)
 from .velocity_kernel import velocity_sample, velocity_step
 from .record import Group
 
@@ -340,6 +340,11 @@ def ahrs_update_acc_in(state, ax, ay, az):
 def ahrs_update_mag_in(state, mx, my, mz, dt):
     """:func:`~ext_observer.core.ahrs.field_kernel.ahrs_update_mag` on the record in ``state``."""
     ahrs_update_mag(state[0], mx, my, mz, dt)
+
+
+def field_back_in(state, var):
+    """:func:`~ext_observer.core.ahrs.field_kernel.field_back` on the record in ``state``."""
+    field_back(state[0], var)
 
 
 def ahrs_unbridged_in(state, gx, gy, gz, dt):

@@ -568,6 +568,19 @@ class AhrsObserver:
         return self._kernels.ahrs.ahrs_unbridged_in(self._states[0], float(gyr[0]), float(gyr[1]),
                                                  float(gyr[2]), float(dt))
 
+    def field_back(self, var):
+        """
+        A field back after a loss, the heading having gained ``var`` rad² on the gyro alone.
+
+        :func:`~ext_observer.core.ahrs.field_kernel.field_back`: the next
+        fields correct the heading with the gain of that doubt, judged
+        against the references and the calibration learned before. One
+        estimate only.
+        """
+        if self.batch is not None:
+            raise ValueError('field_back takes one estimate, not a batch')
+        self._kernels.ahrs.field_back_in(self._states[0], float(var))
+
     def _each(self, func, vector, *extra):
         if self.batch is None:
             func(self._states[0], *vector, *extra)

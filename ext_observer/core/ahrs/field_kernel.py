@@ -15,7 +15,7 @@ import math
 
 from .ahrs_filters import gain, rotate, rotation_matrix
 from .bias_kernel import bias_measure
-from .hole_kernel import calibration_restart, forget_wait
+from .hole_kernel import HOLE_CALIBRATION, calibration_restart, forget_wait
 from .magcal_kernel import mc_apply, mc_field, mc_learn
 from .small_matrix import vec3_at
 from .record import Group
@@ -323,6 +323,35 @@ def field_doubt(s, var):
         s.field.mag_used = 0.0
 
 
+def field_back(s, var):
+    """
+    A field back after a loss: the gyro alone carried the heading, which gained ``var`` rad².
+
+    What was learned before the loss still holds (the body carries its
+    magnet and its calibration with it): the references and the calibration
+    stay, and the returning fields are judged against them. The heading's
+    doubt takes ``var`` (the tilt's none: the accelerometer went on
+    correcting it), so the fields back correct the heading with the Kalman
+    gain of that doubt (:func:`_doubt_gain`); past :data:`HEADING_LOST` the
+    heading is taken afresh from their running mean, as after a hole. The
+    calibration follows the field afresh, as across a hole whose rotation
+    it cannot trust (more than
+    :data:`~ext_observer.core.ahrs.hole_kernel.HOLE_CALIBRATION`): what it
+    learned stays, the body's turn over the loss is not taught.
+    """
+    if s.par.use_mag == 0.0 or not var > 0.0:
+        return
+    if var > HOLE_CALIBRATION:
+        calibration_restart(s)
+    p = s.field.head_doubt + var
+    if p < HEADING_LOST:
+        s.field.head_doubt = p
+    else:
+        s.field.head_doubt = 0.0
+        s.field.tilt_doubt = 0.0
+        s.field.mag_used = 0.0
+
+
 def _doubt_gain(s, kap, norm, dip, psi, dt):
     """
     The heading gain while the gyro's losses are not corrected: at least the Kalman gain.
@@ -362,7 +391,11 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
     k = max(kap, p / (p + r))
     p = (1.0 - k) * (1.0 - k) * p + k * k * r
     k_mag = s.coef.k_mag
-    if p * (1.0 - k_mag) <= r * k_mag:  # P / (P + r) ≤ k_mag: the usual gain again
+    # The doubt ends where an undisturbed field's Kalman gain is the usual
+    # one, P / (P + r_u) ≤ k_mag: a field far off the references has a large
+    # r and a small gain, and says nothing of whether the doubt is gone.
+    ru = r0 + FIELD_HEADING_BIAS * FIELD_HEADING_BIAS * FIELD_CORRELATION / dt
+    if p * (1.0 - k_mag) <= ru * k_mag:
         p = 0.0
         s.field.tilt_doubt = 0.0
     s.field.head_doubt = p

@@ -22,7 +22,8 @@ from .ahrs_filters import rotate
 from .ahrs_params import UncertaintyParams
 from .compiled import entry_point
 from .record import Group
-from .uncertainty_kernel import HEADING_UNKNOWN, INNOVATION_TIME, UNC
+from .uncertainty_kernel import (GYRO_MOTION_SIGMA, GYRO_SCALE_SIGMA, HEADING_UNKNOWN,
+                                 INNOVATION_TIME, UNC)
 
 __all__ = [
     'AttitudeUncertainty',
@@ -423,6 +424,7 @@ class AttitudeUncertainty:
         held.yaw = a * held.yaw
         held.rotation = a * held.rotation
         held.field_age = 0.0 * held.field_age
+        held.ph = e.ph
         unknown = (1 - used) * unknown
         self.heading_set = self.heading_set | used
         c2 = calibration * calibration
@@ -534,6 +536,21 @@ class AttitudeUncertainty:
         return (k if k * count > 1.0 else 1.0 / count) if count >= 1 else 0.0
 
     # --- outputs -----------------------------------------------------------
+
+    @property
+    def held_variance(self):
+        """
+        The heading variance the gyro alone added since the last field, rad².
+
+        What the propagation added to ``P`` since (the gyro's noise, its
+        bias) and the held term of a field lost (the gyro's scale and axes
+        errors over the rotation since): what a field back has to correct.
+        """
+        u = self._u
+        scale = GYRO_SCALE_SIGMA * u.held.yaw
+        axes = GYRO_MOTION_SIGMA * u.held.rotation
+        grown = u.axes.ph - u.held.ph
+        return grown * (grown > 0.0) + scale * scale + axes * axes
 
     @property
     def tilt_variance(self):

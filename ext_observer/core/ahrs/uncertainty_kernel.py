@@ -106,6 +106,7 @@ UNC = Group('unc', "the attitude covariance's constants, its interval's coeffici
         ('yaw', 'rad', 'about the world vertical since the field was lost (signed); the fields '
          'back shrink it as they correct the heading'),
         ('rotation', 'rad', 'the same, the whole rotation (about any axis, unsigned)'),
+        ('ph', 'rad²', "the heading's P after the last field"),
     ]),
 ])
 

@@ -23,8 +23,9 @@ import pytest
 
 from ext_observer.core.ahrs import magcal_kernel
 from ext_observer.core.ahrs.ahrs_filters import rotate
-from ext_observer.core.ahrs.field_kernel import (HEADING_LOST, _doubt_gain, _turn_heading,
-                                                ahrs_update_mag, field_doubt)
+from ext_observer.core.ahrs.field_kernel import (FIELD_HEADING_BIAS, FIELD_HEADING_NOISE,
+                                                HEADING_LOST, _doubt_gain, _turn_heading,
+                                                ahrs_update_mag, field_back, field_doubt)
 from ext_observer.core.ahrs.bias_kernel import bias_measure
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.ahrs_state import STATE
@@ -502,3 +503,50 @@ def test_the_tilts_doubt_is_forgotten_at_the_inclinations_pace():
     assert _doubt_gain(s, 0.125, 2.0 * NORM, DIP, 0.0, dt) == 0.125
     tau = s.par.tau_acc + s.par.tau_acc_gain
     assert s.field.tilt_doubt == pytest.approx(0.01 * math.exp(-2.0 * dt / tau), rel=1e-12)
+
+
+def test_a_field_back_after_a_loss_doubts_the_heading_not_the_tilt_and_keeps_what_was_learned():
+    # The variance the gyro alone added is the heading's doubt (the tilt's
+    # none); the references and the calibration stay, the calibration
+    # follows the field afresh; past HEADING_LOST the heading is taken
+    # afresh from the next fields; in 6D nothing happens.
+    est = AhrsObserver(AhrsParams(), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = record(est)
+    ref = (s.field.ref[0], s.field.ref[1])
+    field_back(s, 0.0)
+    assert s.field.head_doubt == 0.0 and s.cal.fresh == 0.0
+    field_back(s, 0.25 * HEADING_LOST)
+    field_back(s, 0.5 * HEADING_LOST)
+    assert s.field.head_doubt == pytest.approx(0.75 * HEADING_LOST, rel=1e-12)
+    assert s.field.tilt_doubt == 0.0 and s.field.mag_used == 20.0
+    assert (s.field.ref[0], s.field.ref[1]) == ref and s.field.has_ref == 1.0
+    assert s.cal.fresh == 1.0 and s.cal_feed.wait == math.inf
+    field_back(s, 0.25 * HEADING_LOST)
+    assert (s.field.head_doubt, s.field.mag_used) == (0.0, 0.0)
+    six = AhrsObserver(AhrsParams(mag_cal=False), use_mag=False, compiled=False)
+    six.update(STILL, LEVEL, None, DT)
+    field_back(record(six), 0.1)
+    assert record(six).field.head_doubt == 0.0
+
+
+def test_a_field_off_the_references_does_not_end_the_doubt():
+    # Its own r is large (its deviation over cos²(dip)), so its Kalman gain
+    # is small; the doubt ends only where an undisturbed field's gain would
+    # be the usual one: P / (P + r_u) <= k_mag.
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = record(est)
+    k_mag = s.coef.k_mag
+    ru = FIELD_HEADING_NOISE ** 2 / DT + FIELD_HEADING_BIAS ** 2 / DT
+    p = 3.0 * ru * k_mag
+    s.field.head_doubt = p
+    dip = DIP + math.radians(9.0)  # off by less than mag_dip_th
+    k = _doubt_gain(s, k_mag, NORM, dip, 0.0, DT)
+    assert k == k_mag  # its own gain is below the usual one
+    assert s.field.head_doubt > 0.5 * p  # kept: P ← (1 − k)² P + k² r, not ended
+    s.field.head_doubt = 0.5 * ru * k_mag
+    _doubt_gain(s, k_mag, NORM, DIP, 0.0, DT)
+    assert s.field.head_doubt == 0.0
