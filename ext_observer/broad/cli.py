@@ -173,7 +173,8 @@ def _covariance(args, argv, source, folder, trials, groups, progress):
                 data=shown_path(folder), machine=_machine())
     # The covariance is the node's: its pipeline and uncertainty model count too.
     meta['dirty'] = bool(_git('status', '--porcelain', '--', *_ESTIMATOR_FILES,
-                              'ext_observer/core/ahrs/uncertainty.py', 'ext_observer/pipeline/raw_imu.py'))
+                              'ext_observer/core/ahrs/uncertainty.py',
+                              'ext_observer/pipeline/raw_imu.py'))
     modes = MODES if args.mode == 'both' else (args.mode,)
     summary, runs = report(trials, groups, meta, modes, workers=args.workers,
                            json_path=args.json, progress=progress)

@@ -205,7 +205,7 @@ class RawImuEstimator:
 
     def unbridged(self, gyr, dt):
         """
-        A hole of ``dt`` s too long to bridge (over ``max_dt``), closed by a sample of rate ``gyr``.
+        A hole of ``dt`` s too long to bridge (over ``max_dt``), ended by a sample of rate ``gyr``.
 
         The estimate holds and its covariance grows by the rotation the hole
         may have hidden (:meth:`AhrsObserver.unbridged
@@ -219,7 +219,7 @@ class RawImuEstimator:
             self.fields.restart()
 
     def velocity(self, velocity, dt=None):
-        """The body's velocity (m/s, IMU frame), ``dt`` s after the previous one (the velocity aid)."""
+        """The body's velocity (m/s, IMU frame) for the velocity aid, ``dt`` s after the last."""
         self.core.velocity(velocity, dt)
 
     def use_kernels(self, kernels):
@@ -529,7 +529,11 @@ class RawImuPipeline:
         return outcome, estimate
 
     def velocity(self, stamp, velocity):
-        """The body's velocity (ns, m/s; :class:`~ext_observer.pipeline.velocity_aid.VelocityInput`)."""
+        """
+        The body's velocity (ns, m/s).
+
+        See :class:`~ext_observer.pipeline.velocity_aid.VelocityInput`.
+        """
         return self._velocity.take(stamp, velocity)
 
     def field_silence(self):

@@ -167,7 +167,7 @@ def write_columns(path, names, array):
 
 
 def write_recording(path, recording):
-    """Write a :class:`~ext_observer.recordings.recording.Recording` with :data:`OUTPUT_COLUMNS`."""
+    """Write a :class:`~ext_observer.recordings.recording.Recording`: :data:`OUTPUT_COLUMNS`."""
     table = np.column_stack([recording.times, recording.quaternions,
                              recording.roll_pitch_yaw(), recording.rest.astype(float),
                              recording.mag_disturbed.astype(float)])

@@ -42,8 +42,8 @@ import warnings
 import numpy as np
 
 from ext_observer.pipeline.batch import hold_finite
-from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS, imu_filter_settings,
-                                                         mag_frame_rpy_text)
+from ext_observer.pipeline.imu_filter_parameters import (IMU_FILTER_PARAMETERS,
+                                                         imu_filter_settings, mag_frame_rpy_text)
 from ext_observer.pipeline.raw_imu import RawImuPipeline
 from ext_observer.pipeline.health import HEALTH_STATES, HealthWatch
 from ext_observer.pipeline.velocity_aid import with_velocity

@@ -333,7 +333,7 @@ def ahrs_reset_in(state):
 
 
 def ahrs_update_acc_in(state, ax, ay, az):
-    """:func:`~ext_observer.core.ahrs.gravity_kernel.ahrs_update_acc` on the record in ``state``."""
+    """:func:`~ext_observer.core.ahrs.gravity_kernel.ahrs_update_acc` on ``state``'s record."""
     ahrs_update_acc(state[0], ax, ay, az)
 
 
@@ -353,7 +353,7 @@ def ahrs_unbridged_in(state, gx, gy, gz, dt):
 
 
 def velocity_sample_in(state, vx, vy, vz, dt):
-    """:func:`~ext_observer.core.ahrs.velocity_kernel.velocity_sample` on the record in ``state``."""
+    """:func:`~ext_observer.core.ahrs.velocity_kernel.velocity_sample` on ``state``'s record."""
     velocity_sample(state[0], vx, vy, vz, dt)
 
 

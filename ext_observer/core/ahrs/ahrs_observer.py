@@ -57,8 +57,8 @@ class AhrsObserver:
     The steps are the functions of :mod:`~ext_observer.core.ahrs.ahrs_kernel` on
     one state per estimate (:data:`~ext_observer.core.ahrs.ahrs_state.STATE`):
     compiled by numba when it is installed (:mod:`~ext_observer.core.ahrs.compiled`),
-    plain Python otherwise, one source and the same results to the bit. With ``batch``, the estimates step one
-    after the other.
+    plain Python otherwise, one source and the same results to the bit. With
+    ``batch``, the estimates step one after the other.
 
     Parameters
     ----------
@@ -348,7 +348,7 @@ class AhrsObserver:
 
     @property
     def holes(self):
-        """Holes in the stream bridged so far (``hole_kernel``: intervals much longer than usual)."""
+        """Holes in the stream bridged so far (``hole_kernel``: intervals much over the usual)."""
         return self._count('hole.count')
 
     @property
@@ -358,7 +358,11 @@ class AhrsObserver:
 
     @property
     def hole_restart(self):
-        """After a hole: the seconds the inclination's restarted mean weighs the old as (−1: kept)."""
+        """
+        After a hole: the seconds the inclination's restarted mean weighs the old as.
+
+        −1: the mean kept.
+        """
         return self.field('hole.t0')
 
     @property

@@ -281,7 +281,7 @@ def field_reset(s):
 
 
 def cal_feed_reset(s):
-    """The calibration follows the field afresh (what it learned stays); nothing turned or applied."""
+    """The calibration follows the field afresh (what it learned stays); none turned or applied."""
     calibration_restart(s)
     if s.par.has_cal != 0.0:
         for i in range(3):

@@ -7,7 +7,8 @@ each step, what the estimator did (interval, rate, rest, an inclination held
 on the gyro, the heading gain of a field); from that alone it propagates the
 variance of the attitude error, as an error-state Kalman filter's covariance step does, with the
 estimator's fixed gains. The model and its equations: docs/covariance.md
-("The model"). :data:`~ext_observer.core.ahrs.ahrs_params.UNCERTAINTY_TABLE` its parameters; the per-sample
+("The model"). :data:`~ext_observer.core.ahrs.ahrs_params.UNCERTAINTY_TABLE`
+its parameters; the per-sample
 arithmetic is :mod:`~ext_observer.core.ahrs.uncertainty_kernel`'s. Units
 rad, s, rad/s, m/s²; every quantity a float, or an array ``(B,)`` for many
 recordings at once.
@@ -247,7 +248,7 @@ class AttitudeUncertainty:
             self._start_sample(dt, (0.0 * ax, 0.0 * ax, (ax * ax + ay * ay + az * az) ** 0.5))
 
     def _start_sample(self, dt, f):
-        """The start's share for a world-frame specific force ``f`` (floats, or arrays ``(B,)``)."""
+        """The start's share for a world-frame specific force ``f`` (floats, or arrays (B,))."""
         kernel = self._kernel
         fx, fy, fz = f
         if self._compiled or not np.ndim(fx):
