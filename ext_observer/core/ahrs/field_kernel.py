@@ -75,6 +75,10 @@ HEADING_LOST = math.radians(20.0) ** 2
 # σ: a field whose heading is further from the estimate than this many of
 # the doubt's and its own does not correct it (a disturbance).
 FIELD_GATE = 3.0
+# The heading's loss along a clipped stretch, per sample and axis, as a share
+# of the range's rotation: the rate beyond the range, uniform between none and
+# the range itself, has the RMS range / √3.
+CLIP_HEADING_SHARE = 1.0 / math.sqrt(3.0)
 # Where the Butterworth's two states (x, y, z each) start in S_LP.
 LP_STATES = (0, 3)
 
@@ -299,9 +303,19 @@ def field_forget(s):
 
 
 def field_clipped(s, var):
-    """A clipped gyro sample of variance ``var`` (rad² per axis): a doubt, and no calibration."""
+    """
+    A clipped gyro sample of variance ``var`` (rad² per axis): a doubt, and no calibration.
+
+    The rate beyond the range stays beyond it along a clipped stretch, so the
+    heading's losses add up as the inclination's do (``clip_after``): the
+    doubt's σ grows by :data:`CLIP_HEADING_SHARE` of the range's σ per
+    sample, its variance by the difference of the squares (:func:`field_doubt`).
+    """
     s.field.field_clipped = 1.0
-    field_doubt(s, var)
+    p = s.field.head_doubt
+    grow = math.sqrt(p) + CLIP_HEADING_SHARE * math.sqrt(var)
+    # σ ← σ + c √var: the variance grows by (σ + c √var)² − σ²
+    field_doubt(s, grow * grow - p)
 
 
 def field_doubt(s, var):
