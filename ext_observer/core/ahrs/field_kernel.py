@@ -376,7 +376,9 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
     k = max(kap, p / (p + r))
     p = (1.0 - k) * (1.0 - k) * p + k * k * r
     k_mag = s.coef.k_mag
-    if p * (1.0 - k_mag) <= r * k_mag:  # P / (P + r) ≤ k_mag: the usual gain again
+    # P / (P + r) ≤ k_mag: the usual gain again, once no clipped stretch is
+    # still adding to P (its samples' losses add up: clip_after)
+    if p * (1.0 - k_mag) <= r * k_mag and s.gyro.clip_left == 0.0:
         p = 0.0
         s.field.tilt_doubt = 0.0
     s.field.head_doubt = p
