@@ -351,7 +351,8 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
     size; a field of another norm is disturbed whatever the attitude. While
     the heading waits for the calibration, the field as given counts too
     (the wait starts again from it). Once ``P`` no longer moves the gain
-    above the usual one, the usual path resumes.
+    above the usual one (and no clipped stretch's recovery
+    runs, ``gyro.clip_left``), the usual path resumes.
     """
     tau = s.par.tau_acc + s.par.tau_acc_gain
     # T ← T exp(−2 dt / τ): the inclination's correction forgets the tilt error
