@@ -176,16 +176,17 @@ def _watch_clipping(s, gx, gy, gz):
     A sample at the gyro's range (:func:`clipped_variance`): distrust the gyro, lean on the others.
 
     The inclination's mean of the specific force starts again where the
-    stretch's error outweighs it (:func:`clip_after`), the heading from the
-    running mean of the next fields, and the magnetometer calibration does
-    not learn across the stretch.
+    stretch's error outweighs it (:func:`clip_after`); the heading's doubt
+    grows with the stretch (:func:`field_clipped`), so that the next fields
+    correct it with the Kalman gain of that doubt, and from their running
+    mean once the heading is lost; the magnetometer calibration does not
+    learn across the stretch.
     """
     var = clipped_variance(s, gx, gy, gz)
     clip_after(s, var)
     if var == 0.0:
         return
     field_clipped(s, var)
-    s.field.mag_used = 0.0
     forget_wait(s)
     calibration_restart(s)
 

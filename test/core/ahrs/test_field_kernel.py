@@ -23,9 +23,10 @@ import pytest
 
 from ext_observer.core.ahrs import magcal_kernel
 from ext_observer.core.ahrs.ahrs_filters import rotate
-from ext_observer.core.ahrs.field_kernel import (FIELD_HEADING_BIAS, FIELD_HEADING_NOISE,
-                                                HEADING_LOST, _doubt_gain, _turn_heading,
-                                                ahrs_update_mag, field_back, field_doubt)
+from ext_observer.core.ahrs.field_kernel import (CLIP_HEADING_SHARE, FIELD_HEADING_BIAS,
+                                                FIELD_HEADING_NOISE, HEADING_LOST, _doubt_gain,
+                                                _turn_heading, ahrs_update_mag, field_back,
+                                                field_clipped, field_doubt)
 from ext_observer.core.ahrs.bias_kernel import bias_measure
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.ahrs_state import STATE
@@ -452,6 +453,41 @@ def test_the_calibration_learns_nothing_from_a_clipped_stretch():
     assert calibration(est).fields > before
 
 
+def test_after_a_short_clip_the_heading_is_not_taken_afresh_from_a_bent_field():
+    # A level body turning at 0.5 rad/s past the gyro's range for 0.1 s
+    # (it loses about 5°), then for 1 s a field bent 30° in heading that
+    # the norm and dip tests cannot see (a magnet passing by). The clip's
+    # doubt (σ about 5°) weighs the fields with its Kalman gain and keeps
+    # them within its gate: the heading stays near its loss and the field
+    # takes the loss back once it is straight again, where taking the heading
+    # afresh from the fields after the clip followed the bend to 30°.
+    est = AhrsObserver(AhrsParams(mag_cal=False, gyro_range=RANGE), use_mag=True,
+                       compiled=False)
+    straight = world_field(NORM, DIP)
+    bent = world_field(NORM, DIP, math.radians(30.0))
+    yaw = 0.0
+
+    def step(rate, field=straight):
+        nonlocal yaw
+        yaw += rate * DT
+        est.update((0.0, 0.0, max(-RANGE, min(RANGE, rate))), LEVEL, body_field(field, yaw), DT)
+        return abs(wrap(yaw_of(est.q) - yaw))
+
+    for _ in range(300):
+        step(0.0)
+    for _ in range(500):
+        step(0.5)
+    for _ in range(10):
+        step(1.2 * RANGE)
+    assert est.clipped == 10
+    assert record(est).field.head_doubt > math.radians(3.0) ** 2
+    during = max(step(0.5, bent) for _ in range(100))
+    assert during < math.radians(10.0)
+    for _ in range(200):
+        after = step(0.5)
+    assert after < math.radians(3.0)
+
+
 def test_after_a_hole_the_heading_comes_back_from_the_field_as_its_doubt_allows():
     # A level body at rest, the field fixed; a 0.45 s hole hides a turn of
     # 16° (40 °/s for 0.4 s) that the bridge between two still samples
@@ -489,6 +525,26 @@ def test_the_gyros_losses_add_up_as_the_fields_doubt_until_the_heading_is_lost()
     assert s.field.tilt_doubt == pytest.approx(0.75 * HEADING_LOST, rel=1e-12)
     field_doubt(s, 0.25 * HEADING_LOST)
     assert (s.field.head_doubt, s.field.tilt_doubt, s.field.mag_used) == (0.0, 0.0, 0.0)
+
+
+def test_a_clipped_stretchs_losses_add_up_in_the_heading_doubts_sigma():
+    # Along a clipped stretch the rate stays beyond the range: each sample
+    # adds CLIP_HEADING_SHARE of its σ to the doubt's σ (not its variance to
+    # the variance), the tilt share alike, until the heading is lost.
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = record(est)
+    var = (RANGE * DT) ** 2
+    for n in range(1, 4):
+        field_clipped(s, var)
+        sigma = n * CLIP_HEADING_SHARE * RANGE * DT
+        assert s.field.head_doubt == pytest.approx(sigma * sigma, rel=1e-12)
+        assert s.field.tilt_doubt == pytest.approx(sigma * sigma, rel=1e-12)
+    assert s.field.field_clipped == 1.0 and s.field.mag_used == 20.0
+    while s.field.mag_used != 0.0:
+        field_clipped(s, var)
+    assert s.field.head_doubt == 0.0 and s.field.tilt_doubt == 0.0
 
 
 def test_the_tilts_doubt_is_forgotten_at_the_inclinations_pace():
