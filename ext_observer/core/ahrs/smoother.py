@@ -1,0 +1,332 @@
+"""
+Each sample's attitude from the whole recording: :func:`smooth_attitude`.
+
+A strapdown integration corrected by zero-phase averages: offline VQF's
+decomposition (D. Laidig, T. Seel, "VQF: Highly accurate IMU orientation
+estimation with bias estimation and magnetic disturbance rejection",
+Information Fusion 2023, arXiv:2203.17024, and ``offline_vqf.cpp`` of the
+``vqf`` package), with our estimator in it:
+
+1. the gyro bias at each sample from our online estimator
+   (:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`) run over
+   the recording and over the time-reversed one, the two estimates (of
+   disjoint data) weighted by their variances;
+2. the strapdown attitude ``q_g`` with that bias (body → a slowly drifting
+   frame I);
+3. the inclination: the specific force in I averaged over a window centred
+   on each sample (a uniform weight in time: the body's linear acceleration
+   averages to its change of velocity over the window), turned to the
+   vertical;
+4. the heading (9D): the field (with the online pass's calibration where it
+   applied one, from the first sample on) in the inclination-corrected
+   frame, its horizontal direction averaged over a wider window, each
+   sample weighted by how close its norm and dip stay to the field's at the
+   start of the recording, turned north.
+
+The windows are Gaussian-like (three box filters, cumulative sums), symmetric
+in time, so without delay; everything but the online passes is numpy on
+whole arrays. Conventions as the estimator's: ``(w, x, y, z)``, sensor →
+ENU, SI units. What each step gave on BROAD: docs/offline.md.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ..quaternion import conjugate, multiply, normalize, quaternion_from_rotation_vector
+from .ahrs_observer import AhrsObserver
+from .ahrs_params import AhrsParams
+
+__all__ = ['SmoothParams', 'smooth_attitude']
+
+
+@dataclasses.dataclass(frozen=True)
+class SmoothParams:
+    """
+    The smoother's settings (physical units; defaults chosen on BROAD's tuning trials).
+
+    Attributes
+    ----------
+    window_acc : float
+        s, σ of the window that averages the specific force in I.
+    window_mag : float
+        s, σ of the window that averages the field's horizontal direction.
+    window_far : float
+        s, σ of a wider window for the heading, for where the near one
+        holds only disturbed fields.
+    far_share : float
+        How much the wider window's samples count against the near one's
+        (per unit of window weight).
+    mag_sigma : float
+        A field sample whose norm deviates from the reference by this
+        fraction (or whose dip does by this many rad) weighs ``exp(−1/2)``
+        as much as an undisturbed one.
+    ref_time : float
+        s, the start of the recording that gives the field's reference
+        norm and dip (its medians).
+    bias_chunk : float
+        s between two readings of the online passes' bias estimates.
+    online : AhrsParams or None
+        The online passes' parameters (default: the shipped defaults).
+
+    """
+
+    window_acc: float = 2.0
+    window_mag: float = 30.0
+    window_far: float = 300.0
+    far_share: float = 0.01
+    mag_sigma: float = 0.02
+    ref_time: float = 2.0
+    bias_chunk: float = 0.5
+    online: AhrsParams = None
+
+    def __post_init__(self):
+        for name in ('window_acc', 'window_mag', 'window_far', 'mag_sigma', 'ref_time',
+                     'bias_chunk'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f'{name} must be positive and finite, got {value}')
+        if not (math.isfinite(self.far_share) and self.far_share >= 0.0):
+            raise ValueError(f'far_share must be finite and ≥ 0, got {self.far_share}')
+
+
+def smooth_attitude(gyr, acc, mag, rate, params=None):
+    """
+    Each sample's attitude from the whole recording (a smoothed estimate).
+
+    Parameters
+    ----------
+    gyr : array_like, shape (N, 3)
+        Angular rate, rad/s, body frame.
+    acc : array_like, shape (N, 3)
+        Specific force, m/s² (points up at rest).
+    mag : array_like, shape (N, 3), or None
+        Magnetic field (any unit); None: 6D (the heading follows the gyro
+        from the online estimator's first attitude).
+    rate : float
+        Sampling rate, Hz (samples evenly spaced, all finite).
+    params : SmoothParams, optional
+
+    Returns
+    -------
+    q : ndarray, shape (N, 4)
+        Unit quaternions ``(w, x, y, z)``, sensor → ENU.
+    cov : None
+        No covariance yet (the return keeps its place).
+
+    Raises
+    ------
+    ValueError
+        For arrays of another shape, non-finite samples or a bad rate.
+
+    """
+    p = params if params is not None else SmoothParams()
+    gyr, acc, mag = _checked(gyr, acc, mag, rate)
+    dt = 1.0 / float(rate)
+    bias, first, calibration = _bias_both_ways(gyr, acc, mag, dt, p)
+    q = _strapdown(gyr - bias, dt, first)
+    q = _inclination(q, acc, rate, p)
+    if mag is not None:
+        q = _heading(q, calibration(mag), rate, p)
+    return q, None
+
+
+def _checked(gyr, acc, mag, rate):
+    gyr = np.asarray(gyr, dtype=float)
+    acc = np.asarray(acc, dtype=float)
+    arrays = [('gyr', gyr), ('acc', acc)]
+    if mag is not None:
+        mag = np.asarray(mag, dtype=float)
+        arrays.append(('mag', mag))
+    for name, a in arrays:
+        if a.ndim != 2 or a.shape[1] != 3:
+            raise ValueError(f'{name} must have shape (N, 3), got {a.shape}')
+        if a.shape[0] != gyr.shape[0]:
+            raise ValueError(f'{name} has {a.shape[0]} samples, gyr {gyr.shape[0]}')
+        if not np.isfinite(a).all():
+            raise ValueError(f'{name} has non-finite samples')
+    if len(gyr) < 2:
+        raise ValueError(f'a recording needs at least 2 samples, got {len(gyr)}')
+    if not (math.isfinite(rate) and rate > 0.0):
+        raise ValueError(f'rate must be positive and finite, got {rate}')
+    return gyr, acc, mag
+
+
+def _bias_pass(gyr, acc, mag, dt, p):
+    """
+    The online estimator over the recording, its bias read every ``bias_chunk``.
+
+    Returns the sample index of each reading (K,), the biases (K, 3), their
+    variances (K, 3), the first estimate (4,) and the estimator (its state
+    at the end).
+    """
+    est = AhrsObserver(p.online, use_mag=mag is not None)
+    n = len(gyr)
+    step = max(1, int(round(p.bias_chunk / dt)))
+    ends = np.append(np.arange(step, n, step), n)
+    biases, variances = np.empty((len(ends), 3)), np.empty((len(ends), 3))
+    start, first = 0, None
+    for i, end in enumerate(ends):
+        q = est.run(gyr[start:end], acc[start:end], None if mag is None else mag[start:end], dt)
+        if first is None:
+            first = q[0]
+        biases[i] = est.bias
+        variances[i] = np.square(est.bias_std)
+        start = end
+    return ends - 1, biases, variances, first, est
+
+
+def _bias_both_ways(gyr, acc, mag, dt, p):
+    """
+    The bias at each sample from the recording up to it and after it.
+
+    Time-reversed, the gyro reads ``−ω − b``: the reversed pass's bias is
+    negated back. Each sample takes the variance-weighted mean of the two
+    (VQF's offline form does so with its own filter). Also returns the
+    forward pass's first estimate and the field's calibration (a function
+    of the raw field).
+    """
+    n = len(gyr)
+    index_f, b_f, v_f, first, forward = _bias_pass(gyr, acc, mag, dt, p)
+    index_b, b_b, v_b, _, _ = _bias_pass(-gyr[::-1], acc[::-1],
+                                         None if mag is None else mag[::-1], dt, p)
+    # Reading i of the reversed pass holds the samples from n − 1 − index_b[i] on.
+    index_b = (n - 1 - index_b)[::-1]
+    b_b, v_b = -b_b[::-1], v_b[::-1]
+    samples = np.arange(n)
+    bias = np.empty((n, 3))
+    for axis in range(3):
+        bf = np.interp(samples, index_f, b_f[:, axis])
+        vf = np.interp(samples, index_f, v_f[:, axis])
+        bb = np.interp(samples, index_b, b_b[:, axis])
+        vb = np.interp(samples, index_b, v_b[:, axis])
+        bias[:, axis] = (bf * vb + bb * vf) / (vf + vb)
+    return bias, first, _calibration(forward)
+
+
+def _calibration(est):
+    """
+    The raw field → the calibrated field, by the online pass's calibration at its end.
+
+    That calibration has seen the whole recording; it applies from the first
+    sample. Where the online pass applied none (off, or not worth applying:
+    ``mag_cal_deadband``), the field as given.
+    """
+    cal = est.calibration
+    if cal is None or not cal.applied:
+        return lambda mag: mag
+    inverse = np.linalg.inv(cal.soft_iron)
+    offset = cal.bias
+    return lambda mag: (mag - offset) @ inverse.T
+
+
+def _strapdown(rate, dt, first):
+    """
+    ``q_k = q_{k−1} ⊗ exp(ω_k dt / 2)`` from ``q_0 = first``, on whole arrays.
+
+    A blocked scan: the running products within blocks of about √N samples
+    (one product per column, over all blocks at once), then the blocks'
+    running products, then each block's products from its start's.
+    """
+    n = len(rate)
+    step = quaternion_from_rotation_vector(rate * dt)
+    step[0] = normalize(np.asarray(first, dtype=float))
+    size = max(1, int(math.ceil(math.sqrt(n))))
+    blocks = -(-n // size)
+    padded = np.zeros((blocks * size, 4))
+    padded[:, 0] = 1.0
+    padded[:n] = step
+    within = padded.reshape(blocks, size, 4)
+    for j in range(1, size):
+        within[:, j] = multiply(within[:, j - 1], within[:, j])
+    before = np.empty((blocks, 4))
+    before[0] = (1.0, 0.0, 0.0, 0.0)
+    for i in range(1, blocks):
+        before[i] = multiply(before[i - 1], within[i - 1, -1])
+    return normalize(multiply(before[:, None, :], within).reshape(-1, 4)[:n])
+
+
+def _rotate(q, v):
+    """The vectors ``v`` (N, 3) rotated by the unit quaternions ``q`` (N, 4): ``q ⊗ v ⊗ q̄``."""
+    pure = np.concatenate((np.zeros((len(v), 1)), v), axis=1)
+    return multiply(multiply(q, pure), conjugate(q))[:, 1:]
+
+
+def _about_vertical(angle):
+    """Unit quaternions (N, 4) of rotations by ``angle`` (N,) rad about the world's z axis."""
+    r = np.zeros((len(angle), 4))
+    r[:, 0] = np.cos(0.5 * angle)
+    r[:, 3] = np.sin(0.5 * angle)
+    return r
+
+
+def _box(x, lo, hi):
+    """Sums of ``x`` (along axis 0) over the sample ranges ``[lo, hi)``."""
+    c = np.concatenate((np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)))
+    return c[hi] - c[lo]
+
+
+def _sums(x, weight, sigma_samples):
+    """
+    ``Σ K w x`` and ``Σ K w`` over a Gaussian-like window ``K`` of σ samples.
+
+    Three centred box filters of ``2 h + 1`` samples (``h`` ≈ σ: a window of
+    variance σ²), applied alike to ``weight x`` and ``weight``: zero phase,
+    truncated at the ends.
+    """
+    n = len(x)
+    h = max(1, int(round(sigma_samples)))
+    index = np.arange(n)
+    lo, hi = np.maximum(index - h, 0), np.minimum(index + h + 1, n)
+    num = weight[:, None] * x
+    den = weight
+    for _ in range(3):
+        num = _box(num, lo, hi)
+        den = _box(den, lo, hi)
+    return num, den
+
+
+def _average(x, weight, sigma_samples, far=None):
+    """
+    The weighted mean of ``x`` (N, k) over a window of σ samples around each.
+
+    ``far``: ``(σ_far, share)``, a second, wider window whose weights count
+    ``share`` as much (per unit of window weight): where the near window
+    holds no weight, the far one decides.
+    """
+    num, den = _sums(x, weight, sigma_samples)
+    if far is not None and far[1] > 0.0:
+        num_far, den_far = _sums(x, weight, far[0])
+        scale = far[1] * sigma_samples / far[0]
+        num = num + scale * num_far
+        den = den + scale * den_far
+    return num / np.maximum(den, np.finfo(float).tiny)[:, None]
+
+
+def _inclination(q, acc, rate, p):
+    """``c ⊗ q``: ``c``, the smallest rotation turning the averaged specific force in I up."""
+    a_i = _rotate(q, acc)
+    mean = _average(a_i, np.ones(len(q)), p.window_acc * rate)
+    up = mean / np.linalg.norm(mean, axis=1, keepdims=True)
+    # (1 + up·z, up × z) normalized: the rotation by the angle between up and z about up × z.
+    c = np.stack((1.0 + up[:, 2], up[:, 1], -up[:, 0], np.zeros(len(up))), axis=1)
+    return normalize(multiply(normalize(c), q))
+
+
+def _heading(q, mag, rate, p):
+    """``r ⊗ q``: ``r``, about the vertical, turns the averaged horizontal field north (+y)."""
+    m = _rotate(q, mag)
+    norm = np.linalg.norm(m, axis=1)
+    horizontal = np.hypot(m[:, 0], m[:, 1])
+    dip = np.arctan2(m[:, 2], horizontal)
+    start = slice(0, max(1, int(round(p.ref_time * rate))))
+    ref_norm = float(np.median(norm[start]))
+    ref_dip = float(np.median(dip[start]))
+    z = (np.square((norm - ref_norm) / (p.mag_sigma * ref_norm))
+         + np.square((dip - ref_dip) / p.mag_sigma))
+    weight = np.exp(-0.5 * np.minimum(z, 1400.0))
+    unit = m[:, :2] / np.maximum(horizontal, np.finfo(float).tiny)[:, None]
+    mean = _average(unit, weight, p.window_mag * rate, (p.window_far * rate, p.far_share))
+    # The rotation by δ about z takes (sin δ, cos δ)·|h| to (0, |h|): north.
+    return normalize(multiply(_about_vertical(np.arctan2(mean[:, 0], mean[:, 1])), q))
