@@ -7,10 +7,11 @@ estimation with bias estimation and magnetic disturbance rejection",
 Information Fusion 2023, arXiv:2203.17024, and ``offline_vqf.cpp`` of the
 ``vqf`` package), with our estimator in it:
 
-1. the gyro bias at each sample from our online estimator
-   (:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`) run over
-   the recording and over the time-reversed one, the two estimates (of
-   disjoint data) weighted by their variances;
+1. the gyro bias from our online estimator
+   (:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`): its
+   estimate at the end of the recording, or (``bias='both'``) each
+   sample's from the passes over the recording and over the time-reversed
+   one, the two (of disjoint data) weighted by their variances;
 2. the strapdown attitude ``q_g`` with that bias (body → a slowly drifting
    frame I);
 3. the inclination: the specific force in I averaged over a window centred
@@ -65,8 +66,13 @@ class SmoothParams:
     ref_time : float
         s, the start of the recording that gives the field's reference
         norm and dip (its medians).
+    bias : {'end', 'both'}
+        The gyro bias: the online pass's at its end, for every sample; or
+        each sample's from the passes over the recording and over the
+        time-reversed one (for a bias that wanders; twice the time).
     bias_chunk : float
-        s between two readings of the online passes' bias estimates.
+        s between two readings of the online passes' bias estimates
+        (``bias='both'``).
     online : AhrsParams or None
         The online passes' parameters (default: the shipped defaults).
 
@@ -78,6 +84,7 @@ class SmoothParams:
     far_share: float = 0.01
     mag_sigma: float = 0.02
     ref_time: float = 2.0
+    bias: str = 'end'
     bias_chunk: float = 0.5
     online: AhrsParams = None
 
@@ -87,6 +94,8 @@ class SmoothParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be positive and finite, got {value}')
+        if self.bias not in ('end', 'both'):
+            raise ValueError(f"bias must be 'end' or 'both', got {self.bias!r}")
         if not (math.isfinite(self.far_share) and self.far_share >= 0.0):
             raise ValueError(f'far_share must be finite and ≥ 0, got {self.far_share}')
 
@@ -124,7 +133,7 @@ def smooth_attitude(gyr, acc, mag, rate, params=None):
     p = params if params is not None else SmoothParams()
     gyr, acc, mag = _checked(gyr, acc, mag, rate)
     dt = 1.0 / float(rate)
-    bias, first, calibration = _bias_both_ways(gyr, acc, mag, dt, p)
+    bias, first, calibration = _bias(gyr, acc, mag, dt, p)
     q = _strapdown(gyr - bias, dt, first)
     q = _inclination(q, acc, rate, p)
     if mag is not None:
@@ -175,6 +184,20 @@ def _bias_pass(gyr, acc, mag, dt, p):
         variances[i] = np.square(est.bias_std)
         start = end
     return ends - 1, biases, variances, first, est
+
+
+def _bias(gyr, acc, mag, dt, p):
+    """
+    The gyro bias (N, 3) or (3,), the first attitude and the field's calibration.
+
+    ``bias='end'``: one online pass; its bias at the end (it has seen the
+    whole recording) for every sample. ``'both'``: :func:`_bias_both_ways`.
+    """
+    if p.bias == 'both':
+        return _bias_both_ways(gyr, acc, mag, dt, p)
+    est = AhrsObserver(p.online, use_mag=mag is not None)
+    q = est.run(gyr, acc, mag, dt)
+    return np.array(est.bias), q[0], _calibration(est)
 
 
 def _bias_both_ways(gyr, acc, mag, dt, p):
@@ -248,9 +271,15 @@ def _strapdown(rate, dt, first):
 
 
 def _rotate(q, v):
-    """The vectors ``v`` (N, 3) rotated by the unit quaternions ``q`` (N, 4): ``q ⊗ v ⊗ q̄``."""
-    pure = np.concatenate((np.zeros((len(v), 1)), v), axis=1)
-    return multiply(multiply(q, pure), conjugate(q))[:, 1:]
+    """
+    The vectors ``v`` (N, 3) rotated by the unit quaternions ``q`` (N, 4): ``q ⊗ v ⊗ q̄``.
+
+    As ``v + w t + u × t`` with ``t = 2 u × v`` (``q = (w, u)``).
+    """
+    w = q[:, :1]
+    u = q[:, 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
 
 
 def _about_vertical(angle):
@@ -263,7 +292,9 @@ def _about_vertical(angle):
 
 def _box(x, lo, hi):
     """Sums of ``x`` (along axis 0) over the sample ranges ``[lo, hi)``."""
-    c = np.concatenate((np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)))
+    c = np.empty((len(x) + 1,) + x.shape[1:])
+    c[0] = 0.0
+    np.cumsum(x, axis=0, out=c[1:])
     return c[hi] - c[lo]
 
 
