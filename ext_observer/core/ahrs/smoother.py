@@ -66,6 +66,11 @@ class SmoothParams:
     ref_time : float
         s, the start of the recording that gives the field's reference
         norm and dip (its medians).
+    delay : float
+        s, how late the sensor's samples are on the motion (e.g. the group
+        delay of its low-pass filters): each sample's attitude is read
+        this much later on the smoothed one, as only a smoother can. 0:
+        none.
     bias : {'end', 'both'}
         The gyro bias: the online pass's at its end, for every sample; or
         each sample's from the passes over the recording and over the
@@ -85,6 +90,7 @@ class SmoothParams:
     mag_sigma: float = 0.02
     ref_time: float = 2.0
     bias: str = 'end'
+    delay: float = 0.0
     bias_chunk: float = 0.5
     online: AhrsParams = None
 
@@ -94,6 +100,8 @@ class SmoothParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be positive and finite, got {value}')
+        if not math.isfinite(self.delay):
+            raise ValueError(f'delay must be finite, got {self.delay}')
         if self.bias not in ('end', 'both'):
             raise ValueError(f"bias must be 'end' or 'both', got {self.bias!r}")
         if not (math.isfinite(self.far_share) and self.far_share >= 0.0):
@@ -138,7 +146,25 @@ def smooth_attitude(gyr, acc, mag, rate, params=None):
     q = _inclination(q, acc, rate, p)
     if mag is not None:
         q = _heading(q, calibration(mag), rate, p)
+    if p.delay:
+        q = _ahead(q, p.delay * rate)
     return q, None
+
+
+def _ahead(q, samples):
+    """
+    ``q`` read ``samples`` later (may be fractional or negative), held at the ends.
+
+    Between two samples, the normalized linear interpolation (the steps are
+    small).
+    """
+    n = len(q)
+    at = np.clip(np.arange(n) + samples, 0.0, n - 1.0)
+    lo = np.minimum(np.floor(at).astype(np.int64), n - 2)
+    frac = (at - lo)[:, None]
+    a, b = q[lo], q[lo + 1]
+    b = np.where(np.einsum('ij,ij->i', a, b)[:, None] < 0.0, -b, b)
+    return normalize((1.0 - frac) * a + frac * b)
 
 
 def _checked(gyr, acc, mag, rate):
