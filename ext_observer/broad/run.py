@@ -5,8 +5,9 @@ Our estimator runs as one batched call over every trial and mode
 (``estimate_batch`` of :mod:`ext_observer.core.ahrs.ahrs_observer`, with its shipped
 defaults); the anchors, and our smoothed estimate when asked
 (:func:`~ext_observer.core.ahrs.smoother.smooth_attitude`), run one
-recording per task, in processes when ``jobs > 1``. Only the scores, the norms of our raw estimates, the times and
-the per-sample errors of one trial (for the figure) are kept.
+recording per task, in processes when ``jobs > 1``. Only the scores, the
+norms of our raw estimates, the times and the per-sample errors of one
+trial (for the figure) are kept.
 """
 
 import sys

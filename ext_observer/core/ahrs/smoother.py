@@ -286,14 +286,16 @@ def _strapdown(rate, dt, first):
     padded = np.zeros((blocks * size, 4))
     padded[:, 0] = 1.0
     padded[:n] = step
-    within = padded.reshape(blocks, size, 4)
+    # Column j holds the j-th sample of every block, contiguous.
+    within = np.ascontiguousarray(padded.reshape(blocks, size, 4).transpose(1, 0, 2))
     for j in range(1, size):
-        within[:, j] = multiply(within[:, j - 1], within[:, j])
+        within[j] = multiply(within[j - 1], within[j])
     before = np.empty((blocks, 4))
     before[0] = (1.0, 0.0, 0.0, 0.0)
     for i in range(1, blocks):
-        before[i] = multiply(before[i - 1], within[i - 1, -1])
-    return normalize(multiply(before[:, None, :], within).reshape(-1, 4)[:n])
+        before[i] = multiply(before[i - 1], within[-1, i - 1])
+    q = multiply(before[None, :, :], within).transpose(1, 0, 2).reshape(-1, 4)[:n]
+    return normalize(q)
 
 
 def _rotate(q, v):
@@ -316,12 +318,15 @@ def _about_vertical(angle):
     return r
 
 
-def _box(x, lo, hi):
-    """Sums of ``x`` (along axis 0) over the sample ranges ``[lo, hi)``."""
-    c = np.empty((len(x) + 1,) + x.shape[1:])
-    c[0] = 0.0
-    np.cumsum(x, axis=0, out=c[1:])
-    return c[hi] - c[lo]
+def _box(x, h):
+    """Sums of ``x`` (along axis 0) over ``[k − h, k + h]`` at each sample ``k``, truncated."""
+    n = len(x)
+    c = np.empty((n + 2 * h + 1,) + x.shape[1:])
+    c[:h + 1] = 0.0
+    np.cumsum(x, axis=0, out=c[h + 1:n + h + 1])
+    c[n + h + 1:] = c[n + h]
+    # c[h + 1 + k] is the sum up to sample k; before the first, 0; past the last, all.
+    return c[2 * h + 1:] - c[:n]
 
 
 def _sums(x, weight, sigma_samples):
@@ -332,15 +337,12 @@ def _sums(x, weight, sigma_samples):
     variance σ²), applied alike to ``weight x`` and ``weight``: zero phase,
     truncated at the ends.
     """
-    n = len(x)
     h = max(1, int(round(sigma_samples)))
-    index = np.arange(n)
-    lo, hi = np.maximum(index - h, 0), np.minimum(index + h + 1, n)
     num = weight[:, None] * x
     den = weight
     for _ in range(3):
-        num = _box(num, lo, hi)
-        den = _box(den, lo, hi)
+        num = _box(num, h)
+        den = _box(den, h)
     return num, den
 
 
