@@ -65,7 +65,9 @@ class SmoothParams:
         as much as an undisturbed one.
     ref_time : float
         s, the start of the recording that gives the field's reference
-        norm and dip (its medians).
+        norm and dip (its medians); 0: the most common norm and dip of the
+        whole recording instead (for a recording that may start in a
+        disturbed field).
     delay : float
         s, how late the sensor's samples are on the motion (e.g. the group
         delay of its low-pass filters): each sample's attitude is read
@@ -95,11 +97,12 @@ class SmoothParams:
     online: AhrsParams = None
 
     def __post_init__(self):
-        for name in ('window_acc', 'window_mag', 'window_far', 'mag_sigma', 'ref_time',
-                     'bias_chunk'):
+        for name in ('window_acc', 'window_mag', 'window_far', 'mag_sigma', 'bias_chunk'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be positive and finite, got {value}')
+        if not (math.isfinite(self.ref_time) and self.ref_time >= 0.0):
+            raise ValueError(f'ref_time must be finite and ≥ 0, got {self.ref_time}')
         if not math.isfinite(self.delay):
             raise ValueError(f'delay must be finite, got {self.delay}')
         if self.bias not in ('end', 'both'):
@@ -379,9 +382,12 @@ def _heading(q, mag, rate, p):
     norm = np.linalg.norm(m, axis=1)
     horizontal = np.hypot(m[:, 0], m[:, 1])
     dip = np.arctan2(m[:, 2], horizontal)
-    start = slice(0, max(1, int(round(p.ref_time * rate))))
-    ref_norm = float(np.median(norm[start]))
-    ref_dip = float(np.median(dip[start]))
+    if p.ref_time == 0.0:
+        ref_norm, ref_dip = _most_common(norm, dip, p.mag_sigma)
+    else:
+        start = slice(0, max(1, int(round(p.ref_time * rate))))
+        ref_norm = float(np.median(norm[start]))
+        ref_dip = float(np.median(dip[start]))
     z = (np.square((norm - ref_norm) / (p.mag_sigma * ref_norm))
          + np.square((dip - ref_dip) / p.mag_sigma))
     weight = np.exp(-0.5 * np.minimum(z, 1400.0))
@@ -389,3 +395,24 @@ def _heading(q, mag, rate, p):
     mean = _average(unit, weight, p.window_mag * rate, (p.window_far * rate, p.far_share))
     # The rotation by δ about z takes (sin δ, cos δ)·|h| to (0, |h|): north.
     return normalize(multiply(_about_vertical(np.arctan2(mean[:, 0], mean[:, 1])), q))
+
+
+def _most_common(norm, dip, sigma, candidates=64, samples=20000):
+    """
+    The (norm, dip) that the most samples lie near: the mode, under the weights' kernel.
+
+    The candidates are quantiles of the norm and of the dip (``candidates``
+    of each); the samples, at most ``samples`` evenly spread.
+    """
+    step = max(1, len(norm) // samples)
+    n, d = norm[::step], dip[::step]
+    pick = np.linspace(0, len(n) - 1, candidates).astype(np.int64)
+    order = np.argsort(n)
+    cn, cd = n[order][pick], d[order][pick]
+    order = np.argsort(d)
+    cn = np.concatenate((cn, n[order][pick]))
+    cd = np.concatenate((cd, d[order][pick]))
+    z = (np.square((n[None, :] - cn[:, None]) / (sigma * cn[:, None]))
+         + np.square((d[None, :] - cd[:, None]) / sigma))
+    best = int(np.argmax(np.exp(-0.5 * np.minimum(z, 1400.0)).sum(axis=1)))
+    return float(cn[best]), float(cd[best])

@@ -40,6 +40,14 @@ def test_the_smoothed_estimate_is_ahead_of_the_online_one(moving, use_mag):
         assert rms(smoothed[0]) < rms(ours[0]) and rms(smoothed[0]) < 1.0  # total
 
 
+def test_a_field_disturbed_at_the_start_leaves_the_heading_right():
+    truth, gyr, acc, mag = synthetic(seconds=30.0, accel=1.0, seed=4, disturb=(0.0, 8.0, 30.0))
+    online = estimate_batch([gyr], [acc], [mag], [RATE], [True])[0]
+    for ref_time in (2.0, 0.0):  # the start's field, the most common one
+        q, _ = smooth_attitude(gyr, acc, mag, RATE, SmoothParams(ref_time=ref_time))
+        assert rms(errors_deg(q, truth)[1]) < min(0.5, rms(errors_deg(online, truth)[1]))
+
+
 def test_a_constant_gyro_bias_is_recovered_from_both_directions(moving):
     _, gyr, acc, mag = moving
     p = SmoothParams(bias='both')
@@ -103,5 +111,7 @@ def test_bad_input_is_refused(args, match):
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError, match='window_acc must be positive'):
         SmoothParams(window_acc=0.0)
+    with pytest.raises(ValueError, match='ref_time must be finite and ≥ 0'):
+        SmoothParams(ref_time=-1.0)
     with pytest.raises(ValueError, match="bias must be 'end' or 'both'"):
         SmoothParams(bias='middle')
