@@ -382,12 +382,14 @@ def _heading(q, mag, rate, p):
     norm = np.linalg.norm(m, axis=1)
     horizontal = np.hypot(m[:, 0], m[:, 1])
     dip = np.arctan2(m[:, 2], horizontal)
-    if p.ref_time == 0.0:
-        ref_norm, ref_dip = _most_common(norm, dip, p.mag_sigma)
-    else:
-        start = slice(0, max(1, int(round(p.ref_time * rate))))
+    if not np.any(horizontal > 0.0):
+        return q  # no field, no heading: the strapdown's
+    start = slice(0, max(1, int(round(p.ref_time * rate))))
+    if p.ref_time > 0.0 and np.median(norm[start]) > 0.0:
         ref_norm = float(np.median(norm[start]))
         ref_dip = float(np.median(dip[start]))
+    else:
+        ref_norm, ref_dip = _most_common(norm, dip, p.mag_sigma)
     z = (np.square((norm - ref_norm) / (p.mag_sigma * ref_norm))
          + np.square((dip - ref_dip) / p.mag_sigma))
     weight = np.exp(-0.5 * np.minimum(z, 1400.0))
@@ -402,10 +404,12 @@ def _most_common(norm, dip, sigma, candidates=64, samples=20000):
     The (norm, dip) that the most samples lie near: the mode, under the weights' kernel.
 
     The candidates are quantiles of the norm and of the dip (``candidates``
-    of each); the samples, at most ``samples`` evenly spread.
+    of each); the samples (those with a field), at most about ``samples``
+    evenly spread.
     """
-    step = max(1, len(norm) // samples)
-    n, d = norm[::step], dip[::step]
+    some = np.flatnonzero(norm > 0.0)
+    some = some[::max(1, len(some) // samples)]
+    n, d = norm[some], dip[some]
     pick = np.linspace(0, len(n) - 1, candidates).astype(np.int64)
     order = np.argsort(n)
     cn, cd = n[order][pick], d[order][pick]
