@@ -32,12 +32,15 @@ ENU, SI units. What each step gave on BROAD: docs/offline.md.
 
 import dataclasses
 import math
+import os
 
 import numpy as np
 
 from ..quaternion import conjugate, multiply, normalize, quaternion_from_rotation_vector
+from .ahrs_filters import quat_multiply
 from .ahrs_observer import AhrsObserver
 from .ahrs_params import AhrsParams
+from .compiled import compiled_name, wanted
 
 __all__ = ['SmoothParams', 'smooth_attitude']
 
@@ -275,11 +278,29 @@ def _calibration(est):
 
 def _strapdown(rate, dt, first):
     """
-    ``q_k = q_{k−1} ⊗ exp(ω_k dt / 2)`` from ``q_0 = first``, on whole arrays.
+    ``q_k = q_{k−1} ⊗ exp(ω_k dt / 2)`` from ``q_0 = first``, each normalized.
 
-    A blocked scan: the running products within blocks of about √N samples
-    (one product per column, over all blocks at once), then the blocks'
-    running products, then each block's products from its start's.
+    One compiled loop where numba is wanted (:func:`_integrate`); else
+    :func:`_strapdown_blocked`, numpy on whole arrays. The two agree to
+    rounding.
+    """
+    loop = _compiled_loop()
+    if loop is None:
+        return _strapdown_blocked(rate, dt, first)
+    out = np.empty((len(rate), 4))
+    first = normalize(np.asarray(first, dtype=float))
+    loop(np.ascontiguousarray(rate, dtype=float), float(dt), first[0], first[1], first[2],
+         first[3], out)
+    return out
+
+
+def _strapdown_blocked(rate, dt, first):
+    """
+    :func:`_strapdown` on whole arrays: a blocked scan.
+
+    The running products within blocks of about √N samples (one product per
+    column, over all blocks at once), then the blocks' running products, then
+    each block's products from its start's.
     """
     n = len(rate)
     step = quaternion_from_rotation_vector(rate * dt)
@@ -299,6 +320,55 @@ def _strapdown(rate, dt, first):
         before[i] = multiply(before[i - 1], within[-1, i - 1])
     q = multiply(before[None, :, :], within).transpose(1, 0, 2).reshape(-1, 4)[:n]
     return normalize(q)
+
+
+def _integrate(rate, dt, w, x, y, z, out):
+    """
+    The strapdown loop over samples: ``q_k`` into ``out`` (N, 4) from ``q_0 = (w, x, y, z)``.
+
+    Compiled by :func:`_compiled_loop` (``_product``: the kernels' quaternion
+    product, compiled).
+    """
+    out[0, 0], out[0, 1], out[0, 2], out[0, 3] = w, x, y, z
+    for k in range(1, rate.shape[0]):
+        vx, vy, vz = rate[k, 0] * dt, rate[k, 1] * dt, rate[k, 2] * dt
+        angle = math.sqrt(vx * vx + vy * vy + vz * vz)
+        # sin(a / 2) / a, its limit 1/2 below a rounding error's angle.
+        s = math.sin(0.5 * angle) / angle if angle > 1e-8 else 0.5
+        w, x, y, z = _product(w, x, y, z, math.cos(0.5 * angle), s * vx, s * vy, s * vz)
+        scale = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w * scale, x * scale, y * scale, z * scale
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w, x, y, z
+
+
+_product = quat_multiply
+_LOOP = []
+
+
+def _compiled_loop():
+    """
+    :func:`_integrate` compiled by numba, or None where numba is not wanted.
+
+    Cached on disk beside the kernels' compiled code, in a folder of its own
+    (the kernels' twin of ``quat_multiply`` has the same file and name) for
+    this version of the kernel files
+    (:func:`~ext_observer.core.ahrs.compiled.compiled_name`).
+    """
+    global _product
+    if not _LOOP:
+        loop = None
+        if wanted(None)[0]:
+            import numba
+            name, folder = compiled_name()
+            saved = numba.config.CACHE_DIR
+            numba.config.CACHE_DIR = os.path.join(folder, f'{name}_smoother')
+            try:
+                _product = numba.njit(cache=True)(quat_multiply)
+                loop = numba.njit(cache=True)(_integrate)
+            finally:
+                numba.config.CACHE_DIR = saved
+        _LOOP.append(loop)
+    return _LOOP[0]
 
 
 def _rotate(q, v):

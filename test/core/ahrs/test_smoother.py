@@ -1,7 +1,8 @@
 """
 The smoothed estimate (``core/ahrs/smoother.py``) on synthetic motion with a known
 truth: ahead of the online estimator, a gyro bias recovered from both directions,
-the blocked strapdown equal to the plain product, zero-phase windows, bad input refused.
+the strapdown (compiled, blocked) equal to the plain product, zero-phase windows, bad
+input refused.
 """
 
 import numpy as np
@@ -60,17 +61,20 @@ def test_a_constant_gyro_bias_is_recovered_from_both_directions(moving):
     np.testing.assert_allclose(end, BIAS, atol=1.5e-3)
 
 
-def test_the_blocked_strapdown_is_the_running_product():
+def test_the_strapdown_compiled_and_blocked_is_the_running_product():
     rng = np.random.default_rng(1)
     rate = rng.normal(0.0, 2.0, (1001, 3))
+    rate[5] = 0.0
     first = quat.normalize(rng.normal(size=4))
-    q = smoother._strapdown(rate, 0.01, first)
-    expected = np.empty_like(q)
+    expected = np.empty((len(rate), 4))
     expected[0] = first
     steps = quat.quaternion_from_rotation_vector(rate * 0.01)
-    for k in range(1, len(q)):
+    for k in range(1, len(rate)):
         expected[k] = quat.multiply(expected[k - 1], steps[k])
-    np.testing.assert_allclose(q, expected, atol=1e-12)
+    # The compiled loop where numba is wanted, and numpy's blocked scan.
+    np.testing.assert_allclose(smoother._strapdown(rate, 0.01, first), expected, atol=1e-12)
+    np.testing.assert_allclose(smoother._strapdown_blocked(rate, 0.01, first), expected,
+                               atol=1e-12)
 
 
 def test_the_windows_are_zero_phase_and_normalized_by_their_weights():
