@@ -36,8 +36,8 @@ import os
 
 import numpy as np
 
-from ..quaternion import conjugate, multiply, normalize, quaternion_from_rotation_vector
-from .ahrs_filters import quat_multiply
+from ..quaternion import multiply, normalize, quaternion_from_rotation_vector
+from .ahrs_filters import quat_multiply, rotate
 from .ahrs_observer import AhrsObserver
 from .ahrs_params import AhrsParams
 from .compiled import compiled_name, wanted
@@ -373,14 +373,15 @@ def _compiled_loop():
 
 def _rotate(q, v):
     """
-    The vectors ``v`` (N, 3) rotated by the unit quaternions ``q`` (N, 4): ``q ⊗ v ⊗ q̄``.
+    The vectors ``v`` (N, 3) rotated by the quaternions ``q`` (N, 4): ``q ⊗ v ⊗ q̄ / |q|²``.
 
-    As ``v + w t + u × t`` with ``t = 2 u × v`` (``q = (w, u)``).
+    The kernels' rotation (:func:`~ext_observer.core.ahrs.ahrs_filters.rotate`),
+    on columns.
     """
-    w = q[:, :1]
-    u = q[:, 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    out = np.empty((len(v), 3))
+    out[:, 0], out[:, 1], out[:, 2] = rotate(q[:, 0], q[:, 1], q[:, 2], q[:, 3],
+                                             v[:, 0], v[:, 1], v[:, 2])
+    return out
 
 
 def _about_vertical(angle):
