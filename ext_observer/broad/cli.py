@@ -58,6 +58,9 @@ def build_parser():
     parser.add_argument('--plain', action='store_true',
                         help="also run our estimator without the extension term "
                              "(doubles our run time)")
+    parser.add_argument('--smooth', action='store_true',
+                        help='also score our smoothed estimate (each sample from the whole '
+                             "recording, as 'ext_observer smoothed'; docs/offline.md)")
     parser.add_argument('--docs', metavar='DOCS_DIR',
                         help='write DOCS_DIR/broad.md and DOCS_DIR/figures/broad_*.png '
                              "(in a clone of ext_observer: the pages' writers, docgen/, "
@@ -131,7 +134,7 @@ def main(argv=None):
         modes = MODES if args.mode == 'both' else (args.mode,)
         result = run(trials, modes, anchors, plain=args.plain, jobs=args.jobs,
                      workers=args.workers, plot_trial=plot_trial if args.docs else None,
-                     progress=progress)
+                     progress=progress, smooth=args.smooth)
         result['load'] = (load, _load())
     except (ValueError, RuntimeError) as error:
         print(f'error: {error}', file=sys.stderr)
@@ -250,6 +253,8 @@ def _check(args, anchors):
             parse_gap(args.field_gap)
         except ValueError as error:
             return f'--field-gap: {error}'
+    if args.smooth and (args.stress or args.covariance):
+        return '--smooth goes with the accuracy benchmark, not --stress or --covariance'
     try:
         _params(args.param)
     except ValueError as error:

@@ -96,3 +96,5 @@ def test_stress_options_that_do_not_go_together(capsys):
     assert 'unknown parameters' in capsys.readouterr().err
     assert broad.main(['--stress', '--param', 'tau_bias']) == 2
     assert 'NAME=VALUE' in capsys.readouterr().err
+    assert broad.main(['--stress', '--smooth']) == 2
+    assert '--smooth goes with the accuracy benchmark' in capsys.readouterr().err

@@ -8,5 +8,6 @@ state with names (``ahrs_state`` assembles the groups each kernel declares;
 gyro and rest; ``ahrs_params`` the parameter table (rows of
 ``parameter_rows``), ``frames`` frames and first attitude.
 ``magcal*`` the online calibration,
-``uncertainty*`` the covariance, ``compiled`` the kernels compiled by numba.
+``uncertainty*`` the covariance, ``compiled`` the kernels compiled by numba,
+``smoother`` each sample's attitude from the whole recording.
 """
