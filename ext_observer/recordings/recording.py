@@ -50,7 +50,8 @@ from ext_observer.pipeline.velocity_aid import with_velocity
 from ext_observer.recordings.input_units import check_units as refuse_wrong_units
 
 __all__ = ['PipelineRun', 'Recording', 'add_parameter_options', 'attitude_from_imu',
-           'node_settings', 'parameters_from_options', 'parameters_from_yaml', 'roll_pitch_yaw']
+           'node_settings', 'parameters_from_options', 'parameters_from_yaml', 'roll_pitch_yaw',
+           'run_arrays', 'smoothed_into']
 
 SECOND = 1_000_000_000
 # Stamp of the earliest sample of a recording given by times or a rate, ns:
@@ -251,6 +252,12 @@ class Recording:
     units : dict
         ``kind -> (samples, text)``: magnitudes that only a wrong unit
         explains (:mod:`ext_observer.pipeline.units`), as the node warns of them.
+    smoothed : bool
+        :attr:`quaternions`, :attr:`ambient` (then unit, as the quaternions),
+        :attr:`inclination_std` and :attr:`heading_std` are the smoothed
+        estimate's, from the whole recording (``smooth=True``, ``--smooth``:
+        :mod:`ext_observer.recordings.smoothing`; finite on every row); every
+        other attribute is the online run's. False: all are the node's.
 
     """
 
@@ -407,11 +414,13 @@ class PipelineRun:
                     'fields_used': pairer.processed['measurement'],
                     'estimates': int(estimated.sum())},
             resets=dict(pipeline.resets), reinitializations=dict(pipeline.reinitializations),
-            units={kind: (n, units.findings[kind]) for kind, n in units.counts.items() if n})
+            units={kind: (n, units.findings[kind]) for kind, n in units.counts.items() if n},
+            smoothed=False)
 
 
 def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=None,
-                      parameters=None, check_units=True, velocity=None, velocity_times=None):
+                      parameters=None, check_units=True, velocity=None, velocity_times=None,
+                      smooth=False):
     """
     Estimate the attitude of one recording as ``imu_filter_node`` does.
 
@@ -443,6 +452,14 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
         ``ahrs.tau_mag``, ...: ``config/imu_filter.yaml``).
     check_units : bool
         Refuse magnitudes that only a wrong unit explains (:mod:`ext_observer.pipeline.units`).
+    smooth : bool
+        Each sample's attitude from the whole recording, the samples after it
+        too (:func:`~ext_observer.recordings.smoothing.smoothed_attitude`):
+        the online run first, as without (its drops, units, health, counts,
+        calibration are the recording's), then :attr:`Recording.quaternions`,
+        ``ambient``, ``inclination_std`` and ``heading_std`` are the smoothed
+        estimate's (docs/own_data.md: what it costs). Not for a live stream:
+        it needs the whole recording.
 
     Returns
     -------
@@ -472,6 +489,39 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
         raise ValueError('give the IMU rate (Hz) or its times (s), one of them')
     if mag_times is not None:
         mag_times = _times(mag_times, len(mag), 'mag_times')
+    inputs = (gyr, acc, mag, mag_times, velocity, velocity_times)
+    recording = run_arrays(settings, rate, times, *inputs)
+    recording.smoothed = bool(smooth)
+    if smooth:
+        from ext_observer.recordings.smoothing import smoothed_attitude
+        field = mag if settings['use_mag'] else None
+        smoothed_into(recording, smoothed_attitude(
+            gyr, acc, field, recording.times, settings,
+            mag_times=None if field is None else mag_times, velocity=velocity,
+            velocity_times=velocity_times))
+    return recording
+
+
+def smoothed_into(recording, smoothed):
+    """Put a smoothed estimate (quaternions, inclination σ, heading σ) in ``recording``."""
+    quaternions, inclination_std, heading_std = smoothed
+    recording.quaternions = quaternions
+    recording.ambient = quaternions.copy()
+    recording.inclination_std = inclination_std
+    recording.heading_std = heading_std
+    recording.smoothed = True
+
+
+def run_arrays(settings, rate, times, gyr, acc, mag, mag_times=None, velocity=None,
+               velocity_times=None):
+    """
+    Return the online :class:`Recording` of checked arrays (:func:`attitude_from_imu`'s run).
+
+    ``gyr``, ``acc`` (N, 3) and ``mag`` (rows per IMU sample, or at
+    ``mag_times``) as :func:`attitude_from_imu` has checked them; ``rate``
+    (Hz) or ``times`` (s), one of them; ``settings`` :func:`node_settings`'.
+    """
+    count = len(gyr)
     times, stamps, clock = _imu_stamps(rate, times, count, mag_times)
     gyr, acc = gyr.tolist(), acc.tolist()
     field_stamps, fields, events = _field_events(mag if settings['use_mag'] else None,
