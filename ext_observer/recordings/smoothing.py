@@ -16,6 +16,7 @@ import numpy as np
 
 from ext_observer.core.quaternion import multiply, quaternion_from_rotation_vector
 from ext_observer.pipeline.batch import hold_finite
+from ext_observer.recordings.pipeline_run import run_arrays
 
 __all__ = ['combined', 'smoothed_attitude', 'time_reversed']
 
@@ -66,18 +67,19 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
         ``diag(σ_i² / 2, σ_i² / 2, σ_h²)``).
 
     """
-    from ext_observer.recordings.recording import run_arrays
     if mag is None:
         mag_times = None
     inputs = (gyr, acc, mag, mag_times, velocity, velocity_times)
-    forward = run_arrays(settings, None, times, *inputs)
+    # Only what the combination reads is kept of each run (memory: a long recording).
+    forward = _estimate(run_arrays(settings, None, times, *inputs))
     reversed_times, reversed_inputs = time_reversed(times, *inputs)
-    backward = run_arrays(settings, None, reversed_times, *reversed_inputs)
-    return combined(
-        (forward.quaternions, forward.inclination_std, forward.heading_std),
-        tuple(a[::-1] for a in (backward.quaternions, backward.inclination_std,
-                                backward.heading_std)),
-        heading=False)
+    backward = _estimate(run_arrays(settings, None, reversed_times, *reversed_inputs))
+    del reversed_times, reversed_inputs
+    return combined(forward, tuple(a[::-1] for a in backward), heading=False)
+
+
+def _estimate(recording):
+    return recording.quaternions, recording.inclination_std, recording.heading_std
 
 
 def time_reversed(times, gyr, acc, mag=None, mag_times=None, velocity=None,
