@@ -44,8 +44,8 @@ with a core to spare.
 attitude from the whole recording), which needs the whole recording before
 the first estimate is written: a first pass runs the estimator as above
 and keeps the inputs as arrays (:class:`~ext_observer.recordings.bag_worker.KeepingEstimator`),
-the smoother runs on them, and a second pass reads the bag again and writes
-the new one with the smoothed estimates
+the smoother runs on them, and a second pass (in this process) reads the
+bag again and writes the new one with the smoothed estimates
 (:class:`~ext_observer.recordings.bag_worker.SmoothedStates`): the same
 messages as without, ``imu/data``'s ``orientation_covariance`` the smoothed
 σ's where it carries the estimate's own.
@@ -225,7 +225,7 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
         if smooth:
             counts = _write_smoothed(estimator, BagSide(reader, roles, out, storage, topics,
                                                         settings),
-                                     settings, context, progress)
+                                     settings, progress)
         comparison = None
         if 'reference' in roles:
             comparison = _compare_references(recording, estimator.references,
@@ -241,7 +241,7 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
                   dict(estimator.velocity_drops))
 
 
-def _write_smoothed(estimator, side, settings, context, progress):
+def _write_smoothed(estimator, side, settings, progress):
     """
     The second and third steps of ``--smooth``: smooth the kept inputs, write the new bag.
 
@@ -266,8 +266,9 @@ def _write_smoothed(estimator, side, settings, context, progress):
         velocity=velocities if len(velocities) else None,
         velocity_times=seconds(velocity_stamps) if len(velocities) else None))
     del gyr, acc, fields, velocities
-    writer = SmoothedStates(recording, settings, _Progress(side.total, progress))
-    return (in_process(side, writer) if context is None else forked(context, side, writer))
+    # In this process: the estimates are ready, so a forked writer would gain nothing, and it
+    # would hold a copy of this process's pages (about 0.5 kB a sample) while it writes.
+    return in_process(side, SmoothedStates(recording, settings, _Progress(side.total, progress)))
 
 
 def _check_paths(path, out, storage):

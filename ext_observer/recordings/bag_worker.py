@@ -375,30 +375,33 @@ class SmoothedStates:
     """
 
     def __init__(self, recording, settings, progress):
-        width = _width(settings)
-        states = np.full((len(recording.quaternions), width), math.nan)
-        rows = recording.estimated
-        states[rows, :4] = recording.quaternions[rows]
-        if width > 4:
-            tilt = 0.5 * recording.inclination_std[rows] ** 2
-            states[rows, 4] = states[rows, 8] = tilt
-            states[rows, 12] = recording.heading_std[rows] ** 2
-            states[rows, 5:8] = states[rows, 9:12] = 0.0
-        self._states = states
-        self._none = np.full(width, math.nan)
+        self._width = _width(settings)
         self._next = 0
         self.recording = recording
         self.progress = progress
         self.count = 0
+
+    def _states(self, start, stop):
+        """Rows ``start:stop`` of the recording as the pipe carries them (NaN: no estimate)."""
+        recording = self.recording
+        states = np.full((stop - start, self._width), math.nan)
+        rows = recording.estimated[start:stop]
+        states[rows, :4] = recording.quaternions[start:stop][rows]
+        if self._width > 4:
+            tilt = 0.5 * recording.inclination_std[start:stop][rows] ** 2
+            states[rows, 4:13] = 0.0
+            states[rows, 4] = states[rows, 8] = tilt
+            states[rows, 12] = recording.heading_std[start:stop][rows] ** 2
+        return states
 
     def __call__(self, kinds, stamps, values):
         """Return the smoothed estimates of the batch's IMU messages (NaN: none)."""
         kind = np.frombuffer(kinds, dtype=np.int8)
         kind = kind[np.isin(kind, (IMU, IMU_AND_REFERENCE, UNDECODABLE['imu']))]
         decoded = kind != UNDECODABLE['imu']
-        out = np.tile(self._none, (len(kind), 1))
+        out = np.full((len(kind), self._width), math.nan)
         taken = int(decoded.sum())
-        out[decoded] = self._states[self._next:self._next + taken]
+        out[decoded] = self._states(self._next, self._next + taken)
         self._next += taken
         self.count += len(kinds)
         if self.count >= self.progress.next:
