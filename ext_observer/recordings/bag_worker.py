@@ -358,8 +358,8 @@ class SmoothedStates:
     """
     The second pass of ``--smooth``: each IMU message's smoothed estimate, from arrays.
 
-    Stands where :class:`BagEstimator` stands (:func:`in_process`,
-    :func:`forked`), so the new bag is written as the online one is: the
+    Stands where :class:`BagEstimator` stands (:func:`in_process`), so the
+    new bag is written as the online one is: the
     same messages (an estimate where the online run published one), with
     the smoothed quaternion and, where ``imu/data`` carries the estimate's
     covariance, ``diag(σ_i² / 2, σ_i² / 2, σ_h²)``.
