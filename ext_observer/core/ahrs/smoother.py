@@ -24,6 +24,17 @@ Information Fusion 2023, arXiv:2203.17024, and ``offline_vqf.cpp`` of the
    sample weighted by how close its norm and dip stay to the field's at the
    start of the recording, turned north.
 
+With ``times`` (samples lost, unevenly spaced): the strapdown integrates each
+interval with its own length and bridges a hole (an interval over 1.5× the
+usual one) with the rate on the straight line between its two samples; the
+windows run on an even grid in time, a lost sample's time shared by its
+neighbours and a longer hole holding no data; after a hole of at least
+``join_time``, the tilt is joined from both sides (the specific force averaged
+on either side, weighed against the bridge's doubt) and the heading averaged
+within each stretch. A NaN row of the field weighs nothing; a gyro axis at its
+range is bridged across the clipped stretch (Hermite's cubic from both sides).
+docs/offline.md ("Holes, lost fields and clipped stretches") has the figures.
+
 The windows are Gaussian-like (three box filters, cumulative sums), symmetric
 in time, so without delay; everything but the online passes is numpy on
 whole arrays. Conventions as the estimator's: ``(w, x, y, z)``, sensor →
@@ -41,6 +52,8 @@ from .ahrs_filters import quat_multiply, rotate
 from .ahrs_observer import AhrsObserver
 from .ahrs_params import AhrsParams
 from .compiled import compiled_name, wanted
+from .hole_kernel import (HOLE_BRIDGE_DIVISOR, HOLE_FACTOR, HOLE_RATE_CHANGE,
+                          HOLE_RATE_WALK)
 
 __all__ = ['SmoothParams', 'smooth_attitude']
 
@@ -83,6 +96,32 @@ class SmoothParams:
     bias_chunk : float
         s between two readings of the online passes' bias estimates
         (``bias='both'``).
+    bridge : {'hermite', 'linear'}
+        The rate across a hole or a clipped stretch: Hermite's cubic
+        through the known samples on both sides with the rate's slopes
+        there, or the straight line between them.
+    slope_time : float
+        s over which the rate's slope beside a bridge is taken.
+    unclip : bool
+        Bridge each gyro axis across its clipped stretches (at
+        ``online.gyro_range``, or stuck at the recording's peak) from both
+        sides (:func:`_unclipped`); False: the clipped rates as given.
+    join : {'chain', 'local', 'none'}
+        What a hole of at least ``join_time`` changes beyond the gyro's
+        bridge. ``'chain'``: the part after it is tilted to make the
+        specific force averaged over ``window_acc`` s on either side agree
+        (:func:`_join_tilt`, weighed against the bridge), and the heading
+        (9D) is averaged within each stretch between such holes;
+        ``'local'``: the inclination too is averaged within each stretch;
+        ``'none'``: the bridge only, the windows across the holes.
+    join_time : float
+        s: the shortest hole that ``join`` treats; a shorter one's samples
+        share its time in the windows (a lost sample: its neighbours'),
+        a longer one is no data.
+    join_tau : float
+        s: the specific force's samples beside a hole count as independent
+        once every ``join_tau`` (the doubt of the join's averages, weighed
+        against the gyro bridge's, :func:`_bridge_variance`).
     online : AhrsParams or None
         The online passes' parameters (default: the shipped defaults).
 
@@ -97,6 +136,12 @@ class SmoothParams:
     bias: str = 'end'
     delay: float = 0.0
     bias_chunk: float = 0.5
+    bridge: str = 'linear'
+    slope_time: float = 0.02
+    unclip: bool = True
+    join: str = 'chain'
+    join_time: float = 0.05
+    join_tau: float = 0.01
     online: AhrsParams = None
 
     def __post_init__(self):
@@ -108,13 +153,23 @@ class SmoothParams:
             raise ValueError(f'ref_time must be finite and ≥ 0, got {self.ref_time}')
         if not math.isfinite(self.delay):
             raise ValueError(f'delay must be finite, got {self.delay}')
+        if self.bridge not in ('linear', 'hermite'):
+            raise ValueError(f"bridge must be 'linear' or 'hermite', got {self.bridge!r}")
+        if self.join not in ('chain', 'local', 'none'):
+            raise ValueError(f"join must be 'chain', 'local' or 'none', got {self.join!r}")
+        if not self.join_time > 0.0:
+            raise ValueError(f'join_time must be positive, got {self.join_time}')
+        if not (math.isfinite(self.join_tau) and self.join_tau > 0.0):
+            raise ValueError(f'join_tau must be positive and finite, got {self.join_tau}')
+        if not (math.isfinite(self.slope_time) and self.slope_time >= 0.0):
+            raise ValueError(f'slope_time must be finite and ≥ 0, got {self.slope_time}')
         if self.bias not in ('end', 'both'):
             raise ValueError(f"bias must be 'end' or 'both', got {self.bias!r}")
         if not (math.isfinite(self.far_share) and self.far_share >= 0.0):
             raise ValueError(f'far_share must be finite and ≥ 0, got {self.far_share}')
 
 
-def smooth_attitude(gyr, acc, mag, rate, params=None):
+def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     """
     Each sample's attitude from the whole recording (a smoothed estimate).
 
@@ -125,11 +180,17 @@ def smooth_attitude(gyr, acc, mag, rate, params=None):
     acc : array_like, shape (N, 3)
         Specific force, m/s² (points up at rest).
     mag : array_like, shape (N, 3), or None
-        Magnetic field (any unit); None: 6D (the heading follows the gyro
-        from the online estimator's first attitude).
-    rate : float
-        Sampling rate, Hz (samples evenly spaced, all finite).
+        Magnetic field (any unit); a row with a NaN: no field at that sample
+        (its heading bridged from both sides). None: 6D (the heading follows
+        the gyro from the online estimator's first attitude).
+    rate : float, optional
+        Sampling rate, Hz (samples evenly spaced); or ``times``.
     params : SmoothParams, optional
+    times : array_like, shape (N,), optional
+        Each sample's time, s, increasing (instead of ``rate``): the
+        strapdown integrates each interval with its own length, the windows
+        run in time (a lost stretch holds no data), and a hole (an interval
+        over 1.5× the usual one) is bridged from both sides.
 
     Returns
     -------
@@ -141,31 +202,53 @@ def smooth_attitude(gyr, acc, mag, rate, params=None):
     Raises
     ------
     ValueError
-        For arrays of another shape, non-finite samples or a bad rate.
+        For arrays of another shape, non-finite samples, a bad rate or bad
+        times.
+
+    Notes
+    -----
+    Samples at the gyro's range (``online.gyro_range``, or a rate stuck at
+    the recording's peak on an axis) are a rotation not known: bridged from
+    both sides as a hole.
 
     """
     p = params if params is not None else SmoothParams()
-    gyr, acc, mag = _checked(gyr, acc, mag, rate)
-    dt = 1.0 / float(rate)
-    bias, first, calibration = _bias(gyr, acc, mag, dt, p)
-    q = _strapdown(gyr - bias, dt, first)
-    q = _inclination(q, acc, rate, p)
+    gyr, acc, mag, axis = _checked(gyr, acc, mag, rate, times)
+    bias, first, calibration = _bias(gyr, acc, mag, axis.dt, p)
+    if p.unclip:
+        gyr = _unclipped(gyr, _clipped(gyr, p), axis.times,
+                         max(1, int(round(p.slope_time / axis.usual))))
+    rate, dt, rows = _bridged(gyr - bias, axis, p)
+    q = _strapdown(rate, dt, first)[rows]
+    gaps = _gaps(axis, p.join_time)
+    if p.join == 'chain':
+        q = _inclination(_join_tilt(q, acc, gyr - bias, gaps, axis, p), acc, axis, p)
+    elif p.join == 'local' and len(gaps[0]):
+        bounds = np.concatenate(([0], gaps[1], [len(q)]))
+        q = np.concatenate([_inclination(q[lo:hi], acc[lo:hi], axis.part(lo, hi), p)
+                            for lo, hi in zip(bounds[:-1], bounds[1:])])
+    else:
+        q = _inclination(q, acc, axis, p)
     if mag is not None:
-        q = _heading(q, calibration(mag), rate, p)
+        q = _heading(q, calibration(mag), axis, p, gaps)
     if p.delay:
-        q = _ahead(q, p.delay * rate)
+        q = _ahead(q, p.delay, axis)
     return q, None
 
 
-def _ahead(q, samples):
+def _ahead(q, delay, axis):
     """
-    ``q`` read ``samples`` later (may be fractional or negative), held at the ends.
+    ``q`` read ``delay`` s later (may be negative), held at the ends.
 
     Between two samples, the normalized linear interpolation (the steps are
     small).
     """
     n = len(q)
-    at = np.clip(np.arange(n) + samples, 0.0, n - 1.0)
+    if axis.slot is None:
+        at = np.arange(n) + delay * axis.rate
+    else:
+        at = np.interp(axis.times + delay, axis.times, np.arange(n, dtype=float))
+    at = np.clip(at, 0.0, n - 1.0)
     lo = np.minimum(np.floor(at).astype(np.int64), n - 2)
     frac = (at - lo)[:, None]
     a, b = q[lo], q[lo + 1]
@@ -173,7 +256,83 @@ def _ahead(q, samples):
     return normalize((1.0 - frac) * a + frac * b)
 
 
-def _checked(gyr, acc, mag, rate):
+class _Axis:
+    """
+    The samples' time axis: each one's interval and its slot on an even grid.
+
+    Attributes
+    ----------
+    dt : ndarray, shape (N,)
+        s, the interval that ends at each sample (the first: the usual one).
+    usual : float
+        s, the usual interval (the median).
+    rate : float
+        Hz, ``1 / usual``.
+    slot : ndarray of int, shape (N,) or None
+        Each sample's index on the grid of ``usual`` steps from the first;
+        None: the samples are the grid (evenly spaced).
+    size : int
+        The grid's length.
+    times : ndarray, shape (N,)
+        s, from the first sample.
+
+    """
+
+    def __init__(self, dt, slot=None, rate=None):
+        self.dt = dt
+        self.usual = float(dt[0])
+        self.rate = 1.0 / self.usual if rate is None else float(rate)
+        self.slot = slot
+        self.size = len(dt) if slot is None else int(slot[-1]) + 1
+        self.times = np.concatenate(([0.0], np.cumsum(dt[1:])))
+
+    def grid(self, x):
+        """``x`` (N, ...) summed onto the grid (size, ...): empty slots hold 0."""
+        if self.slot is None:
+            return x
+        out = np.zeros((self.size,) + x.shape[1:])
+        np.add.at(out, self.slot, x)
+        return out
+
+    def samples(self, x):
+        """The grid's ``x`` (size, ...) read back at the samples (N, ...)."""
+        return x if self.slot is None else x[self.slot]
+
+    def part(self, lo, hi):
+        """The axis of samples ``lo:hi``."""
+        dt = self.dt[lo:hi].copy()
+        dt[0] = self.usual
+        if self.slot is None:
+            return _Axis(dt, rate=self.rate)
+        part = _Axis(dt, self.slot[lo:hi] - self.slot[lo])
+        part.usual, part.rate = self.usual, self.rate
+        return part
+
+    def spans(self, longest):
+        """
+        Each sample's share of time in usual intervals (N,): half its intervals on both sides.
+
+        An interval over ``longest`` s counts as none (a hole: no data); a
+        shorter one as its length (a lost sample's time shared by its
+        neighbours, as the trapezoid's rule does). Evenly spaced: ones.
+        """
+        if self.slot is None:
+            return np.ones(len(self.dt))
+        dt = np.where(self.dt[1:] < longest, self.dt[1:], 0.0)
+        return (np.concatenate(([self.usual], dt)) + np.concatenate((dt, [self.usual]))) / (
+            2.0 * self.usual)
+
+    def slots(self):
+        """Each sample's slot on the grid (N,)."""
+        return np.arange(len(self.dt)) if self.slot is None else self.slot
+
+
+# Intervals within this share of the usual one are the usual one (times
+# rounded to a clock's tick or to floating point).
+_EVEN = 1e-6
+
+
+def _checked(gyr, acc, mag, rate, times=None):
     gyr = np.asarray(gyr, dtype=float)
     acc = np.asarray(acc, dtype=float)
     arrays = [('gyr', gyr), ('acc', acc)]
@@ -185,31 +344,129 @@ def _checked(gyr, acc, mag, rate):
             raise ValueError(f'{name} must have shape (N, 3), got {a.shape}')
         if a.shape[0] != gyr.shape[0]:
             raise ValueError(f'{name} has {a.shape[0]} samples, gyr {gyr.shape[0]}')
-        if not np.isfinite(a).all():
+        if name == 'mag':
+            # A NaN anywhere in a row: no field at that sample.
+            if np.isinf(a).any():
+                raise ValueError('mag has infinite samples (NaN rows: no field)')
+            mag = np.where(np.isnan(a).any(axis=1, keepdims=True), np.nan, a)
+        elif not np.isfinite(a).all():
             raise ValueError(f'{name} has non-finite samples')
-    if len(gyr) < 2:
-        raise ValueError(f'a recording needs at least 2 samples, got {len(gyr)}')
-    if not (math.isfinite(rate) and rate > 0.0):
-        raise ValueError(f'rate must be positive and finite, got {rate}')
-    return gyr, acc, mag
+    n = len(gyr)
+    if n < 2:
+        raise ValueError(f'a recording needs at least 2 samples, got {n}')
+    if (rate is None) == (times is None):
+        raise ValueError('give either rate or times, not both or neither')
+    if times is None:
+        if not (math.isfinite(rate) and rate > 0.0):
+            raise ValueError(f'rate must be positive and finite, got {rate}')
+        return gyr, acc, mag, _Axis(np.full(n, 1.0 / float(rate)), rate=rate)
+    times = np.asarray(times, dtype=float)
+    if times.shape != (n,):
+        raise ValueError(f'times must have shape ({n},), got {times.shape}')
+    if not np.isfinite(times).all():
+        raise ValueError('times has non-finite values')
+    dt = np.diff(times)
+    if not (dt > 0.0).all():
+        raise ValueError('times must increase strictly')
+    usual = float(np.median(dt))
+    dt = np.where(np.abs(dt - usual) <= _EVEN * usual, usual, dt)
+    dt = np.concatenate(([usual], dt))
+    if (dt == usual).all():
+        return gyr, acc, mag, _Axis(dt)
+    slot = np.rint((times - times[0]) / usual).astype(np.int64)
+    return gyr, acc, mag, _Axis(dt, slot)
+
+
+def _clipped(gyr, p):
+    """
+    The rates not known (N, 3): at the gyro's range on their axis.
+
+    At ``online.gyro_range`` where set (> 0), or at the recording's peak
+    on an axis where two or more samples sit at it (a rate stuck at the
+    peak: a range nobody declared).
+    """
+    size = np.abs(gyr)
+    clipped = np.zeros(gyr.shape, dtype=bool)
+    limit = 0.0 if p.online is None else float(p.online.gyro_range)
+    if limit > 0.0:
+        clipped |= size >= limit * (1.0 - _EVEN)
+    peak = size.max(axis=0)
+    at_peak = (size == peak) & (peak > 0.0)
+    clipped |= at_peak & (at_peak.sum(axis=0) >= 2)
+    return clipped
+
+
+def _unclipped(gyr, clipped, t, reach=1):
+    """
+    ``gyr`` with its clipped rates (``clipped``, (N, 3)) bridged from both sides, per axis.
+
+    Across each clipped stretch of an axis, Hermite's cubic through the
+    rates beside it with their slopes (the differences to the samples
+    ``reach`` before and after), at least the clipped value in size (the rate went
+    beyond the range, not back). A stretch at an end keeps its values.
+    """
+    if not clipped.any():
+        return gyr
+    out = gyr.copy()
+    n = len(gyr)
+    index = np.arange(n)
+    for axis in range(3):
+        bad = clipped[:, axis]
+        if not bad.any() or bad.all():
+            continue
+        w = gyr[:, axis]
+        a = np.maximum.accumulate(np.where(bad, -1, index))[bad]
+        b = np.minimum.accumulate(np.where(bad, n, index)[::-1])[::-1][bad]
+        inner = (a >= 0) & (b < n)
+        k, a, b = np.flatnonzero(bad)[inner], a[inner], b[inner]
+        a0 = np.maximum(a - reach, 0)
+        b1 = np.minimum(b + reach, n - 1)
+        ma = np.where(a > a0, (w[a] - w[a0]) / (t[a] - t[a0]), 0.0)
+        mb = np.where(b1 > b, (w[b1] - w[b]) / (t[b1] - t[b]), 0.0)
+        span = t[b] - t[a]
+        s = (t[k] - t[a]) / span
+        curve = (w[a] + (w[b] - w[a]) * (s * s * (3.0 - 2.0 * s))
+                 + span * (s * (1.0 - s) ** 2 * ma + s * s * (s - 1.0) * mb))
+        out[k, axis] = np.sign(w[k]) * np.maximum(np.abs(curve), np.abs(w[k]))
+    return out
+
+
+def _online(est, gyr, acc, mag, dt, start=0, end=None):
+    """
+    ``est`` over samples ``start:end``, each step fed its own interval ``dt[k]`` (s).
+
+    One call of the kernels' loop per run of samples of one interval and
+    with a field or without (a NaN row of ``mag``: that sample's field is not
+    given). Returns the estimates (end − start, 4).
+    """
+    end = len(gyr) if end is None else end
+    has = None if mag is None else ~np.isnan(mag[:, 0])
+    change = np.flatnonzero((dt[start + 1:end] != dt[start:end - 1])
+                            | (False if has is None else has[start + 1:end] != has[start:end - 1]))
+    bounds = np.concatenate(([start], start + 1 + change, [end]))
+    out = np.empty((end - start, 4))
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        field = None if has is None or not has[lo] else mag[lo:hi]
+        out[lo - start:hi - start] = est.run(gyr[lo:hi], acc[lo:hi], field, float(dt[lo]))
+    return out
 
 
 def _bias_pass(gyr, acc, mag, dt, p):
     """
     The online estimator over the recording, its bias read every ``bias_chunk``.
 
-    Returns the sample index of each reading (K,), the biases (K, 3), their
-    variances (K, 3), the first estimate (4,) and the estimator (its state
-    at the end).
+    ``dt`` (N,): each sample's interval. Returns the sample index of each
+    reading (K,), the biases (K, 3), their variances (K, 3), the first
+    estimate (4,) and the estimator (its state at the end).
     """
     est = AhrsObserver(p.online, use_mag=mag is not None)
     n = len(gyr)
-    step = max(1, int(round(p.bias_chunk / dt)))
+    step = max(1, int(round(p.bias_chunk / dt[0])))
     ends = np.append(np.arange(step, n, step), n)
     biases, variances = np.empty((len(ends), 3)), np.empty((len(ends), 3))
     start, first = 0, None
     for i, end in enumerate(ends):
-        q = est.run(gyr[start:end], acc[start:end], None if mag is None else mag[start:end], dt)
+        q = _online(est, gyr, acc, mag, dt, start, end)
         if first is None:
             first = q[0]
         biases[i] = est.bias
@@ -222,13 +479,15 @@ def _bias(gyr, acc, mag, dt, p):
     """
     The gyro bias (N, 3) or (3,), the first attitude and the field's calibration.
 
+    ``dt``: the interval (s) before each sample (N,), or one for all.
     ``bias='end'``: one online pass; its bias at the end (it has seen the
     whole recording) for every sample. ``'both'``: :func:`_bias_both_ways`.
     """
+    dt = np.broadcast_to(np.asarray(dt, dtype=float), (len(gyr),))
     if p.bias == 'both':
         return _bias_both_ways(gyr, acc, mag, dt, p)
     est = AhrsObserver(p.online, use_mag=mag is not None)
-    q = est.run(gyr, acc, mag, dt)
+    q = _online(est, gyr, acc, mag, dt)
     return np.array(est.bias), q[0], _calibration(est)
 
 
@@ -244,8 +503,10 @@ def _bias_both_ways(gyr, acc, mag, dt, p):
     """
     n = len(gyr)
     index_f, b_f, v_f, first, forward = _bias_pass(gyr, acc, mag, dt, p)
+    # Reversed, the interval before sample j is the one after sample n − 1 − j.
+    back_dt = np.concatenate((dt[:1], dt[1:][::-1]))
     index_b, b_b, v_b, _, _ = _bias_pass(-gyr[::-1], acc[::-1],
-                                         None if mag is None else mag[::-1], dt, p)
+                                         None if mag is None else mag[::-1], back_dt, p)
     # Reading i of the reversed pass holds the samples from n − 1 − index_b[i] on.
     index_b = (n - 1 - index_b)[::-1]
     b_b, v_b = -b_b[::-1], v_b[::-1]
@@ -276,9 +537,184 @@ def _calibration(est):
     return lambda mag: (mag - offset) @ inverse.T
 
 
+def _bridged(gyr, axis, p):
+    """
+    The strapdown's steps: rates (M, 3), intervals (M,) and each sample's row in them (N,).
+
+    A usual interval integrates its closing sample's rate, as before. An
+    interval over :data:`HOLE_FACTOR` times the usual one (a hole) is
+    bridged from both sides: split into steps of about the usual interval,
+    each integrating the rate of a curve through the samples on either side
+    (``bridge``: a straight line, or Hermite's cubic with the rate's slopes
+    there, each over ``slope_time``). Without holes, the samples' own rates
+    and intervals.
+    """
+    n = len(gyr)
+    dt = axis.dt
+    bridge = np.zeros(n, dtype=bool)
+    bridge[1:] = dt[1:] > HOLE_FACTOR * axis.usual
+    if not bridge.any():
+        return gyr, dt, slice(None)
+    index = np.arange(n)
+    t = axis.times
+    steps = np.ones(n, dtype=np.int64)
+    steps[bridge] = np.maximum(1, np.rint(dt[bridge] / axis.usual).astype(np.int64))
+    rows = np.cumsum(steps) - 1
+    owner = np.repeat(index, steps)
+    rate = gyr[owner]
+    step_dt = np.repeat(dt / steps, steps)
+    fine = np.flatnonzero(bridge[owner])
+    k = owner[fine]
+    # Each bridged step ends (i + 1) dt_k / L_k after the sample before k.
+    i = fine - (rows[k] - steps[k] + 1)
+    tau = t[k] - dt[k] + (i + 1) * dt[k] / steps[k]
+    a, b = k - 1, k
+    wa, wb = gyr[a], gyr[b]
+    span = dt[k][:, None]
+    s = np.clip((tau - t[a]) / dt[k], 0.0, 1.0)[:, None]
+    if p.bridge == 'hermite':
+        ma, mb = _slopes(gyr, t, p.slope_time)
+        rate[fine] = (wa + (wb - wa) * (s * s * (3.0 - 2.0 * s))
+                      + span * (s * (1.0 - s) ** 2 * ma[a] + s * s * (s - 1.0) * mb[b]))
+    else:
+        rate[fine] = (1.0 - s) * wa + s * wb
+    return rate, step_dt, rows
+
+
+def _gaps(axis, shortest):
+    """
+    The holes to join: ``(before, after)`` sample indices (G,) each.
+
+    A hole: an interval at least ``shortest`` s long, from sample
+    ``before`` to ``after = before + 1``.
+    """
+    before = np.flatnonzero(axis.dt[1:] >= shortest)
+    return before, before + 1, axis.dt[before + 1]
+
+
+def _one_sided(x, weight, gaps, axis, window):
+    """
+    ``Σ w x`` and ``Σ w`` over the ``window`` s before each gap and after it (G, k), (G,).
+
+    Each side's samples stop at the neighbouring gap.
+    """
+    before, after = gaps[:2]
+    t = axis.times
+    c = np.concatenate((np.zeros((1,) + x.shape[1:]), np.cumsum(weight[:, None] * x, axis=0)))
+    cw = np.concatenate(([0.0], np.cumsum(weight)))
+    prev_end = np.concatenate(([0], after[:-1]))
+    next_start = np.concatenate((before[1:], [len(t) - 1]))
+    lo = np.maximum(np.searchsorted(t, t[before] - window, side='left'), prev_end)
+    hi = np.minimum(np.searchsorted(t, t[after] + window, side='right'), next_start + 1)
+    left = (c[before + 1] - c[lo], cw[before + 1] - cw[lo])
+    right = (c[hi] - c[after], cw[hi] - cw[after])
+    return left, right
+
+
+def _segment_turns(q, turns, gaps):
+    """
+    ``D_s ⊗ q``: each sample after gap ``j`` turned by ``turns[0] ⊗ … ⊗ turns[j]`` (G, 4).
+
+    ``D_{j+1} = D_j ⊗ turns[j]``: each turn is measured in the frame of
+    the samples before its gap as they were (uncorrected).
+    """
+    before, after = gaps[:2]
+    if len(before) == 0:
+        return q
+    total = np.empty((len(turns) + 1, 4))
+    total[0] = (1.0, 0.0, 0.0, 0.0)
+    for j, turn in enumerate(turns):
+        total[j + 1] = normalize(multiply(total[j], turn))
+    segment = np.searchsorted(after, np.arange(len(q)), side='right')
+    return normalize(multiply(total[segment], q))
+
+
+def _bridge_variance(gyr, gaps):
+    """
+    rad², how unsure the gyro's bridge across each gap is (G,): the online estimator's model.
+
+    Per axis, :data:`HOLE_RATE_CHANGE` of the rate's change across the gap
+    times its length, squared, and a rate random walk's Brownian bridge
+    (:func:`~ext_observer.core.ahrs.hole_kernel.hole_variance`'s terms),
+    summed over the axes.
+    """
+    before, after = gaps[:2]
+    return np.sum(np.square(HOLE_RATE_CHANGE * (gyr[after] - gyr[before]))
+                  * np.square(gaps[2])[:, None]
+                  + HOLE_RATE_WALK * gaps[2][:, None] ** 3 / HOLE_BRIDGE_DIVISOR, axis=1)
+
+
+def _toward(turn, share):
+    """Unit quaternions (G, 4) turned ``share`` (G,) of the way from identity to ``turn``."""
+    half = np.arccos(np.clip(np.abs(turn[:, 0]), 0.0, 1.0)) * share
+    axis = turn[:, 1:] * np.sign(turn[:, :1] + (turn[:, :1] == 0.0))
+    axis = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), np.finfo(float).tiny)
+    return np.concatenate((np.cos(half)[:, None], np.sin(half)[:, None] * axis), axis=1)
+
+
+def _join_tilt(q, acc, gyr, gaps, axis, p):
+    """
+    ``q`` with each gap's tilt taken from both sides: the specific force in I averaged over
+    ``window_acc`` s before the gap and after it, the part after turned by the smallest
+    rotation that makes the two agree.
+    """
+    if len(gaps[0]) == 0:
+        return q
+    f = _rotate(q, acc)
+    x = np.concatenate((f, np.einsum('ij,ij->i', f, f)[:, None]), axis=1)
+    (sl, nl), (sr, nr) = _one_sided(x, np.ones(len(q)), gaps, axis, p.window_acc)
+    ul = sl[:, :3] / np.maximum(np.linalg.norm(sl[:, :3], axis=1, keepdims=True),
+                                np.finfo(float).tiny)
+    ur = sr[:, :3] / np.maximum(np.linalg.norm(sr[:, :3], axis=1, keepdims=True),
+                                np.finfo(float).tiny)
+    # The smallest rotation taking ur to ul: (1 + ur·ul, ur × ul), normalized.
+    turn = normalize(np.concatenate((1.0 + np.einsum('ij,ij->i', ur, ul)[:, None],
+                                     np.cross(ur, ul)), axis=1))
+    # The averages' doubt: the specific force's spread over each side, its
+    # samples counting as independent once every join_tau s.
+    var = (_spread(sl, nl) * p.join_tau / np.maximum(nl * axis.usual, axis.usual)
+           + _spread(sr, nr) * p.join_tau / np.maximum(nr * axis.usual, axis.usual))
+    var = var / np.maximum(np.square(0.5 * (np.linalg.norm(sl[:, :3], axis=1) / np.maximum(nl, 1.0)
+                                             + np.linalg.norm(sr[:, :3], axis=1)
+                                             / np.maximum(nr, 1.0))), np.finfo(float).tiny)
+    bridge = _bridge_variance(gyr, gaps)
+    share = bridge / np.maximum(bridge + var, np.finfo(float).tiny)
+    return _segment_turns(q, _toward(turn, share), gaps)
+
+
+def _spread(s, count):
+    """The mean squared deviation from their mean of vectors given by sums ``(Σx, Σ|x|²)``."""
+    count = np.maximum(count, 1.0)
+    mean = s[:, :-1] / count[:, None]
+    return np.maximum(s[:, -1] / count - np.einsum('ij,ij->i', mean, mean), 0.0)
+
+
+def _slopes(gyr, t, span):
+    """
+    The rate's slope (rad/s²) ending at each sample and starting at it (N, 3) each.
+
+    The difference to the sample about ``span`` s before (after); 0 where
+    there is none.
+    """
+    index = np.arange(len(gyr))
+    tk, wk = t, gyr
+    back = np.searchsorted(tk, tk - span, side='right') - 1
+    ahead = np.searchsorted(tk, tk + span, side='left')
+    back = np.where(back >= np.arange(len(tk)), np.arange(len(tk)) - 1, back)
+    ahead = np.where(ahead <= np.arange(len(tk)), np.arange(len(tk)) + 1, ahead)
+    out_back, out_ahead = np.zeros_like(gyr), np.zeros_like(gyr)
+    ok = back >= 0
+    out_back[index[ok]] = (wk[ok] - wk[back[ok]]) / (tk[ok] - tk[back[ok]])[:, None]
+    ok = ahead < len(tk)
+    out_ahead[index[ok]] = (wk[ahead[ok]] - wk[ok]) / (tk[ahead[ok]] - tk[ok])[:, None]
+    return out_back, out_ahead
+
+
 def _strapdown(rate, dt, first):
     """
-    ``q_k = q_{k−1} ⊗ exp(ω_k dt / 2)`` from ``q_0 = first``, each normalized.
+    ``q_k = q_{k−1} ⊗ exp(ω_k dt_k / 2)`` from ``q_0 = first``, each normalized.
+
+    ``dt``: s, one for all steps or each step's (N,).
 
     One compiled loop where numba is wanted (:func:`_integrate`); else
     :func:`_strapdown_blocked`, numpy on whole arrays. The two agree to
@@ -289,7 +725,8 @@ def _strapdown(rate, dt, first):
         return _strapdown_blocked(rate, dt, first)
     out = np.empty((len(rate), 4))
     first = normalize(np.asarray(first, dtype=float))
-    loop(np.ascontiguousarray(rate, dtype=float), float(dt), first[0], first[1], first[2],
+    dt = np.ascontiguousarray(np.broadcast_to(np.asarray(dt, dtype=float), (len(rate),)))
+    loop(np.ascontiguousarray(rate, dtype=float), dt, first[0], first[1], first[2],
          first[3], out)
     return out
 
@@ -303,7 +740,8 @@ def _strapdown_blocked(rate, dt, first):
     each block's products from its start's.
     """
     n = len(rate)
-    step = quaternion_from_rotation_vector(rate * dt)
+    dt = np.broadcast_to(np.asarray(dt, dtype=float), (n,))
+    step = quaternion_from_rotation_vector(rate * dt[:, None])
     step[0] = normalize(np.asarray(first, dtype=float))
     size = max(1, int(math.ceil(math.sqrt(n))))
     blocks = -(-n // size)
@@ -326,12 +764,14 @@ def _integrate(rate, dt, w, x, y, z, out):
     """
     The strapdown loop over samples: ``q_k`` into ``out`` (N, 4) from ``q_0 = (w, x, y, z)``.
 
+    ``dt`` (N,): each step's interval, s.
+
     Compiled by :func:`_compiled_loop` (``_product``: the kernels' quaternion
     product, compiled).
     """
     out[0, 0], out[0, 1], out[0, 2], out[0, 3] = w, x, y, z
     for k in range(1, rate.shape[0]):
-        vx, vy, vz = rate[k, 0] * dt, rate[k, 1] * dt, rate[k, 2] * dt
+        vx, vy, vz = rate[k, 0] * dt[k], rate[k, 1] * dt[k], rate[k, 2] * dt[k]
         angle = math.sqrt(vx * vx + vy * vy + vz * vz)
         # sin(a / 2) / a, its limit 1/2 below a rounding error's angle.
         s = math.sin(0.5 * angle) / angle if angle > 1e-8 else 0.5
@@ -403,69 +843,93 @@ def _box(x, h):
     return c[2 * h + 1:] - c[:n]
 
 
-def _sums(x, weight, sigma_samples):
+def _sums(x, weight, sigma_samples, axis=None):
     """
     ``Σ K w x`` and ``Σ K w`` over a Gaussian-like window ``K`` of σ samples.
 
     Three centred box filters of ``2 h + 1`` samples (``h`` ≈ σ: a window of
     variance σ²), applied alike to ``weight x`` and ``weight``: zero phase,
-    truncated at the ends.
+    truncated at the ends. ``axis`` (:class:`_Axis`): on its even grid, in
+    usual intervals (a lost sample: a slot of weight 0), read back at the
+    samples.
     """
     h = max(1, int(round(sigma_samples)))
     num = weight[:, None] * x
     den = weight
+    if axis is not None:
+        num, den = axis.grid(num), axis.grid(den)
     for _ in range(3):
         num = _box(num, h)
         den = _box(den, h)
+    if axis is not None:
+        num, den = axis.samples(num), axis.samples(den)
     return num, den
 
 
-def _average(x, weight, sigma_samples, far=None):
+def _average(x, weight, sigma_samples, far=None, axis=None):
     """
     The weighted mean of ``x`` (N, k) over a window of σ samples around each.
 
     ``far``: ``(σ_far, share)``, a second, wider window whose weights count
     ``share`` as much (per unit of window weight): where the near window
-    holds no weight, the far one decides.
+    holds no weight, the far one decides. ``axis``: the windows in time
+    (:func:`_sums`), σ in usual intervals.
     """
-    num, den = _sums(x, weight, sigma_samples)
+    num, den = _sums(x, weight, sigma_samples, axis)
     if far is not None and far[1] > 0.0:
-        num_far, den_far = _sums(x, weight, far[0])
+        num_far, den_far = _sums(x, weight, far[0], axis)
         scale = far[1] * sigma_samples / far[0]
         num = num + scale * num_far
         den = den + scale * den_far
     return num / np.maximum(den, np.finfo(float).tiny)[:, None]
 
 
-def _inclination(q, acc, rate, p):
+def _inclination(q, acc, axis, p):
     """``c ⊗ q``: ``c``, the smallest rotation turning the averaged specific force in I up."""
     a_i = _rotate(q, acc)
-    mean = _average(a_i, np.ones(len(q)), p.window_acc * rate)
+    mean = _average(a_i, axis.spans(p.join_time), p.window_acc * axis.rate, axis=axis)
     up = mean / np.linalg.norm(mean, axis=1, keepdims=True)
     # (1 + up·z, up × z) normalized: the rotation by the angle between up and z about up × z.
     c = np.stack((1.0 + up[:, 2], up[:, 1], -up[:, 0], np.zeros(len(up))), axis=1)
     return normalize(multiply(normalize(c), q))
 
 
-def _heading(q, mag, rate, p):
-    """``r ⊗ q``: ``r``, about the vertical, turns the averaged horizontal field north (+y)."""
-    m = _rotate(q, mag)
+def _heading(q, mag, axis, p, gaps=None):
+    """
+    ``r ⊗ q``: ``r``, about the vertical, turns the averaged horizontal field north (+y).
+
+    A NaN row of ``mag`` (no field) weighs 0: its heading comes from the
+    fields on both sides. ``gaps`` (:func:`_gaps`; ``join`` not
+    ``'none'``): the averages within each stretch between two gaps (the
+    gyro's bridge across a long hole does not hold the heading).
+    """
+    lost = np.isnan(mag[:, 0])
+    m = _rotate(q, np.where(lost[:, None], 0.0, mag))
     norm = np.linalg.norm(m, axis=1)
     horizontal = np.hypot(m[:, 0], m[:, 1])
     dip = np.arctan2(m[:, 2], horizontal)
     if not np.any(horizontal > 0.0):
         return q  # no field, no heading: the strapdown's
-    start = slice(0, max(1, int(round(p.ref_time * rate))))
-    if p.ref_time > 0.0 and np.median(norm[start]) > 0.0:
+    start = (axis.slots() < max(1, int(round(p.ref_time * axis.rate)))) & ~lost
+    if p.ref_time > 0.0 and start.any() and np.median(norm[start]) > 0.0:
         ref_norm = float(np.median(norm[start]))
         ref_dip = float(np.median(dip[start]))
     else:
         ref_norm, ref_dip = _most_common(norm, dip, p.mag_sigma)
     z = (np.square((norm - ref_norm) / (p.mag_sigma * ref_norm))
          + np.square((dip - ref_dip) / p.mag_sigma))
-    weight = np.exp(-0.5 * np.minimum(z, 1400.0))
+    weight = np.where(lost, 0.0, np.exp(-0.5 * np.minimum(z, 1400.0)) * axis.spans(p.join_time))
     unit = m[:, :2] / np.maximum(horizontal, np.finfo(float).tiny)[:, None]
-    mean = _average(unit, weight, p.window_mag * rate, (p.window_far * rate, p.far_share))
+    has_gaps = gaps is not None and len(gaps[0]) > 0
+    if has_gaps and p.join in ('local', 'chain'):
+        bounds = np.concatenate(([0], gaps[1], [len(q)]))
+        mean = np.concatenate([
+            _average(unit[lo:hi], weight[lo:hi], p.window_mag * axis.rate,
+                     (p.window_far * axis.rate, p.far_share), axis.part(lo, hi))
+            for lo, hi in zip(bounds[:-1], bounds[1:])])
+    else:
+        mean = _average(unit, weight, p.window_mag * axis.rate,
+                        (p.window_far * axis.rate, p.far_share), axis)
     # The rotation by δ about z takes (sin δ, cos δ)·|h| to (0, |h|): north.
     return normalize(multiply(_about_vertical(np.arctan2(mean[:, 0], mean[:, 1])), q))
 
@@ -478,7 +942,7 @@ def _most_common(norm, dip, sigma, candidates=64, samples=20000):
     of each); the samples (those with a field), at most about ``samples``
     evenly spread.
     """
-    some = np.flatnonzero(norm > 0.0)
+    some = np.flatnonzero(norm > 0.0)  # a lost field's norm is 0
     some = some[::max(1, len(some) // samples)]
     n, d = norm[some], dip[some]
     pick = np.linspace(0, len(n) - 1, candidates).astype(np.int64)

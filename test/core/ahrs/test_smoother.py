@@ -119,3 +119,78 @@ def test_bad_settings_are_refused():
         SmoothParams(ref_time=-1.0)
     with pytest.raises(ValueError, match="bias must be 'end' or 'both'"):
         SmoothParams(bias='middle')
+
+
+def test_times_evenly_spaced_give_the_rate_result_to_the_bit(moving):
+    truth, gyr, acc, mag = moving
+    rate = 128.0  # an interval of 1/128 s: the times' differences exact
+    times = 3.0 + np.arange(len(gyr)) / rate
+    for field in (None, mag):
+        by_rate, _ = smooth_attitude(gyr, acc, field, rate)
+        by_times, _ = smooth_attitude(gyr, acc, field, times=times)
+        np.testing.assert_array_equal(by_times, by_rate)
+
+
+@pytest.mark.parametrize('use_mag', [False, True])
+def test_holes_are_bridged_from_both_sides(moving, use_mag):
+    truth, gyr, acc, mag = moving
+    field = mag if use_mag else None
+    times = np.arange(len(gyr)) / RATE
+    full, _ = smooth_attitude(gyr, acc, field, RATE)
+    random = np.random.default_rng(5).random(len(gyr)) >= 0.4
+    random[0] = True
+    q, _ = smooth_attitude(gyr[random], acc[random], None if field is None else field[random],
+                           times=times[random])
+    kept, whole = errors_deg(q, truth[random]), errors_deg(full[random], truth[random])
+    # 40 % lost at random: within 1.2× the full data's error over the kept samples.
+    assert rms(kept[2]) < 1.2 * rms(whole[2]) + 0.02  # inclination
+    if use_mag:
+        assert rms(kept[0]) < 1.2 * rms(whole[0]) + 0.02  # total
+    # 200 ms lost every 2 s: bridged (the closing rate over each hole alone, the
+    # heading would wander by tens of degrees), short of the full data's figure.
+    burst = np.mod(times, 2.0) >= 0.2
+    burst[0] = True
+    q, _ = smooth_attitude(gyr[burst], acc[burst], None if field is None else field[burst],
+                           times=times[burst])
+    kept = errors_deg(q, truth[burst])
+    assert rms(kept[2]) < 2.5 and (not use_mag or rms(kept[0]) < 2.5)
+
+
+def test_lost_fields_weigh_nothing_and_the_heading_is_bridged(moving):
+    truth, gyr, acc, mag = moving
+    full, _ = smooth_attitude(gyr, acc, mag, RATE)
+    lost = mag.copy()
+    lost[np.random.default_rng(6).random(len(mag)) < 0.5] = np.nan  # a slower magnetometer
+    lost[int(20 * RATE):int(30 * RATE), 1] = np.nan  # 10 s without a field
+    q, _ = smooth_attitude(gyr, acc, lost, RATE)
+    assert np.isfinite(q).all()
+    assert rms(errors_deg(q, truth)[0]) < 1.2 * rms(errors_deg(full, truth)[0]) + 0.05
+
+
+def test_a_clipped_gyro_is_bridged_across_its_stretches(moving):
+    truth, gyr, acc, _ = moving
+    limit = 0.8 * np.abs(gyr).max()
+    clipped = np.clip(gyr, -limit, limit)
+    assert (np.abs(gyr) > limit).sum() > 10
+    whole, _ = smooth_attitude(gyr, acc, None, RATE)
+    held, _ = smooth_attitude(clipped, acc, None, RATE)  # stuck at its peak: found so
+    ignored = smoother._clipped
+    try:
+        smoother._clipped = lambda g, p: np.zeros(g.shape, dtype=bool)
+        naive, _ = smooth_attitude(clipped, acc, None, RATE)
+    finally:
+        smoother._clipped = ignored
+    err = [rms(errors_deg(q, truth)[2]) for q in (whole, held, naive)]
+    # Bridged from both sides, nearer the truth than the clipped rates as given.
+    assert err[1] < 0.95 * err[2], err
+
+
+@pytest.mark.parametrize('kwargs, match', [
+    ({'rate': 100.0, 'times': np.arange(10.0)}, 'either rate or times'),
+    ({'times': np.arange(9.0)}, r'times must have shape \(10,\)'),
+    ({'times': np.r_[0.0, 1.0, 1.0, np.arange(3.0, 10.0)]}, 'times must increase'),
+    ({'times': np.r_[np.nan, np.arange(1.0, 10.0)]}, 'times has non-finite'),
+])
+def test_bad_times_are_refused(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        smooth_attitude(np.zeros((10, 3)), np.tile([0.0, 0.0, 9.81], (10, 1)), None, **kwargs)
