@@ -9,6 +9,8 @@ For each dev trial (:mod:`ext_observer.broad`), the smoothed estimate
   ``numpy.random.default_rng(zlib.crc32(name))``), the kept ones at their
   true times;
 - ``burst``: 200 ms lost every 2 s (the first 200 ms of each 2 s);
+- ``field``: every sample, the field only on every 4th one and lost from
+  30 to 40 s of every 60 s (NaN rows; 9D);
 - ``clipped``: every sample, the gyro clipped at ±250 °/s (robustness
   variant e, :func:`ext_observer.broad.stress.clip_gyro`; BROAD's range
   given as ``gyro_range``);
@@ -31,7 +33,8 @@ import numpy as np
 
 __all__ = ['lost', 'main', 'measure']
 
-CASES = ('full', 'random', 'burst', 'clipped')
+CASES = ('full', 'random', 'burst', 'field', 'clipped')
+FIELD = (4, 30.0, 40.0, 60.0)  # a field every 4th sample; none from 30 to 40 s of every 60 s
 LOST_SHARE = 0.4
 BURST = (0.2, 2.0)  # s lost, every s
 
@@ -72,6 +75,11 @@ def measure(trial, case, use_mag, params=None, other=None):
     acc = hold_finite(np.asarray(trial.acc, dtype=float))[keep]
     mag = hold_finite(np.asarray(trial.mag, dtype=float))[keep] if use_mag else None
     times = np.arange(n)[keep] / trial.rate
+    if case == 'field' and mag is not None:
+        mag = mag.copy()
+        mag[(np.arange(n) % FIELD[0] != 0)
+            | ((np.mod(np.arange(n) / trial.rate, FIELD[3]) >= FIELD[1])
+               & (np.mod(np.arange(n) / trial.rate, FIELD[3]) < FIELD[2]))] = np.nan
     if other == 'online':
         q = AhrsObserver(p.online, use_mag=use_mag).run(gyr, acc, mag, 1.0 / trial.rate)
     elif other is not None:
