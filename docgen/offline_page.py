@@ -98,9 +98,9 @@ def markdown(result, groups, meta, covariance, figure, docs):
     lines += ['By split (`ext_observer/broad/split.py`; mean over the trials of each):', '']
     rows = []
     for algorithm, label in shown:
-        rows.append([label] + [
-            f'{_deg(_mean(result, algorithm, "9D", "total_rmse_deg", _names(result, s)), 3)}'
-            f' / {_deg(_mean(result, algorithm, "6D", "inclination_rmse_deg", _names(result, s)), 3)}'
+        rows.append([label] + [' / '.join(
+            _deg(_mean(result, algorithm, mode, key, _names(result, s)), 3)
+            for mode, key in (('9D', 'total_rmse_deg'), ('6D', 'inclination_rmse_deg')))
             for s in _SPLITS])
     lines += [table([''] + [f'{s} ({counts[s]}): 9D total / 6D incl.' for s in _SPLITS], rows),
               '']
@@ -116,7 +116,7 @@ def markdown(result, groups, meta, covariance, figure, docs):
         lines += ['Ours smoothed against offline VQF, 9D total / 6D inclination: '
                   + '; '.join(ratios) + '.', '']
     lines += _covariance_lines(covariance)
-    lines += _time_lines(result)
+    lines += _time_lines(result, meta)
     if figure:
         rel = os.path.relpath(figure, docs).replace(os.sep, '/')
         lines += [f'![{meta.get("plot_trial")}: error over time, online and smoothed]({rel})', '',
@@ -144,16 +144,19 @@ def _covariance_lines(covariance):
             table([''] + list(_SPLITS), rows), '']
 
 
-def _time_lines(result):
+def _time_lines(result, meta):
     seconds = result['seconds']
     if OURS not in seconds or OURS_SMOOTHED not in seconds:
         return []
-    online, smoothed = seconds[OURS], seconds[OURS_SMOOTHED]
-    return [f'Time, all trials, both modes: ours online {online:.1f} s (its batched run, '
-            f'in {result.get("workers", 1) or 1} process), ours smoothed {smoothed:.1f} s '
-            f'(`smooth_attitude`, one process, summed over the runs; {smoothed / online:.1f}×). '
-            'The smoothed covariance runs the node\'s pipeline forward and backward besides '
-            '(docs/own_data.md).', '']
+    workers = meta.get('workers') or 1
+    return [f'Time, all trials in both modes: ours online {seconds[OURS]:.1f} s (the wall time '
+            f'of one batched call over all trials, {workers} process'
+            f'{"es" if workers > 1 else ""}), ours smoothed {seconds[OURS_SMOOTHED]:.1f} s '
+            '(`smooth_attitude`, its online pass included: the sum over the runs, one trial '
+            'each). The smoothed covariance runs the node\'s pipeline forward and backward '
+            'besides: what that costs, '
+            '[own_data.md](own_data.md#the-whole-recording-a-smoothed-estimate).',
+            '']
 
 
 def smoothed_pairs(trial, mode):

@@ -99,7 +99,7 @@ def _held(std):
 
 
 def _smoothed(gyr, acc, mag, times, settings, mag_times):
-    """:func:`~ext_observer.core.ahrs.smoother.smooth_attitude`'s quaternions, in ``world_frame``."""
+    """:func:`~ext_observer.core.ahrs.smoother.smooth_attitude`'s estimate, in ``world_frame``."""
     times = np.asarray(times, dtype=float)
     steps = np.diff(times)
     steps = steps[np.isfinite(steps) & (steps > 0.0)]

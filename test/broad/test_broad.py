@@ -105,7 +105,7 @@ def test_the_offline_page_fills_its_section_and_keeps_the_prose(tmp_path):
     text = page.read_text(encoding='utf-8')
     assert text.startswith('# Title\n\nProse.') and text.endswith('More prose.\n')
     assert '\nold\n' not in text and '**ours smoothed**' in text and 'offline VQF' in text
-    assert '1.25 / 90 %' in text and '3.0×' in text and 'tuning (4)' in text
+    assert '1.25 / 90 %' in text and 'ours smoothed 3.0 s' in text and 'tuning (4)' in text
     assert 'tuning 1.00× / 1.00×' in text and 'held-out (0)' in text
     assert (figures / offline_page.FIGURE).stat().st_size > 1000
     assert f'](figures/{offline_page.FIGURE})' in text
