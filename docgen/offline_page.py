@@ -153,8 +153,8 @@ def _time_lines(result, meta):
             f'of one batched call over all trials, {workers} process'
             f'{"es" if workers > 1 else ""}), ours smoothed {seconds[OURS_SMOOTHED]:.1f} s '
             '(`smooth_attitude`, its online pass included: the sum over the runs, one trial '
-            'each). The smoothed covariance runs the node\'s pipeline forward and backward '
-            'besides: what that costs, '
+            'each). The smoothed covariance runs the node\'s pipeline backward besides (and '
+            'forward, where the caller has not: `broad` has not): what that costs, '
             '[own_data.md](own_data.md#the-whole-recording-a-smoothed-estimate).',
             '']
 

@@ -25,7 +25,7 @@ __all__ = ['combined', 'field_per_sample', 'smoothed_attitude', 'time_reversed']
 
 
 def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocity=None,
-                      velocity_times=None):
+                      velocity_times=None, online_std=None):
     """
     Return each IMU sample's attitude from the whole recording, and its σ.
 
@@ -43,9 +43,10 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
     two runs' σ combined as of two independent estimates (:func:`combined`),
     as the smoothed estimate uses the samples on both sides. On BROAD's 22
     trials the smoothed estimate's mean e²/σ² is within 0.3–3 for both, on
-    the tuning and on the held-out trials (docs/offline.md). The two runs
-    cost about twice the online run; the smoother itself a fraction of
-    that (docs/own_data.md).
+    the tuning and on the held-out trials (docs/offline.md). The forward
+    run is the caller's online run where it gives its σ (``online_std``);
+    the backward one costs about as much; the smoother itself a fraction
+    of that (docs/own_data.md).
 
     Parameters
     ----------
@@ -67,6 +68,10 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
         (s), for the velocity aid, as
         :func:`~ext_observer.recordings.recording.attitude_from_imu` takes it:
         the σ's runs use it; the smoother does not (yet).
+    online_std : tuple of ndarray, shape (N,), optional
+        ``(inclination_std, heading_std)`` of the online run over these same
+        inputs (:class:`~ext_observer.recordings.recording.Recording`'s), where
+        the caller made one: the σ's forward run is then not run again.
 
     Returns
     -------
@@ -82,12 +87,17 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
         mag_times = None
     q = _smoothed(gyr, acc, mag, times, settings, mag_times)
     inputs = (gyr, acc, mag, mag_times, velocity, velocity_times)
-    # Only the σ is kept of each run (memory: a long recording).
-    forward = _estimate(run_arrays(settings, None, times, *inputs))
+    # Only the σ is kept of each run (memory: a long recording); combined as
+    # combined() combines them.
+    if online_std is None:
+        forward = _estimate(run_arrays(settings, None, times, *inputs))
+    else:
+        forward = (None, *online_std)
     reversed_times, reversed_inputs = time_reversed(times, *inputs)
     backward = _estimate(run_arrays(settings, None, reversed_times, *reversed_inputs))
     del reversed_times, reversed_inputs
-    _, inclination_std, heading_std = combined(forward, tuple(a[::-1] for a in backward))
+    inclination_std = _weights(forward[1], backward[1][::-1])[1]
+    heading_std = _weights(forward[2], backward[2][::-1])[1]
     return q, _held(inclination_std), _held(heading_std)
 
 
@@ -152,7 +162,7 @@ def field_per_sample(mag, mag_times, times):
 
 
 def _estimate(recording):
-    return recording.quaternions, recording.inclination_std, recording.heading_std
+    return None, recording.inclination_std, recording.heading_std
 
 
 def time_reversed(times, gyr, acc, mag=None, mag_times=None, velocity=None,
