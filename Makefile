@@ -100,6 +100,9 @@ bench: $(BENCH_STAMP)
 # make broad BROAD_ARGS="--stress --json out/robustness.json": the robustness
 # benchmark instead (each trial cut, biased, at 50 Hz, clipped),
 # into docs/robustness.md, docs/figures/robustness.png and out/robustness.json.
+# make broad BROAD_ARGS='--smooth --anchors VQF "offline VQF"': our smoothed
+# estimate too, against VQF and offline VQF, into docs/offline.md's generated
+# section and docs/figures/offline_error.png (with its covariance: a few minutes more).
 BROAD_DATA ?=
 BROAD_ARGS ?=
 

@@ -60,7 +60,9 @@ def build_parser():
                              "(doubles our run time)")
     parser.add_argument('--smooth', action='store_true',
                         help='also score our smoothed estimate (each sample from the whole '
-                             "recording, as 'ext_observer smoothed'; docs/offline.md)")
+                             "recording, as 'ext_observer smoothed'; docs/offline.md; "
+                             'with --docs, the generated section of DOCS_DIR/offline.md and '
+                             'DOCS_DIR/figures/offline_error.png instead of the broad page)')
     parser.add_argument('--docs', metavar='DOCS_DIR',
                         help='write DOCS_DIR/broad.md and DOCS_DIR/figures/broad_*.png '
                              "(in a clone of ext_observer: the pages' writers, docgen/, "
@@ -158,7 +160,12 @@ def main(argv=None):
     print(text_report(result, groups, meta))
     if args.json:
         write_json(args.json, result, groups, meta)
-    if args.docs:
+    if args.docs and args.smooth:
+        page = docgen('offline_page')
+        covariance = page.covariance_summary(trials, modes, workers=args.jobs,
+                                             progress=progress)
+        page.write_page(result, groups, meta, trials, covariance, args.docs, progress)
+    elif args.docs:
         meta['plot_movement'] = next(t.movement for t in trials if t.name == plot_trial)
         _write_page(args.docs, result, groups, meta, progress)
     return 0

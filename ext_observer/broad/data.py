@@ -95,13 +95,19 @@ def shown_path(path):
 
 
 def shown_command(words):
-    """Return the command ``words`` as a page shows it: absolute paths as :func:`shown_path`."""
+    """Return the command ``words`` as a page shows it: absolute paths as :func:`shown_path`.
+
+    An argument holding a space (not the first word, the program) is shown in double
+    quotes.
+    """
     shown = []
     for word in words:
         option, equals, value = word.rpartition('=') if word.startswith('-') else ('', '', word)
         if os.path.isabs(value):
             value = shown_path(value)
-        shown.append(option + equals + value)
+        word = option + equals + value
+        # An argument with a space (an anchor's name) quoted, so the command runs as shown.
+        shown.append(f'"{word}"' if ' ' in word and shown else word)
     return ' '.join(shown).strip()
 
 

@@ -264,7 +264,8 @@ def _write_smoothed(estimator, side, settings, progress):
         gyr, acc, fields if use_mag else None, seconds(stamps), settings,
         mag_times=seconds(field_stamps) if use_mag else None,
         velocity=velocities if len(velocities) else None,
-        velocity_times=seconds(velocity_stamps) if len(velocities) else None))
+        velocity_times=seconds(velocity_stamps) if len(velocities) else None,
+        online_std=(recording.inclination_std, recording.heading_std)))
     del gyr, acc, fields, velocities
     # In this process: the estimates are ready, so a forked writer would gain nothing, and it
     # would hold a copy of this process's pages (about 0.5 kB a sample) while it writes.

@@ -264,7 +264,8 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
         smoothed_into(recording, smoothed_attitude(
             gyr, acc, field, recording.times, settings,
             mag_times=None if field is None else mag_times, velocity=velocity,
-            velocity_times=velocity_times))
+            velocity_times=velocity_times,
+            online_std=(recording.inclination_std, recording.heading_std)))
     return recording
 
 

@@ -14,28 +14,39 @@ s; quaternions ``(w, x, y, z)``, sensor → ``world_frame``.
 
 import numpy as np
 
+from ext_observer.core.ahrs.frames import world_from_enu
+from ext_observer.core.ahrs.smoother import SmoothParams, smooth_attitude
 from ext_observer.core.quaternion import multiply, quaternion_from_rotation_vector
 from ext_observer.pipeline.batch import hold_finite
+from ext_observer.pipeline.imu_filter_parameters import ahrs_params
 from ext_observer.recordings.pipeline_run import run_arrays
 
-__all__ = ['combined', 'smoothed_attitude', 'time_reversed']
+__all__ = ['combined', 'field_per_sample', 'smoothed_attitude', 'time_reversed']
 
 
 def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocity=None,
-                      velocity_times=None):
+                      velocity_times=None, online_std=None):
     """
     Return each IMU sample's attitude from the whole recording, and its σ.
 
-    The interim smoother: ``imu_filter_node``'s estimator run forward and on
-    the time-reversed recording (:func:`time_reversed`), the two estimates
-    combined per sample by their published σ (:func:`combined`): the
-    inclination; the heading and its σ are the forward run's (each run's
-    heading refers to what it met first, the field where it started in 9D,
-    its own start in 6D, and the two differ by degrees). The two runs'
-    errors are correlated (the same samples), which this combination
-    ignores: its σ is somewhat optimistic (on BROAD the inclination's mean
-    e²/σ² is 1.3). It is the seam's working body until the smoother of
-    ``ext_observer.core.ahrs`` replaces it.
+    The attitude is :func:`~ext_observer.core.ahrs.smoother.smooth_attitude`'s
+    (docs/offline.md: an online pass for the gyro bias and the field's
+    calibration, a strapdown, zero-phase window averages for the
+    inclination and the heading), with the node's ``ahrs.*`` parameters for
+    its online pass, ``use_mag``, and the rate of the IMU times (the median
+    interval), turned from ENU to ``world_frame``. It takes one field row
+    per IMU sample: the last field at or before it (:func:`field_per_sample`).
+
+    The σ is the online covariance model's, from ``imu_filter_node``'s
+    estimator run forward and on the time-reversed recording
+    (:func:`time_reversed`): for the inclination and for the heading, the
+    two runs' σ combined as of two independent estimates (:func:`combined`),
+    as the smoothed estimate uses the samples on both sides. On BROAD's 22
+    trials the smoothed estimate's mean e²/σ² is within 0.3–3 for both, on
+    the tuning and on the held-out trials (docs/offline.md). The forward
+    run is the caller's online run where it gives its σ (``online_std``);
+    the backward one costs about as much; the smoother itself a fraction
+    of that (docs/own_data.md).
 
     Parameters
     ----------
@@ -55,7 +66,12 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
     velocity, velocity_times : ndarray, optional
         The body's velocity, m/s, (V, 3), per IMU sample or at its own times
         (s), for the velocity aid, as
-        :func:`~ext_observer.recordings.recording.attitude_from_imu` takes it.
+        :func:`~ext_observer.recordings.recording.attitude_from_imu` takes it:
+        the σ's runs use it; the smoother does not (yet).
+    online_std : tuple of ndarray, shape (N,), optional
+        ``(inclination_std, heading_std)`` of the online run over these same
+        inputs (:class:`~ext_observer.recordings.recording.Recording`'s), where
+        the caller made one: the σ's forward run is then not run again.
 
     Returns
     -------
@@ -69,17 +85,84 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
     """
     if mag is None:
         mag_times = None
+    q = _smoothed(gyr, acc, mag, times, settings, mag_times)
     inputs = (gyr, acc, mag, mag_times, velocity, velocity_times)
-    # Only what the combination reads is kept of each run (memory: a long recording).
-    forward = _estimate(run_arrays(settings, None, times, *inputs))
+    # Only the σ is kept of each run (memory: a long recording); combined as
+    # combined() combines them.
+    if online_std is None:
+        forward = _estimate(run_arrays(settings, None, times, *inputs))
+    else:
+        forward = (None, *online_std)
     reversed_times, reversed_inputs = time_reversed(times, *inputs)
     backward = _estimate(run_arrays(settings, None, reversed_times, *reversed_inputs))
     del reversed_times, reversed_inputs
-    return combined(forward, tuple(a[::-1] for a in backward), heading=False)
+    inclination_std = _weights(forward[1], backward[1][::-1])[1]
+    heading_std = _weights(forward[2], backward[2][::-1])[1]
+    return q, _held(inclination_std), _held(heading_std)
+
+
+def _held(std):
+    """A row without a σ (neither run had an estimate there) takes the nearest before's."""
+    if np.isnan(std).any() and not np.isnan(std).all():
+        return hold_finite(std[:, None])[:, 0]
+    return std
+
+
+def _smoothed(gyr, acc, mag, times, settings, mag_times):
+    """:func:`~ext_observer.core.ahrs.smoother.smooth_attitude`'s estimate, in ``world_frame``."""
+    times = np.asarray(times, dtype=float)
+    steps = np.diff(times)
+    steps = steps[np.isfinite(steps) & (steps > 0.0)]
+    if not len(steps):
+        raise ValueError('the IMU times must increase somewhere to give a rate')
+    rate = 1.0 / float(np.median(steps))
+    use_mag = bool(settings['use_mag']) and mag is not None
+    field = field_per_sample(mag, mag_times, times) if use_mag else None
+    if field is not None and np.isnan(field).all():
+        field = None  # no field at all: 6D
+    if field is not None:
+        # smooth_attitude takes no NaN row yet: each held from the nearest before (the
+        # first from the first field) until it takes them as samples without a field.
+        field = hold_finite(field)
+    params = SmoothParams(online=ahrs_params(settings))
+    q, _ = smooth_attitude(hold_finite(np.asarray(gyr, dtype=float)),
+                           hold_finite(np.asarray(acc, dtype=float)), field, rate=rate,
+                           params=params)
+    return world_from_enu(q, settings['world_frame'])
+
+
+def field_per_sample(mag, mag_times, times):
+    """
+    One field row per IMU sample: the last field at or before it (NaN: none yet).
+
+    Parameters
+    ----------
+    mag : ndarray, shape (M, 3)
+    mag_times : ndarray, shape (M,), or None
+        s; None: ``mag`` has a row per IMU sample already (returned as it is).
+    times : ndarray, shape (N,)
+        s, the IMU samples'.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+
+    """
+    mag = np.asarray(mag, dtype=float)
+    if mag_times is None:
+        return mag
+    mag_times = np.asarray(mag_times, dtype=float)
+    order = np.argsort(mag_times, kind='stable')
+    before = np.searchsorted(mag_times[order], np.asarray(times, dtype=float),
+                             side='right') - 1
+    out = np.full((len(times), 3), np.nan)
+    some = before >= 0
+    out[some] = mag[order][before[some]]
+    return out
 
 
 def _estimate(recording):
-    return recording.quaternions, recording.inclination_std, recording.heading_std
+    return None, recording.inclination_std, recording.heading_std
 
 
 def time_reversed(times, gyr, acc, mag=None, mag_times=None, velocity=None,

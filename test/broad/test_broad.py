@@ -13,7 +13,7 @@ import pytest
 
 from broad_synthetic import NAMES
 from conftest import REPO
-from docgen import broad_page, broad_plots
+from docgen import broad_page, broad_plots, offline_page
 from ext_observer import broad
 
 
@@ -74,6 +74,41 @@ def test_figures_are_written(tmp_path):
     assert set(figures) == {'groups', 'trial'}
     for path in figures.values():
         assert os.path.basename(path).startswith('broad_') and os.path.getsize(path) > 1000
+
+
+def test_the_offline_page_fills_its_section_and_keeps_the_prose(tmp_path):
+    pytest.importorskip('matplotlib')
+    groups = broad.find_groups('/nonexistent', NAMES)
+    result = _fake_result(NAMES)
+    result['scores'][broad.OURS_SMOOTHED] = result['scores'].pop('Madgwick')
+    result['scores']['offline VQF'] = result['scores'][broad.OURS_SMOOTHED]
+    result['seconds'][broad.OURS_SMOOTHED] = 3.0
+    n = 400
+    angles = tuple(np.full(n, 0.01) for _ in range(3))
+    result['series'] = {a: {'9D': angles, '6D': angles} for a in (broad.OURS,
+                                                                   broad.OURS_SMOOTHED)}
+
+    class Trial:
+        name, rate, movement = NAMES[-1], 100.0, np.arange(n) > 50
+
+        def __len__(self):
+            return n
+
+    figures = tmp_path / 'figures'
+    covariance = {(m, s, c): {'mean_z2': 1.25, 'within_2sigma': 0.9}
+                  for m in broad.MODES for s in ('tuning', 'held-out', 'all')
+                  for c in ('inclination', 'heading')}
+    page = tmp_path / 'offline.md'
+    page.write_text(f'# Title\n\nProse.\n\n{offline_page.BEGIN}\nold\n{offline_page.END}\n'
+                    'More prose.\n', encoding='utf-8')
+    offline_page.write_page(result, groups, _meta(NAMES), [Trial()], covariance, str(tmp_path))
+    text = page.read_text(encoding='utf-8')
+    assert text.startswith('# Title\n\nProse.') and text.endswith('More prose.\n')
+    assert '\nold\n' not in text and '**ours smoothed**' in text and 'offline VQF' in text
+    assert '1.25 / 90 %' in text and 'ours smoothed 3.0 s' in text and 'tuning (4)' in text
+    assert 'tuning 1.00× / 1.00×' in text and 'held-out (0)' in text
+    assert (figures / offline_page.FIGURE).stat().st_size > 1000
+    assert f'](figures/{offline_page.FIGURE})' in text
 
 
 # Every public name of the module ext_observer/broad.py had, before it became

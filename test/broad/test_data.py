@@ -81,9 +81,10 @@ def test_data_folder_is_the_option_then_the_environment_then_the_defaults(tree, 
     assert broad.shown_path(str(fetched)) == 'data/broad'
     # A page never holds this machine's absolute paths, typed or not.
     assert broad.shown_command(['python -m ext_observer broad', '--data', str(shared),
-                                f'--json={fetched}/b.json', '--docs', 'docs']) == (
+                                f'--json={fetched}/b.json', '--docs', 'docs', '--anchors',
+                                'offline VQF']) == (
         'python -m ext_observer broad --data ../shared/broad --json=data/broad/b.json '
-        '--docs docs')
+        '--docs docs --anchors "offline VQF"')
     assert not os.path.isabs(broad.shown_path('/elsewhere/broad'))
 
 
