@@ -33,9 +33,10 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
     (docs/offline.md: an online pass for the gyro bias and the field's
     calibration, a strapdown, zero-phase window averages for the
     inclination and the heading), with the node's ``ahrs.*`` parameters for
-    its online pass, ``use_mag``, and the rate of the IMU times (the median
-    interval), turned from ENU to ``world_frame``. It takes one field row
-    per IMU sample: the last field at or before it (:func:`field_per_sample`).
+    its online pass, ``use_mag`` and the IMU's times (holes bridged from both
+    sides), turned from ENU to ``world_frame``. It takes one field row per IMU
+    sample: a field at the first sample at or after its time, NaN where none
+    (:func:`field_per_sample`).
 
     The σ is the online covariance model's, from ``imu_filter_node``'s
     estimator run forward and on the time-reversed recording
@@ -111,29 +112,40 @@ def _held(std):
 def _smoothed(gyr, acc, mag, times, settings, mag_times):
     """:func:`~ext_observer.core.ahrs.smoother.smooth_attitude`'s estimate, in ``world_frame``."""
     times = np.asarray(times, dtype=float)
-    steps = np.diff(times)
-    steps = steps[np.isfinite(steps) & (steps > 0.0)]
-    if not len(steps):
+    # The samples the online run stepped on: each later than every one before
+    # (a repeated or out-of-order stamp is dropped, as the node drops it); a
+    # dropped row shows the estimate of the sample before it.
+    kept = _increasing(times)
+    if kept.sum() < 2:
         raise ValueError('the IMU times must increase somewhere to give a rate')
-    rate = 1.0 / float(np.median(steps))
     use_mag = bool(settings['use_mag']) and mag is not None
-    field = field_per_sample(mag, mag_times, times) if use_mag else None
+    field = field_per_sample(mag, mag_times, times)[kept] if use_mag else None
     if field is not None and np.isnan(field).all():
         field = None  # no field at all: 6D
-    if field is not None:
-        # smooth_attitude takes no NaN row yet: each held from the nearest before (the
-        # first from the first field) until it takes them as samples without a field.
-        field = hold_finite(field)
     params = SmoothParams(online=ahrs_params(settings))
-    q, _ = smooth_attitude(hold_finite(np.asarray(gyr, dtype=float)),
-                           hold_finite(np.asarray(acc, dtype=float)), field, rate=rate,
-                           params=params)
+    q, _ = smooth_attitude(hold_finite(np.asarray(gyr, dtype=float)[kept]),
+                           hold_finite(np.asarray(acc, dtype=float)[kept]), field,
+                           params=params, times=times[kept])
+    rows = np.maximum.accumulate(np.where(kept, np.arange(len(times)), 0))
+    q = q[np.cumsum(kept)[rows] - 1]
     return world_from_enu(q, settings['world_frame'])
+
+
+def _increasing(times):
+    """Where a time is later than every time before it (the first always), bool (N,)."""
+    latest = np.maximum.accumulate(np.where(np.isfinite(times), times, -np.inf))
+    kept = np.ones(len(times), dtype=bool)
+    kept[1:] = times[1:] > latest[:-1]
+    return kept
 
 
 def field_per_sample(mag, mag_times, times):
     """
-    One field row per IMU sample: the last field at or before it (NaN: none yet).
+    One field row per IMU sample: a field at the first sample at or after its time.
+
+    A row with no field there is NaN (a slower magnetometer, a field lost for
+    a while: the smoother bridges those from the fields on both sides);
+    several fields before one sample: the last of them.
 
     Parameters
     ----------
@@ -141,7 +153,7 @@ def field_per_sample(mag, mag_times, times):
     mag_times : ndarray, shape (M,), or None
         s; None: ``mag`` has a row per IMU sample already (returned as it is).
     times : ndarray, shape (N,)
-        s, the IMU samples'.
+        s, the IMU samples', increasing.
 
     Returns
     -------
@@ -153,11 +165,13 @@ def field_per_sample(mag, mag_times, times):
         return mag
     mag_times = np.asarray(mag_times, dtype=float)
     order = np.argsort(mag_times, kind='stable')
-    before = np.searchsorted(mag_times[order], np.asarray(times, dtype=float),
-                             side='right') - 1
+    at = np.searchsorted(np.asarray(times, dtype=float), mag_times[order], side='left')
+    inside = at < len(times)
+    at, fields = at[inside], mag[order][inside]
+    # The last field for each sample: the last occurrence of each index.
+    last = len(at) - 1 - np.unique(at[::-1], return_index=True)[1]
     out = np.full((len(times), 3), np.nan)
-    some = before >= 0
-    out[some] = mag[order][before[some]]
+    out[at[last]] = fields[last]
     return out
 
 

@@ -47,15 +47,20 @@ def test_the_smoothed_estimate_is_in_the_world_frame_and_takes_fields_at_their_t
                             parameters={'world_frame': 'ned'})
     np.testing.assert_allclose(ned.quaternions, world_from_enu(enu.quaternions, 'ned'),
                                atol=1e-12)
-    # A field every fourth sample, at its own times: each sample takes the last one.
+    # A field every fourth sample, at its own times: at the sample at or after it.
     slow = attitude_from_imu(gyr, acc, mag[::4] * 1e-6, times=times, mag_times=times[::4],
                              smooth=True)
     assert _rms(errors_deg(slow.quaternions, truth)[0]) < 1.5 * _rms(
         errors_deg(enu.quaternions, truth)[0])
     rows = field_per_sample(np.arange(6.0).reshape(2, 3), np.array([0.25, 0.5]),
                             np.array([0.0, 0.25, 0.3, 0.5, 0.75]))
-    np.testing.assert_array_equal(rows[0], np.nan)
-    np.testing.assert_array_equal(rows[1:], [[0, 1, 2], [0, 1, 2], [3, 4, 5], [3, 4, 5]])
+    np.testing.assert_array_equal(rows[[0, 2, 4]], np.nan)
+    np.testing.assert_array_equal(rows[[1, 3]], [[0, 1, 2], [3, 4, 5]])
+    # Two fields before one sample: the later; one after the last sample: none.
+    rows = field_per_sample(np.arange(9.0).reshape(3, 3), np.array([0.1, 0.2, 0.9]),
+                            np.array([0.0, 0.25, 0.5]))
+    np.testing.assert_array_equal(rows[1], [3, 4, 5])
+    assert np.isnan(rows[[0, 2]]).all()
 
 
 def test_time_reversed_twice_is_the_recording():
@@ -89,3 +94,20 @@ def test_combined_weighs_the_inclination_by_the_sigmas():
     np.testing.assert_allclose(inclination, [1.0, 0.5, 2.0], atol=1e-9)
     np.testing.assert_allclose(inclination_std, [np.sqrt(0.5), np.sqrt(0.75), 1.0])
     np.testing.assert_array_equal(heading_std, [1.0, 1.0, 1.0])
+
+
+def test_a_hole_is_bridged_and_a_repeated_stamp_shows_the_estimate_before_it():
+    truth, gyr, acc, mag = synthetic(seconds=8.0, accel=1.0)
+    times = np.arange(len(gyr)) / RATE
+    full = attitude_from_imu(gyr, acc, mag * 1e-6, times=times, smooth=True)
+    # 50 ms lost at 4 s, and one sample stamped again as the one before it.
+    keep = (times < 4.0) | (times >= 4.05)
+    t, g, a, m = times[keep], gyr[keep], acc[keep], mag[keep]
+    k = np.flatnonzero(t > 6.0)[0]
+    t = t.copy()
+    t[k] = t[k - 1]
+    holed = attitude_from_imu(g, a, m * 1e-6, times=t, smooth=True)
+    assert sum(holed.drops.values()) >= 1, holed.drops  # the node drops the repeated stamp
+    np.testing.assert_array_equal(holed.quaternions[k], holed.quaternions[k - 1])
+    error = _rms(errors_deg(holed.quaternions, truth[keep])[0])
+    assert error < 1.5 * _rms(errors_deg(full.quaternions, truth)[0]) + 0.05
