@@ -379,8 +379,22 @@ def learning_run(level, seed=3):
     Returns the heading error and the published heading σ (degrees) per
     sample, and the calibration's state per sample.
     """
-    from synthetic_motion import errors_deg, FIELD as FIELD_UT, RATE, synthetic
+    from synthetic_motion import synthetic
     truth, gyr, acc, mag = synthetic(seconds=40.0, seed=seed)
+    heading, sigma, states = _hard_iron_run(truth, gyr, acc, mag, level, seed,
+                                            np.zeros(len(gyr), dtype=bool), states=True)
+    return heading, sigma, states
+
+
+def _hard_iron_run(truth, gyr, acc, mag, level, seed, no_field, states=False):
+    """
+    The node's pipeline on synthetic motion, a hard iron of ``level`` × the field's norm.
+
+    A field every second sample, none where ``no_field``. Returns the heading
+    error and the published heading σ (degrees) per sample but the first,
+    and with ``states`` the calibration's state per sample.
+    """
+    from synthetic_motion import errors_deg, FIELD as FIELD_UT, RATE
     rng = np.random.default_rng(seed)
     u = rng.normal(size=3)
     raw = (mag + level * np.linalg.norm(FIELD_UT) * u / np.linalg.norm(u)) * 1e-6  # T
@@ -388,18 +402,19 @@ def learning_run(level, seed=3):
     period = round(SECOND / RATE)
     q = np.full((len(gyr), 4), np.nan)
     sigma = np.full(len(gyr), np.nan)
-    states = []
+    kept = []
     for k in range(len(gyr)):
         stamp = START + k * period
         _, estimate = pipeline.imu(stamp, tuple(gyr[k]), tuple(acc[k]))
         if estimate is not None:
             q[k] = estimate.state
             sigma[k] = math.degrees(math.sqrt(estimate.covariance[8]))
-        states.append(pipeline.estimator.core.calibration_state)
-        if k % 2 == 0:
+        if states:
+            kept.append(pipeline.estimator.core.calibration_state)
+        if k % 2 == 0 and not no_field[k]:
             pipeline.field(stamp, tuple(raw[k]))
     _, heading, _ = errors_deg(q[1:], truth[1:])
-    return heading, sigma[1:], states[1:]
+    return (heading, sigma[1:]) + ((kept[1:],) if states else ())
 
 
 @pytest.mark.skipif(not HAS_CALIBRATION, reason='the core has no online calibration yet')
@@ -442,29 +457,14 @@ def gap_run(gap, seconds=75.0, seed=4):
     Returns the heading error and the published heading σ (degrees) per
     sample, and the time (s).
     """
-    from synthetic_motion import errors_deg, FIELD as FIELD_UT, RATE, synthetic
+    from synthetic_motion import RATE, synthetic
     truth, gyr, acc, mag = synthetic(seconds=seconds, seed=seed)
     t = np.arange(len(gyr)) / RATE
     inside = (t >= gap[0]) & (t < gap[1])
     late = (t >= gap[1] - 5.0) & inside
     gyr = gyr + np.where(late, math.radians(2.0), 0.0)[:, None] * [0.0, 0.0, 1.0]
-    rng = np.random.default_rng(seed)
-    u = rng.normal(size=3)
-    raw = (mag + 1.5 * np.linalg.norm(FIELD_UT) * u / np.linalg.norm(u)) * 1e-6  # T
-    pipeline = RawImuPipeline(node_settings())
-    period = round(SECOND / RATE)
-    q = np.full((len(gyr), 4), np.nan)
-    sigma = np.full(len(gyr), np.nan)
-    for k in range(len(gyr)):
-        stamp = START + k * period
-        _, estimate = pipeline.imu(stamp, tuple(gyr[k]), tuple(acc[k]))
-        if estimate is not None:
-            q[k] = estimate.state
-            sigma[k] = math.degrees(math.sqrt(estimate.covariance[8]))
-        if k % 2 == 0 and not inside[k]:
-            pipeline.field(stamp, tuple(raw[k]))
-    _, heading, _ = errors_deg(q[1:], truth[1:])
-    return heading, sigma[1:], t[1:]
+    heading, sigma = _hard_iron_run(truth, gyr, acc, mag, 1.5, seed, inside)
+    return heading, sigma, t[1:]
 
 
 @pytest.mark.skipif(not HAS_CALIBRATION, reason='the core has no online calibration yet')
