@@ -1,0 +1,414 @@
+"""
+The smoothed attitude's loops: an error-state Kalman filter forward, a Rauch–Tung–Striebel pass back.
+
+:func:`rts_forward` runs the gyro strapdown at every sample (the nominal
+attitude ``q``, the nominal world velocity ``v`` from the specific force)
+and, every few samples, one step of a Kalman filter on the nominal's error
+``δx = (δθ, δb, δv, δa)``: ``δθ`` the attitude error in the world frame
+(``q_true = exp(δθ) ⊗ q``), ``δb`` the gyro bias's (body frame, rad/s),
+``δv`` the velocity's (world frame, m/s), ``δa`` the accelerometer bias's
+(body frame, m/s²: a body that turns tells it from the tilt). A tilt error turns gravity into a
+growing horizontal velocity, and the velocity of a body that does not
+travel far stays small: a weak pseudo-measurement ``v ≈ 0`` (exactly 0 at
+rest) makes the accelerometer a measurement of the tilt. The field's
+horizontal direction measures the heading. Each step stores what the
+backward pass needs (its transition, the predicted and the updated
+covariances, the correction it applied); :func:`rts_backward` runs the
+Rauch–Tung–Striebel recursion on the error state and :func:`rts_output`
+turns the smoothed errors into each sample's attitude and covariance.
+
+The model follows J. Solà, "Quaternion kinematics for the error-state
+Kalman filter" (2017, the error-state and its reset) and S. Särkkä,
+"Bayesian Filtering and Smoothing" (2013, the RTS smoother); the lines are
+ours. Arrays are numpy arrays (also plain); written in the part of Python
+numba compiles (:mod:`~ext_observer.core.ahrs.compiled`). Quaternions
+``(w, x, y, z)``, sensor → ENU; SI units.
+"""
+
+import math
+
+from .ahrs_filters import quat_multiply, rotate
+
+# The error state's size and where each part starts in it.
+DIM = 12
+THETA = 0
+BIAS = 3
+VEL = 6
+ACC_BIAS = 9
+
+
+def rotation_rows(w, x, y, z):
+    """``R(q)`` of a unit quaternion, row-major, as a 9-tuple (``v_world = R v_body``)."""
+    return (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
+            2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
+            2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
+
+
+def rotation_quaternion(rx, ry, rz):
+    """``exp(r / 2)``: the unit quaternion of the rotation vector ``r`` (rad)."""
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    half = 0.5 * angle
+    # sin(half) / angle, with its Taylor series near 0.
+    k = 0.5 - angle * angle / 48.0 if angle < 1e-4 else math.sin(half) / angle
+    return math.cos(half), k * rx, k * ry, k * rz
+
+
+def unit(w, x, y, z):
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    return w / n, x / n, y / n, z / n
+
+
+def scalar_update(p, dx, h, z, rho):
+    """
+    One scalar measurement ``z = h·δx + noise(rho)`` into ``(dx, p)`` (updated in place).
+
+    ``h`` an array of DIM; ``p`` the covariance (DIM × DIM), ``dx`` the
+    error estimate. Returns the normalized innovation squared.
+    """
+    ph = [0.0] * DIM
+    s = rho
+    r = z
+    for i in range(DIM):
+        acc = 0.0
+        for j in range(DIM):
+            acc += p[i, j] * h[j]
+        ph[i] = acc
+        s += h[i] * acc
+        r -= h[i] * dx[i]
+    for i in range(DIM):
+        dx[i] += ph[i] * r / s
+    for i in range(DIM):
+        for j in range(DIM):
+            p[i, j] -= ph[i] * ph[j] / s
+    return r * r / s
+
+
+def propagate(p, phi, sr, sa, dt_sum, q_gyr, q_bias, q_vel, q_acc_bias, out_pred):
+    """
+    The transition of one step and the predicted covariance ``Φ P Φᵀ + Q``.
+
+    ``sr`` the sum of ``R dt`` over the step (9, row-major), ``sa`` the sum
+    of ``R f dt`` (3); ``q_*`` the noise densities (variance per second).
+    Writes ``phi`` and ``out_pred``.
+    """
+    for i in range(DIM):
+        for j in range(DIM):
+            phi[i, j] = 1.0 if i == j else 0.0
+    # δθ' = −R δb; δv' = −[R f]× δθ − R δa (and so ½ [Σ R f dt]× Σ R dt from the
+    # gyro bias).
+    ax, ay, az = sa[0], sa[1], sa[2]
+    cross = (0.0, -az, ay, az, 0.0, -ax, -ay, ax, 0.0)
+    for i in range(3):
+        for j in range(3):
+            phi[THETA + i, BIAS + j] = -sr[3 * i + j]
+            # The heading's error left out of the velocity: the velocity is
+            # known too loosely to tell the heading, and would spoil it.
+            phi[VEL + i, THETA + j] = -cross[3 * i + j] if j < 2 else 0.0
+            acc = 0.0
+            for m in range(3):
+                acc += cross[3 * i + m] * sr[3 * m + j]
+            phi[VEL + i, BIAS + j] = 0.5 * acc
+            phi[VEL + i, ACC_BIAS + j] = -sr[3 * i + j]
+    tmp = [0.0] * (DIM * DIM)
+    for i in range(DIM):
+        for j in range(DIM):
+            acc = 0.0
+            for m in range(DIM):
+                acc += phi[i, m] * p[m, j]
+            tmp[DIM * i + j] = acc
+    for i in range(DIM):
+        for j in range(DIM):
+            acc = 0.0
+            for m in range(DIM):
+                acc += tmp[DIM * i + m] * phi[j, m]
+            out_pred[i, j] = acc
+    for i in range(3):
+        out_pred[THETA + i, THETA + i] += q_gyr * dt_sum
+        out_pred[BIAS + i, BIAS + i] += q_bias * dt_sum
+        out_pred[VEL + i, VEL + i] += q_vel * dt_sum
+        out_pred[ACC_BIAS + i, ACC_BIAS + i] += q_acc_bias * dt_sum
+
+
+def heading_update(p, dx, hx, hy, hz, rho, tilt):
+    """
+    The field's horizontal direction (world ``h``, nominal attitude) as a heading measurement.
+
+    The true field points north: ``h_x`` of ``exp(δθ) h`` is 0, so
+    ``atan2(h_x, h_y) = δθ_z − (h_z / h_y) δθ_y`` (the second term only with
+    ``tilt``: the field's dip then also tells the tilt about north).
+    """
+    hh = math.sqrt(hx * hx + hy * hy)
+    if hh <= 0.0:
+        return 0.0
+    h = [0.0] * DIM
+    h[THETA + 2] = 1.0
+    if tilt:
+        h[THETA + 1] = -hz / hh
+    return scalar_update(p, dx, h, math.atan2(hx, hy), rho)
+
+
+def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, p0, gravity, opts, qn,
+                steps, phis, preds, posts, corrs):
+    """
+    The forward filter over a whole recording; returns the number of steps.
+
+    Parameters
+    ----------
+    gyr, acc, mag : arrays (count, 3)
+        rad/s, m/s², the calibrated field (any unit; a NaN row: no field).
+    rest : array (count,)
+        1.0 where the body is at rest (its velocity is 0).
+    count : int
+    dt : float
+        Sampling interval, s.
+    use_mag : bool
+    q0 : array (4,)
+        First attitude, sensor → ENU.
+    b0 : array (3,)
+        First gyro bias, rad/s.
+    a0 : array (3,)
+        First accelerometer bias, m/s².
+    p0 : array (DIM, DIM)
+        First covariance.
+    gravity : float
+        The specific force's norm at rest, m/s².
+    opts : array
+        ``(every, q_gyr, q_bias, q_vel, vel_var, vel_tau, rest_var, mag_var,
+        mag_tau, norm_ref, dip_ref, norm_tol, dip_tol, mag_tilt, q_acc_bias)``:
+        samples per step, the noise densities (rad²/s, rad²/s³, m²/s³; the
+        last m²/s⁵), the
+        velocity's pseudo-measurement (m²/s², s) and at rest (m²/s²), the
+        heading's (rad², s), the field's references (its norm, its dip as
+        ``h_z / |h|``) and tolerances, 1.0 to let the field tell the tilt,
+        and the accelerometer bias's walk.
+    qn : array (count, 4)
+        Out: the nominal attitude after each sample.
+    steps : int array (K,)
+        Out: each step's sample.
+    phis, preds, posts : arrays (K, DIM, DIM)
+        Out: each step's transition (from the step before), predicted and
+        updated covariances.
+    corrs : array (K, DIM)
+        Out: each step's correction of the nominal.
+
+    """
+    every = int(opts[0])
+    q_gyr, q_bias, q_vel = opts[1], opts[2], opts[3]
+    vel_var, vel_tau, rest_var = opts[4], opts[5], opts[6]
+    mag_var, mag_tau = opts[7], opts[8]
+    norm_ref, dip_ref, norm_tol, dip_tol = opts[9], opts[10], opts[11], opts[12]
+    tilt = opts[13] != 0.0
+    q_acc_bias = opts[14]
+    w, x, y, z = q0[0], q0[1], q0[2], q0[3]
+    bx, by, bz = b0[0], b0[1], b0[2]
+    vx, vy, vz = 0.0, 0.0, 0.0
+    ax, ay, az = a0[0], a0[1], a0[2]
+    p = posts[0]
+    for i in range(DIM):
+        for j in range(DIM):
+            p[i, j] = p0[i, j]
+    sr = [0.0] * 9
+    sa = [0.0] * 3
+    sh = [0.0] * 3
+    h = [0.0] * DIM
+    k = 0
+    at_rest = True
+    n_mag = 0
+    s_norm = 0.0
+    dt_sum = 0.0
+    for n in range(count):
+        if n > 0:
+            # Strapdown: the gyro of sample n turns the body from n − 1 to n.
+            dw, dx_, dy_, dz_ = rotation_quaternion((gyr[n, 0] - bx) * dt,
+                                                    (gyr[n, 1] - by) * dt,
+                                                    (gyr[n, 2] - bz) * dt)
+            w, x, y, z = quat_multiply(w, x, y, z, dw, dx_, dy_, dz_)
+            w, x, y, z = unit(w, x, y, z)
+            r = rotation_rows(w, x, y, z)
+            fx, fy, fz = rotate(w, x, y, z, acc[n, 0] - ax, acc[n, 1] - ay, acc[n, 2] - az)
+            vx += fx * dt
+            vy += fy * dt
+            vz += (fz - gravity) * dt
+            for m in range(9):
+                sr[m] += r[m] * dt
+            sa[0] += fx * dt
+            sa[1] += fy * dt
+            sa[2] += fz * dt
+            dt_sum += dt
+        qn[n, 0], qn[n, 1], qn[n, 2], qn[n, 3] = w, x, y, z
+        at_rest = at_rest and rest[n] != 0.0
+        if use_mag and mag[n, 0] == mag[n, 0]:
+            mx, my, mz = rotate(w, x, y, z, mag[n, 0], mag[n, 1], mag[n, 2])
+            sh[0] += mx
+            sh[1] += my
+            sh[2] += mz
+            s_norm += math.sqrt(mx * mx + my * my + mz * mz)
+            n_mag += 1
+        if n > 0 and n % every != 0 and n != count - 1:
+            continue
+        # One step of the filter at sample n.
+        steps[k] = n
+        if k > 0:
+            propagate(posts[k - 1], phis[k], sr, sa, dt_sum, q_gyr, q_bias, q_vel, q_acc_bias,
+                      preds[k])
+            for i in range(DIM):
+                for j in range(DIM):
+                    posts[k, i, j] = preds[k, i, j]
+        else:
+            for i in range(DIM):
+                for j in range(DIM):
+                    phis[0, i, j] = 1.0 if i == j else 0.0
+                    preds[0, i, j] = p0[i, j]
+        p = posts[k]
+        dx = corrs[k]
+        for i in range(DIM):
+            dx[i] = 0.0
+        span = dt_sum if dt_sum > 0.0 else dt
+        # The velocity: 0 at rest, else small (one look per vel_tau).
+        for c in range(3):
+            for i in range(DIM):
+                h[i] = 0.0
+            h[VEL + c] = 1.0
+            var = rest_var if at_rest else vel_var * vel_tau / span
+            scalar_update(p, dx, h, -(vx, vy, vz)[c], var)
+        if n_mag > 0:
+            hn = math.sqrt(sh[0] * sh[0] + sh[1] * sh[1] + sh[2] * sh[2])
+            norm = s_norm / n_mag
+            off_norm = (norm / norm_ref - 1.0) / norm_tol
+            off_dip = (sh[2] / hn - dip_ref) / dip_tol
+            worse = 1.0 + off_norm * off_norm + off_dip * off_dip
+            rho = mag_var * mag_tau / span * worse * worse
+            heading_update(p, dx, sh[0], sh[1], sh[2], rho, tilt)
+        # The reset: the correction moves into the nominal.
+        cw, cx, cy, cz = rotation_quaternion(dx[THETA], dx[THETA + 1], dx[THETA + 2])
+        w, x, y, z = quat_multiply(cw, cx, cy, cz, w, x, y, z)
+        w, x, y, z = unit(w, x, y, z)
+        bx += dx[BIAS]
+        by += dx[BIAS + 1]
+        bz += dx[BIAS + 2]
+        vx += dx[VEL]
+        vy += dx[VEL + 1]
+        vz += dx[VEL + 2]
+        ax += dx[ACC_BIAS]
+        ay += dx[ACC_BIAS + 1]
+        az += dx[ACC_BIAS + 2]
+        k += 1
+        for m in range(9):
+            sr[m] = 0.0
+        sa[0], sa[1], sa[2] = 0.0, 0.0, 0.0
+        sh[0], sh[1], sh[2] = 0.0, 0.0, 0.0
+        s_norm = 0.0
+        n_mag = 0
+        dt_sum = 0.0
+        at_rest = True
+        qn[n, 0], qn[n, 1], qn[n, 2], qn[n, 3] = w, x, y, z
+    return k
+
+
+def cholesky_solve(a, b, out, low):
+    """``out = a⁻¹ b`` for a symmetric positive definite ``a`` (DIM × DIM), ``b`` DIM × DIM."""
+    for i in range(DIM):
+        for j in range(i + 1):
+            acc = a[i, j]
+            for m in range(j):
+                acc -= low[i, m] * low[j, m]
+            if i == j:
+                low[i, i] = math.sqrt(acc if acc > 0.0 else 1e-300)
+            else:
+                low[i, j] = acc / low[j, j]
+    for c in range(DIM):
+        for i in range(DIM):
+            acc = b[i, c]
+            for m in range(i):
+                acc -= low[i, m] * out[m, c]
+            out[i, c] = acc / low[i, i]
+        for i in range(DIM - 1, -1, -1):
+            acc = out[i, c]
+            for m in range(i + 1, DIM):
+                acc -= low[m, i] * out[m, c]
+            out[i, c] = acc / low[i, i]
+
+
+def rts_backward(k_count, phis, preds, posts, corrs, smooth, m_tmp, x_tmp, low, d_tmp):
+    """
+    The Rauch–Tung–Striebel recursion on the error state, from the last step back.
+
+    ``smooth[k]`` (out) the smoothed error at step ``k`` from its updated
+    nominal; ``posts[k]`` is overwritten with the smoothed covariance. The
+    gain ``G = P⁺_k Φᵀ (P⁻_{k+1})⁻¹`` is ``Xᵀ`` with ``P⁻ X = Φ P⁺``.
+    """
+    last = k_count - 1
+    for i in range(DIM):
+        smooth[last, i] = 0.0
+    e = [0.0] * DIM
+    for k in range(last - 1, -1, -1):
+        phi = phis[k + 1]
+        pred = preds[k + 1]
+        post = posts[k]
+        for i in range(DIM):
+            e[i] = smooth[k + 1, i] + corrs[k + 1, i]
+            for j in range(DIM):
+                acc = 0.0
+                for m in range(DIM):
+                    acc += phi[i, m] * post[m, j]
+                m_tmp[i, j] = acc
+        cholesky_solve(pred, m_tmp, x_tmp, low)
+        # x_tmp = Gᵀ: the smoothed error and D = P^s_{k+1} − P⁻_{k+1}.
+        for i in range(DIM):
+            acc = 0.0
+            for m in range(DIM):
+                acc += x_tmp[m, i] * e[m]
+            smooth[k, i] = acc
+            for j in range(DIM):
+                d_tmp[i, j] = posts[k + 1, i, j] - pred[i, j]
+        # P^s_k = P⁺_k + Gᵀ' D G, with G = x_tmpᵀ.
+        for i in range(DIM):
+            for j in range(DIM):
+                acc = 0.0
+                for m in range(DIM):
+                    acc += d_tmp[i, m] * x_tmp[m, j]
+                m_tmp[i, j] = acc
+        for i in range(DIM):
+            for j in range(DIM):
+                acc = 0.0
+                for m in range(DIM):
+                    acc += x_tmp[m, i] * m_tmp[m, j]
+                post[i, j] += acc
+
+
+def rts_output(count, k_count, steps, qn, smooth, corrs, posts, q_out, cov_out):
+    """
+    Each sample's smoothed attitude and its error's covariance (world frame, 3 × 3).
+
+    Between two steps the nominal is the gyro's alone; its error goes from
+    the smoothed one after step ``k`` to the one before step ``k + 1``
+    (smoothed plus that step's correction), linearly in time, and so does
+    the covariance.
+    """
+    k = 0
+    for n in range(count):
+        while k < k_count - 1 and steps[k] < n:
+            k += 1
+        # n in (steps[k − 1], steps[k]]: at a step, the smoothed error of its update.
+        if steps[k] == n or k == 0:
+            ex = smooth[k, THETA]
+            ey = smooth[k, THETA + 1]
+            ez = smooth[k, THETA + 2]
+            for i in range(3):
+                for j in range(3):
+                    cov_out[n, i, j] = posts[k, THETA + i, THETA + j]
+        else:
+            a = (n - steps[k - 1]) / (steps[k] - steps[k - 1])
+            e0 = smooth[k - 1, THETA]
+            e1 = smooth[k - 1, THETA + 1]
+            e2 = smooth[k - 1, THETA + 2]
+            ex = e0 + a * (smooth[k, THETA] + corrs[k, THETA] - e0)
+            ey = e1 + a * (smooth[k, THETA + 1] + corrs[k, THETA + 1] - e1)
+            ez = e2 + a * (smooth[k, THETA + 2] + corrs[k, THETA + 2] - e2)
+            for i in range(3):
+                for j in range(3):
+                    c0 = posts[k - 1, THETA + i, THETA + j]
+                    cov_out[n, i, j] = c0 + a * (posts[k, THETA + i, THETA + j] - c0)
+        cw, cx, cy, cz = rotation_quaternion(ex, ey, ez)
+        w, x, y, z = quat_multiply(cw, cx, cy, cz, qn[n, 0], qn[n, 1], qn[n, 2], qn[n, 3])
+        q_out[n, 0], q_out[n, 1], q_out[n, 2], q_out[n, 3] = w, x, y, z
