@@ -29,25 +29,29 @@ __all__ = ['SMOOTHER_DEFAULTS', 'smooth_attitude_rts']
 SMOOTHER_DEFAULTS = {
     'update_interval': (0.01, 's', 'time between two steps of the filter (the strapdown runs '
                         'at every sample)'),
-    'gyro_noise': (0.002, 'rad/s/√Hz', "the gyro's white noise density"),
+    'gyro_noise': (0.01, 'rad/s/√Hz', "the tilt's noise density (the gyro's white noise and "
+                   'what the model leaves out)'),
+    'heading_noise': (0.003, 'rad/s/√Hz', "the heading's noise density (the gyro's about the "
+                      'vertical)'),
     'bias_walk': (2e-5, 'rad/s/√s', "the gyro bias's random walk"),
     'acc_noise': (0.05, 'm/s²/√Hz', "the specific force's white noise density"),
-    'velocity_sigma': (0.5, 'm/s', "the body's velocity, once per velocity_tau"),
-    'velocity_tau': (1.0, 's', 'the time over which the velocity stays alike'),
+    'velocity_sigma': (1.0, 'm/s', "the body's velocity, once per velocity_tau"),
+    'velocity_tau': (2.0, 's', 'the time over which the velocity stays alike'),
     'rest_sigma': (0.01, 'm/s', 'the velocity at rest, per step'),
     'rest_window': (0.3, 's', 'the window whose gyro and accelerometer say rest'),
     'rest_gyro': (0.03, 'rad/s', "the gyro's standard deviation below which the body rests"),
     'rest_acc': (0.2, 'm/s²', "the accelerometer's standard deviation below which it rests"),
-    'mag_sigma': (0.05, 'rad', "the field's heading, once per mag_tau"),
+    'mag_sigma': (0.2, 'rad', "the field's heading, once per mag_tau"),
     'mag_tau': (1.0, 's', "the time over which the field's error stays alike"),
-    'mag_norm_tol': (0.1, '1', "the field's norm's relative departure that doubles its σ"),
+    'mag_norm_tol': (0.2, '1', "the field's norm's relative departure that doubles its σ"),
     'mag_dip_tol': (0.1, '1', "the field's dip's departure (its sine) that doubles its σ"),
     'mag_tilt': (0.0, '1', '1: the field also tells the tilt about north (its dip)'),
     'start_tilt': (0.1, 'rad', "the first attitude's tilt, σ"),
     'start_heading': (0.5, 'rad', "the first attitude's heading, σ"),
     'start_bias': (0.01, 'rad/s', "the first gyro bias's σ per axis"),
-    'start_acc_bias': (0.05, 'm/s²', "the accelerometer bias's σ per axis (0: none)"),
+    'start_acc_bias': (0.0, 'm/s²', "the accelerometer bias's σ per axis (0: none)"),
     'acc_bias_walk': (1e-4, 'm/s²/√s', "the accelerometer bias's random walk"),
+    'start_scale': (0.003, '1', "the gyro's scale factors' σ per axis (relative; 0: none)"),
 }
 
 
@@ -206,14 +210,15 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
     p0 = np.diag([settings['start_tilt'] ** 2] * 2 + [settings['start_heading'] ** 2]
                  + [settings['start_bias'] ** 2] * 3 + [settings['velocity_sigma'] ** 2] * 3
                  # A tiny σ for none keeps the covariance positive definite.
-                 + [max(settings['start_acc_bias'], 1e-9) ** 2] * 3)
+                 + [max(settings['start_acc_bias'], 1e-9) ** 2] * 3
+                 + [max(settings['start_scale'], 1e-9) ** 2] * 3)
     every = max(1, int(round(settings['update_interval'] * rate)))
     opts = np.array([every, settings['gyro_noise'] ** 2, settings['bias_walk'] ** 2,
                      settings['acc_noise'] ** 2, settings['velocity_sigma'] ** 2,
                      settings['velocity_tau'], settings['rest_sigma'] ** 2,
                      settings['mag_sigma'] ** 2, settings['mag_tau'], norm_ref, dip_ref,
                      settings['mag_norm_tol'], settings['mag_dip_tol'], settings['mag_tilt'],
-                     settings['acc_bias_walk'] ** 2])
+                     settings['acc_bias_walk'] ** 2, settings['heading_noise'] ** 2])
     k = kernels(compiled).smoother_rts
     dim = k.DIM
     steps_max = (count - 1) // every + 2
@@ -224,7 +229,7 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
     posts = np.empty((steps_max, dim, dim))
     corrs = np.empty((steps_max, dim))
     used = k.rts_forward(gyr, acc, field, rest, count, dt, use_mag, q0, gyro_bias, np.zeros(3),
-                         p0, gravity, opts, qn, steps, phis, preds, posts, corrs)
+                         np.zeros(3), p0, gravity, opts, qn, steps, phis, preds, posts, corrs)
     del field
     smooth = np.empty((used, dim))
     k.rts_backward(used, phis, preds, posts, corrs, smooth, np.empty((dim, dim)),

@@ -4,10 +4,12 @@ The smoothed attitude's loops: an error-state Kalman filter forward, a Rauch–T
 :func:`rts_forward` runs the gyro strapdown at every sample (the nominal
 attitude ``q``, the nominal world velocity ``v`` from the specific force)
 and, every few samples, one step of a Kalman filter on the nominal's error
-``δx = (δθ, δb, δv, δa)``: ``δθ`` the attitude error in the world frame
+``δx = (δθ, δb, δv, δa, δs)``: ``δθ`` the attitude error in the world frame
 (``q_true = exp(δθ) ⊗ q``), ``δb`` the gyro bias's (body frame, rad/s),
 ``δv`` the velocity's (world frame, m/s), ``δa`` the accelerometer bias's
-(body frame, m/s²: a body that turns tells it from the tilt). A tilt error turns gravity into a
+(body frame, m/s²: a body that turns tells it from the tilt), ``δs`` the
+gyro's scale factors' (relative, per axis: a body that turns tells them
+from the field and the tilt). A tilt error turns gravity into a
 growing horizontal velocity, and the velocity of a body that does not
 travel far stays small: a weak pseudo-measurement ``v ≈ 0`` (exactly 0 at
 rest) makes the accelerometer a measurement of the tilt. The field's
@@ -30,11 +32,12 @@ import math
 from .ahrs_filters import quat_multiply, rotate
 
 # The error state's size and where each part starts in it.
-DIM = 12
+DIM = 15
 THETA = 0
 BIAS = 3
 VEL = 6
 ACC_BIAS = 9
+SCALE = 12
 
 
 def rotation_rows(w, x, y, z):
@@ -83,24 +86,27 @@ def scalar_update(p, dx, h, z, rho):
     return r * r / s
 
 
-def propagate(p, phi, sr, sa, dt_sum, q_gyr, q_bias, q_vel, q_acc_bias, out_pred):
+def propagate(p, phi, sr, sa, sw, dt_sum, q_gyr, q_head, q_bias, q_vel, q_acc_bias, out_pred):
     """
     The transition of one step and the predicted covariance ``Φ P Φᵀ + Q``.
 
     ``sr`` the sum of ``R dt`` over the step (9, row-major), ``sa`` the sum
-    of ``R f dt`` (3); ``q_*`` the noise densities (variance per second).
+    of ``R f dt`` (3), ``sw`` the sum of ``R diag(ω) dt`` (9, row-major);
+    ``q_*`` the noise densities (variance per second):
+    ``q_gyr`` the tilt's, ``q_head`` the heading's.
     Writes ``phi`` and ``out_pred``.
     """
     for i in range(DIM):
         for j in range(DIM):
             phi[i, j] = 1.0 if i == j else 0.0
-    # δθ' = −R δb; δv' = −[R f]× δθ − R δa (and so ½ [Σ R f dt]× Σ R dt from the
+    # δθ' = −R (δb + diag(ω) δs); δv' = −[R f]× δθ − R δa (and so ½ [Σ R f dt]× Σ R dt from the
     # gyro bias).
     ax, ay, az = sa[0], sa[1], sa[2]
     cross = (0.0, -az, ay, az, 0.0, -ax, -ay, ax, 0.0)
     for i in range(3):
         for j in range(3):
             phi[THETA + i, BIAS + j] = -sr[3 * i + j]
+            phi[THETA + i, SCALE + j] = -sw[3 * i + j]
             # The heading's error left out of the velocity: the velocity is
             # known too loosely to tell the heading, and would spoil it.
             phi[VEL + i, THETA + j] = -cross[3 * i + j] if j < 2 else 0.0
@@ -122,8 +128,10 @@ def propagate(p, phi, sr, sa, dt_sum, q_gyr, q_bias, q_vel, q_acc_bias, out_pred
             for m in range(DIM):
                 acc += tmp[DIM * i + m] * phi[j, m]
             out_pred[i, j] = acc
+    out_pred[THETA + 2, THETA + 2] += q_head * dt_sum
     for i in range(3):
-        out_pred[THETA + i, THETA + i] += q_gyr * dt_sum
+        if i < 2:
+            out_pred[THETA + i, THETA + i] += q_gyr * dt_sum
         out_pred[BIAS + i, BIAS + i] += q_bias * dt_sum
         out_pred[VEL + i, VEL + i] += q_vel * dt_sum
         out_pred[ACC_BIAS + i, ACC_BIAS + i] += q_acc_bias * dt_sum
@@ -147,7 +155,7 @@ def heading_update(p, dx, hx, hy, hz, rho, tilt):
     return scalar_update(p, dx, h, math.atan2(hx, hy), rho)
 
 
-def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, p0, gravity, opts, qn,
+def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, s0, p0, gravity, opts, qn,
                 steps, phis, preds, posts, corrs):
     """
     The forward filter over a whole recording; returns the number of steps.
@@ -168,19 +176,23 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, p0, gravity
         First gyro bias, rad/s.
     a0 : array (3,)
         First accelerometer bias, m/s².
+    s0 : array (3,)
+        First gyro scale factors' errors (``ω = (1 − s) ω_gyro − b``).
     p0 : array (DIM, DIM)
         First covariance.
     gravity : float
         The specific force's norm at rest, m/s².
     opts : array
         ``(every, q_gyr, q_bias, q_vel, vel_var, vel_tau, rest_var, mag_var,
-        mag_tau, norm_ref, dip_ref, norm_tol, dip_tol, mag_tilt, q_acc_bias)``:
+        mag_tau, norm_ref, dip_ref, norm_tol, dip_tol, mag_tilt, q_acc_bias,
+        q_head)``:
         samples per step, the noise densities (rad²/s, rad²/s³, m²/s³; the
         last m²/s⁵), the
         velocity's pseudo-measurement (m²/s², s) and at rest (m²/s²), the
         heading's (rad², s), the field's references (its norm, its dip as
         ``h_z / |h|``) and tolerances, 1.0 to let the field tell the tilt,
-        and the accelerometer bias's walk.
+        the accelerometer bias's walk and the heading's noise density (the
+        gyro's about the vertical, rad²/s; ``q_gyr`` is the tilt's).
     qn : array (count, 4)
         Out: the nominal attitude after each sample.
     steps : int array (K,)
@@ -199,10 +211,13 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, p0, gravity
     norm_ref, dip_ref, norm_tol, dip_tol = opts[9], opts[10], opts[11], opts[12]
     tilt = opts[13] != 0.0
     q_acc_bias = opts[14]
+    q_head = opts[15]
     w, x, y, z = q0[0], q0[1], q0[2], q0[3]
     bx, by, bz = b0[0], b0[1], b0[2]
     vx, vy, vz = 0.0, 0.0, 0.0
     ax, ay, az = a0[0], a0[1], a0[2]
+    sx, sy, sz = s0[0], s0[1], s0[2]
+    sw = [0.0] * 9
     p = posts[0]
     for i in range(DIM):
         for j in range(DIM):
@@ -219,9 +234,9 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, p0, gravity
     for n in range(count):
         if n > 0:
             # Strapdown: the gyro of sample n turns the body from n − 1 to n.
-            dw, dx_, dy_, dz_ = rotation_quaternion((gyr[n, 0] - bx) * dt,
-                                                    (gyr[n, 1] - by) * dt,
-                                                    (gyr[n, 2] - bz) * dt)
+            dw, dx_, dy_, dz_ = rotation_quaternion(((1.0 - sx) * gyr[n, 0] - bx) * dt,
+                                                    ((1.0 - sy) * gyr[n, 1] - by) * dt,
+                                                    ((1.0 - sz) * gyr[n, 2] - bz) * dt)
             w, x, y, z = quat_multiply(w, x, y, z, dw, dx_, dy_, dz_)
             w, x, y, z = unit(w, x, y, z)
             r = rotation_rows(w, x, y, z)
@@ -231,6 +246,7 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, p0, gravity
             vz += (fz - gravity) * dt
             for m in range(9):
                 sr[m] += r[m] * dt
+                sw[m] += r[m] * gyr[n, m % 3] * dt
             sa[0] += fx * dt
             sa[1] += fy * dt
             sa[2] += fz * dt
@@ -249,8 +265,8 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, p0, gravity
         # One step of the filter at sample n.
         steps[k] = n
         if k > 0:
-            propagate(posts[k - 1], phis[k], sr, sa, dt_sum, q_gyr, q_bias, q_vel, q_acc_bias,
-                      preds[k])
+            propagate(posts[k - 1], phis[k], sr, sa, sw, dt_sum, q_gyr, q_head, q_bias, q_vel,
+                      q_acc_bias, preds[k])
             for i in range(DIM):
                 for j in range(DIM):
                     posts[k, i, j] = preds[k, i, j]
@@ -292,9 +308,13 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, p0, gravity
         ax += dx[ACC_BIAS]
         ay += dx[ACC_BIAS + 1]
         az += dx[ACC_BIAS + 2]
+        sx += dx[SCALE]
+        sy += dx[SCALE + 1]
+        sz += dx[SCALE + 2]
         k += 1
         for m in range(9):
             sr[m] = 0.0
+            sw[m] = 0.0
         sa[0], sa[1], sa[2] = 0.0, 0.0, 0.0
         sh[0], sh[1], sh[2] = 0.0, 0.0, 0.0
         s_norm = 0.0
