@@ -136,7 +136,8 @@ def calibrated_field(mag, bias, soft_iron):
     return np.linalg.solve(soft_iron, (mag - bias).T).T
 
 
-def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, compiled=None):
+def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, compiled=None,
+                        details=False):
     """
     Each sample's attitude and its covariance from the whole recording.
 
@@ -160,6 +161,8 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
     compiled : bool, optional
         As :func:`~ext_observer.core.ahrs.compiled.kernels` (the same
         results either way).
+    details : bool
+        Also return what else the smoother estimated.
 
     Returns
     -------
@@ -169,6 +172,11 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
         Covariance of the attitude error (rad², world frame ENU:
         ``q_true = exp(δθ) ⊗ q``): ``cov[:, 2, 2]`` the heading's, the
         upper-left block the tilt's.
+    details : dict
+        Only with ``details``: at each filter step (``steps``, the sample
+        indices), the smoothed ``gyro_bias`` (rad/s), ``acc_bias`` (m/s²)
+        and ``gyro_scale`` (relative errors: ``ω = (1 − s) ω_gyro − b``),
+        each of shape (K, 3).
 
     """
     settings = _settings(params)
@@ -228,8 +236,10 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
     preds = np.empty((steps_max, dim, dim))
     posts = np.empty((steps_max, dim, dim))
     corrs = np.empty((steps_max, dim))
+    nominal = np.empty((steps_max, 9))
     used = k.rts_forward(gyr, acc, field, rest, count, dt, use_mag, q0, gyro_bias, np.zeros(3),
-                         np.zeros(3), p0, gravity, opts, qn, steps, phis, preds, posts, corrs)
+                         np.zeros(3), p0, gravity, opts, qn, steps, phis, preds, posts, corrs,
+                         nominal)
     del field
     smooth = np.empty((used, dim))
     k.rts_backward(used, phis, preds, posts, corrs, smooth, np.empty((dim, dim)),
@@ -238,4 +248,9 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
     q = np.empty((count, 4))
     cov = np.empty((count, 3, 3))
     k.rts_output(count, used, steps, qn, smooth, corrs, posts, q, cov)
-    return q, cov
+    if not details:
+        return q, cov
+    parts = {name: nominal[:used, 3 * i:3 * i + 3] + smooth[:, at:at + 3]
+             for i, (name, at) in enumerate((('gyro_bias', k.BIAS), ('acc_bias', k.ACC_BIAS),
+                                             ('gyro_scale', k.SCALE)))}
+    return q, cov, {'steps': steps[:used].copy(), **parts}

@@ -156,7 +156,7 @@ def heading_update(p, dx, hx, hy, hz, rho, tilt):
 
 
 def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, s0, p0, gravity, opts, qn,
-                steps, phis, preds, posts, corrs):
+                steps, phis, preds, posts, corrs, nominal):
     """
     The forward filter over a whole recording; returns the number of steps.
 
@@ -202,6 +202,9 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, s0, p0, gra
         updated covariances.
     corrs : array (K, DIM)
         Out: each step's correction of the nominal.
+    nominal : array (K, 9)
+        Out: each step's nominal gyro bias, accelerometer bias and gyro
+        scale factors' errors, after its correction.
 
     """
     every = int(opts[0])
@@ -311,6 +314,9 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, s0, p0, gra
         sx += dx[SCALE]
         sy += dx[SCALE + 1]
         sz += dx[SCALE + 2]
+        nominal[k, 0], nominal[k, 1], nominal[k, 2] = bx, by, bz
+        nominal[k, 3], nominal[k, 4], nominal[k, 5] = ax, ay, az
+        nominal[k, 6], nominal[k, 7], nominal[k, 8] = sx, sy, sz
         k += 1
         for m in range(9):
             sr[m] = 0.0
