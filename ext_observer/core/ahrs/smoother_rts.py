@@ -232,19 +232,20 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
     steps_max = (count - 1) // every + 2
     qn = np.empty((count, 4))
     steps = np.zeros(steps_max, dtype=np.int64)
-    phis = np.empty((steps_max, dim, dim))
+    sums = np.zeros((steps_max, k.SUMS))
+    phi = np.empty((dim, dim))
     preds = np.empty((steps_max, dim, dim))
     posts = np.empty((steps_max, dim, dim))
     corrs = np.empty((steps_max, dim))
     nominal = np.empty((steps_max, 9))
     used = k.rts_forward(gyr, acc, field, rest, count, dt, use_mag, q0, gyro_bias, np.zeros(3),
-                         np.zeros(3), p0, gravity, opts, qn, steps, phis, preds, posts, corrs,
-                         nominal)
+                         np.zeros(3), p0, gravity, opts, qn, steps, sums, phi, preds, posts,
+                         corrs, nominal)
     del field
     smooth = np.empty((used, dim))
-    k.rts_backward(used, phis, preds, posts, corrs, smooth, np.empty((dim, dim)),
+    k.rts_backward(used, sums, preds, posts, corrs, smooth, phi, np.empty((dim, dim)),
                    np.empty((dim, dim)), np.zeros((dim, dim)), np.empty((dim, dim)))
-    del phis, preds
+    del sums, preds
     q = np.empty((count, 4))
     cov = np.empty((count, 3, 3))
     k.rts_output(count, used, steps, qn, smooth, corrs, posts, q, cov)

@@ -33,6 +33,8 @@ from .ahrs_filters import quat_multiply, rotate
 
 # The error state's size and where each part starts in it.
 DIM = 15
+# The sums a step keeps to make its transition again (transition()).
+SUMS = 21
 THETA = 0
 BIAS = 3
 VEL = 6
@@ -86,35 +88,41 @@ def scalar_update(p, dx, h, z, rho):
     return r * r / s
 
 
-def propagate(p, phi, sr, sa, sw, dt_sum, q_gyr, q_head, q_bias, q_vel, q_acc_bias, out_pred):
+def transition(phi, sums):
     """
-    The transition of one step and the predicted covariance ``Φ P Φᵀ + Q``.
+    The transition ``Φ`` of one step (written into ``phi``) from its sums.
 
-    ``sr`` the sum of ``R dt`` over the step (9, row-major), ``sa`` the sum
-    of ``R f dt`` (3), ``sw`` the sum of ``R diag(ω) dt`` (9, row-major);
-    ``q_*`` the noise densities (variance per second):
-    ``q_gyr`` the tilt's, ``q_head`` the heading's.
-    Writes ``phi`` and ``out_pred``.
+    ``sums`` (SUMS): the sum of ``R dt`` over the step (9, row-major), of
+    ``R f dt`` (3) and of ``R diag(ω) dt`` (9, row-major).
     """
     for i in range(DIM):
         for j in range(DIM):
             phi[i, j] = 1.0 if i == j else 0.0
-    # δθ' = −R (δb + diag(ω) δs); δv' = −[R f]× δθ − R δa (and so ½ [Σ R f dt]× Σ R dt from the
-    # gyro bias).
-    ax, ay, az = sa[0], sa[1], sa[2]
+    # δθ' = −R (δb + diag(ω) δs); δv' = −[R f]× δθ − R δa (and so ½ [Σ R f dt]× Σ R dt
+    # from the gyro bias).
+    ax, ay, az = sums[9], sums[10], sums[11]
     cross = (0.0, -az, ay, az, 0.0, -ax, -ay, ax, 0.0)
     for i in range(3):
         for j in range(3):
-            phi[THETA + i, BIAS + j] = -sr[3 * i + j]
-            phi[THETA + i, SCALE + j] = -sw[3 * i + j]
+            phi[THETA + i, BIAS + j] = -sums[3 * i + j]
+            phi[THETA + i, SCALE + j] = -sums[12 + 3 * i + j]
             # The heading's error left out of the velocity: the velocity is
             # known too loosely to tell the heading, and would spoil it.
             phi[VEL + i, THETA + j] = -cross[3 * i + j] if j < 2 else 0.0
             acc = 0.0
             for m in range(3):
-                acc += cross[3 * i + m] * sr[3 * m + j]
+                acc += cross[3 * i + m] * sums[3 * m + j]
             phi[VEL + i, BIAS + j] = 0.5 * acc
-            phi[VEL + i, ACC_BIAS + j] = -sr[3 * i + j]
+            phi[VEL + i, ACC_BIAS + j] = -sums[3 * i + j]
+
+
+def propagate(p, phi, dt_sum, q_gyr, q_head, q_bias, q_vel, q_acc_bias, out_pred):
+    """
+    The predicted covariance ``Φ P Φᵀ + Q`` of one step into ``out_pred``.
+
+    ``q_*`` the noise densities (variance per second): ``q_gyr`` the
+    tilt's, ``q_head`` the heading's.
+    """
     tmp = [0.0] * (DIM * DIM)
     for i in range(DIM):
         for j in range(DIM):
@@ -156,7 +164,7 @@ def heading_update(p, dx, hx, hy, hz, rho, tilt):
 
 
 def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, s0, p0, gravity, opts, qn,
-                steps, phis, preds, posts, corrs, nominal):
+                steps, sums, phi, preds, posts, corrs, nominal):
     """
     The forward filter over a whole recording; returns the number of steps.
 
@@ -197,9 +205,12 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, s0, p0, gra
         Out: the nominal attitude after each sample.
     steps : int array (K,)
         Out: each step's sample.
-    phis, preds, posts : arrays (K, DIM, DIM)
-        Out: each step's transition (from the step before), predicted and
-        updated covariances.
+    sums : array (K, SUMS)
+        Out: each step's sums (:func:`transition`, from the step before).
+    phi : array (DIM, DIM)
+        Scratch.
+    preds, posts : arrays (K, DIM, DIM)
+        Out: each step's predicted and updated covariances.
     corrs : array (K, DIM)
         Out: each step's correction of the nominal.
     nominal : array (K, 9)
@@ -268,15 +279,20 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, s0, p0, gra
         # One step of the filter at sample n.
         steps[k] = n
         if k > 0:
-            propagate(posts[k - 1], phis[k], sr, sa, sw, dt_sum, q_gyr, q_head, q_bias, q_vel,
-                      q_acc_bias, preds[k])
+            for m in range(9):
+                sums[k, m] = sr[m]
+                sums[k, 12 + m] = sw[m]
+            for m in range(3):
+                sums[k, 9 + m] = sa[m]
+            transition(phi, sums[k])
+            propagate(posts[k - 1], phi, dt_sum, q_gyr, q_head, q_bias, q_vel, q_acc_bias,
+                      preds[k])
             for i in range(DIM):
                 for j in range(DIM):
                     posts[k, i, j] = preds[k, i, j]
         else:
             for i in range(DIM):
                 for j in range(DIM):
-                    phis[0, i, j] = 1.0 if i == j else 0.0
                     preds[0, i, j] = p0[i, j]
         p = posts[k]
         dx = corrs[k]
@@ -355,7 +371,7 @@ def cholesky_solve(a, b, out, low):
             out[i, c] = acc / low[i, i]
 
 
-def rts_backward(k_count, phis, preds, posts, corrs, smooth, m_tmp, x_tmp, low, d_tmp):
+def rts_backward(k_count, sums, preds, posts, corrs, smooth, phi, m_tmp, x_tmp, low, d_tmp):
     """
     The Rauch–Tung–Striebel recursion on the error state, from the last step back.
 
@@ -368,7 +384,7 @@ def rts_backward(k_count, phis, preds, posts, corrs, smooth, m_tmp, x_tmp, low, 
         smooth[last, i] = 0.0
     e = [0.0] * DIM
     for k in range(last - 1, -1, -1):
-        phi = phis[k + 1]
+        transition(phi, sums[k + 1])
         pred = preds[k + 1]
         post = posts[k]
         for i in range(DIM):
