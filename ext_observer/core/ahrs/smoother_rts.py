@@ -51,6 +51,8 @@ SMOOTHER_DEFAULTS = {
     'start_bias': (0.01, 'rad/s', "the first gyro bias's σ per axis"),
     'start_acc_bias': (0.0, 'm/s²', "the accelerometer bias's σ per axis (0: none)"),
     'acc_bias_walk': (1e-4, 'm/s²/√s', "the accelerometer bias's random walk"),
+    'delay': (0.0, 's', "how late the IMU's samples come after the motion they measure "
+              '(its filters, its clock): each sample gets the attitude this much after it'),
     'start_scale': (0.003, '1', "the gyro's scale factors' σ per axis (relative; 0: none)"),
 }
 
@@ -134,6 +136,16 @@ def calibrated_field(mag, bias, soft_iron):
     if bias is None:
         return mag
     return np.linalg.solve(soft_iron, (mag - bias).T).T
+
+
+def _later(q, samples):
+    """The attitude ``samples`` (a float) after each one, between two samples linearly."""
+    count = len(q)
+    at = np.minimum(np.arange(count) + samples, count - 1)
+    lo = np.minimum(at.astype(np.int64), count - 2)
+    f = (at - lo)[:, None]
+    later = (1.0 - f) * q[lo] + f * q[lo + 1]
+    return later / np.linalg.norm(later, axis=1, keepdims=True)
 
 
 def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, compiled=None,
@@ -249,6 +261,8 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
     q = np.empty((count, 4))
     cov = np.empty((count, 3, 3))
     k.rts_output(count, used, steps, qn, smooth, corrs, posts, q, cov)
+    if settings['delay'] > 0.0:
+        q = _later(q, settings['delay'] * rate)
     if not details:
         return q, cov
     parts = {name: nominal[:used, 3 * i:3 * i + 3] + smooth[:, at:at + 3]
