@@ -43,15 +43,15 @@ KEY = {'9D': 'total_rmse_deg', '6D': 'inclination_rmse_deg'}
 
 
 def calibrations(trials, cache):
-    """Each trial's online calibration ``(b, S)`` (kept in ``cache`` if given)."""
+    """Each trial's online calibration ``(b, S, lag)`` (kept in ``cache`` if given)."""
     found = {}
     if cache and os.path.exists(cache):
         with open(cache, 'rb') as f:
             found = pickle.load(f)
     for t in trials:
         if t.name not in found:
-            b, s, _ = online_calibration(t.gyr, t.acc, t.mag, t.rate)
-            found[t.name] = (b, s)
+            b, s, _, lag = online_calibration(t.gyr, t.acc, t.mag, t.rate)
+            found[t.name] = (b, s, lag)
     if cache:
         with open(cache, 'wb') as f:
             pickle.dump(found, f)
@@ -67,16 +67,16 @@ def nees(q, cov, trial):
             float(np.mean(heading[keep] ** 2 / cov[keep, 2, 2])))
 
 
-def run(trials, params, cals, modes):
+def run(trials, params, cals, modes, mag_lag=False):
     rows = []
     for t in trials:
         for mode in modes:
             start = time.perf_counter()
             if mode == '9D':
-                c = cals[t.name]
+                b, s, lag = cals[t.name]
+                b, s = (np.zeros(3), np.eye(3)) if b is None else (b, s)
                 q, cov = smooth_attitude_rts(t.gyr, t.acc, t.mag, t.rate, params,
-                                             calibration=(np.zeros(3), np.eye(3))
-                                             if c[0] is None else c)
+                                             calibration=(b, s, lag if mag_lag else 0.0))
             else:
                 q, cov = smooth_attitude_rts(t.gyr, t.acc, None, t.rate, params)
             seconds = time.perf_counter() - start
@@ -125,13 +125,15 @@ def main(argv=None):
     parser.add_argument('--per-trial', action='store_true')
     parser.add_argument('--timing', action='store_true', help='also time the online run')
     parser.add_argument('--json', default=None)
+    parser.add_argument('--mag-lag', action='store_true',
+                        help="take out the field's lag the online calibration learned")
     args = parser.parse_args(argv)
     params = {k: float(v) for k, v in (s.split('=', 1) for s in args.set)}
     found = find_trials(data_dir(args.data), args.trials)
     trials = load_trials([f for f in found if args.split in ('all', split_of(f[0]))])
     modes = ('9D', '6D') if args.mode == 'both' else (args.mode,)
     cals = calibrations(trials, args.cache) if '9D' in modes else {}
-    rows = run(trials, params, cals, modes)
+    rows = run(trials, params, cals, modes, args.mag_lag)
     if args.per_trial:
         for r in rows:
             print(f'{r["trial"]:45} {r["mode"]} {r[KEY[r["mode"]]]:7.3f} '

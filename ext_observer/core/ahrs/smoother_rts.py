@@ -117,6 +117,9 @@ def online_calibration(gyr, acc, mag, rate):
     soft_iron : ndarray (3, 3) or None
     gyro_bias : ndarray (3,)
         The online estimate's gyro bias at the end, rad/s.
+    lag : float
+        The field's lag behind the gyro the calibration learned, s (0 if it
+        did not converge).
 
     """
     from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
@@ -124,11 +127,13 @@ def online_calibration(gyr, acc, mag, rate):
     observer.run(gyr, acc, mag, 1.0 / rate)
     gyro_bias = np.asarray(observer.bias, dtype=float)
     cal = observer.calibration
+    lag = float(cal.delay) if cal is not None and cal.state in ('converged', 'loaded') else 0.0
     # What the online estimator itself would apply: a learned calibration
     # that turns the heading by less than its deadband is left out.
     if cal is None or not cal.applied:
-        return None, None, gyro_bias
-    return np.asarray(cal.bias, dtype=float), np.asarray(cal.soft_iron, dtype=float), gyro_bias
+        return None, None, gyro_bias, lag
+    return (np.asarray(cal.bias, dtype=float), np.asarray(cal.soft_iron, dtype=float), gyro_bias,
+            lag)
 
 
 def calibrated_field(mag, bias, soft_iron):
@@ -136,6 +141,13 @@ def calibrated_field(mag, bias, soft_iron):
     if bias is None:
         return mag
     return np.linalg.solve(soft_iron, (mag - bias).T).T
+
+
+def _field_on_time(mag, samples):
+    """The field ``samples`` (a float) after each sample, linearly between two."""
+    count = len(mag)
+    at = np.clip(np.arange(count) + samples, 0.0, count - 1.0)
+    return np.stack([np.interp(at, np.arange(count), mag[:, i]) for i in range(3)], axis=1)
 
 
 def _later(q, samples):
@@ -167,9 +179,12 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
     params : dict, optional
         Settings of :data:`SMOOTHER_DEFAULTS` to change.
     calibration : tuple, optional
-        ``(b, S)`` of ``y = S m + b`` for the field; default: the one a
-        first online pass over the recording learns (none if it did not
-        converge), applied from the first sample.
+        ``(b, S)`` of ``y = S m + b`` for the field, or ``(b, S, lag)`` with
+        the field's lag behind the gyro (s), taken out; default: the
+        calibration a first online pass over the recording learns, applied
+        from the first sample where the online estimator applied it (its
+        lag is not taken out: docs/broad_tuning.md, "The smoothed
+        attitude").
     compiled : bool, optional
         As :func:`~ext_observer.core.ahrs.compiled.kernels` (the same
         results either way).
@@ -208,10 +223,15 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
     if use_mag:
         mag = _vectors(mag, 'mag', count)
         if calibration is None:
-            b, s, _ = online_calibration(gyr, acc, mag, rate)
+            b, s, _, _ = online_calibration(gyr, acc, mag, rate)
+            lag = 0.0
         else:
-            b, s = (np.asarray(c, dtype=float) for c in calibration)
-        field = np.ascontiguousarray(calibrated_field(mag, b, s))
+            b, s = (np.asarray(c, dtype=float) for c in calibration[:2])
+            lag = float(calibration[2]) if len(calibration) > 2 else 0.0
+        field = calibrated_field(mag, b, s)
+        if lag != 0.0:
+            field = _field_on_time(field, lag * rate)
+        field = np.ascontiguousarray(field)
     else:
         field = np.zeros((count, 3))
     norms = np.linalg.norm(field, axis=1)
