@@ -7,5 +7,6 @@ state with names (``ahrs_state`` assembles the groups each kernel declares;
 the bias learned in motion and ``clip_and_rest`` a clipped gyro and rest; ``ahrs_params`` the parameter
 table (rows of ``parameter_rows``), ``frames`` frames and first attitude.
 ``magcal*`` the online calibration,
-``uncertainty*`` the covariance, ``compiled`` the kernels compiled by numba.
+``uncertainty*`` the covariance, ``smoother_rts*`` the attitude from the whole recording
+(a Rauch–Tung–Striebel smoother), ``compiled`` the kernels compiled by numba.
 """

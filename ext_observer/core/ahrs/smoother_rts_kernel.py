@@ -1,5 +1,5 @@
 """
-The smoothed attitude's loops: an error-state Kalman filter forward, a Rauch–Tung–Striebel pass back.
+The smoothed attitude's loops: an error-state Kalman filter forward, an RTS pass back.
 
 :func:`rts_forward` runs the gyro strapdown at every sample (the nominal
 attitude ``q``, the nominal world velocity ``v`` from the specific force)
