@@ -22,6 +22,7 @@ trigonometry it needs is timed separately as the floor of the other case.
 import numpy as np
 
 from ext_observer.core import LuenbergerObserver, multiply, PAPER_ALPHA, PAPER_GAIN
+from ext_observer.core.paper.observer import multiply_components
 
 
 def right_matrix(quaternion):
@@ -55,22 +56,8 @@ class LeanExtendedStep:
 
         ``q`` is the estimate, ``e = exp(Ω/2)``, ``y`` the measurement.
         """
-        p, t = self.propagated, self.scratch[0]
-        qw, qx, qy, qz = q
-        ew, ex, ey, ez = e
-        for row, terms in enumerate((
-                ((qw, ew, 1), (qx, ex, -1), (qy, ey, -1), (qz, ez, -1)),
-                ((qw, ex, 1), (qx, ew, 1), (qy, ez, 1), (qz, ey, -1)),
-                ((qw, ey, 1), (qx, ez, -1), (qy, ew, 1), (qz, ex, 1)),
-                ((qw, ez, 1), (qx, ey, 1), (qy, ex, -1), (qz, ew, 1)))):
-            (a, b, _), *rest = terms
-            np.multiply(a, b, out=p[row])
-            for a, b, sign in rest:
-                np.multiply(a, b, out=t)
-                if sign > 0:
-                    p[row] += t
-                else:
-                    p[row] -= t
+        # q ⊗ e, the core's product of components, its terms in the scratch.
+        p = multiply_components(q, e, self.propagated, self.scratch[0])
         np.subtract(y, q, out=self.scratch)
         np.matmul(self.gain_matrix, self.scratch, out=out)
         out += p

@@ -61,27 +61,25 @@ class RelayNode:
 
     def increment_callback(self, msg):
         """Keep the increment until its measurement comes, or pair it."""
-        key = self._key(msg)
-        measurement = self.measurements.pop(key, None)
-        if measurement is None:
-            self._keep(self.increments, key, msg)
-        else:
+        measurement = self._pair(msg, self.measurements, self.increments)
+        if measurement is not None:
             self._publish(msg, measurement)
 
     def measurement_callback(self, msg):
         """Keep the measurement until its increment comes, or pair it."""
-        key = self._key(msg)
-        increment = self.increments.pop(key, None)
-        if increment is None:
-            self._keep(self.measurements, key, msg)
-        else:
+        increment = self._pair(msg, self.increments, self.measurements)
+        if increment is not None:
             self._publish(increment, msg)
 
-    @staticmethod
-    def _keep(pending, key, msg):
-        if len(pending) >= MAX_PENDING:
-            del pending[next(iter(pending))]
-        pending[key] = msg
+    def _pair(self, msg, partners, pending):
+        """``msg``'s partner of the same stamp, taken from ``partners``; else keep ``msg``."""
+        key = self._key(msg)
+        partner = partners.pop(key, None)
+        if partner is None:
+            if len(pending) >= MAX_PENDING:
+                del pending[next(iter(pending))]
+            pending[key] = msg
+        return partner
 
     def _publish(self, increment, measurement):
         out = self._out()

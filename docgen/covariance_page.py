@@ -298,7 +298,9 @@ measurement with error `e`: `θ ← (1 − k) θ + k e`, so
 `P ← (1 − k)² P + k² R` and `C ← (1 − k) C`. Each update is a
 congruence plus a positive term, so the 2×2 stays positive definite.
 
-**The corrections.** Inclination: every sample, `k = 1 − exp(−dt / (tau_acc + tau_acc_gain))`
+**The corrections.** Inclination: every sample the estimator does not hold on the gyro
+(the specific force rejected: then `k = 0`, and `C`, with the quarter-turned part it grows,
+turns with the body about the vertical), `k = 1 − exp(−dt / (tau_acc + tau_acc_gain))`
 (the world-frame low-pass in series with the Luenberger gain),
 `R = (acc_noise / g)² / dt`, one sample's direction noise. For small
 `k` the steady state is `P ≈ q τ / 2 + R dt / (2 τ)` for a process
@@ -316,7 +318,10 @@ about any axis (0.05 %: a body turning back and forth rectifies them into a
 drift with no net turn, 0.085 % of tuning trial 34's rotation); the two in
 quadrature are the held term `h`. Each field back shrinks `ψ` and `ρ` by
 `1 − κ` as it corrects the heading. Fields that come, used or rejected, add
-nothing to them.
+nothing to them. What the gyro alone added since the last field, `P_h`'s
+growth and `h²`, is what the first field back hands the estimator as the
+heading's doubt: the fields back correct it at that doubt's Kalman gain
+(raw_imu.md, "A field lost"), and κ above is that gain.
 
 **The heading's lag behind the fields.** What the model propagates is the error its
 noises explain; a drift it does not model (a gyro's scale error in fast turns, a
@@ -448,7 +453,11 @@ _MODEL = [
     '(`bias_init`) and learned at rest (the estimator\'s gain of `tau_rest`).',
     '- A complementary correction with gain k pulls θ to a measurement with error e: '
     'θ ← (1 − k) θ + k e, so P ← (1 − k)² P + k² R. Inclination: every sample, k from '
-    '`tau_acc` + `tau_acc_gain`, R the accelerometer\'s direction noise. For a process '
+    '`tau_acc` + `tau_acc_gain`, R the accelerometer\'s direction noise; none while the '
+    'estimator holds the inclination on the gyro (the specific force rejected), when the '
+    'tilt\'s covariance with β turns with the body about the vertical (a body turning at '
+    'ω carries β round: the tilt grows by at most 4 B / ω², by B t² without a turn). '
+    'For a process '
     'noise density q and a correction of time constant τ this settles at '
     'q τ / 2 + R dt / (2 τ), the complementary filter\'s trade-off in closed form '
     '(`test_uncertainty.py::test_steady_state_is_the_closed_form_of_a_first_order_correction`). '

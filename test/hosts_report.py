@@ -46,6 +46,22 @@ table = docgen('markdown').table
 
 # Blocks ----------------------------------------------------------------------------
 
+def runs_of(results, labels):
+    """``(key, label, run)`` of each run of ``labels`` (key: label) that ``results`` holds."""
+    for key, label in labels.items():
+        run = results['runs'].get(key)
+        if run is not None:
+            yield key, label, run
+
+
+def sweep(results, key):
+    """The phases of run ``key`` that measured both subscriptions (a loss sweep's)."""
+    run = results['runs'].get(key)
+    if run is None:
+        return []
+    return [p for p in run['phases'] if 'reliable' in p]
+
+
 def block_run(results):
     setup = results['setup']
     return (f'Measured on {setup.get("date", "?")} at commit `{setup.get("commit", "?")}` '
@@ -68,10 +84,7 @@ def block_faults(results):
     setup = results['setup']
     bounds = setup['recovery_bound_s']
     rows = []
-    for layout, label in LAYOUTS.items():
-        run = results['runs'].get(layout)
-        if run is None:
-            continue
+    for _, label, run in runs_of(results, LAYOUTS):
         for phase in run['phases']:
             if phase['kind'] == 'none':
                 rows.append([label, f'none (band {run["band_rad"]:.2f} rad)', '–',
@@ -104,10 +117,7 @@ def block_faults(results):
 
 def block_accounting(results):
     rows = []
-    for layout, label in LAYOUTS.items():
-        run = results['runs'].get(layout)
-        if run is None:
-            continue
+    for _, label, run in runs_of(results, LAYOUTS):
         final = run['observer_final']
         drops = ', '.join(f'{k[len("dropped_"):]} {v}' for k, v in final.items()
                           if k.startswith('dropped_')) or 'none'
@@ -120,13 +130,8 @@ def block_accounting(results):
 
 
 def qos_row(results, key, loss):
-    run = results['runs'].get(key)
-    if run is None:
-        return None
-    for phase in run['phases']:
-        if phase.get('loss_percent') == loss and ('reliable' in phase):
-            return phase
-    return None
+    return next((phase for phase in sweep(results, key) if phase.get('loss_percent') == loss),
+                None)
 
 
 def block_qos(results):
@@ -150,14 +155,9 @@ def block_qos(results):
 
 def block_inputs(results):
     rows = []
-    for key, inputs in INPUTS.items():
-        run = results['runs'].get(key)
-        if run is None:
-            continue
-        for phase in run['phases']:
+    for key, inputs, _ in runs_of(results, INPUTS):
+        for phase in sweep(results, key):
             loss = phase.get('loss_percent')
-            if 'reliable' not in phase:
-                continue
             propagated = phase.get('propagated_fraction')
             if propagated is None and phase.get('observer_steps'):
                 propagated = phase['observer_steps_propagated'] / phase['observer_steps']
@@ -171,13 +171,6 @@ def block_inputs(results):
 
 # Figures ---------------------------------------------------------------------------
 
-def sweep(results, key):
-    run = results['runs'].get(key)
-    if run is None:
-        return []
-    return [p for p in run['phases'] if 'reliable' in p]
-
-
 def figures(results, folder):
     import matplotlib
     matplotlib.use('Agg')
@@ -185,6 +178,14 @@ def figures(results, folder):
 
     os.makedirs(folder, exist_ok=True)
     written = []
+
+    def save(fig, name):
+        fig.tight_layout()
+        path = os.path.join(folder, name)
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(path)
+
     styles = {'qos_best_effort_inputs': ('tab:red', 'o'),
               'gyro_monitor_on_a': ('tab:blue', 's'),
               'qos_reliable_inputs_depth_1000': ('tab:green', '^')}
@@ -225,11 +226,7 @@ def figures(results, folder):
         axis.legend(fontsize=7)
     for axis in axes:
         axis.grid(alpha=0.3, which='both')
-    fig.tight_layout()
-    path = os.path.join(folder, 'hosts_delivery.png')
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    written.append(path)
+    save(fig, 'hosts_delivery.png')
 
     # 2. Latency p50 / p99 by loss, reliable vs best effort.
     fig, axis = plt.subplots(figsize=(6.5, 4))
@@ -244,15 +241,10 @@ def figures(results, folder):
              title='attitude_estimate latency across the link\n(the sweep with best-effort increments)')
     axis.grid(alpha=0.3, which='both')
     axis.legend(fontsize=8)
-    fig.tight_layout()
-    path = os.path.join(folder, 'hosts_latency.png')
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    written.append(path)
+    save(fig, 'hosts_latency.png')
 
     # 3. The error through the faults, with the band and the recovery times.
-    runs = [(layout, results['runs'][layout]) for layout in LAYOUTS
-            if layout in results['runs']]
+    runs = [(layout, run) for layout, _, run in runs_of(results, LAYOUTS)]
     fig, axes = plt.subplots(len(runs), 1, figsize=(12, 3.2 * len(runs)), squeeze=False)
     for axis, (layout, run) in zip(axes[:, 0], runs):
         # No line across a time without estimates (a partition, a restart).
@@ -275,11 +267,7 @@ def figures(results, folder):
                  ylabel='rad', title=LAYOUTS[layout])
         axis.legend(loc='center right', fontsize=7)
         axis.grid(alpha=0.3)
-    fig.tight_layout()
-    path = os.path.join(folder, 'hosts_recovery.png')
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    written.append(path)
+    save(fig, 'hosts_recovery.png')
     return written
 
 

@@ -76,6 +76,18 @@ class Driver:
         """Go on at stamp ``to`` (a new time line, or a gap)."""
         self.stamp = to
 
+    def step_at(self, to):
+        """Jump to ``to``, send one step and wait for its estimate; its stamp."""
+        self.jump(to)
+        stamp = self.step()
+        self.drain()
+        return stamp
+
+    def fresh_estimate(self, initial, stamp):
+        """The core's estimate after the step sent at ``stamp``, started afresh at ``initial``."""
+        theta, y = self.sent[stamp]
+        return SingleObserver(initial=initial).step(theta, unit(y))
+
     def drain(self):
         """Wait for the estimate of every step sent to reach the probe."""
         self.spinner.spin_until(lambda: all(t in self.probe.estimates for t in self.order),
@@ -214,13 +226,9 @@ def test_jumps_gaps_and_the_reset_service(ros_context, spinner):
 
     # A bag that restarts: stamps 90 s back. The observer starts over from
     # initial_estimate on the new time line and converges again.
-    driver.jump(10 * SECOND)
-    first = driver.step()
-    driver.drain()
+    first = driver.step_at(10 * SECOND)
     assert observer.resets['backward_jump'] == 1
-    theta, y = driver.sent[first]
-    assert probe.estimates[first + PERIOD] == SingleObserver(initial=initial).step(
-        theta, unit(y))
+    assert probe.estimates[first + PERIOD] == driver.fresh_estimate(initial, first)
     driver.run(40)
     assert driver.error() < 0.6
 
@@ -232,13 +240,9 @@ def test_jumps_gaps_and_the_reset_service(ros_context, spinner):
     # With forward_gap_action = reset, it starts over.
     [result] = observer.set_parameters([Parameter('forward_gap_action', value='reset')])
     assert result.successful
-    driver.jump(driver.stamp + 5 * SECOND)
-    gap = driver.step()
-    driver.drain()
+    gap = driver.step_at(driver.stamp + 5 * SECOND)
     assert observer.resets['forward_gap'] == 1
-    theta, y = driver.sent[gap]
-    assert probe.estimates[gap + PERIOD] == SingleObserver(initial=initial).step(
-        theta, unit(y))
+    assert probe.estimates[gap + PERIOD] == driver.fresh_estimate(initial, gap)
 
     # The reset service.
     client = probe.create_client(Trigger, '/observer/reset')

@@ -64,11 +64,53 @@ def _state_subscripts(source):
     return found
 
 
+# Where the positions of the calibration filter's parts in its vector are
+# read: its accessors (offset_of, soft_iron_of, ...), beside the positions.
+POSITIONS_READ_IN = 'magcal_layout.py'
+
+
+def _named_positions(source):
+    """
+    Where a kernel subscripts an array at a named position (``x[CAL_D + k]``, ``x[CAL_TAU]``).
+
+    A term of the index made of upper-case names (and numbers) alone is a
+    position; a row stride times a variable (``p[CAL_N * i + j]``) is not.
+    """
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.Subscript):
+            continue
+        index = node.slice
+        terms = []
+
+        def add(e):
+            if isinstance(e, ast.BinOp) and isinstance(e.op, (ast.Add, ast.Sub)):
+                add(e.left)
+                add(e.right)
+            elif isinstance(e, ast.UnaryOp):
+                add(e.operand)
+            elif e is not None:
+                terms.append(e)
+
+        for part in ([index.lower, index.upper, index.step] if isinstance(index, ast.Slice)
+                     else [index]):
+            add(part)
+        for term in terms:
+            names = [n.id for n in ast.walk(term) if isinstance(n, ast.Name)]
+            if names and all(n.isupper() for n in names):
+                found.append((node.lineno, node.col_offset, ast.unparse(node)))
+                break
+    return [f'{line}: {text}' for line, _, text in sorted(found)]
+
+
 def test_no_kernel_reads_or_writes_the_state_by_an_index():
     from ext_observer.core.ahrs import compiled
     found = {}
     for name, path in zip(compiled.KERNEL_SOURCES, compiled.kernel_paths()):
-        hits = _state_subscripts(pathlib.Path(path).read_text(encoding='utf-8'))
+        source = pathlib.Path(path).read_text(encoding='utf-8')
+        hits = _state_subscripts(source)
+        if name != POSITIONS_READ_IN:
+            hits += _named_positions(source)
         if hits:
             found[name] = hits
     assert found == {}, found
@@ -77,6 +119,11 @@ def test_no_kernel_reads_or_writes_the_state_by_an_index():
         '2: s[S_LP + 3]', '2: state[1]']
     assert _state_subscripts('def f(s, at):\n    return s[at + 1]\n') == []  # an array
     assert _state_subscripts('def f(state):\n    s = state[0]\n    s.inc.lp[3] = 1.0\n') == []
+    assert _named_positions(
+        'def f(cal, p, i, j, k):\n    x = cal.x\n    d = x[CAL_D + k] + x[CAL_TAU] + x[-CAL_Z]\n'
+        '    p[(CAL_N + 1) * CAL_TAU] = p[CAL_N * i + j] + x[3] + x[CAL_S:CAL_S + 3][0]\n') == [
+        '3: x[CAL_D + k]', '3: x[CAL_TAU]', '3: x[-CAL_Z]', '4: p[(CAL_N + 1) * CAL_TAU]',
+        '4: x[CAL_S:CAL_S + 3]']
 
 
 def test_the_estimators_state_is_its_groups_each_declared_once_every_field_with_its_meaning():

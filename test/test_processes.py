@@ -7,6 +7,7 @@ the pipeline end to end, calls the observer's parameter services, and every
 process is ended by the test (SIGINT, checked), or by the fixture on failure.
 """
 
+import os
 import re
 import signal
 import sys
@@ -24,6 +25,9 @@ from ext_observer.core import attitude_error, manifold_distance
 from ext_observer.nodes.monitor_node import DIAGNOSTIC_KEYS, ERROR_KEYS, STATUS_NAME
 from ext_observer.nodes.node_common import LEVEL_NAMES
 from ros_helpers import cpu_seconds, installed, Probe, values_of
+
+# Small nodes run as processes, to see how run_node stops them.
+STOP_NODES = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'stop_nodes.py')
 
 
 def assert_clean_exit(process, code=0):
@@ -196,31 +200,11 @@ def test_ctrl_c_on_busy_nodes_exits_cleanly(ros_processes, ros_context, spinner)
         assert_clean_exit(process)
 
 
-SIGINT_OF_A_BACKGROUND_JOB = '''
-import signal
-import sys
-from rclpy.node import Node
-from ext_observer.nodes.node_common import run_node
-
-class Node_(Node):
-    NODE_NAME = 'background'
-
-    def __init__(self):
-        super().__init__(self.NODE_NAME)
-        handled = signal.getsignal(signal.SIGINT) not in (signal.SIG_IGN, signal.SIG_DFL)
-        print(f'the node handles SIGINT: {handled}', flush=True)
-        self.create_timer(0.01, lambda: None)
-
-sys.exit(run_node(Node_, ['background']))
-'''
-
-
 def test_a_background_jobs_node_ends_on_ctrl_c(ros_processes):
     # Started with SIGINT ignored, a node had only rclpy's signal thread to
     # end it; run_node handles SIGINT itself, so that Ctrl-C ends it as in a
     # terminal.
-    process = ros_processes(as_background_job([sys.executable, '-c',
-                                               SIGINT_OF_A_BACKGROUND_JOB]))
+    process = ros_processes(as_background_job([sys.executable, STOP_NODES, 'background']))
     wait_for_output(process, 'the node handles SIGINT:', 30.0)
     assert 'the node handles SIGINT: True' in process.output
     process.interrupt(timeout=10.0)
@@ -253,36 +237,6 @@ def test_a_stop_signal_while_the_node_imports_ends_it_cleanly(ros_processes, sig
     assert '[imu_filter]' not in process.output, 'the node had started'
 
 
-STOP_ORDER = '''
-import sys
-from rclpy.node import Node
-from std_msgs.msg import Float64
-from ext_observer.nodes.node_common import run_node
-
-class Node_(Node):
-    NODE_NAME = 'ordered'
-
-    def __init__(self):
-        super().__init__(self.NODE_NAME)
-        self.publisher = self.create_publisher(Float64, 'x', 10)
-        self.create_timer(0.001, self.timer_callback)
-        self.context.on_shutdown(lambda: print('context shut down', flush=True))
-        self.steps = 0
-
-    def timer_callback(self):
-        self.publisher.publish(Float64(data=1.0))
-        self.steps += 1
-        if self.steps == 100:
-            print('spinning', flush=True)
-
-    def destroy_node(self):
-        print(f'destroy_node, context up: {self.context.ok()}', flush=True)
-        super().destroy_node()
-
-sys.exit(run_node(Node_, ['ordered'] + sys.argv[1:]))
-'''
-
-
 @pytest.mark.parametrize('executor', [[], ['--executor', 'single']])
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
 def test_a_stop_signal_shuts_the_context_down_last(ros_processes, executor, signum):
@@ -290,7 +244,7 @@ def test_a_stop_signal_shuts_the_context_down_last(ros_processes, executor, sign
     # destroyed with the context still up, and only then does the context go
     # down. With rclpy's own handlers it went down first, under the spinning
     # executor and the callback publishing.
-    process = ros_processes([sys.executable, '-c', STOP_ORDER] + executor)
+    process = ros_processes([sys.executable, STOP_NODES, 'ordered'] + executor)
     wait_for_output(process, 'spinning', 30.0)
     process.process.send_signal(signum)
     process.wait(timeout=20.0)
@@ -312,38 +266,6 @@ def test_sigterm_on_a_running_node_exits_cleanly(ros_processes, ros_context, spi
     assert_clean_exit(process)
 
 
-SHUTDOWN_UNDER_A_CALLBACK = '''
-import sys
-import threading
-import time
-import rclpy
-from rclpy.node import Node
-from std_msgs.msg import Float64
-from ext_observer.nodes.node_common import run_node
-
-class Node_(Node):
-    NODE_NAME = 'busy'
-
-    def __init__(self):
-        super().__init__(self.NODE_NAME)
-        self.publisher = self.create_publisher(Float64, 'x', 10)
-        self.create_timer(0.01, self.timer_callback)
-
-    def timer_callback(self):
-        if sys.argv[1] == 'thread':
-            self.publisher.publish(Float64(data=1.0))
-            return
-        # The context goes down while a callback runs.
-        rclpy.shutdown()
-        self.publisher.publish(Float64(data=1.0))
-
-if sys.argv[1] == 'thread':
-    # Shut down from another thread, while the main thread spins.
-    threading.Thread(target=lambda: (time.sleep(1.0), rclpy.shutdown()), daemon=True).start()
-sys.exit(run_node(Node_, ['busy'] + sys.argv[2:]))
-'''
-
-
 @pytest.mark.parametrize('executor', [[], ['--executor', 'single']])
 @pytest.mark.parametrize('how', ['callback', 'thread'])
 def test_run_node_ends_cleanly_when_the_context_goes_down(ros_processes, how, executor):
@@ -351,8 +273,7 @@ def test_run_node_ends_cleanly_when_the_context_goes_down(ros_processes, how, ex
     # spin, which run_node takes as the end it is. And a shutdown from
     # another thread (rclpy 7.1's EventsExecutor hangs when shut down from
     # another thread unless spun with a finite timeout).
-    process = ros_processes([sys.executable, '-c', SHUTDOWN_UNDER_A_CALLBACK, how]
-                            + executor)
+    process = ros_processes([sys.executable, STOP_NODES, 'busy', how] + executor)
     process.wait(timeout=20.0)
     assert_clean_exit(process)
 

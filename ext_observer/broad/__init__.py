@@ -49,9 +49,10 @@ from ext_observer.broad.data import (data_dir, DEFAULT_DIRS, ENV_VAR, find_group
                                      load_trial, load_trials, shown_command, shown_path,
                                      Trial)
 from ext_observer.broad.result_keys import (algorithms_in, ALGORITHMS, ANCHORS, FUSION_DEFAULTS,
-                                            MODES, OFFLINE_VQF, OURS, OURS_PLAIN)
+                                            MODES, OFFLINE_VQF, OURS, OURS_PLAIN,
+                                            OURS_SMOOTHED)
 from ext_observer.broad.report import fmt, text_report, write_json
-from ext_observer.broad.run import estimate_ours, log, run
+from ext_observer.broad.run import estimate_ours, log, run, smoothed_estimate
 from ext_observer.broad.scoring import (combined_norms, criteria, error_angles, group_means,
                                         norm_deviation, norm_parts, rmse_deg, score, summary,
                                         VQF_RATIO_GOAL)
@@ -70,14 +71,17 @@ __all__ = [
     'ALGORITHMS', 'ANCHOR_PACKAGES', 'ANCHORS', 'BROAD_GYRO_RANGE', 'DEFAULT_DIRS', 'ENV_VAR',
     'FUSION_DEFAULTS', 'FUSION_README', 'HOW_TO_GET', 'fusion_settings',
     'IDENTITY', 'MADGWICK_BETA', 'MAHONY_KI', 'MAHONY_KP', 'MODES', 'NWU_TO_ENU',
-    'OFFLINE_VQF', 'OURS', 'OURS_PLAIN', 'PLOT_TRIAL', 'STANDARD_GRAVITY', 'Trial', 'VQF_RATIO_GOAL',
+    'OFFLINE_VQF', 'OURS', 'OURS_PLAIN', 'OURS_SMOOTHED', 'PLOT_TRIAL',
+    'STANDARD_GRAVITY', 'Trial', 'VQF_RATIO_GOAL',
     'algorithms_in', 'anchor_estimates', 'attitude_from_acc_mag', 'build_parser',
     'combined_norms', 'criteria', 'data_dir', 'error_angles', 'estimate_ours', 'find_groups',
     'find_trials',
-    'fmt', 'group_means', 'groups_from_name', 'has_trials', 'load_trial', 'load_trials', 'log', 'main',
+    'fmt', 'group_means', 'groups_from_name', 'has_trials', 'load_trial', 'load_trials', 'log',
+    'main',
     'missing_anchor_packages', 'norm_deviation', 'norm_parts', 'rmse_deg',
     'run',
-    'score', 'shown_command', 'shown_path', 'summary', 'text_report', 'write_json',
+    'score', 'smoothed_estimate', 'shown_command', 'shown_path', 'summary', 'text_report',
+    'write_json',
     # The robustness benchmark (--stress).
     'BIAS', 'DESCRIPTIONS', 'GYRO_RANGE', 'GYRO_RANGES', 'HALVES', 'LABELS', 'LOW_RATE',
     'MODE_KEYS',

@@ -58,6 +58,9 @@ def build_parser():
     parser.add_argument('--plain', action='store_true',
                         help="also run our estimator without the extension term "
                              "(doubles our run time)")
+    parser.add_argument('--smooth', action='store_true',
+                        help='also score our smoothed estimate (each sample from the whole '
+                             "recording, as 'ext_observer smoothed'; docs/offline.md)")
     parser.add_argument('--docs', metavar='DOCS_DIR',
                         help='write DOCS_DIR/broad.md and DOCS_DIR/figures/broad_*.png '
                              "(in a clone of ext_observer: the pages' writers, docgen/, "
@@ -78,6 +81,11 @@ def build_parser():
                         help='instead: is the published orientation covariance honest? (our '
                              'estimator through the node\'s pipeline; with --docs, '
                              'DOCS_DIR/covariance.md and its figures)')
+    parser.add_argument('--field-gap', metavar='START:END',
+                        help='with --covariance, instead of its table: each trial in 9D with '
+                             'the field gone from START to END s into it (e.g. 60:120): the '
+                             "heading's mean e²/σ² with the field, within 2σ without it, its "
+                             'RMS error after the return against the run without a gap')
     parser.add_argument('--stress', action='store_true',
                         help='instead: the robustness benchmark, each trial (a) as recorded, '
                              '(b) cut at its first movement sample, (c) (b) plus a 1 °/s gyro '
@@ -126,7 +134,7 @@ def main(argv=None):
         modes = MODES if args.mode == 'both' else (args.mode,)
         result = run(trials, modes, anchors, plain=args.plain, jobs=args.jobs,
                      workers=args.workers, plot_trial=plot_trial if args.docs else None,
-                     progress=progress)
+                     progress=progress, smooth=args.smooth)
         result['load'] = (load, _load())
     except (ValueError, RuntimeError) as error:
         print(f'error: {error}', file=sys.stderr)
@@ -158,12 +166,18 @@ def main(argv=None):
 
 def _covariance(args, argv, source, folder, trials, groups, progress):
     """The covariance benchmark (``--covariance``) on the trials read."""
-    from ext_observer.broad.covariance import report
+    from ext_observer.broad.covariance import field_gap, gap_table, parse_gap, report
+    if args.field_gap is not None:
+        gap = parse_gap(args.field_gap)
+        print(gap_table(field_gap(trials, groups, gap, workers=args.workers,
+                                  progress=progress), gap))
+        return 0
     meta = dict(source, command=shown_command(['python -m ext_observer broad', *argv]),
                 data=shown_path(folder), machine=_machine())
     # The covariance is the node's: its pipeline and uncertainty model count too.
     meta['dirty'] = bool(_git('status', '--porcelain', '--', *_ESTIMATOR_FILES,
-                              'ext_observer/core/ahrs/uncertainty.py', 'ext_observer/pipeline/raw_imu.py'))
+                              'ext_observer/core/ahrs/uncertainty.py',
+                              'ext_observer/pipeline/raw_imu.py'))
     modes = MODES if args.mode == 'both' else (args.mode,)
     summary, runs = report(trials, groups, meta, modes, workers=args.workers,
                            json_path=args.json, progress=progress)
@@ -231,6 +245,16 @@ def _check(args, anchors):
         return '--stress and --covariance are two benchmarks: one at a time'
     if (args.variants or args.param) and not args.stress:
         return '--variants and --param go with --stress'
+    if args.field_gap is not None:
+        if not args.covariance or args.docs:
+            return '--field-gap goes with --covariance (and writes no page)'
+        from ext_observer.broad.covariance import parse_gap
+        try:
+            parse_gap(args.field_gap)
+        except ValueError as error:
+            return f'--field-gap: {error}'
+    if args.smooth and (args.stress or args.covariance):
+        return '--smooth goes with the accuracy benchmark, not --stress or --covariance'
     try:
         _params(args.param)
     except ValueError as error:

@@ -57,7 +57,7 @@ def node_settings(mode, values=None):
     return imu_filter_settings(settings)
 
 
-def run_trial(trial, mode, values=None):
+def run_trial(trial, mode, values=None, gap=None):
     """
     Run one trial through the node's pipeline; keep the estimates, covariances and inputs.
 
@@ -67,6 +67,9 @@ def run_trial(trial, mode, values=None):
     mode : {'9D', '6D'}
     values : dict, optional
         Node parameters other than the defaults.
+    gap : (float, float), optional
+        A field gone: no field is given from ``gap[0]`` to ``gap[1]`` s
+        into the trial (9D).
 
     Returns
     -------
@@ -78,7 +81,8 @@ def run_trial(trial, mode, values=None):
         ``reference`` and ``dip`` (what the sample's field told the
         uncertainty model: NaN without one; ``gain0``, ``calibration0``,
         ``reference0`` and ``dip0`` for the field the start used),
-        ``rejected`` (a field came and did not correct the heading),
+        ``rejected`` (a field came and did not correct the heading), ``held``
+        (the inclination held on the gyro, the specific force rejected),
         ``bias_var`` (the estimator's bias variance, NaN when it learns no
         bias in motion), ``clip_var`` (what a sample at the gyro's range
         added to the variances), ``dt``.
@@ -93,10 +97,11 @@ def run_trial(trial, mode, values=None):
                                                'reference', 'dip', 'gain0', 'calibration0',
                                                'reference0', 'dip0', 'bias_var', 'clip_var')}
     out['state'] = np.full((n, 4), np.nan)
-    for key in ('rest', 'rejected', 'started'):
+    for key in ('rest', 'rejected', 'started', 'held'):
         out[key] = np.zeros(n, dtype=bool)
     gyr, acc = trial.gyr.tolist(), trial.acc.tolist()
     mag = (trial.mag * TESLA_PER_MICROTESLA).tolist() if mode == '9D' else None
+    lo, hi = (math.inf, math.inf) if gap is None else (gap[0] * trial.rate, gap[1] * trial.rate)
     for k in range(n):
         stamp = _START_NS + round(k * period)
         tracker.last_field = None
@@ -107,13 +112,14 @@ def run_trial(trial, mode, values=None):
             out['tilt'][k], out['heading'][k] = estimate.covariance[0], estimate.covariance[8]
             out['started'][k] = not was_started or estimate.reason is not None
             out['rest'][k] = core.rest
+            out['held'][k] = core.held
             bias_var = core.bias_variance
             out['bias_var'][k] = math.nan if bias_var is None else bias_var
             out['clip_var'][k] = core.clip_variance
             if tracker.last_field is not None:
                 (out['gain0'][k], out['calibration0'][k], out['reference0'][k],
                  out['dip0'][k]) = tracker.last_field[1:]
-        if mag is not None:
+        if mag is not None and not lo <= k < hi:
             tracker.last_field = None
             pipeline.field(stamp, mag[k])
             if tracker.last_field is not None:
@@ -165,6 +171,7 @@ def replay(runs, params=None, ahrs_params=None):
     acc = (np.stack([stack(f'acc{j}', 0.0) for j in range(3)], axis=1)
            if all('acc0' in r for r in runs) else None)
     rest, started = stack('rest', 0.0), stack('started', 0.0)
+    held = stack('held', 0.0) if all('held' in r for r in runs) else None
     bias_var = stack('bias_var', np.nan) if all('bias_var' in r for r in runs) else None
     if bias_var is not None and not np.isfinite(bias_var).any():
         bias_var = None
@@ -197,7 +204,8 @@ def replay(runs, params=None, ahrs_params=None):
             tracker.step(dt, gyr[k], states[k], rest[k] > 0.5,
                          None if bias_var is None else np.nan_to_num(bias_var[k]),
                          None if clip_var is None else np.nan_to_num(clip_var[k]),
-                         None if acc is None else acc[k])
+                         None if acc is None else acc[k],
+                         held=None if held is None else held[k] > 0.5)
         cov = tracker.covariance
         tilt[k], heading[k] = cov[0], cov[8]
         apply(1, k)
@@ -322,9 +330,9 @@ _JOB = None
 
 
 def _run_job(index):
-    trials, modes, values = _JOB
+    trials, modes, values, gap = _JOB
     trial, mode = trials[index // len(modes)], modes[index % len(modes)]
-    run = run_trial(trial, mode, values)
+    run = run_trial(trial, mode, values, gap)
     # The gyro and the accelerometer ride along for replays.
     for j in range(3):
         run[f'gyr{j}'] = trial.gyr[:, j]
@@ -332,9 +340,11 @@ def _run_job(index):
     return index, run
 
 
-def run_all(trials, modes=MODES, values=None, workers=1, progress=None):
+def run_all(trials, modes=MODES, values=None, workers=1, progress=None, gap=None):
     """
     Run every trial in every mode (forked processes when ``workers > 1``).
+
+    ``values`` and ``gap`` as :func:`run_trial` takes them.
 
     Returns
     -------
@@ -343,7 +353,7 @@ def run_all(trials, modes=MODES, values=None, workers=1, progress=None):
 
     """
     global _JOB
-    _JOB = (trials, tuple(modes), values)
+    _JOB = (trials, tuple(modes), values, gap)
     count = len(trials) * len(modes)
     # Longest first, so the last job is a short one.
     order = sorted(range(count), key=lambda i: -len(trials[i // len(modes)]))
@@ -546,3 +556,151 @@ def tune(trials, runs, groups, names, start=None, factors=(0.7, 0.85, 1.2, 1.4),
             if progress:
                 progress(f'  {name} = {values[name]:.4g} (cost {best:.3f})')
     return values, best
+
+
+# --- a field that goes and comes back ------------------------------------------
+
+# s: how long after a field's return its heading is judged.
+RETURN_TIME = 10.0
+# The return's RMS heading error may exceed that of the same seconds without a
+# gap by this factor, or by this much (rad), whichever allows more.
+RETURN_FACTOR, RETURN_MARGIN = 1.5, math.radians(1.5)
+# The share of the samples without a field whose heading must be within 2σ.
+GAP_FRACTION = 0.95
+# The BROAD group whose trials carry a magnet on the board.
+MAGNET_GROUP = 'attached_magnet'
+
+
+def parse_gap(text):
+    """``'60:120'`` → ``(60.0, 120.0)``: seconds into each trial, the field gone between."""
+    try:
+        lo, hi = (float(v) for v in text.split(':'))
+    except ValueError:
+        raise ValueError(f'a field gap is START:END in seconds, e.g. 60:120; got {text!r}')
+    if not 0.0 <= lo < hi < math.inf:
+        raise ValueError(f'a field gap needs 0 <= START < END (finite); got {text!r}')
+    return lo, hi
+
+
+def gap_trial(trial, run, gapped, gap):
+    """
+    One trial's field-gap figures: its heading with the field present, gone, and back.
+
+    Parameters
+    ----------
+    trial : Trial
+    run, gapped : dict
+        :func:`run_trial`'s in 9D, without and with ``gap``.
+    gap : (float, float)
+        s into the trial.
+
+    Returns
+    -------
+    dict of ndarray
+        ``present`` (e²/σ² of the heading over the scored samples without a
+        gap), ``gone`` (e²/σ² of the gapped run's heading over the scored
+        samples without a field), ``back`` and ``back_ref`` (the heading
+        errors, rad, over the scored samples of the :data:`RETURN_TIME` s
+        after the field's return, with and without the gap; empty where the
+        trial ends before it returns).
+
+    """
+    t = np.arange(len(trial)) / trial.rate
+    _, heading, scored = errors(trial, run)
+    _, heading_gap, scored_gap = errors(trial, gapped)
+    gone = scored_gap & (t >= gap[0]) & (t < gap[1])
+    back = scored & scored_gap & (t >= gap[1]) & (t < gap[1] + RETURN_TIME)
+    return {'present': heading[scored] ** 2 / run['heading'][scored],
+            'gone': heading_gap[gone] ** 2 / gapped['heading'][gone],
+            'back': heading_gap[back], 'back_ref': heading[back]}
+
+
+def gap_figures(parts):
+    """
+    The pooled figures of :func:`gap_trial`'s outputs ``parts``, and whether they pass.
+
+    Returns
+    -------
+    dict
+        ``present_mean_z2``, ``gone_within_2sigma`` (NaN: no sample without
+        a field), ``back_rms`` and ``back_rms_ref`` (rad; NaN: no return),
+        ``present_ok`` (the mean within :data:`MEAN_PASS`), ``gone_ok``,
+        ``back_ok`` (None where there is nothing to judge).
+
+    """
+    def cat(key):
+        return np.concatenate([p[key] for p in parts])
+
+    present, gone, back, ref = cat('present'), cat('gone'), cat('back'), cat('back_ref')
+    f = {'present_mean_z2': float(np.mean(present)) if present.size else math.nan,
+         'gone_within_2sigma': float(np.mean(gone <= 4.0)) if gone.size else math.nan,
+         'back_rms': float(np.sqrt(np.mean(back ** 2))) if back.size else math.nan,
+         'back_rms_ref': float(np.sqrt(np.mean(ref ** 2))) if ref.size else math.nan}
+    lo, hi = MEAN_PASS
+    f['present_ok'] = bool(lo <= f['present_mean_z2'] <= hi) if present.size else None
+    f['gone_ok'] = bool(f['gone_within_2sigma'] >= GAP_FRACTION) if gone.size else None
+    f['back_ok'] = (bool(f['back_rms'] <= max(RETURN_FACTOR * f['back_rms_ref'],
+                                               f['back_rms_ref'] + RETURN_MARGIN))
+                    if back.size else None)
+    return f
+
+
+# The field-gap benchmark's band for the heading's mean e²/σ² with the field
+# present: wider than MEAN_RANGE, pooled over trials of every kind.
+MEAN_PASS = (0.3, 3.0)
+
+
+def field_gap(trials, groups, gap, workers=1, progress=None):
+    """
+    A field gone for a while in each trial (9D): the heading's error and σ before, during, after.
+
+    Each trial runs through the node's pipeline twice, with every field and
+    without those of ``gap``; a trial shorter than ``gap[0]`` loses no field
+    and is left out of the gap's figures, one that ends before ``gap[1]``
+    counts only while the field is gone. Rows: each trial, then pooled per
+    split (tuning, held-out, all) over every trial and over those of
+    :data:`MAGNET_GROUP`.
+
+    Returns
+    -------
+    list of (str, dict)
+        The row's name and :func:`gap_figures`'s.
+
+    """
+    if progress:
+        progress(f'{len(trials)} trials × 9D with and without the field from {gap[0]:g} to '
+                 f'{gap[1]:g} s, {workers} process{"es" if workers > 1 else ""} ...')
+    full = run_all(trials, ('9D',), workers=workers, progress=progress)['9D']
+    gapped = run_all(trials, ('9D',), values=None, workers=workers, progress=progress,
+                     gap=gap)['9D']
+    parts = {t.name: gap_trial(t, full[t.name], gapped[t.name], gap) for t in trials}
+    magnet = set(groups['members'].get(MAGNET_GROUP, []))
+    rows = [(t.name, gap_figures([parts[t.name]])) for t in trials]
+    for split in (*SPLITS, 'all'):
+        chosen = [t.name for t in trials if split in ('all', split_of(t.name))]
+        if chosen:
+            rows.append((f'{split}: every trial', gap_figures([parts[n] for n in chosen])))
+        with_magnet = [n for n in chosen if n in magnet]
+        if with_magnet:
+            rows.append((f'{split}: {MAGNET_GROUP}',
+                         gap_figures([parts[n] for n in with_magnet])))
+    return rows
+
+
+def gap_table(rows, gap):
+    """:func:`field_gap`'s rows as a text table."""
+    def verdict(ok):
+        return '   -' if ok is None else (' yes' if ok else '  NO')
+
+    lines = [f'heading, 9D: field present (mean e²/σ², {MEAN_PASS[0]:g}–{MEAN_PASS[1]:g}); '
+             f'field gone {gap[0]:g}–{gap[1]:g} s (within 2σ, ≥ {100 * GAP_FRACTION:g} %); '
+             f'the {RETURN_TIME:g} s after its return (RMS error, ≤ max({RETURN_FACTOR:g}×, '
+             f'+{math.degrees(RETURN_MARGIN):g}°) that without a gap)',
+             f'{"trial":40} {"present":>8} {"ok":>4} {"gone 2σ":>8} {"ok":>4} '
+             f'{"back":>7} {"no gap":>7} {"ok":>4}']
+    for name, f in rows:
+        lines.append(f'{name:40} {f["present_mean_z2"]:8.2f} {verdict(f["present_ok"])} '
+                     f'{100 * f["gone_within_2sigma"]:7.1f}% {verdict(f["gone_ok"])} '
+                     f'{math.degrees(f["back_rms"]):6.2f}° '
+                     f'{math.degrees(f["back_rms_ref"]):6.2f}° {verdict(f["back_ok"])}')
+    return '\n'.join(lines)

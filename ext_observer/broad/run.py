@@ -3,16 +3,20 @@ The run: our estimator and the anchors on the trials, each estimate scored.
 
 Our estimator runs as one batched call over every trial and mode
 (``estimate_batch`` of :mod:`ext_observer.core.ahrs.ahrs_observer`, with its shipped
-defaults); the anchors run one recording per task, in processes when
-``jobs > 1``. Only the scores, the norms of our raw estimates, the times and
-the per-sample errors of one trial (for the figure) are kept.
+defaults); the anchors, and our smoothed estimate when asked
+(:func:`~ext_observer.core.ahrs.smoother.smooth_attitude`), run one
+recording per task, in processes when ``jobs > 1``. Only the scores, the
+norms of our raw estimates, the times and the per-sample errors of one
+trial (for the figure) are kept.
 """
 
 import sys
 import time
 
+import numpy as np
+
 from ext_observer.broad.anchors import anchor_estimates, BROAD_GYRO_RANGE
-from ext_observer.broad.result_keys import ANCHORS, MODES, OURS, OURS_PLAIN
+from ext_observer.broad.result_keys import ANCHORS, MODES, OURS, OURS_PLAIN, OURS_SMOOTHED
 from ext_observer.broad.scoring import combined_norms, error_angles, norm_parts, score
 
 
@@ -76,7 +80,8 @@ def estimate_ours(trials, modes, variant, workers=1, params=None, then=None):
 
 
 def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
-        plot_trial=None, progress=log, params=None, gyro_range=BROAD_GYRO_RANGE):
+        plot_trial=None, progress=log, params=None, gyro_range=BROAD_GYRO_RANGE,
+        smooth=False):
     """
     Score the estimator (and the anchors) on the trials.
 
@@ -101,6 +106,9 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
     gyro_range : float
         The range of the gyro that recorded the trials, rad/s, for the
         anchors that are told it (Fusion); default BROAD's sensor's.
+    smooth : bool
+        Also score our smoothed estimate (each sample from the whole
+        recording), as ``OURS_SMOOTHED``.
 
     Returns
     -------
@@ -127,7 +135,10 @@ def run(trials, modes=MODES, anchors=ANCHORS, plain=False, jobs=1, workers=1,
             result['series'].setdefault(algorithm, {})[mode] = series
 
     _run_ours(trials, modes, plain, workers, result, keep, scored, progress, params)
-    _run_anchors(trials, modes, anchors, jobs, result, keep, progress, gyro_range)
+    tasks = ([(OURS_SMOOTHED, t, m, gyro_range) for m in modes for t in trials] if smooth
+             else [])
+    tasks += [(a, t, m, gyro_range) for a in anchors for m in modes for t in trials]
+    _run_tasks(tasks, jobs, result, keep, progress)
     return result
 
 
@@ -154,17 +165,35 @@ def _run_ours(trials, modes, plain, workers, result, keep, scored, progress, par
 def _anchor_task(task):
     anchor, trial, mode, gyro_range = task
     start = time.perf_counter()
-    q = anchor_estimates(anchor, trial.gyr, trial.acc, trial.mag, trial.rate, mode == '9D',
-                         gyro_range)
+    if anchor == OURS_SMOOTHED:
+        q = smoothed_estimate(trial, mode == '9D')
+    else:
+        q = anchor_estimates(anchor, trial.gyr, trial.acc, trial.mag, trial.rate,
+                             mode == '9D', gyro_range)
     return q, time.perf_counter() - start
 
 
-def _run_anchors(trials, modes, anchors, jobs, result, keep, progress, gyro_range):
-    tasks = [(a, t, m, gyro_range) for a in anchors for m in modes for t in trials]
+def smoothed_estimate(trial, use_mag):
+    """
+    Our smoothed estimate of a trial (shipped settings), sensor → ENU, shape (N, 4).
+
+    Non-finite samples are held from the last finite one, as our online
+    estimator's batched call does.
+    """
+    from ext_observer.core.ahrs.smoother import smooth_attitude
+    from ext_observer.pipeline.batch import hold_finite
+    mag = hold_finite(np.asarray(trial.mag, dtype=float)) if use_mag else None
+    q, _ = smooth_attitude(hold_finite(np.asarray(trial.gyr, dtype=float)),
+                           hold_finite(np.asarray(trial.acc, dtype=float)), mag, trial.rate)
+    return q
+
+
+def _run_tasks(tasks, jobs, result, keep, progress):
+    """The anchors' runs and our smoothed estimate's, one recording per task."""
     if not tasks:
         return
-    progress(f'anchors: {", ".join(anchors)} ({len(tasks)} runs, '
-             f'{_plural(jobs, "process")}) ...')
+    names = list(dict.fromkeys(a for a, _, _, _ in tasks))
+    progress(f'{", ".join(names)} ({len(tasks)} runs, {_plural(jobs, "process")}) ...')
     start = time.perf_counter()
     if jobs > 1:
         import concurrent.futures

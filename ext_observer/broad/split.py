@@ -30,7 +30,7 @@ def trial_number(name):
 
 
 def split_of(name):
-    """``'tuning'`` or ``'held-out'`` for a BROAD trial's name; None for a name without a number."""
+    """``'tuning'`` or ``'held-out'`` for a BROAD trial's name; None for one without a number."""
     number = trial_number(name)
     if number is None:
         return None

@@ -36,20 +36,18 @@ import gc
 import math
 import os
 
-import numpy as np
 from geometry_msgs.msg import QuaternionStamped, TransformStamped, Vector3Stamped
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Imu, MagneticField
-from std_msgs.msg import Bool, Header
+from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
 from ext_observer.recordings.calibrate import write_params
-from ext_observer.recordings.cdr import (decode_field, frame_id, ImuData, imu_layout,
-                                         QuaternionStamped as EstimateBytes, Undecodable)
-from ext_observer.nodes.conversions import nanoseconds_from_stamp, vector_from_msg
+from ext_observer.recordings.cdr import Undecodable
 from ext_observer.core.ahrs.compiled import plain_warning
 from ext_observer.pipeline.kernel_cache import BackgroundCompile, start_plan
 from ext_observer.nodes.estimator_node_base import EstimatorNode, LOG_THROTTLE
+from ext_observer.nodes.imu_filter_io import SerializedPath, TypedPath
 from ext_observer.pipeline.imu_filter_parameters import (covariance_text, IMU_FILTER_PARAMETERS,
                                                          imu_filter_settings,
                                                          mag_frame_rpy_text, unused_text)
@@ -113,7 +111,6 @@ class ImuFilterNode(EstimatorNode):
         self.stream = StreamWatch(self, self.INPUT_WORDS['increment'])
         # Inputs that did not decode (serialized_io), by kind.
         self.undecodable = dict.fromkeys(KINDS, 0)
-        self._covariance_out = np.zeros(9)
         serialized = settings['serialized_io']
         self.increment_subscription = self._subscribe(
             Imu, IMU_TOPIC, self.imu_data_raw_serialized_callback if serialized
@@ -125,9 +122,9 @@ class ImuFilterNode(EstimatorNode):
         # The velocity aid's odom or velocity topic (velocity_source).
         self.velocity_input = VelocityTopic(self, settings)
         self._estimate_msg = QuaternionStamped()
-        # The output adapters of the two paths (Inputs, below).
-        self._typed = _TypedPath(self._estimate_msg)
-        self._serialized = _SerializedPath()
+        # The two paths' adapters (imu_filter_io; Inputs, below).
+        self._typed = TypedPath(self._estimate_msg)
+        self._serialized = SerializedPath()
         self._status_steps = self._status_fields = 0
         self._said = set()
         self._field_lost = False
@@ -219,24 +216,13 @@ class ImuFilterNode(EstimatorNode):
     #
     # One body per input, _imu_sample and _field_sample, for both paths: the
     # typed (rclpy's message objects) and the serialized (CDR bytes). What
-    # differs is confined to the input adapters, the subscription callbacks
-    # (the message or its bytes decoded: stamp, vectors, where the covariance
-    # goes), and to the output adapters, _TypedPath and _SerializedPath (the
-    # frame, and the outputs: the message filled in place, or bytes).
+    # differs is confined to the paths' adapters (imu_filter_io): the input
+    # decoded (stamp, vectors, where the covariance goes) and the outputs
+    # written (the message filled in place, or bytes).
 
     def imu_data_raw_callback(self, msg):
         """Take one IMU sample; publish the estimate of the step it closes."""
-        # nanoseconds_from_stamp and vector_from_msg, written out: this runs
-        # for every sample (the fields of a message are Python ints and floats).
-        header_stamp = msg.header.stamp
-        v, a = msg.angular_velocity, msg.linear_acceleration
-        # The estimated covariance is written straight into the message that
-        # goes out (its own float64 array): no copy.
-        self._imu_sample(self._typed, msg,
-                         header_stamp.sec * 1_000_000_000 + header_stamp.nanosec,
-                         (v.x, v.y, v.z), (a.x, a.y, a.z),
-                         msg.orientation_covariance if self._covariance_estimated else None,
-                         header_stamp)
+        self._imu_sample(self._typed, msg)
 
     def imu_data_raw_serialized_callback(self, raw):
         """
@@ -246,39 +232,26 @@ class ImuFilterNode(EstimatorNode):
         (docs/nodes.md#serialized-inputs-and-outputs), without a message
         object: rclpy neither deserializes the input nor serializes the outputs.
         """
-        try:
-            order, body, stamp, gyr, acc = imu_layout(raw)
-        except Undecodable as error:
-            self._undecodable('increment', error)
-            return
-        self._imu_sample(self._serialized, raw, stamp, gyr, acc,
-                         self._covariance_out if self._covariance_estimated else None,
-                         stamp, order, body)
+        self._imu_sample(self._serialized, raw)
 
-    def _imu_sample(self, path, sample, stamp, gyr, acc, covariance, out_stamp, order=None,
-                    body=None):
+    def _imu_sample(self, path, sample):
         """
         Run the pipeline on one IMU sample and publish its outputs.
 
         Parameters
         ----------
-        path : _TypedPath or _SerializedPath
-            The output adapter.
+        path : ext_observer.nodes.imu_filter_io.TypedPath or SerializedPath
+            The sample's path: its decoding and its outputs.
         sample : sensor_msgs.msg.Imu or bytes
             The input, as the subscription gave it.
-        stamp : int
-            ns.
-        gyr, acc : tuple of 3 float
-            rad/s, m/s².
-        covariance : array of 9 float64 or None
-            Where the estimate's covariance goes; None: the fixed one.
-        out_stamp : builtin_interfaces.msg.Time or int
-            The stamp as the outputs carry it: the message's own, or ``stamp``.
-        order, body : int or None
-            The bytes' layout (:func:`~ext_observer.recordings.cdr.imu_layout`);
-            None for a message.
 
         """
+        try:
+            stamp, gyr, acc, covariance, out_stamp, order, body = path.imu(
+                sample, self._covariance_estimated)
+        except Undecodable as error:
+            self._undecodable('increment', error)
+            return
         if self._frames['imu'] is None:
             self._frames['imu'] = path.frame(sample)
         # No clock is read: the steps wait for nothing.
@@ -312,20 +285,19 @@ class ImuFilterNode(EstimatorNode):
 
     def imu_mag_callback(self, msg):
         """Take a magnetic field (T) and correct the heading with it at once."""
-        self._field_sample(self._typed, msg, nanoseconds_from_stamp(msg.header.stamp),
-                           vector_from_msg(msg.magnetic_field))
+        self._field_sample(self._typed, msg)
 
     def imu_mag_serialized_callback(self, raw):
         """Take a magnetic field (T) as CDR bytes and correct the heading with it."""
+        self._field_sample(self._serialized, raw)
+
+    def _field_sample(self, path, sample):
+        """Correct the heading with a field; ``sample`` the message or its bytes."""
         try:
-            stamp, field = decode_field(raw)
+            stamp, field = path.field(sample)
         except Undecodable as error:
             self._undecodable('measurement', error)
             return
-        self._field_sample(self._serialized, raw, stamp, field)
-
-    def _field_sample(self, path, sample, stamp, field):
-        """Correct the heading with a field; ``sample`` the message or its bytes."""
         if self._frames['mag'] is None:
             self._frames['mag'] = path.frame(sample)
         self.pipeline.field(stamp, field)
@@ -600,93 +572,6 @@ class ImuFilterNode(EstimatorNode):
         (self.get_logger().info if bias is not None else self.get_logger().warning)(
             f'~/save_calibration: {response.message}')
         return response
-
-
-# The output adapters: the same calls, the typed path's outputs messages and
-# the serialized path's bytes. Both have frame(sample), header(sample, stamp)
-# (for the debug topics and /tf), estimate(out_stamp, w, x, y, z) and
-# imu_data(sample, order, body, w, x, y, z, covariance, acc), which return
-# what goes out; configure(frame, ...) takes the settings those depend on.
-
-class _TypedPath:
-    """
-    The typed path's output adapter: rclpy's message objects.
-
-    ``imu/data`` is the input message itself, filled in place: the message is
-    the node's once its callback has run.
-    """
-
-    def __init__(self, estimate):
-        self._estimate = estimate  # the QuaternionStamped, reused
-        # Its parts, read once: this runs for every sample.
-        self._estimate_header, self._estimate_quaternion = estimate.header, estimate.quaternion
-        self._fixed_covariance = None
-
-    def configure(self, frame, fixed_covariance):
-        """Take the estimate's frame_id and the fixed covariance (9 floats)."""
-        self._estimate_header.frame_id = frame
-        self._fixed_covariance = fixed_covariance
-
-    @staticmethod
-    def frame(msg):
-        """The message's ``header.frame_id``."""
-        return msg.header.frame_id
-
-    @staticmethod
-    def header(msg, stamp):
-        """The header of the debug topics and ``/tf``: the message's own."""
-        return msg.header
-
-    def estimate(self, stamp, w, x, y, z):
-        """``attitude_estimate``; ``stamp`` the message's own (``builtin_interfaces/Time``)."""
-        self._estimate_header.stamp = stamp
-        q = self._estimate_quaternion
-        q.w, q.x, q.y, q.z = w, x, y, z
-        return self._estimate
-
-    def imu_data(self, msg, order, body, w, x, y, z, covariance, acc):
-        """
-        ``imu/data``: the message with the normalized orientation written in.
-
-        ``covariance`` None: the fixed one written in (else the estimate has
-        written its own there); ``acc``, the acceleration to write, or None.
-        """
-        n = (w * w + x * x + y * y + z * z) ** 0.5
-        q = msg.orientation
-        q.w, q.x, q.y, q.z = w / n, x / n, y / n, z / n
-        if covariance is None:
-            # In place: the message's own float64 array (cheaper than a new one).
-            msg.orientation_covariance[:] = self._fixed_covariance
-        if acc is not None:
-            a = msg.linear_acceleration
-            a.x, a.y, a.z = acc
-        return msg
-
-
-class _SerializedPath:
-    """
-    The serialized path's output adapter: CDR bytes.
-
-    Its ``estimate`` and ``imu_data`` are :mod:`ext_observer.recordings.cdr`'s
-    writers themselves (no call of its own on the way).
-    """
-
-    frame = staticmethod(frame_id)
-
-    def __init__(self):
-        self.estimate = self.imu_data = None
-
-    def configure(self, frame, orientation_stddev):
-        """Take the estimate's frame_id and the fixed covariance's σ (rad)."""
-        self.estimate = EstimateBytes(frame)
-        self.imu_data = ImuData(orientation_stddev).filled
-
-    @staticmethod
-    def header(raw, stamp):
-        """The header of the debug topics and ``/tf``, made from the bytes."""
-        header = Header(frame_id=frame_id(raw))
-        header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-        return header
 
 
 def main(args=None):

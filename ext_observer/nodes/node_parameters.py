@@ -1,5 +1,5 @@
 """
-The parameters of the paper's nodes (``observer_node``, ``gyro_node``, ``monitor_node``) and their validation.
+The paper's nodes' parameters (``observer_node``, ``gyro_node``, ``monitor_node``), their checks.
 
 Each node's rows are listed once (:data:`OBSERVER_PARAMETERS`,
 :data:`GYRO_PARAMETERS`, :data:`MONITOR_PARAMETERS`: the descriptors, the

@@ -35,7 +35,9 @@ BEFORE = ('lost before they reach the node, which keeps up ({why}): the driver, 
 
 class StreamWatch:
     """
-    The health of one input stream, for :class:`~ext_observer.nodes.estimator_node_base.EstimatorNode`.
+    The health of one input stream.
+
+    For :class:`~ext_observer.nodes.estimator_node_base.EstimatorNode`.
 
     Parameters
     ----------

@@ -98,7 +98,7 @@ class VelocityTopic:
             f'counted as dropped_velocity_{reason}', throttle_duration_sec=LOG_THROTTLE)
 
     def expected_frame(self):
-        """The velocity's frame expected: `velocity_frame`, else the IMU samples' (None: none yet)."""
+        """The velocity's frame expected: `velocity_frame`, else the IMU samples' (or None)."""
         return self.node.parameters.settings['velocity_frame'] or self.node._frames['imu']
 
     def frame_mismatch(self):

@@ -2,7 +2,8 @@
 Many recordings through the raw-IMU estimator (:func:`estimate_batch`).
 
 Each recording runs whole through one
-:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver` (:meth:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver.run`:
+:class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver`
+(:meth:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver.run`:
 compiled by numba where it is installed, plain Python otherwise), in this
 process or shared among forked workers: the same estimator, the same results.
 """

@@ -99,7 +99,7 @@ class HealthWatch:
 
 
 def field_lost(pipeline):
-    """No field for ``mag_timeout`` s of the IMU's stamps (9D, a field seen before, timeout > 0)."""
+    """No field for ``mag_timeout`` s of the IMU's stamps (9D, a field seen before, a timeout)."""
     timeout = pipeline.estimator._mag_timeout
     if timeout <= 0.0 or not pipeline.estimator.core.use_mag:
         return False

@@ -147,7 +147,7 @@ IDENTITY_MOUNTING = (1.0, 0.0, 0.0, 0.0)
 
 def quaternion_matrix(q):
     """
-    Return the rotation matrix R of a mounting quaternion ``q = (w, x, y, z)`` (9 floats, row-major).
+    Return the rotation matrix R (9 floats, row-major) of a mounting quaternion ``(w, x, y, z)``.
 
     The one definition for the mountings given as quaternions
     (``mag_mounting``: ``m_imu = R m_mag``; ``velocity_mounting``:
@@ -162,9 +162,10 @@ def quaternion_matrix(q):
 
 def quaternion_from_rpy(rpy):
     """
-    Return the unit quaternion (w, x, y, z) of roll, pitch, yaw (rad, fixed axes), as tf2's ``setRPY``.
+    Return the unit quaternion (w, x, y, z) of roll, pitch, yaw (rad, fixed axes).
 
-    The rotation of :func:`mounting_matrix` (``q_z(yaw) ⊗ q_y(pitch) ⊗ q_x(roll)``).
+    tf2's ``setRPY``: the rotation of :func:`mounting_matrix`
+    (``q_z(yaw) ⊗ q_y(pitch) ⊗ q_x(roll)``).
     """
     roll, pitch, yaw = (0.5 * float(v) for v in rpy)
     cr, sr = math.cos(roll), math.sin(roll)
@@ -197,7 +198,7 @@ def mounting_matrix(rpy):
 
 def field_mounting(settings):
     """
-    Return the magnetometer's mounting R (``m_imu = R m_mag``, 9 floats), or None for the IMU's frame.
+    Return the magnetometer's mounting R (``m_imu = R m_mag``, 9 floats); None: the IMU's frame.
 
     From ``mag_mounting`` (a unit quaternion w, x, y, z); from the
     deprecated ``mag_frame_rpy`` when that is the one set (the parameters'

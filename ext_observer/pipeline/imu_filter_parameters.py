@@ -9,7 +9,8 @@ Those with the same meaning are honoured (``use_mag``, ``world_frame``,
 ``yaw_offset``, :data:`IMU_TOOLS_OPTIONS`); those of their filters' gains
 (:data:`IMU_TOOLS_UNUSED`: ``gain``, ``zeta``, ``gain_acc``,
 ``do_bias_estimation``, ...) are accepted, and named in one start-up warning
-with what replaces each (:func:`unused_text`). The estimator's own gains are the ``ahrs.*`` parameters and the
+with what replaces each (:func:`unused_text`). The estimator's own gains are
+the ``ahrs.*`` parameters and the
 noise of the model behind the published covariance the ``covariance.*``
 ones: each a row of the core's table
 (:data:`~ext_observer.core.ahrs.ahrs_params.AHRS_TABLE`,
@@ -39,7 +40,8 @@ __all__ = ['AHRS_PREFIX', 'COMPLEMENTARY_UNUSED', 'COVARIANCE_MODES', 'COVARIANC
 
 # Where the velocity aid's velocity comes from (velocity_source).
 VELOCITY_SOURCES = ('none', 'odom', 'twist')
-# A mounting quaternion's (mag_mounting, velocity_mounting) norm may differ from 1 by this much (rounded input).
+# A mounting quaternion's (mag_mounting, velocity_mounting) norm may differ from 1 by
+# this much (rounded input).
 _UNIT_TOLERANCE = 1e-6
 # The core's parameters are the node's parameters ahrs.<name>.
 AHRS_PREFIX = 'ahrs.'
@@ -129,8 +131,8 @@ IMU_TOOLS_OPTIONS = (
                   '(as imu_filter_madgwick).'),
     ParameterSpec('remove_gravity_vector', False,
                   f'linear_acceleration of imu/data without gravity ({STANDARD_GRAVITY} m/s² '
-                  'along the estimated vertical), in the sensor frame, as imu_filter_madgwick; false: '
-                  'as measured.'),
+                  'along the estimated vertical), in the sensor frame, as imu_filter_madgwick; '
+                  'false: as measured.'),
 )
 
 # imu_filter_madgwick's parameters that this node accepts and does not use,
@@ -224,7 +226,8 @@ IMU_FILTER_OWN = (
                   'A field lost: after this long without one (s, on the IMU\'s stamps) the '
                   'node warns (/diagnostics and the log, once per episode) and runs 6D, '
                   "the gyro holding the heading, its variance growing; the field's return "
-                  'brings the heading back at the rate of tau_mag, without a step '
+                  'brings the heading back at the Kalman gain of that variance, then of '
+                  'tau_mag, without a step '
                   '(docs/raw_imu.md#the-magnetometers-frame-and-a-lost-field). 0 = never warn.',
                   (0.0, 3600.0)),
     ParameterSpec('calibration_file', 'mag_calibration.yaml',

@@ -101,9 +101,9 @@ import math
 from ext_observer.core.validation import check_increment, check_measurement, check_vector
 from ext_observer.pipeline.guard import carried
 # The vocabulary lives in pairing_terms.py; its names are importable from here too.
-from ext_observer.pipeline.pairing_terms import (VALUE_REASONS, BACKWARD_JUMP, DROP_REASONS,  # noqa: F401
-                                EVENTS, INCREMENT_DROP_REASONS, KINDS,
-                                MEASUREMENT_DROP_REASONS, MIN_ACCELERATION, MIN_FIELD, Step)
+from ext_observer.pipeline.pairing_terms import (  # noqa: F401
+    VALUE_REASONS, BACKWARD_JUMP, DROP_REASONS, EVENTS, INCREMENT_DROP_REASONS, KINDS,
+    MEASUREMENT_DROP_REASONS, MIN_ACCELERATION, MIN_FIELD, Step)
 
 __all__ = ['BACKWARD_JUMP', 'DROP_REASONS', 'KINDS', 'MIN_ACCELERATION', 'MIN_FIELD', 'Step',
            'StepPairer']

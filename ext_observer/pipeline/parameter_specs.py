@@ -4,7 +4,8 @@ The nodes' parameters as plain data: :class:`ParameterSpec` rows, and the docs m
 A node lists its parameters once, as rows; :mod:`ext_observer.nodes.ros_parameters`
 declares them with rclpy (a ``ParameterDescriptor`` per row), and in a clone
 ``python -m ext_observer docs`` (``docgen/parameter_tables.py``) writes
-docs/parameters.md and config/*.yaml from the same rows. No ROS here: the offline tools read the same tables.
+docs/parameters.md and config/*.yaml from the same rows. No ROS here: the
+offline tools read the same tables.
 
 Every parameter has a value: rclpy's ``get_parameters`` (what ``ros2 param
 dump`` calls) answers nothing for a whole request that names a parameter

@@ -183,8 +183,12 @@ class RawImuEstimator:
                      r[6] * field[0] + r[7] * field[1] + r[8] * field[2])
         if dt is not None and 0.0 < self._mag_timeout < dt:
             # A field back after a loss: its gain is that of a regular
-            # interval, so that the heading returns at tau_mag's rate, not in one step.
+            # interval, so that the heading does not return in one step; the
+            # heading's doubt is what the gyro alone added since the last
+            # field, which the fields back correct with their Kalman gain.
             dt = self._field_dt
+            if self.core.initialized and self.uncertainty.started:
+                self.core.field_back(float(self.uncertainty.held_variance))
         elif dt is not None:
             self._field_dt = dt
         bx, by, bz = self._mag_bias
@@ -201,7 +205,7 @@ class RawImuEstimator:
 
     def unbridged(self, gyr, dt):
         """
-        A hole of ``dt`` s too long to bridge (over ``max_dt``), closed by a sample of rate ``gyr``.
+        A hole of ``dt`` s too long to bridge (over ``max_dt``), ended by a sample of rate ``gyr``.
 
         The estimate holds and its covariance grows by the rotation the hole
         may have hidden (:meth:`AhrsObserver.unbridged
@@ -215,7 +219,7 @@ class RawImuEstimator:
             self.fields.restart()
 
     def velocity(self, velocity, dt=None):
-        """The body's velocity (m/s, IMU frame), ``dt`` s after the previous one (the velocity aid)."""
+        """The body's velocity (m/s, IMU frame) for the velocity aid, ``dt`` s after the last."""
         self.core.velocity(velocity, dt)
 
     def use_kernels(self, kernels):
@@ -525,7 +529,11 @@ class RawImuPipeline:
         return outcome, estimate
 
     def velocity(self, stamp, velocity):
-        """The body's velocity (ns, m/s; :class:`~ext_observer.pipeline.velocity_aid.VelocityInput`)."""
+        """
+        The body's velocity (ns, m/s).
+
+        See :class:`~ext_observer.pipeline.velocity_aid.VelocityInput`.
+        """
         return self._velocity.take(stamp, velocity)
 
     def field_silence(self):

@@ -42,7 +42,7 @@ class VelocityInput:
             self.estimator.core.velocity_timeout = float(settings['velocity_timeout'])
 
     def take(self, stamp, velocity):
-        """One velocity; None when taken, else the drop reason (``'not_finite'``, ``'out_of_order'``)."""
+        """One velocity; None if taken, else why dropped (``'not_finite'``, ``'out_of_order'``)."""
         v = tuple(float(c) for c in velocity)
         if len(v) != 3 or not all(math.isfinite(c) for c in v):
             return 'not_finite'
@@ -67,7 +67,9 @@ class VelocityInput:
 
 def with_velocity(events, stamps, velocity_stamps):
     """
-    Batch events ``(kind, index)`` with ``(2, j)`` for velocity ``j`` before the first IMU sample at or after it.
+    Batch events ``(kind, index)`` with ``(2, j)`` for velocity ``j``.
+
+    Each velocity comes before the first IMU sample at or after it.
 
     IMU samples are kind 0 at ``stamps[index]``; ``velocity_stamps`` ascending.
     """

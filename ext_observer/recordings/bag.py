@@ -38,6 +38,17 @@ Two processes share the work (:mod:`ext_observer.recordings.bag_worker`; one whe
 estimator, a forked one reads, decodes, encodes and writes a batch ahead,
 so that reading and writing cost little beside the estimator on a machine
 with a core to spare.
+
+``--smooth`` writes the smoothed estimate
+(:func:`~ext_observer.recordings.smoothing.smoothed_attitude`: each sample's
+attitude from the whole recording), which needs the whole recording before
+the first estimate is written: a first pass runs the estimator as above
+and keeps the inputs as arrays (:class:`~ext_observer.recordings.bag_worker.KeepingEstimator`),
+the smoother runs on them, and a second pass (in this process) reads the
+bag again and writes the new one with the smoothed estimates
+(:class:`~ext_observer.recordings.bag_worker.SmoothedStates`): the same
+messages as without, ``imu/data``'s ``orientation_covariance`` the smoothed
+σ's where it carries the estimate's own.
 """
 
 import argparse
@@ -53,7 +64,8 @@ import numpy as np
 from ext_observer.core.ahrs.compiled import warn_if_plain
 from ext_observer.recordings.bag_io import BagReader, STORAGES
 from ext_observer.recordings.bag_worker import (BagEstimator, BagSide, fork_context, forked,
-                                               in_process, VELOCITY_TYPES)
+                                               in_process, KeepingEstimator, SmoothedStates,
+                                               VELOCITY_TYPES)
 from ext_observer.recordings.cdr import FIELD_TYPE, IMU_TYPE, QUATERNION_TYPE, REFERENCE_TYPES
 from ext_observer.recordings.recording import (add_parameter_options, node_settings,
                                     parameters_from_options, SECOND)
@@ -148,7 +160,7 @@ def _find(connections, topic, types, role, option):
 def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_topic=None,
             parameters=None, storage=None, data_topic='imu/data',
             estimate_topic='attitude_estimate', progress=None, parallel=True,
-            velocity_topic=None):
+            velocity_topic=None, smooth=False):
     """
     Run ``imu_filter_node``'s estimator on a bag; write the new bag.
 
@@ -180,6 +192,9 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     velocity_topic : str, optional
         ``nav_msgs/Odometry`` or ``geometry_msgs/TwistStamped``: the body's
         velocity for the velocity aid.
+    smooth : bool
+        Write the smoothed estimate (module docstring, ``--smooth``): the
+        recording and the comparison are the smoothed estimate's.
 
     Returns
     -------
@@ -199,13 +214,18 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     roles, topics = _roles_and_topics(reader, settings, (imu_topic, mag_topic, compare_topic,
                                                          velocity_topic),
                                       (data_topic, estimate_topic))
-    side = BagSide(reader, roles, out, storage, topics, settings)
-    estimator = BagEstimator(settings, _Progress(side.total, progress))
+    side = BagSide(reader, roles, None if smooth else out, storage, topics, settings)
+    estimator = (KeepingEstimator if smooth else BagEstimator)(
+        settings, _Progress(side.total, progress))
     context = fork_context() if parallel else None
     try:
         counts = (in_process(side, estimator) if context is None
                   else forked(context, side, estimator))
         recording = estimator.recording
+        if smooth:
+            counts = _write_smoothed(estimator, BagSide(reader, roles, out, storage, topics,
+                                                        settings),
+                                     settings, progress)
         comparison = None
         if 'reference' in roles:
             comparison = _compare_references(recording, estimator.references,
@@ -219,6 +239,36 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
                    for role, (topic, msgtype, _) in topics.items()},
                   {topics[role][0]: n for role, n in estimator.undecodable.items()},
                   dict(estimator.velocity_drops))
+
+
+def _write_smoothed(estimator, side, settings, progress):
+    """
+    The second and third steps of ``--smooth``: smooth the kept inputs, write the new bag.
+
+    Puts the smoothed estimate in ``estimator.recording``; returns the
+    messages written by role.
+    """
+    from ext_observer.recordings.recording import smoothed_into
+    from ext_observer.recordings.smoothing import smoothed_attitude
+    recording = estimator.recording
+    estimator.run = None  # the online pipeline's own records, no longer needed
+    stamps, gyr, acc, (field_stamps, fields), (velocity_stamps, velocities) = (
+        estimator.inputs())
+    start = int(stamps[0])
+
+    def seconds(values):
+        return (values - start) * 1e-9
+
+    use_mag = settings['use_mag'] and len(fields) > 0
+    smoothed_into(recording, smoothed_attitude(
+        gyr, acc, fields if use_mag else None, seconds(stamps), settings,
+        mag_times=seconds(field_stamps) if use_mag else None,
+        velocity=velocities if len(velocities) else None,
+        velocity_times=seconds(velocity_stamps) if len(velocities) else None))
+    del gyr, acc, fields, velocities
+    # In this process: the estimates are ready, so a forked writer would gain nothing, and it
+    # would hold a copy of this process's pages (about 0.5 kB a sample) while it writes.
+    return in_process(side, SmoothedStates(recording, settings, _Progress(side.total, progress)))
 
 
 def _check_paths(path, out, storage):
@@ -361,6 +411,9 @@ def build_parser():
                         help='default attitude_estimate')
     parser.add_argument('--plot', metavar='FILE.png',
                         help='roll, pitch, yaw, the flags and the comparison error')
+    parser.add_argument('--smooth', action='store_true',
+                        help='write the smoothed estimate: each sample from the whole '
+                             'recording, the samples after it too (reads the bag twice)')
     return parser
 
 
@@ -374,6 +427,8 @@ def report(run, out):
     lines.append(f'  IMU samples {counts["imu_samples"]}, estimates {counts["estimates"]}, '
                  f'fields {counts["fields"]} (used {counts["fields_used"]})')
     lines.append(f'  dropped: {recording.dropped_text()}')
+    if recording.smoothed:
+        lines.append('  smoothed: the estimates written are from the whole recording')
     resets = ', '.join(f'{cause} {n}' for cause, n in recording.resets.items() if n)
     if resets:
         lines.append(f'  resets: {resets}')
@@ -405,7 +460,7 @@ def main(argv=None):
                       compare_topic=args.compare, parameters=parameters,
                       storage=args.storage, data_topic=args.data_topic,
                       estimate_topic=args.estimate_topic,
-                      velocity_topic=args.velocity_topic)
+                      velocity_topic=args.velocity_topic, smooth=args.smooth)
     except (ValueError, OSError) as error:
         print(f'error: {error}', file=sys.stderr)
         return 2

@@ -301,6 +301,118 @@ class BagEstimator:
         self.recording = self.run.recording()
 
 
+class KeepingEstimator(BagEstimator):
+    """
+    :class:`BagEstimator` that also keeps its inputs as arrays: the first pass of ``--smooth``.
+
+    After :meth:`finish`, :meth:`inputs` gives them to
+    :func:`~ext_observer.recordings.smoothing.smoothed_attitude`: one row
+    per decoded IMU message (the recording's rows), the fields and the
+    velocities with their stamps. About 56 bytes a sample.
+    """
+
+    def __init__(self, settings, progress):
+        super().__init__(settings, progress)
+        self._kept = {kind: (array.array('q'), array.array('d')) for kind in (IMU, FIELD,
+                                                                            VELOCITY)}
+
+    def __call__(self, kinds, stamps, values):
+        """Keep the batch's inputs, then estimate them (:class:`BagEstimator`)."""
+        kind = np.frombuffer(kinds, dtype=np.int8)
+        stamp = np.frombuffer(stamps, dtype=np.int64)
+        value = np.frombuffer(values, dtype=float)
+        starts = np.concatenate([[0], np.cumsum(_WIDTHS[kind])[:-1]]).astype(np.intp)
+        for keep, (found, width) in ((IMU, ((IMU, IMU_AND_REFERENCE), 6)),
+                                     (FIELD, ((FIELD,), 3)), (VELOCITY, ((VELOCITY,), 3))):
+            rows = np.flatnonzero(np.isin(kind, found))
+            kept_stamps, kept_values = self._kept[keep]
+            kept_stamps.frombytes(stamp[rows].tobytes())
+            kept_values.frombytes(value[starts[rows, None] + np.arange(width)].tobytes())
+        return super().__call__(kinds, stamps, values)
+
+    def inputs(self):
+        """
+        Return what the smoother takes: ``(stamps, gyr, acc, fields, velocities)``.
+
+        ``stamps`` ns (N,); ``gyr``, ``acc`` (N, 3); ``fields`` and
+        ``velocities`` ``(stamps (M,), values (M, 3))``. The arrays are given
+        up here (the estimator keeps none).
+        """
+        kept, self._kept = self._kept, None
+        out = {}
+        for kind, width in ((IMU, 6), (FIELD, 3), (VELOCITY, 3)):
+            stamps, values = kept.pop(kind)
+            out[kind] = (np.frombuffer(stamps, dtype=np.int64),
+                         np.frombuffer(values, dtype=float).reshape(-1, width))
+        stamps, imu = out[IMU]
+        return stamps, imu[:, :3], imu[:, 3:], out[FIELD], out[VELOCITY]
+
+
+# Floats each kind of message carries across the pipe, by kind.
+_WIDTHS = np.zeros(max(max(_SIZES), max(UNDECODABLE.values())) + 1, dtype=np.intp)
+for _kind, _size in _SIZES.items():
+    _WIDTHS[_kind] = _size
+
+
+class SmoothedStates:
+    """
+    The second pass of ``--smooth``: each IMU message's smoothed estimate, from arrays.
+
+    Stands where :class:`BagEstimator` stands (:func:`in_process`), so the
+    new bag is written as the online one is: the
+    same messages (an estimate where the online run published one), with
+    the smoothed quaternion and, where ``imu/data`` carries the estimate's
+    covariance, ``diag(σ_i² / 2, σ_i² / 2, σ_h²)``.
+
+    Parameters
+    ----------
+    recording : ext_observer.recordings.recording.Recording
+        Smoothed (one row per decoded IMU message).
+    settings : dict
+    progress : callable
+        As :class:`BagEstimator`'s.
+
+    """
+
+    def __init__(self, recording, settings, progress):
+        self._width = _width(settings)
+        self._next = 0
+        self.recording = recording
+        self.progress = progress
+        self.count = 0
+
+    def _states(self, start, stop):
+        """Rows ``start:stop`` of the recording as the pipe carries them (NaN: no estimate)."""
+        recording = self.recording
+        states = np.full((stop - start, self._width), math.nan)
+        rows = recording.estimated[start:stop]
+        states[rows, :4] = recording.quaternions[start:stop][rows]
+        if self._width > 4:
+            tilt = 0.5 * recording.inclination_std[start:stop][rows] ** 2
+            states[rows, 4:13] = 0.0
+            states[rows, 4] = states[rows, 8] = tilt
+            states[rows, 12] = recording.heading_std[start:stop][rows] ** 2
+        return states
+
+    def __call__(self, kinds, stamps, values):
+        """Return the smoothed estimates of the batch's IMU messages (NaN: none)."""
+        kind = np.frombuffer(kinds, dtype=np.int8)
+        kind = kind[np.isin(kind, (IMU, IMU_AND_REFERENCE, UNDECODABLE['imu']))]
+        decoded = kind != UNDECODABLE['imu']
+        out = np.full((len(kind), self._width), math.nan)
+        taken = int(decoded.sum())
+        out[decoded] = self._states(self._next, self._next + taken)
+        self._next += taken
+        self.count += len(kinds)
+        if self.count >= self.progress.next:
+            self.progress(self.count)
+        return array.array('d', out.tobytes())
+
+    def finish(self):
+        """After the last batch: the progress's end."""
+        self.progress.finish(self.count)
+
+
 def fork_context():
     try:
         return multiprocessing.get_context('fork')

@@ -141,7 +141,11 @@ def calibration_from_recording(recording):
 
 
 def read_csv(path):
-    """A CSV recording (:mod:`ext_observer.recordings.csvio`) through the node's pipeline: ``Calibration``."""
+    """
+    A CSV recording (:mod:`ext_observer.recordings.csvio`) through the node's pipeline.
+
+    Returns its ``Calibration``.
+    """
     from ext_observer.recordings.csvio import read_recording as read_columns
     from ext_observer.recordings.recording import attitude_from_imu
     times, gyr, acc, mag = read_columns(path)

@@ -24,6 +24,9 @@ orientation ``imu/data`` would carry), ``roll, pitch, yaw`` (rad,
 ``mag_disturbed`` (0 or 1). The estimate is
 :func:`~ext_observer.recordings.recording.attitude_from_imu`'s, so ``imu_filter_node``'s; a line
 the node drops repeats the latest estimate (the counts are printed).
+``--smooth``: the quaternions and angles are the smoothed estimate's, each
+line's attitude from the whole recording (``attitude_from_imu(...,
+smooth=True)``); ``rest`` and ``mag_disturbed`` stay the online run's.
 """
 
 import argparse
@@ -167,7 +170,7 @@ def write_columns(path, names, array):
 
 
 def write_recording(path, recording):
-    """Write a :class:`~ext_observer.recordings.recording.Recording` with :data:`OUTPUT_COLUMNS`."""
+    """Write a :class:`~ext_observer.recordings.recording.Recording`: :data:`OUTPUT_COLUMNS`."""
     table = np.column_stack([recording.times, recording.quaternions,
                              recording.roll_pitch_yaw(), recording.rest.astype(float),
                              recording.mag_disturbed.astype(float)])
@@ -189,6 +192,9 @@ def build_parser():
     parser.add_argument('--out', required=True, help='the output CSV file')
     add_parameter_options(parser)
     parser.add_argument('--plot', metavar='FILE.png', help='roll, pitch, yaw and the flags')
+    parser.add_argument('--smooth', action='store_true',
+                        help='the smoothed estimate: each line from the whole recording, the '
+                             'lines after it too')
     return parser
 
 
@@ -201,7 +207,8 @@ def main(argv=None):
         times, gyr, acc, mag = read_recording(args.csv)
         velocity_times, velocity = read_velocity(args.csv)
         recording = attitude_from_imu(gyr, acc, mag, times=times, parameters=parameters,
-                                      velocity=velocity, velocity_times=velocity_times)
+                                      velocity=velocity, velocity_times=velocity_times,
+                                      smooth=args.smooth)
         write_recording(args.out, recording)
     except (ValueError, OSError) as error:
         print(f'error: {error}', file=sys.stderr)
@@ -209,7 +216,7 @@ def main(argv=None):
     counts = recording.counts
     print(f'wrote {args.out}: {counts["imu_samples"]} lines, {counts["estimates"]} estimates, '
           f'fields {counts["fields"]} (used {counts["fields_used"]}); dropped: '
-          f'{recording.dropped_text()}')
+          f'{recording.dropped_text()}' + ('; smoothed' if recording.smoothed else ''))
     if args.plot:
         from ext_observer.recordings.recording_plot import plot_recording
         plot_recording(recording, args.plot, title=args.csv)

@@ -129,7 +129,7 @@ def write_bag(path, recording, storage='mcap', reference=True):
 
 
 def write_csv(path, recording):
-    """Write a recording (:func:`excerpt`) as a CSV of :mod:`ext_observer.recordings.csvio`'s columns."""
+    """Write a recording (:func:`excerpt`) as a CSV of ``csvio``'s columns."""
     from ext_observer.recordings.csvio import write_columns
     count = len(recording['stamps'])
     mag = np.full((count, 3), np.nan)

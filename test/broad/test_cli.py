@@ -85,6 +85,10 @@ def test_stress_command_end_to_end_on_two_short_trials(tmp_path):
 
 def test_stress_options_that_do_not_go_together(capsys):
     assert broad.main(['--stress', '--covariance']) == 2
+    assert broad.main(['--field-gap', '60:120']) == 2
+    assert '--field-gap goes with --covariance' in capsys.readouterr().err
+    assert broad.main(['--covariance', '--field-gap', '120:60']) == 2
+    assert '--field-gap: ' in capsys.readouterr().err
     assert broad.main(['--variants', 'b']) == 2
     assert broad.main(['--param', 'tau_bias=100']) == 2
     assert '--variants and --param go with --stress' in capsys.readouterr().err
@@ -92,3 +96,5 @@ def test_stress_options_that_do_not_go_together(capsys):
     assert 'unknown parameters' in capsys.readouterr().err
     assert broad.main(['--stress', '--param', 'tau_bias']) == 2
     assert 'NAME=VALUE' in capsys.readouterr().err
+    assert broad.main(['--stress', '--smooth']) == 2
+    assert '--smooth goes with the accuracy benchmark' in capsys.readouterr().err

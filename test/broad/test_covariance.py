@@ -99,3 +99,38 @@ def test_the_bound_margin_is_a_share_of_each_range_and_the_smaller_counts():
     assert bound_margin({'within_2sigma': 0.90, 'mean_z2': 1.0}) == pytest.approx(0.0)
     assert bound_margin({'within_2sigma': 0.945, 'mean_z2': 0.25}) == pytest.approx(-0.5)
     assert bound_margin({'within_2sigma': 0.981, 'mean_z2': 1.0}) == pytest.approx(0.1)
+
+
+def test_the_field_gap_benchmark_judges_each_trial_and_pools_the_magnet_trials(capsys):
+    from ext_observer.broad.covariance import (field_gap, gap_figures, gap_table, MAGNET_GROUP,
+                                               parse_gap)
+
+    trials = [synthetic_trial('02_undisturbed_a', 30.0),
+              synthetic_trial('35_disturbed_attached_magnet_4cm', 30.0),
+              synthetic_trial('04_short', 8.0)]
+    groups = {'members': {MAGNET_GROUP: [trials[1].name]}}
+    gap = parse_gap('10:20')
+    rows = dict(field_gap(trials, groups, gap))
+    assert set(rows) >= {t.name for t in trials} | {'held-out: every trial',
+                                                      f'held-out: {MAGNET_GROUP}',
+                                                      f'all: {MAGNET_GROUP}'}
+    for name in trials[0].name, trials[1].name:
+        f = rows[name]
+        assert f['gone_ok'] and f['back_ok'] and f['present_ok'] is not None
+        # A level body and an exact field: the heading back as it was.
+        assert f['back_rms'] < max(1.5 * f['back_rms_ref'], f['back_rms_ref'] + 0.01)
+    # A trial over before the gap: nothing to judge there.
+    assert rows['04_short']['gone_ok'] is None and rows['04_short']['back_ok'] is None
+    print(gap_table(list(rows.items()), gap))
+    assert '35_disturbed_attached_magnet_4cm' in capsys.readouterr().out
+    # The pass rules on known figures.
+    part = {'present': np.array([1.0, 3.0]), 'gone': np.array([1.0, 5.0]),
+            'back': np.array([0.03, 0.03]), 'back_ref': np.array([0.01, 0.01])}
+    f = gap_figures([part])
+    assert f['present_mean_z2'] == 2.0 and f['present_ok']
+    assert f['gone_within_2sigma'] == 0.5 and not f['gone_ok']
+    assert f['back_rms'] == pytest.approx(0.03) and f['back_ok']  # 0.01 + 1.5° allows it
+    with pytest.raises(ValueError, match='START:END'):
+        parse_gap('60-120')
+    with pytest.raises(ValueError, match='START < END'):
+        parse_gap('120:60')

@@ -1,6 +1,6 @@
 """
 The benchmark's runs (``broad/run.py``) on two short synthetic trials: ours
-in every mode (and plain), the anchors, the plotted trial's series, what
+in every mode (and plain, and smoothed), the anchors, the plotted trial's series, what
 each batched call hands back, trials of different rates refused.
 """
 
@@ -44,6 +44,16 @@ def test_ours_plain_and_an_anchor_are_scored_in_every_mode():
     assert len(result['series'][broad.OURS]['9D'][0]) == len(trials[1].gyr)
     assert set(result['norms']) == {'extended', 'plain'}
     assert lines
+
+
+def test_our_smoothed_estimate_is_scored_beside_the_online_one():
+    trials = [level_turn('02_a'), level_turn('03_b', seconds=5.0, turn=-0.3)]
+    result = run(trials, anchors=(), smooth=True, progress=lambda text: None)
+    assert set(result['scores']) == {broad.OURS, broad.OURS_SMOOTHED}
+    for mode in ('9D', '6D'):
+        for row in result['scores'][broad.OURS_SMOOTHED][mode].values():
+            assert row['inclination_rmse_deg'] < 0.5
+    assert result['seconds'][broad.OURS_SMOOTHED] > 0.0
 
 
 def test_each_estimate_and_what_then_returns_are_keyed_by_mode_and_trial():

@@ -39,6 +39,39 @@ def assert_accounted(pairer):
         assert pairer.received[kind] == pairer.accounted(kind), kind
 
 
+def apply(pairer, op, stamp, value, now):
+    """
+    One drawn operation on ``pairer``: ``(outcome, now)``.
+
+    ``increment`` and ``imu`` (an angular velocity), ``measurement``, ``tick``
+    (the clock moves on by ``stamp``) or ``restart``; the outcome is None, a
+    backward jump (a restart) or a drop reason.
+    """
+    if op == 'increment':
+        outcome = pairer.add_increment(stamp, value, now)
+    elif op == 'imu':
+        outcome = pairer.add_angular_velocity(stamp, value, now)
+    elif op == 'measurement':
+        outcome = pairer.add_measurement(stamp, value)
+    elif op == 'tick':
+        now += stamp
+        outcome = None
+    else:
+        pairer.restart()
+        outcome = BACKWARD_JUMP
+    assert outcome is None or outcome == BACKWARD_JUMP or outcome in DROP_REASONS
+    return outcome, now
+
+
+def assert_valid_step(step, last):
+    """A released step follows the one before (``last``), with a bounded increment."""
+    assert step.previous == last
+    assert all(map(math.isfinite, step.increment))
+    assert math.hypot(*step.increment) <= 2.0
+    if step.measurement is not None:
+        assert math.hypot(*step.measurement) == pytest.approx(1.0)
+
+
 # Examples, one rule each --------------------------------------------------------
 
 def test_pairs_by_stamp_and_waits_for_the_measurement():
@@ -217,19 +250,9 @@ def test_every_input_is_accounted_for_and_steps_are_valid(ops, depth):
     returned = Counter()
     released = corrected = 0
     for op, stamp, value in ops:
-        if op == 'increment':
-            sent['increment'] += 1
-            outcome = pairer.add_increment(stamp, value, now)
-        elif op == 'measurement':
-            sent['measurement'] += 1
-            outcome = pairer.add_measurement(stamp, value)
-        elif op == 'tick':
-            now += stamp
-            outcome = None
-        else:
-            pairer.restart()
-            outcome = BACKWARD_JUMP
-        assert outcome is None or outcome == BACKWARD_JUMP or outcome in DROP_REASONS
+        if op in sent:
+            sent[op] += 1
+        outcome, now = apply(pairer, op, stamp, value, now)
         if outcome in DROP_REASONS:
             returned[outcome] += 1
         if outcome == BACKWARD_JUMP:
@@ -237,13 +260,9 @@ def test_every_input_is_accounted_for_and_steps_are_valid(ops, depth):
         for step in pairer.pop_ready(now):
             released += 1
             corrected += step.measurement is not None
-            assert step.previous == last
+            assert_valid_step(step, last)
             assert last is None or step.stamp > last
             assert step.stamp > 0
-            assert all(map(math.isfinite, step.increment))
-            assert math.hypot(*step.increment) <= 2.0
-            if step.measurement is not None:
-                assert math.hypot(*step.measurement) == pytest.approx(1.0)
             last = step.stamp
         assert pairer.last_stamp == last
         assert pairer.waiting('increment') <= depth
@@ -448,27 +467,13 @@ def test_every_imu_sample_is_accounted_for_and_steps_are_valid(ops, depth, const
         ops += [('imu', stamp, THETA_SMALL), ('tick', interval, None)]
     ops.append(('tick', S, None))  # then nothing waits for a measurement
     for op, stamp, value in ops:
-        if op == 'imu':
-            outcome = pairer.add_angular_velocity(stamp, value, now)
-        elif op == 'measurement':
-            outcome = pairer.add_measurement(stamp, value)
-        elif op == 'tick':
-            now += stamp
-            outcome = None
-        else:
-            pairer.restart()
-            outcome = BACKWARD_JUMP
-        assert outcome is None or outcome == BACKWARD_JUMP or outcome in DROP_REASONS
+        outcome, now = apply(pairer, op, stamp, value, now)
         if outcome == BACKWARD_JUMP:
             last = last_end = None
         for step in pairer.pop_ready(now):
-            assert step.previous == last
+            assert_valid_step(step, last)
             assert last_end is None or step.stamp >= last_end
             assert 0 < step.stamp < step.end <= step.stamp + 200 * MS
-            assert all(map(math.isfinite, step.increment))
-            assert math.hypot(*step.increment) <= 2.0
-            if step.measurement is not None:
-                assert math.hypot(*step.measurement) == pytest.approx(1.0)
             last, last_end = step.stamp, step.end
             released += 1
         assert pairer.waiting('increment') <= depth + 1
@@ -562,6 +567,38 @@ sample_operations = st.lists(st.one_of(
     st.tuples(st.just('restart'), st.none(), st.none(), st.none())), max_size=60)
 
 
+def assert_one_call_is_the_general_calls(options, ops):
+    """
+    ``ops`` through the one-call path and through the general calls alike; its outcomes.
+
+    One pairer takes each sample with ``add_sample``, another (the same
+    ``options``) with ``add_angular_velocity`` then ``pop_ready``: every
+    outcome, step, state and counter is the same. Returns the one-call
+    path's outcomes of the samples.
+    """
+    fast, general = StepPairer(**options), StepPairer(**options)
+    stamp = 2 * S
+    outcomes = []
+    for kind, delta, value, acc in ops:
+        if delta is not None:
+            stamp += delta
+        if kind == 'sample':
+            outcome, steps = fast.add_sample(stamp, value, acc)
+            assert outcome == general.add_angular_velocity(stamp, value, 0, acc)
+            assert list(steps) == general.pop_ready(0)
+            outcomes.append(outcome)
+        elif kind == 'field':
+            assert fast.add_field(stamp, value) == general.add_field(stamp, value)
+        elif kind == 'measurement':
+            at = stamp + acc   # around the last sample's stamp
+            assert fast.add_measurement(at, value) == general.add_measurement(at, value)
+        else:
+            assert fast.restart() == general.restart()
+        assert _pairer_state(fast) == _pairer_state(general)
+    assert_accounted(fast)
+    return outcomes
+
+
 def _pairer_state(pairer):
     return (dict(pairer.received), dict(pairer.processed), dict(pairer.drops),
             dict(pairer.events), pairer.pending_stamp, pairer.last_stamp, pairer.field_stamp,
@@ -580,25 +617,7 @@ def test_add_sample_is_add_angular_velocity_then_pop_ready(ops, constant_dt, max
     settings_ = dict(timeout=timeout, depth=4, backward_jump=1 * S, forward_gap=500 * MS,
                      max_dt=max_dt, constant_dt=constant_dt, max_increment=max_increment,
                      arrival_order=arrival)
-    fast, general = StepPairer(**settings_), StepPairer(**settings_)
-    stamp = 2 * S
-    for kind, delta, value, acc in ops:
-        if delta is not None:
-            stamp += delta
-        if kind == 'sample':
-            outcome, steps = fast.add_sample(stamp, value, acc)
-            expected = general.add_angular_velocity(stamp, value, 0, acc)
-            assert outcome == expected
-            assert list(steps) == general.pop_ready(0)
-        elif kind == 'field':
-            assert fast.add_field(stamp, value) == general.add_field(stamp, value)
-        elif kind == 'measurement':
-            at = stamp + acc   # around the last sample's stamp
-            assert fast.add_measurement(at, value) == general.add_measurement(at, value)
-        else:
-            assert fast.restart() == general.restart()
-        assert _pairer_state(fast) == _pairer_state(general)
-    assert_accounted(fast)
+    assert_one_call_is_the_general_calls(settings_, ops)
 
 
 def test_arrival_order_steps_with_a_repeated_stamp_are_all_accounted():
@@ -626,24 +645,10 @@ def test_arrival_order_add_sample_is_add_angular_velocity_then_pop_ready():
         options = dict(timeout=0, depth=4, backward_jump=S,
                        forward_gap=S // 2, max_dt=S // 25, constant_dt=0.004,
                        max_increment=3.0, arrival_order=True)
-        fast, general = StepPairer(**options), StepPairer(**options)
-        stamp = 2 * S
-        for kind, delta, value, acc in ops:
-            if delta is not None:
-                stamp += delta
-            if kind == 'sample':
-                outcome, steps = fast.add_sample(stamp, value, acc)
-                assert outcome == general.add_angular_velocity(stamp, value, 0, acc)
-                assert list(steps) == general.pop_ready(0)
-                assert outcome in (None, 'backward_jump', 'non_finite_increment',
-                                   'non_finite_acceleration', 'zero_acceleration',
-                                   'increment_too_large'), outcome
-            elif kind == 'field':
-                assert fast.add_field(stamp, value) == general.add_field(stamp, value)
-            else:
-                assert fast.restart() == general.restart()
-            assert _pairer_state(fast) == _pairer_state(general)
-        assert_accounted(fast)
+        for outcome in assert_one_call_is_the_general_calls(options, ops):
+            assert outcome in (None, 'backward_jump', 'non_finite_increment',
+                               'non_finite_acceleration', 'zero_acceleration',
+                               'increment_too_large'), outcome
 
     check()
 

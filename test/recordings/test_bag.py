@@ -23,7 +23,7 @@ from ext_observer.recordings import cdr
 from ext_observer.recordings.bag import _Progress, compare, main as bag_main, run_bag
 from ext_observer.broad import score
 from ext_observer.recordings.example_data import excerpt, LATENCY, REFERENCE_TOPIC, write_bag
-from ext_observer.recordings.recording import node_settings
+from ext_observer.recordings.recording import attitude_from_imu, node_settings
 from recording_excerpt import (MAG_EVERY, TOLERANCE, files_digest, first_seconds, header_stamp,
                                python_call, quiet, read_bag)
 from recording_excerpt import data, recording  # noqa: F401 (fixtures)
@@ -240,3 +240,32 @@ def test_progress_on_long_bags():
     quiet = io.StringIO()
     _Progress(10, quiet).finish(10)
     assert quiet.getvalue() == ''
+
+
+def test_bag_smooth_writes_the_smoothed_estimate(tmp_path, data, recording):
+    bag = write_bag(str(tmp_path / 'in'), recording, 'mcap')
+    out = io.StringIO()
+    assert quiet(bag_main, [bag, '--out', str(tmp_path / 'out'), '--smooth'], out) == 0
+    assert 'smoothed' in out.getvalue()
+    written = read_bag(str(tmp_path / 'out'))
+    stamps = np.array(recording['stamps'], dtype=np.int64)
+    mag = np.full((len(stamps), 3), np.nan)
+    mag[recording['field_index']] = recording['field'][recording['field_index']]
+    expected = attitude_from_imu(recording['gyr'], recording['acc'], mag,
+                                 times=(stamps - stamps[0]) * 1e-9, smooth=True)
+    online = python_call(data)
+    data_msgs = written['/imu/data']
+    # The same messages as the online run writes: one per estimate.
+    assert [header_stamp(m) for _, m, _ in data_msgs] == recording['stamps'][1:]
+    orientation = np.array([[m.orientation.w, m.orientation.x, m.orientation.y,
+                             m.orientation.z] for _, m, _ in data_msgs])
+    np.testing.assert_allclose(orientation, expected.quaternions[1:], rtol=0, atol=TOLERANCE)
+    assert np.abs(orientation - online.quaternions[1:]).max() > 1e-4
+    covariance = np.array([m.orientation_covariance for _, m, _ in data_msgs])
+    tilt = expected.inclination_std[1:] ** 2 / 2
+    np.testing.assert_allclose(covariance[:, [0, 4, 8]],
+                               np.column_stack([tilt, tilt, expected.heading_std[1:] ** 2]),
+                               rtol=1e-12)
+    ambient = np.array([[m.quaternion.w, m.quaternion.x, m.quaternion.y, m.quaternion.z]
+                        for _, m, _ in written['/attitude_estimate']])
+    np.testing.assert_allclose(ambient, expected.quaternions[1:], rtol=0, atol=TOLERANCE)

@@ -11,7 +11,7 @@ import pytest
 from broad_replay import fields_tesla, offline
 from ext_observer.recordings.csvio import main as csv_main, read_columns, read_recording
 from ext_observer.recordings.example_data import write_csv
-from ext_observer.recordings.recording import roll_pitch_yaw
+from ext_observer.recordings.recording import attitude_from_imu, roll_pitch_yaw
 from recording_excerpt import MAG_EVERY, TOLERANCE, python_call, quiet
 from recording_excerpt import data, recording  # noqa: F401 (fixtures)
 
@@ -59,3 +59,17 @@ def test_csv_errors_name_the_column_and_the_line(tmp_path):
     path.write_text('t,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z\n0,0,0,0,0,0\n')
     with pytest.raises(ValueError, match='line 2: 6 cells, the header has 7'):
         read_recording(str(path))
+
+
+def test_csv_smooth_writes_the_smoothed_estimate(tmp_path, data, recording):
+    path = write_csv(str(tmp_path / 'in.csv'), recording)
+    out = io.StringIO()
+    assert quiet(csv_main, [path, '--out', str(tmp_path / 'out.csv'), '--smooth'], out) == 0
+    assert 'smoothed' in out.getvalue()
+    columns = read_columns(str(tmp_path / 'out.csv'), ('qw', 'qx', 'qy', 'qz', 'rest'))
+    q = np.column_stack([columns[name] for name in ('qw', 'qx', 'qy', 'qz')])
+    times, gyr, acc, mag = read_recording(path)
+    expected = attitude_from_imu(gyr, acc, mag, times=times, smooth=True)
+    np.testing.assert_allclose(q, expected.quaternions, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(columns['rest'].astype(bool), expected.rest)
+    assert np.abs(q - python_call(data).quaternions).max() > 1e-4  # not the online estimate

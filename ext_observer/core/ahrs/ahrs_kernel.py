@@ -37,8 +37,8 @@ from .hole_kernel import (HOLE_CALIBRATION, calibration_restart, clip_after, for
                           restart_weighted)
 from .bias_kernel import bias_reset, bias_variance
 from .magcal_kernel import mc_apply
-from .field_kernel import (ahrs_update_mag, cal_feed_reset, field_clipped, field_doubt,
-                           field_reset)
+from .field_kernel import (ahrs_update_mag, cal_feed_reset, field_back, field_clipped,
+                           field_doubt, field_reset)
 from .velocity_kernel import velocity_sample, velocity_step
 from .record import Group
 
@@ -176,16 +176,17 @@ def _watch_clipping(s, gx, gy, gz):
     A sample at the gyro's range (:func:`clipped_variance`): distrust the gyro, lean on the others.
 
     The inclination's mean of the specific force starts again where the
-    stretch's error outweighs it (:func:`clip_after`), the heading from the
-    running mean of the next fields, and the magnetometer calibration does
-    not learn across the stretch.
+    stretch's error outweighs it (:func:`clip_after`); the heading's doubt
+    grows with the stretch (:func:`field_clipped`), so that the next fields
+    correct it with the Kalman gain of that doubt, and from their running
+    mean once the heading is lost; the magnetometer calibration does not
+    learn across the stretch.
     """
     var = clipped_variance(s, gx, gy, gz)
     clip_after(s, var)
     if var == 0.0:
         return
     field_clipped(s, var)
-    s.field.mag_used = 0.0
     forget_wait(s)
     calibration_restart(s)
 
@@ -333,7 +334,7 @@ def ahrs_reset_in(state):
 
 
 def ahrs_update_acc_in(state, ax, ay, az):
-    """:func:`~ext_observer.core.ahrs.gravity_kernel.ahrs_update_acc` on the record in ``state``."""
+    """:func:`~ext_observer.core.ahrs.gravity_kernel.ahrs_update_acc` on ``state``'s record."""
     ahrs_update_acc(state[0], ax, ay, az)
 
 
@@ -342,13 +343,18 @@ def ahrs_update_mag_in(state, mx, my, mz, dt):
     ahrs_update_mag(state[0], mx, my, mz, dt)
 
 
+def field_back_in(state, var):
+    """:func:`~ext_observer.core.ahrs.field_kernel.field_back` on the record in ``state``."""
+    field_back(state[0], var)
+
+
 def ahrs_unbridged_in(state, gx, gy, gz, dt):
     """:func:`ahrs_unbridged` on the record in ``state``."""
     return ahrs_unbridged(state[0], gx, gy, gz, dt)
 
 
 def velocity_sample_in(state, vx, vy, vz, dt):
-    """:func:`~ext_observer.core.ahrs.velocity_kernel.velocity_sample` on the record in ``state``."""
+    """:func:`~ext_observer.core.ahrs.velocity_kernel.velocity_sample` on ``state``'s record."""
     velocity_sample(state[0], vx, vy, vz, dt)
 
 

@@ -12,6 +12,7 @@ batch of ``(B,)`` arrays. The steps, the credit to VQF and the conventions
 """
 
 import math
+import operator
 
 import numpy as np
 
@@ -35,6 +36,20 @@ __all__ = [
 MODES = ('6D', '9D')
 
 
+# A reader per field name, for one estimate's view (AhrsObserver.field):
+# the node reads several fields at every sample.
+_READERS = {}
+
+
+def _reader(name):
+    """``view -> value`` of one state field: a float, a vector a tuple of floats."""
+    path, size = STATE.path(name)
+    get = operator.attrgetter('.'.join(path))
+    if size == 1:
+        return lambda view: float(get(view))
+    return lambda view: tuple(float(v) for v in get(view))
+
+
 class AhrsObserver:
     """
     The raw-IMU estimator on floats (one estimate) or on ``(B,)`` arrays.
@@ -42,8 +57,8 @@ class AhrsObserver:
     The steps are the functions of :mod:`~ext_observer.core.ahrs.ahrs_kernel` on
     one state per estimate (:data:`~ext_observer.core.ahrs.ahrs_state.STATE`):
     compiled by numba when it is installed (:mod:`~ext_observer.core.ahrs.compiled`),
-    plain Python otherwise, one source and the same results to the bit. With ``batch``, the estimates step one
-    after the other.
+    plain Python otherwise, one source and the same results to the bit. With
+    ``batch``, the estimates step one after the other.
 
     Parameters
     ----------
@@ -70,6 +85,9 @@ class AhrsObserver:
         The gyro bias estimate (rad/s), body frame.
     rest : bool or ndarray
         Whether rest is detected.
+    held : bool or ndarray
+        Whether the last step held the inclination on the gyro (the specific
+        force rejected: ``accel_rejection``).
     mag_disturbed : bool or ndarray
         Whether the last magnetometer sample was rejected.
     calibration : MagCalibrator or None
@@ -213,7 +231,10 @@ class AhrsObserver:
         :mod:`~ext_observer.core.ahrs.ahrs_state` (docs/layout.md).
         """
         if self.batch is None:
-            return STATE.get(self._view(self._states[0]), name)
+            read = _READERS.get(name)
+            if read is None:
+                read = _READERS[name] = _reader(name)
+            return read(self._view(self._states[0]))
         values = [STATE.get(h[0], name) for h in self._states]
         if isinstance(values[0], tuple):
             return tuple(np.array(v) for v in zip(*values))
@@ -327,7 +348,7 @@ class AhrsObserver:
 
     @property
     def holes(self):
-        """Holes in the stream bridged so far (``hole_kernel``: intervals much longer than usual)."""
+        """Holes in the stream bridged so far (``hole_kernel``: intervals much over the usual)."""
         return self._count('hole.count')
 
     @property
@@ -337,7 +358,11 @@ class AhrsObserver:
 
     @property
     def hole_restart(self):
-        """After a hole: the seconds the inclination's restarted mean weighs the old as (−1: kept)."""
+        """
+        After a hole: the seconds the inclination's restarted mean weighs the old as.
+
+        −1: the mean kept.
+        """
         return self.field('hole.t0')
 
     @property
@@ -349,6 +374,11 @@ class AhrsObserver:
     def rest(self):
         """Whether rest is detected."""
         return self._flag('rest.detected')
+
+    @property
+    def held(self):
+        """Whether the last step held the inclination on the gyro (the specific force rejected)."""
+        return self._flag('rej.time')
 
     @property
     def mag_disturbed(self):
@@ -541,6 +571,19 @@ class AhrsObserver:
             raise ValueError('unbridged takes one estimate, not a batch')
         return self._kernels.ahrs.ahrs_unbridged_in(self._states[0], float(gyr[0]), float(gyr[1]),
                                                  float(gyr[2]), float(dt))
+
+    def field_back(self, var):
+        """
+        A field back after a loss, the heading having gained ``var`` rad² on the gyro alone.
+
+        :func:`~ext_observer.core.ahrs.field_kernel.field_back`: the next
+        fields correct the heading with the gain of that doubt, judged
+        against the references and the calibration learned before. One
+        estimate only.
+        """
+        if self.batch is not None:
+            raise ValueError('field_back takes one estimate, not a batch')
+        self._kernels.ahrs.field_back_in(self._states[0], float(var))
 
     def _each(self, func, vector, *extra):
         if self.batch is None:

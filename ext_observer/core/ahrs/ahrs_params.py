@@ -1,5 +1,6 @@
 """
-The raw-IMU estimator's parameters (:class:`AhrsParams`) and its covariance's (:class:`UncertaintyParams`).
+The raw-IMU estimator's parameters (:class:`AhrsParams`) and its covariance's
+(:class:`UncertaintyParams`).
 
 What a user tunes: time constants in seconds, thresholds in rad/s and m/s²
 (VQF's way; see :mod:`ext_observer.core.ahrs.ahrs_observer`). :data:`AHRS_TABLE`

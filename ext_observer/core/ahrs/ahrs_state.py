@@ -4,7 +4,8 @@ The raw-IMU estimator's state: its groups, each declared beside the code that ow
 ``STATE`` is what one estimate keeps (:mod:`~ext_observer.core.ahrs.record`):
 the parameters (``par``, set once by the wrapper), the coefficients of the
 current intervals (``coef``) and the estimate with what it remembers, one
-group per concept, then the magnetometer calibration's state (``cal``, :mod:`~ext_observer.core.ahrs.magcal_layout`'s ``CAL``). A
+group per concept, then the magnetometer calibration's state (``cal``,
+:mod:`~ext_observer.core.ahrs.magcal_layout`'s ``CAL``). A
 kernel reads ``s.rest.time`` or ``s.bias.rate[0]``; docs/layout.md lists
 every field with its unit and meaning (``python -m ext_observer.core.ahrs.ahrs_state``
 prints the table).

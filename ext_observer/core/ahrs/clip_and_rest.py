@@ -112,7 +112,9 @@ def clipped_variance(s, gx, gy, gz):
 
 def detect_rest(s, gx, gy, gz):
     """
-    Rest (gyro and specific force still for ``rest_time``); at rest the bias is the low-passed rate.
+    Rest: gyro and specific force still for ``rest_time``.
+
+    At rest the bias is the low-passed rate.
     """
     k = s.coef.k_rest
     lx, ly, lz = first_order_step(s.rest.gyr_lp, k, gx, gy, gz)

@@ -15,7 +15,7 @@ import math
 
 from .ahrs_filters import gain, rotate, rotation_matrix
 from .bias_kernel import bias_measure
-from .hole_kernel import calibration_restart, forget_wait
+from .hole_kernel import HOLE_CALIBRATION, calibration_restart, forget_wait
 from .magcal_kernel import mc_apply, mc_field, mc_learn
 from .small_matrix import vec3_at
 from .record import Group
@@ -75,6 +75,10 @@ HEADING_LOST = math.radians(20.0) ** 2
 # σ: a field whose heading is further from the estimate than this many of
 # the doubt's and its own does not correct it (a disturbance).
 FIELD_GATE = 3.0
+# The heading's loss along a clipped stretch, per sample and axis, as a share
+# of the range's rotation: the rate beyond the range, uniform between none and
+# the range itself, has the RMS range / √3.
+CLIP_HEADING_SHARE = 1.0 / math.sqrt(3.0)
 # Where the Butterworth's two states (x, y, z each) start in S_LP.
 LP_STATES = (0, 3)
 
@@ -281,7 +285,7 @@ def field_reset(s):
 
 
 def cal_feed_reset(s):
-    """The calibration follows the field afresh (what it learned stays); nothing turned or applied."""
+    """The calibration follows the field afresh (what it learned stays); none turned or applied."""
     calibration_restart(s)
     if s.par.has_cal != 0.0:
         for i in range(3):
@@ -299,9 +303,19 @@ def field_forget(s):
 
 
 def field_clipped(s, var):
-    """A clipped gyro sample of variance ``var`` (rad² per axis): a doubt, and no calibration."""
+    """
+    A clipped gyro sample of variance ``var`` (rad² per axis): a doubt, and no calibration.
+
+    The rate beyond the range stays beyond it along a clipped stretch, so the
+    heading's losses add up as the inclination's do (``clip_after``): the
+    doubt's σ grows by :data:`CLIP_HEADING_SHARE` of the range's σ per
+    sample, its variance by the difference of the squares (:func:`field_doubt`).
+    """
     s.field.field_clipped = 1.0
-    field_doubt(s, var)
+    p = s.field.head_doubt
+    grow = math.sqrt(p) + CLIP_HEADING_SHARE * math.sqrt(var)
+    # σ ← σ + c √var: the variance grows by (σ + c √var)² − σ²
+    field_doubt(s, grow * grow - p)
 
 
 def field_doubt(s, var):
@@ -323,6 +337,35 @@ def field_doubt(s, var):
         s.field.mag_used = 0.0
 
 
+def field_back(s, var):
+    """
+    A field back after a loss: the gyro alone carried the heading, which gained ``var`` rad².
+
+    What was learned before the loss still holds (the body carries its
+    magnet and its calibration with it): the references and the calibration
+    stay, and the returning fields are judged against them. The heading's
+    doubt takes ``var`` (the tilt's none: the accelerometer went on
+    correcting it), so the fields back correct the heading with the Kalman
+    gain of that doubt (:func:`_doubt_gain`); past :data:`HEADING_LOST` the
+    heading is taken afresh from their running mean, as after a hole. The
+    calibration follows the field afresh, as across a hole whose rotation
+    it cannot trust (more than
+    :data:`~ext_observer.core.ahrs.hole_kernel.HOLE_CALIBRATION`): what it
+    learned stays, the body's turn over the loss is not taught.
+    """
+    if s.par.use_mag == 0.0 or not var > 0.0:
+        return
+    if var > HOLE_CALIBRATION:
+        calibration_restart(s)
+    p = s.field.head_doubt + var
+    if p < HEADING_LOST:
+        s.field.head_doubt = p
+    else:
+        s.field.head_doubt = 0.0
+        s.field.tilt_doubt = 0.0
+        s.field.mag_used = 0.0
+
+
 def _doubt_gain(s, kap, norm, dip, psi, dt):
     """
     The heading gain while the gyro's losses are not corrected: at least the Kalman gain.
@@ -337,7 +380,8 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
     size; a field of another norm is disturbed whatever the attitude. While
     the heading waits for the calibration, the field as given counts too
     (the wait starts again from it). Once ``P`` no longer moves the gain
-    above the usual one, the usual path resumes.
+    above the usual one (and no clipped stretch's recovery
+    runs, ``gyro.clip_left``), the usual path resumes.
     """
     tau = s.par.tau_acc + s.par.tau_acc_gain
     # T ← T exp(−2 dt / τ): the inclination's correction forgets the tilt error
@@ -362,7 +406,13 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
     k = max(kap, p / (p + r))
     p = (1.0 - k) * (1.0 - k) * p + k * k * r
     k_mag = s.coef.k_mag
-    if p * (1.0 - k_mag) <= r * k_mag:  # P / (P + r) ≤ k_mag: the usual gain again
+    # The doubt ends where an undisturbed field's Kalman gain is the usual
+    # one, P / (P + r_u) ≤ k_mag (a field far off the references has a large
+    # r and a small gain, and says nothing of whether the doubt is gone),
+    # once no clipped stretch is still adding to P (its samples' losses add
+    # up: clip_after).
+    ru = r0 + FIELD_HEADING_BIAS * FIELD_HEADING_BIAS * FIELD_CORRELATION / dt
+    if p * (1.0 - k_mag) <= ru * k_mag and s.gyro.clip_left == 0.0:
         p = 0.0
         s.field.tilt_doubt = 0.0
     s.field.head_doubt = p

@@ -41,7 +41,8 @@ def ahrs_update_acc(s, ax, ay, az):
     # Rest detection needs the accelerometer's deviation from its mean.
     rx, ry, rz = first_order_step(s.rest.acc_lp, s.coef.k_rest, ax, ay, az)
     ex, ey, ez = ax - rx, ay - ry, az - rz
-    s.rest.acc_still = 1.0 if (ex * ex + ey * ey + ez * ez) < s.par.rest_acc * s.par.rest_acc else 0.0
+    still = (ex * ex + ey * ey + ez * ez) < s.par.rest_acc * s.par.rest_acc
+    s.rest.acc_still = 1.0 if still else 0.0
     # Gravity from the specific force less the body's own acceleration (rest sees it all).
     ax, ay, az = velocity_removed(s, ax, ay, az)
 

@@ -363,6 +363,11 @@ class MagCalibrator:
     @property
     def state(self):
         """``'off'``, ``'learning'``, ``'converged'`` or ``'loaded'`` (a list with ``batch``)."""
+        if self.batch is None:  # the node's path, read at every field
+            h = self._holder
+            return ('off' if _value(h, 'enabled') == 0.0 else
+                    'loaded' if _value(h, 'loaded') != 0.0 else
+                    'converged' if _value(h, 'converged') != 0.0 else 'learning')
         states = ['off' if not on else 'loaded' if loaded else
                   'converged' if conv else 'learning'
                   for on, loaded, conv in zip(self._flags('enabled'), self._flags('loaded'),

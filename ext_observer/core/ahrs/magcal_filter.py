@@ -8,9 +8,10 @@ gyro's rotation and lets it walk, :func:`mc_update` is one gated update
 with a field, :func:`mc_start` starts the filter from a field (a prior, a
 loaded calibration or nothing). Each takes the calibrator's record ``cal``
 (:data:`~ext_observer.core.ahrs.magcal_layout.CAL`) and works on its fields
-by name: the filter's state ``cal.x``, its covariance ``cal.p`` (indexed by
-the parts of the filter, ``CAL_S``, ``CAL_Z``, ...) and the scratch of its
-matrices. Each line names its equation; the algebra is
+by name: the filter's state ``cal.x`` (its parts read through
+:mod:`~ext_observer.core.ahrs.magcal_layout`'s ``offset_of``, ...), its
+covariance ``cal.p`` (its blocks at the parts' rows, ``CAL_S``, ``CAL_Z``,
+...) and the scratch of its matrices. Each line names its equation; the algebra is
 :mod:`~ext_observer.core.ahrs.small_matrix`'s. The same subset of Python as
 the kernel's, so numba compiles it (:mod:`~ext_observer.core.ahrs.compiled`).
 """
@@ -20,7 +21,8 @@ import math
 from .magcal_layout import (GATE, CAL_D, CAL_DIFFUSE, CAL_LOADED_BIAS_STD,
                             CAL_LOADED_SOFT_SHARE, CAL_N, CAL_NIS_CAP, CAL_NIS_RATE, CAL_NY,
                             CAL_S, CAL_SCALE_FLOOR, CAL_SYMMETRIZE_EVERY, CAL_TAU, CAL_Z,
-                            CAL_ZDT)
+                            CAL_ZDT, field_with_offset_of, lag_of, offset_of,
+                            set_field_with_offset, soft_iron_of)
 from .small_matrix import (add3, add_diagonal, add_scaled3, col3_at, cols, column3_into,
                            combination12_into, copy_into, cross3, diagonal_into, dot12,
                            dot12_onto, dot3, fill, identity_minus, mat3_vec_at, mat3t_vec,
@@ -42,9 +44,9 @@ def mc_predict(cal, rw, rx, ry, rz, dt):
     r = rotation_of(rw, rx, ry, rz)
     e = identity_minus(r)
     x, p = cal.x, cal.p
-    z = vec3_at(x, CAL_Z)
-    m = sub3(vec3_at(x, CAL_S), z)
-    store3(x, CAL_S, add3(mat3t_vec(r, m), z))  # s ← Rᵀ m + z, m = s − z
+    z = offset_of(x)
+    m = sub3(field_with_offset_of(x), z)
+    set_field_with_offset(x, add3(mat3t_vec(r, m), z))  # s ← Rᵀ m + z, m = s − z
     for j in range(CAL_N):  # P[s, :] ← Rᵀ P[s, :] + (I − R)ᵀ P[z, :]
         ps = col3_at(p, CAL_N * CAL_S + j, CAL_N)
         pz = col3_at(p, CAL_N * CAL_Z + j, CAL_N)
@@ -99,9 +101,9 @@ def mc_update(cal, y0, y1, y2, w0, w1, w2, live, norm):
 def mc_correct(cal, y, w):
     """The update proper: the innovation, its covariance and gate, then the gain; True if used."""
     x = cal.x
-    sv = vec3_at(x, CAL_S)
-    tau = x[CAL_TAU]
-    c = cross3(w, sub3(sv, vec3_at(x, CAL_Z)))  # c = ω × m, m = s − z
+    sv = field_with_offset_of(x)
+    tau = lag_of(x)
+    c = cross3(w, sub3(sv, offset_of(x)))  # c = ω × m, m = s − z
     mc_inverse_a(cal)  # A⁻¹ = (I + D(d))⁻¹
     pred = mat3_vec_at(cal.ai, 0, add_scaled3(sv, tau, c))  # ŷ = A⁻¹ (s + τ c)
     nu = sub3(y, pred)  # ν = y − ŷ
@@ -120,8 +122,7 @@ def mc_correct(cal, y, w):
 
 def mc_inverse_a(cal):
     """``A⁻¹ = (I + D(d))⁻¹`` into ``cal.ai``, ``d`` from ``cal.x``."""
-    x = cal.x
-    d0, d1, d2, d3, d4 = x[CAL_D], x[CAL_D + 1], x[CAL_D + 2], x[CAL_D + 3], x[CAL_D + 4]
+    d0, d1, d2, d3, d4 = soft_iron_of(cal.x)
     mc_inv3(cal.ai, 1.0 + d0, d2, d3, d2, 1.0 + d1, d4, d3, d4, 1.0 - d0 - d1)
 
 
@@ -182,7 +183,7 @@ def mc_gain_step(cal, nu, g0, g1, g2):
 def mc_field_scale(cal, norm):
     """The field's norm the noises scale with: ``|s − z|``, at least a share of ``norm``."""
     x = cal.x
-    m = sub3(vec3_at(x, CAL_S), vec3_at(x, CAL_Z))
+    m = sub3(field_with_offset_of(x), offset_of(x))
     scale = math.sqrt(dot3(m, m))
     if CAL_SCALE_FLOOR * norm > scale:
         scale = CAL_SCALE_FLOOR * norm
@@ -232,7 +233,7 @@ def mc_prior_spread(cal, z_std, d_std, tau_std):
     p = cal.p
     diagonal_into(p, 0, CAL_N, CAL_Z, 3, z_std * z_std)
     diagonal_into(p, 0, CAL_N, CAL_D, CAL_NY, d_std * d_std)
-    p[(CAL_N + 1) * CAL_TAU] = tau_std * tau_std
+    diagonal_into(p, 0, CAL_N, CAL_TAU, 1, tau_std * tau_std)
 
 
 def mc_prior_x(cal):
@@ -250,7 +251,7 @@ def mc_start_field(cal, y, norm):
     x, p, yy, t = cal.x, cal.p, cal.yy, cal.k
     mc_regressor_into(yy, 0, CAL_NY, y)
     matmul_acc_into(x, rows(CAL_S, 1), yy, rows(0, CAL_NY), x, rows(CAL_D, 1), 3, CAL_NY, 1)
-    store3(x, CAL_S, add3(y, vec3_at(x, CAL_S)))  # s = y + Y d
+    set_field_with_offset(x, add3(y, field_with_offset_of(x)))  # s = y + Y d
     pd = rows(CAL_N * CAL_D + CAL_Z, CAL_N)  # P[d, 3:]
     matmul_acc_into(p, rows(CAL_Z, CAL_N), yy, rows(0, CAL_NY), p, pd, 3, CAL_NY, CAL_ZDT)
     copy_into(p, cols(CAL_N * CAL_Z, CAL_N), p, rows(CAL_Z, CAL_N), 3, CAL_ZDT)

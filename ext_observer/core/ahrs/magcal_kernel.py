@@ -18,9 +18,11 @@ from .magcal_filter import mc_predict, mc_start, mc_update
 from .magcal_layout import (CAL_D, CAL_HOLD, CAL_HOLD_TURN, CAL_INF, CAL_N,
                             CAL_NIS_EXPECTED, CAL_NY, CAL_REFUSED_SHARE, CAL_REFUSED_TAU,
                             CAL_SHIFT_SAMPLES, CAL_SIGNIFICANT, CAL_TINY, CAL_TURNING2,
-                            CAL_WATCH, CAL_WILD, CAL_Z, CAL_ZD, CAL_ZDT)
+                            CAL_WATCH, CAL_WILD, CAL_Z, CAL_ZD, CAL_ZDT, field_with_offset_of,
+                            offset_of, soft_iron_of)
 from .small_matrix import (col3_at, column3_into, copy_into, cross3, dot3, fill,
-                           finite_or_zero, max_of, quad3_at, rows, store3, vec3_at, vec5_at)
+                           finite_or_zero, max_of, quad3_at, rows, store3, sub3, vec3_at,
+                           vec5_at)
 
 
 # --- state -------------------------------------------------------------------
@@ -231,9 +233,9 @@ def mc_lost(cal, watched, use, live, w, dt):
     lost = watched and share > CAL_REFUSED_SHARE
     if live:
         wild = CAL_WILD * cal.soft_iron
-        x = cal.x
+        d = soft_iron_of(cal.x)
         for k in range(CAL_NY):
-            if abs(x[CAL_D + k]) > wild:
+            if abs(d[k]) > wild:
                 lost = True
     return lost
 
@@ -392,11 +394,8 @@ def mc_cache(cal):
     if applied:
         x = cal.x
         g = cal.scale
-        d0 = x[CAL_D]
-        d1 = x[CAL_D + 1]
-        d2 = x[CAL_D + 2]
-        d3 = x[CAL_D + 3]
-        d4 = x[CAL_D + 4]
+        d0, d1, d2, d3, d4 = soft_iron_of(x)
+        z0, z1, z2 = offset_of(x)
         a[0] = g + g * d0
         a[1] = g * d2
         a[2] = g * d3
@@ -406,9 +405,9 @@ def mc_cache(cal):
         a[6] = g * d3
         a[7] = g * d4
         a[8] = g - g * (d0 + d1)
-        a[9] = g * x[CAL_Z]
-        a[10] = g * x[CAL_Z + 1]
-        a[11] = g * x[CAL_Z + 2]
+        a[9] = g * z0
+        a[10] = g * z1
+        a[11] = g * z2
     else:
         fill(a, 0, 12, 0.0)
         a[0] = 1.0
@@ -435,7 +434,8 @@ def mc_field(cal):
     """The calibrated field now, as the filter tracks it (body frame)."""
     x = cal.x
     g = cal.scale
-    return ((x[0] - x[3]) * g, (x[1] - x[4]) * g, (x[2] - x[5]) * g)
+    m0, m1, m2 = sub3(field_with_offset_of(x), offset_of(x))  # m = s − z
+    return (m0 * g, m1 * g, m2 * g)
 
 
 # --- helpers -------------------------------------------------------------------------

@@ -4,12 +4,17 @@ The magnetometer calibration's tuning, and its state: the record :data:`CAL`.
 One calibrator's state is a record of :data:`CAL`'s fields
 (:mod:`~ext_observer.core.ahrs.record`), each declared below with its unit
 and meaning; :mod:`~ext_observer.core.ahrs.magcal_kernel` does the maths on
-it. The filter's state ``x`` and its covariance ``p`` are indexed by the
-parts of the filter (``CAL_S``, ``CAL_Z``, ``CAL_D``, ``CAL_TAU``). "field"
-is the unit of the fields the calibrator is given (any unit).
+it. The filter's state ``x`` is one vector for the Kalman algebra; its
+parts are read and written by name, through :func:`field_with_offset_of`,
+:func:`offset_of`, :func:`soft_iron_of`, :func:`lag_of` and
+:func:`set_field_with_offset` (the one place their positions are read), and
+the blocks of its covariance ``p`` by the parts' first rows (``CAL_S``,
+``CAL_Z``, ``CAL_D``, ``CAL_TAU``). "field" is the unit of the fields the
+calibrator is given (any unit).
 """
 
 from .record import Group
+from .small_matrix import store3, vec3_at, vec5_at
 
 # --- tuning -------------------------------------------------------------------
 
@@ -63,6 +68,34 @@ CAL_TAU = 11
 CAL_ZD = 8  # the calibration proper, (z, d)
 CAL_ZDT = CAL_N - CAL_Z  # what a prior holds: (z, d, τ), x[CAL_Z:]
 CAL_NY = 5  # d, and the columns of Y(y), with D(d) y = Y(y) d
+
+
+# --- the parts of x, by name -----------------------------------------------------------
+
+
+def field_with_offset_of(x):
+    """``s = m + z = A y`` (field, body frame): the calibrated field, its offset still in."""
+    return vec3_at(x, CAL_S)
+
+
+def set_field_with_offset(x, s):
+    """``s`` (a 3-tuple) into ``x``."""
+    store3(x, CAL_S, s)
+
+
+def offset_of(x):
+    """``z`` (field, body frame): the hard-iron offset."""
+    return vec3_at(x, CAL_Z)
+
+
+def soft_iron_of(x):
+    """``d`` (5-tuple, 1): the soft iron, ``A = I + D(d)``, ``D(d)`` symmetric and traceless."""
+    return vec5_at(x, CAL_D, 1)
+
+
+def lag_of(x):
+    """``τ`` (s): how far the field lags the gyro."""
+    return x[CAL_TAU]
 
 # --- the state -------------------------------------------------------------------
 
@@ -143,4 +176,6 @@ CAL = Group('cal', "one magnetometer calibrator: its Kalman filter, prior, verdi
             ])
 
 
-__all__ = [name for name in dir() if name.startswith('CAL_')] + ['CAL', 'GATE']
+__all__ = [name for name in dir() if name.startswith('CAL_')] + [
+    'CAL', 'GATE', 'field_with_offset_of', 'lag_of', 'offset_of', 'set_field_with_offset',
+    'soft_iron_of']

@@ -183,8 +183,8 @@ def smooth_attitude_rts(gyr, acc, mag, rate, params=None, calibration=None, comp
         the field's lag behind the gyro (s), taken out; default: the
         calibration a first online pass over the recording learns, applied
         from the first sample where the online estimator applied it (its
-        lag is not taken out: docs/broad_tuning.md, "The smoothed
-        attitude").
+        lag is not taken out: docs/broad_tuning.md, "The
+        Rauch–Tung–Striebel smoother").
     compiled : bool, optional
         As :func:`~ext_observer.core.ahrs.compiled.kernels` (the same
         results either way).

@@ -3,11 +3,12 @@ How good the raw-IMU estimate is now: a variance for its inclination and one for
 
 :class:`AttitudeUncertainty` runs beside
 :class:`~ext_observer.core.ahrs.ahrs_observer.AhrsObserver` and is told, after
-each step, what the estimator did (interval, rate, rest, the heading gain
-of a field); from that alone it propagates the variance of the attitude
-error, as an error-state Kalman filter's covariance step does, with the
+each step, what the estimator did (interval, rate, rest, an inclination held
+on the gyro, the heading gain of a field); from that alone it propagates the
+variance of the attitude error, as an error-state Kalman filter's covariance step does, with the
 estimator's fixed gains. The model and its equations: docs/covariance.md
-("The model"). :data:`~ext_observer.core.ahrs.ahrs_params.UNCERTAINTY_TABLE` its parameters; the per-sample
+("The model"). :data:`~ext_observer.core.ahrs.ahrs_params.UNCERTAINTY_TABLE`
+its parameters; the per-sample
 arithmetic is :mod:`~ext_observer.core.ahrs.uncertainty_kernel`'s. Units
 rad, s, rad/s, m/s²; every quantity a float, or an array ``(B,)`` for many
 recordings at once.
@@ -22,7 +23,8 @@ from .ahrs_filters import rotate
 from .ahrs_params import UncertaintyParams
 from .compiled import entry_point
 from .record import Group
-from .uncertainty_kernel import HEADING_UNKNOWN, INNOVATION_TIME, UNC
+from .uncertainty_kernel import (GYRO_MOTION_SIGMA, GYRO_SCALE_SIGMA, HEADING_UNKNOWN,
+                                 INNOVATION_TIME, UNC)
 
 __all__ = [
     'AttitudeUncertainty',
@@ -246,7 +248,7 @@ class AttitudeUncertainty:
             self._start_sample(dt, (0.0 * ax, 0.0 * ax, (ax * ax + ay * ay + az * az) ** 0.5))
 
     def _start_sample(self, dt, f):
-        """The start's share for a world-frame specific force ``f`` (floats, or arrays ``(B,)``)."""
+        """The start's share for a world-frame specific force ``f`` (floats, or arrays (B,))."""
         kernel = self._kernel
         fx, fy, fz = f
         if self._compiled or not np.ndim(fx):
@@ -279,7 +281,8 @@ class AttitudeUncertainty:
 
     # --- the steps ---------------------------------------------------------
 
-    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None, acc=None, hole=None):
+    def step(self, dt, gyr, q, rest, bias_var=None, clip_var=None, acc=None, hole=None,
+             held=None):
         """
         One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
@@ -318,6 +321,11 @@ class AttitudeUncertainty:
             and the seconds the restarted inclination mean weighs the old as
             (negative: not restarted; :func:`~ext_observer.core.ahrs.uncertainty_kernel.
             uncertainty_restart`).
+        held : bool or ndarray, optional
+            Whether the estimator held the inclination on the gyro, the
+            specific force rejected (:attr:`AhrsObserver.held
+            <ext_observer.core.ahrs.ahrs_observer.AhrsObserver.held>`): no
+            correction from it. None: not held.
 
         """
         if dt != self._u.coef.dt:
@@ -330,7 +338,7 @@ class AttitudeUncertainty:
         if self._compiled:
             self._kernel.covariance_step(
                 self._holder, float(dt), float(gx), float(gy), float(gz), float(w), float(x),
-                float(y), float(z), 1.0 if rest else 0.0,
+                float(y), float(z), 1.0 if rest else 0.0, 1.0 if held else 0.0,
                 0.0 if bias_var is None else float(bias_var),
                 0.0 if clip_var is None else float(clip_var), extra, hole_var, hole_t0,
                 float(ax), float(ay), float(az), acc is not None)
@@ -339,7 +347,7 @@ class AttitudeUncertainty:
         # kernel's order: the start's share last).
         many = acc is not None and any(np.ndim(v) for v in (w, x, y, z, ax, ay, az))
         self._kernel.covariance_step(
-            self._holder, dt, gx, gy, gz, w, x, y, z, rest,
+            self._holder, dt, gx, gy, gz, w, x, y, z, rest, 0.0 if held is None else held,
             0.0 if bias_var is None else bias_var, 0.0 if clip_var is None else clip_var,
             extra, hole_var, hole_t0, ax, ay, az, acc is not None and not many)
         if many:
@@ -417,6 +425,7 @@ class AttitudeUncertainty:
         held.yaw = a * held.yaw
         held.rotation = a * held.rotation
         held.field_age = 0.0 * held.field_age
+        held.ph = e.ph
         unknown = (1 - used) * unknown
         self.heading_set = self.heading_set | used
         c2 = calibration * calibration
@@ -528,6 +537,21 @@ class AttitudeUncertainty:
         return (k if k * count > 1.0 else 1.0 / count) if count >= 1 else 0.0
 
     # --- outputs -----------------------------------------------------------
+
+    @property
+    def held_variance(self):
+        """
+        The heading variance the gyro alone added since the last field, rad².
+
+        What the propagation added to ``P`` since (the gyro's noise, its
+        bias) and the held term of a field lost (the gyro's scale and axes
+        errors over the rotation since): what a field back has to correct.
+        """
+        u = self._u
+        scale = GYRO_SCALE_SIGMA * u.held.yaw
+        axes = GYRO_MOTION_SIGMA * u.held.rotation
+        grown = u.axes.ph - u.held.ph
+        return grown * (grown > 0.0) + scale * scale + axes * axes
 
     @property
     def tilt_variance(self):

@@ -67,6 +67,8 @@ UNC = Group('unc', "the attitude covariance's constants, its interval's coeffici
     Group('axes', 'per axis [[P, C], [C, B]] of the angle and bias errors (tilt t, heading h)', [
         ('pt', 'rad²', "P of the tilt, per horizontal axis"),
         ('ct', 'rad²/s', "C of the tilt: its angle and bias errors' covariance"),
+        ('ct_turned', 'rad²/s', "C of the tilt's part turned a quarter about the vertical: "
+         'the bias error turned with the body while the inclination was held on the gyro'),
         ('ph', 'rad²', "P of the heading"),
         ('ch', 'rad²/s', "C of the heading"),
         ('b', '(rad/s)²', "B, the bias error's variance (one for every axis)"),
@@ -104,6 +106,7 @@ UNC = Group('unc', "the attitude covariance's constants, its interval's coeffici
         ('yaw', 'rad', 'about the world vertical since the field was lost (signed); the fields '
          'back shrink it as they correct the heading'),
         ('rotation', 'rad', 'the same, the whole rotation (about any axis, unsigned)'),
+        ('ph', 'rad²', "the heading's P after the last field"),
     ]),
 ])
 
@@ -164,27 +167,48 @@ def uncertainty_coefficients(u, dt):
     c.q_bias = b * b * (1.0 - phi * phi)
 
 
-def uncertainty_propagate(u, dt, gx, gy, gz, w, x, y, z, rest):
+def uncertainty_propagate(u, dt, gx, gy, gz, w, x, y, z, rest, held):
     """
     One IMU sample: the gyro's propagation, the bias at rest, the inclination correction.
 
     ``dt`` the interval (s; its coefficients recomputed when it changed),
     ``g`` the measured rate (rad/s, body frame), ``(w, x, y, z)`` the
     estimate after the step (any nonzero norm), ``rest`` 1.0 (or True)
-    where the estimator detected rest and learned the bias, else 0.0.
+    where the estimator detected rest and learned the bias, else 0.0;
+    ``held`` 1.0 where it held the inclination on the gyro (the specific
+    force rejected: no correction from it), else 0.0.
+
+    While held, the tilt's covariance with the bias error turns with the body
+    about the vertical (a bias error fixed in the body tilts the world along a
+    direction that turns with it): ``C = ct + i ct_turned`` in the body's
+    turning frame, ``dC/dt = B − i ω_z C``, and the tilt grows by ``2 Re(C)``:
+    a body turning at ``ω_z`` is carried round and back, one that does not
+    turn by ``B t²``. (Where the force corrects the tilt, its correction
+    outweighs the turn: ``C`` keeps its axes, as before.)
     """
     if dt != u.coef.dt:
         uncertainty_coefficients(u, dt)
     c, e = u.coef, u.axes
     w2 = gx * gx + gy * gy + gz * gz
     q_theta = c.q_gyro + c.q_rate * w2
+    # The rate about the world vertical: the third row of R(q), over |q|².
+    n2 = w * w + x * x + y * y + z * z
+    wz = (2.0 * (x * z - w * y) * gx + 2.0 * (y * z + w * x) * gy
+          + (w * w - x * x - y * y + z * z) * gz) / n2
     b = e.b
     phi = c.phi
     # [θ, β] ← F [θ, β] with F = [[1, dt], [0, φ]]: F P Fᵀ + Q, per axis.
     bdt = b * dt
     pt = e.pt + (2.0 * e.ct + bdt) * dt + q_theta
     ph = e.ph + (2.0 * e.ch + bdt) * dt + q_theta
-    ct = phi * (e.ct + bdt)
+    # C turned by −ω_z dt while held, as the rotation (1 − i a)/(1 + i a), a = ω_z dt / 2
+    # (arithmetic only, for arrays too; exactly C where nothing turns).
+    a = 0.5 * held * wz * dt
+    d = 1.0 + a * a
+    cs, sn = (1.0 - a * a) / d, 2.0 * a / d
+    c1 = e.ct + bdt
+    ct = phi * (c1 * cs + e.ct_turned * sn)
+    ct2 = phi * (e.ct_turned * cs - c1 * sn)
     ch = phi * (e.ch + bdt)
     b = phi * phi * b + c.q_bias
     # At rest the bias is the low-passed rate: β ← (1 − k_r) β + k_r n.
@@ -192,19 +216,17 @@ def uncertainty_propagate(u, dt, gx, gy, gz, w, x, y, z, rest):
     a = 1.0 - kr
     b = a * a * b + kr * kr * c.r_gyro
     ct = a * ct
+    ct2 = a * ct2
     ch = a * ch
-    # The inclination correction of every sample: P ← (1 − k)² P + k² R.
-    k = c.k_acc
+    # The inclination correction of every sample not held: P ← (1 − k)² P + k² R.
+    k = c.k_acc * (1.0 - held)
     a = 1.0 - k
     e.pt = a * a * pt + k * k * c.r_acc
     e.ct = a * ct
+    e.ct_turned = a * ct2
     e.ph = ph
     e.ch = ch
     e.b = b
-    # The rate about the world vertical: the third row of R(q), over |q|².
-    n2 = w * w + x * x + y * y + z * z
-    wz = (2.0 * (x * z - w * y) * gx + 2.0 * (y * z + w * x) * gy
-          + (w * w - x * x - y * y + z * z) * gz) / n2
     wz2 = wz * wz
     u.rate.wz2 = wz2
     held = u.held
@@ -361,16 +383,17 @@ def covariance_variances(uh):
     return uncertainty_variances(uh[0])
 
 
-def covariance_step(uh, dt, gx, gy, gz, w, x, y, z, rest, bias_var, clip_var, extra, hole_var,
-                    hole_t0, ax, ay, az, with_acc):
+def covariance_step(uh, dt, gx, gy, gz, w, x, y, z, rest, held, bias_var, clip_var, extra,
+                    hole_var, hole_t0, ax, ay, az, with_acc):
     """
     The covariance's step of one IMU sample: its sub-steps in their one order.
 
     The propagation over ``dt`` (the usual interval, s) with the rate
     ``g`` (rad/s, body) to the estimate ``(w, x, y, z)`` after the step
-    (any nonzero norm), the bias at ``rest`` (1.0 or True; else 0.0)
-    (:func:`uncertainty_propagate`); a hole's restart of the inclination's
-    mean (``hole_t0`` s, where ``hole_t0 ≥ 0``; :func:`uncertainty_restart`);
+    (any nonzero norm), the bias at ``rest`` (1.0 or True; else 0.0), the
+    inclination ``held`` on the gyro (1.0; else 0.0) (:func:`uncertainty_propagate`);
+    a hole's restart of the inclination's mean (``hole_t0`` s, where
+    ``hole_t0 ≥ 0``; :func:`uncertainty_restart`);
     the estimator's bias variance ``bias_var`` ((rad/s)², 0: none;
     :func:`uncertainty_bias`); a clipped sample's ``clip_var`` (rad², 0:
     none; :func:`uncertainty_clipped`); a hole bridged, ``extra`` s beyond
@@ -380,13 +403,13 @@ def covariance_step(uh, dt, gx, gy, gz, w, x, y, z, rest, bias_var, clip_var, ex
 
     The start's share reads and writes only ``u.start`` (and constants); the
     others only ``u.axes``: its place in the order changes no bit. The rate,
-    the estimate, ``rest``, ``bias_var`` and ``clip_var`` may be arrays
+    the estimate, ``rest``, ``held``, ``bias_var`` and ``clip_var`` may be arrays
     ``(B,)`` (plain); the hole's arguments and ``with_acc`` are floats, and
     with arrays ``with_acc`` is false (the wrapper counts the start
     recording by recording).
     """
     u = uh[0]
-    uncertainty_propagate(u, dt, gx, gy, gz, w, x, y, z, rest)
+    uncertainty_propagate(u, dt, gx, gy, gz, w, x, y, z, rest, held)
     if hole_var != 0.0 and hole_t0 >= 0.0:
         uncertainty_restart(u, hole_t0)
     uncertainty_bias(u, bias_var)
@@ -462,8 +485,8 @@ def sample_step(state, uh, cov, gx, gy, gz, ax, ay, az, dt, max_residual):
         bias_var = (bias_variance(s, 0, 0) + bias_variance(s, 1, 1)
                     + bias_variance(s, 2, 2)) / BIAS_TRACE_AXES
     covariance_step(uh, step_dt, gx, gy, gz, w, x, y, z, 1.0 if s.rest.detected != 0.0 else 0.0,
-                    bias_var, s.gyro.clipped, dt - step_dt, s.hole.var, s.hole.t0,
-                    ax, ay, az, True)
+                    1.0 if s.rej.time > 0.0 else 0.0, bias_var, s.gyro.clipped,
+                    dt - step_dt, s.hole.var, s.hole.t0, ax, ay, az, True)
     t, h = uncertainty_variances(uh[0])
     zero = 0.0 * t
     cov[0] = t

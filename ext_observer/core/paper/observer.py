@@ -36,6 +36,7 @@ from .. import quaternion as quat
 __all__ = [
     'GAIN_MODES',
     'component_major',
+    'multiply_components',
     'LuenbergerObserver',
     'ObserverConfig',
     'PAPER_ALPHA',
@@ -241,7 +242,7 @@ class LuenbergerObserver:
         shape = np.broadcast_shapes(q.shape, E.shape)
         # The propagation q̂ ⊗ E, scaled by (1 − 4α(q̂̄q̂ − 1)) for extended:
         # that is q̂ ⊗ E − α ∇V(q̂ ⊗ E), the term of Corollary 1.
-        new = _multiply_components(q, E, np.empty(shape))
+        new = multiply_components(q, E, np.empty(shape))
         if cfg.variant == 'extended':
             scale = np.einsum('i...,i...->...', q, q)
             scale -= 1.0
@@ -261,7 +262,7 @@ class LuenbergerObserver:
             else:
                 kappa = cfg.kappa_at(self.measurements_used)
                 innovation *= kappa
-                new += _multiply_components(
+                new += multiply_components(
                     innovation, E, np.empty(np.broadcast_shapes(
                         innovation.shape, E.shape)))
             self.measurements_used += 1
@@ -319,11 +320,15 @@ def _rotation_components(theta, ndim=0):
     return out
 
 
-def _multiply_components(p, q, out):
-    """Hamilton product of components ``(4, ...)`` into ``out``."""
+def multiply_components(p, q, out, scratch=None):
+    """
+    Hamilton product of components ``(4, ...)`` into ``out``.
+
+    ``scratch``: an array of ``out.shape[1:]`` for the terms (else a new one).
+    """
     pw, px, py, pz = p
     qw, qx, qy, qz = q
-    t = np.empty(out.shape[1:])
+    t = np.empty(out.shape[1:]) if scratch is None else scratch
     for row, terms in enumerate((
             ((pw, qw, 1), (px, qx, -1), (py, qy, -1), (pz, qz, -1)),
             ((pw, qx, 1), (px, qw, 1), (py, qz, 1), (pz, qy, -1)),

@@ -2,10 +2,12 @@
 Acceleration rejection: a long turn without a velocity, and a steady turn that is not rest.
 
 The core on a simulated level turn without odometry (the low-passed specific
-force tilted for tens of seconds): rejected, the estimate stays near level;
-off, it tilts; after ``acc_reject_time`` the force is trusted again. The rest
-detection does not take a steady turn's yaw rate for a bias. Plain and
-compiled agree to the bit. No ROS.
+force tilted for as long as the turn lasts): rejected, the estimate stays
+near level, also long past ``acc_reject_time`` (the force turns with the
+body: not gravity); off, it tilts; a force that does not turn with the body
+is trusted again after ``acc_reject_time``. The rest detection does not take
+a steady turn's yaw rate for a bias. Plain and compiled agree to the bit.
+No ROS.
 """
 
 import math
@@ -28,13 +30,22 @@ needs_numba = pytest.mark.skipif(not compiled_module.compiled_available(),
                                  reason='numba is not installed')
 
 
-def _turn(yaw_rate, seconds=30.0, still=10.0):
-    """A level vehicle at SPEED: still (the bias learned at rest), then a constant turn."""
+def _turn(yaw_rate, seconds=30.0, still=10.0, speed=SPEED):
+    """A level vehicle at ``speed``: still (the bias learned at rest), then a constant turn."""
     t = np.arange(int((still + seconds) * RATE)) / RATE
     rate = np.where(t >= still, yaw_rate, 0.0)
     zero = np.zeros_like(t)  # body x forward, z up; the specific force is ω × v and g
     return (np.column_stack((zero, zero, rate)),
-            np.column_stack((zero, rate * SPEED, np.full_like(t, G))))
+            np.column_stack((zero, rate * speed, np.full_like(t, G))))
+
+
+def _accelerating(acceleration, seconds, still=10.0):
+    """A level vehicle still, then speeding up straight ahead at ``acceleration`` (m/s²)."""
+    t = np.arange(int((still + seconds) * RATE)) / RATE
+    zero = np.zeros_like(t)
+    return (np.column_stack((zero, zero, zero)),
+            np.column_stack((np.where(t >= still, acceleration, 0.0), zero,
+                             np.full_like(t, G))))
 
 
 def _run(gyr, acc, params=None, compiled=False, watch=None):
@@ -63,13 +74,51 @@ def test_a_long_turn_without_a_velocity_is_rejected_and_stays_near_level():
     assert seen[-1, 0] > 25.0  # rejected since the turn began
 
 
-def test_after_the_longest_rejection_the_force_is_gravity_again():
-    gyr, acc = _turn(0.3)
-    q, seen = _run(gyr, acc, AhrsParams(acc_reject_time=5.0),
-                   watch=lambda core: [core.field('rej.time')])
+def test_a_turn_that_lasts_is_rejected_for_as_long_as_it_lasts():
+    # 8 m/s at 0.5 rad/s (0.41 g): the apparent gravity 22° off the vertical,
+    # its low-pass still 15° off, for twice acc_reject_time (shortened, for speed).
+    gyr, acc = _turn(0.5, seconds=40.0, speed=8.0)
+    q, seen = _run(gyr, acc, AhrsParams(acc_reject_time=20.0),
+                   watch=lambda core: [core.state[0].rej.time, core.state[0].rej.turned])
     tilt = _tilt_deg(q)
-    assert tilt[-1000:].mean() > 10.0
-    assert seen[:, 0].max() <= 5.0 + 1.0 / RATE
+    assert tilt.max() < 3.5  # at most about acc_reject before it begins
+    assert tilt[-int(20.0 * RATE):].max() < 1.0
+    assert seen[-1, 0] > 38.0  # rejected since the turn began, and still
+    assert seen[-1, 0] - seen[-1, 1] < 5.0  # all but its first seconds held by the turn
+
+
+def test_after_the_longest_rejection_a_force_that_does_not_turn_is_gravity_again():
+    gyr, acc = _accelerating(2.0, 20.0)  # 0.2 g straight ahead: nothing turns
+    q, seen = _run(gyr, acc, AhrsParams(acc_reject_time=12.0),
+                   watch=lambda core: [core.state[0].rej.time, core.state[0].rej.turned])
+    tilt = _tilt_deg(q)
+    assert tilt[-100:].mean() > 10.0
+    assert 11.0 < seen[:, 0].max() <= 12.0 + 1.0 / RATE
+    assert seen[:, 1].max() == 0.0
+
+
+def test_a_tilted_vertical_in_a_spin_is_no_turn_and_the_force_is_gravity_again():
+    # A body spinning in place about the vertical at 0.5 rad/s, gravity its only
+    # force, the gyro's vertical put 6° off: the force's deviation from it is
+    # fixed in the world, not in the body (no turn), and after acc_reject_time
+    # the force is gravity again.
+    n = int(20.0 * RATE)
+    gyr = np.tile((0.0, 0.0, 0.5), (n, 1))
+    acc = np.tile((0.0, 0.0, G), (n, 1))
+    core = AhrsObserver(AhrsParams(acc_reject_time=12.0), use_mag=False, compiled=False)
+    still = int(5.0 * RATE)
+    for k in range(still):
+        core.update((0.0, 0.0, 0.0), acc[k], None, 1.0 / RATE)
+    s = core.state[0]
+    s.rej.carried[:] = [math.sin(math.radians(6.0)), 0.0, math.cos(math.radians(6.0))]
+    times, turned = [], []
+    for k in range(n):
+        core.update(gyr[k], acc[k], None, 1.0 / RATE)
+        times.append(s.rej.time)
+        turned.append(s.rej.turned)
+    assert 11.0 < max(times) <= 12.0 + 1.0 / RATE
+    assert max(turned) < 0.5
+    assert _tilt_deg([core.q])[0] < 1.0
 
 
 def test_a_steady_turn_faster_than_bias_max_is_not_rest():
@@ -116,8 +165,11 @@ def test_a_rate_ramping_into_a_turn_is_not_learned_as_a_bias():
 
 @needs_numba
 def test_plain_and_compiled_agree_to_the_bit_through_a_rejection_and_its_end():
-    gyr, acc = _turn(0.3, seconds=12.0)
-    params = AhrsParams(acc_reject_time=5.0)
+    # A turn (held past acc_reject_time), then speeding up straight (not held).
+    turn_gyr, turn_acc = _turn(0.3, seconds=15.0)
+    straight_gyr, straight_acc = _accelerating(2.0, 15.0, still=2.0)
+    gyr, acc = np.vstack((turn_gyr, straight_gyr)), np.vstack((turn_acc, straight_acc))
+    params = AhrsParams(acc_reject_time=12.0)
     plain, _ = _run(gyr, acc, params)
     compiled, _ = _run(gyr, acc, params, compiled=True)
     assert np.array_equal(plain, compiled)
@@ -147,16 +199,71 @@ def test_the_tilting_rate_is_the_horizontal_part_of_the_rate_less_the_bias():
     dt = 0.01
     k = dt / (2.0 * 1.5 + dt)
     expected = 0.25 + k * (math.hypot(w[0], w[1]) - 0.25)
-    assert ar._tilting(s, dt) == pytest.approx(expected, rel=1e-12)
+    world = ar._world_rate(s)
+    assert world == pytest.approx(tuple(w), rel=1e-12)
+    assert ar._tilting(s, world[0], world[1], dt) == pytest.approx(expected, rel=1e-12)
     assert s.rej.tilt == pytest.approx(expected, rel=1e-12)
 
 
 def test_a_reset_forgets_the_carried_vertical_the_rejection_and_the_tilt():
     s = STATE.plain()
     s.rej.carried[:] = [0.1, 0.2, 0.9]
-    s.rej.time, s.rej.tilt = 0.7, 0.3
+    s.rej.dev[:] = [0.1, -0.2, 0.0]
+    s.rej.path[:] = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    s.rej.time, s.rej.tilt, s.rej.turned = 0.7, 0.3, 0.5
+    s.rej.follow, s.rej.predicted = 0.2, 0.4
     ar.acc_rejection_reset(s)
     assert list(s.rej.carried) == [0.0, 0.0, 0.0] and s.rej.time == 0.0 and s.rej.tilt == 0.0
+    assert list(s.rej.dev) == [0.0] * 3 and list(s.rej.path) == [0.0] * 6
+    assert s.rej.turned == 0.0 and s.rej.follow == 0.0 and s.rej.predicted == 0.0
+
+
+def _deviation_state(d):
+    s = STATE.plain()
+    s.par.tau_acc = 2.0
+    s.bias.p[:] = [1e-8, 0.0, 0.0, 1e-8, 0.0, 1e-8]
+    s.rej.dev[:] = d
+    return s
+
+
+@pytest.mark.parametrize('fixed_in, turns', [('body', True), ('world', False)])
+def test_a_deviation_turns_with_the_body_only_if_the_gyro_turns_it(fixed_in, turns):
+    d, w, dt = np.array([0.2, 0.1, 0.0]), np.array([0.0, 0.0, 0.5]), 0.01
+    s = _deviation_state(d)
+    s.rej.follow, s.rej.predicted = 0.01, 0.02
+    c, sn = math.cos(0.5 * dt), math.sin(0.5 * dt)
+    h = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]]) @ d if fixed_in == 'body' else d
+    p = np.cross(w, h)  # the rate of a deviation fixed in the body
+    k = dt / (2.0 + dt)
+    assert bool(ar._turns_with_body(s, *h, *w, dt)) is turns
+    assert s.rej.follow == pytest.approx(0.01 + k * (np.dot((h - d) / dt, p) - 0.01), rel=1e-12)
+    assert s.rej.predicted == pytest.approx(0.02 + k * (np.dot(p, p) - 0.02), rel=1e-12)
+
+
+def test_a_deviation_along_the_rotation_axis_is_no_turn():
+    d = np.array([0.0, 0.0, 0.2])  # along ω: gravity would look the same
+    s = _deviation_state(d)
+    assert not ar._turns_with_body(s, *d, 0.0, 0.0, 0.5, 0.01)
+    assert s.rej.predicted == 0.0
+
+
+def test_the_bias_carries_u_by_its_sigma_times_the_time_unless_the_body_turns():
+    s = STATE.plain()
+    sigma = 0.002
+    s.bias.p[:] = [0.5 * sigma ** 2, 0.0, 0.0, sigma ** 2, 0.0, 0.25 * sigma ** 2]
+    s.est.q[:] = [math.cos(0.2), 0.0, math.sin(0.2), 0.0]  # pitched: R's rows not the axes
+    for _ in range(50):
+        ar._path_step(s, 0.1)
+    assert ar._carried_off(s) == pytest.approx(sigma * 5.0, rel=1e-12)
+    # A full turn about the vertical at 0.5 rad/s, level: the path comes back to nothing.
+    ar._rejection_starts(s)
+    steps = 1000
+    dt = 2.0 * math.pi / 0.5 / steps
+    for k in range(steps):
+        a = 0.5 * (k + 0.5) * dt
+        s.est.q[:] = [math.cos(0.5 * a), 0.0, 0.0, math.sin(0.5 * a)]
+        ar._path_step(s, dt)
+    assert ar._carried_off(s) < 1e-3 * sigma * steps * dt
 
 
 def test_a_force_rejected_too_long_becomes_the_vertical_it_shows():

@@ -23,8 +23,10 @@ import pytest
 
 from ext_observer.core.ahrs import magcal_kernel
 from ext_observer.core.ahrs.ahrs_filters import rotate
-from ext_observer.core.ahrs.field_kernel import (HEADING_LOST, _doubt_gain, _turn_heading,
-                                                ahrs_update_mag, field_doubt)
+from ext_observer.core.ahrs.field_kernel import (CLIP_HEADING_SHARE, FIELD_HEADING_BIAS,
+                                                FIELD_HEADING_NOISE, HEADING_LOST, _doubt_gain,
+                                                _turn_heading, ahrs_update_mag, field_back,
+                                                field_clipped, field_doubt)
 from ext_observer.core.ahrs.bias_kernel import bias_measure
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.ahrs_state import STATE
@@ -451,6 +453,41 @@ def test_the_calibration_learns_nothing_from_a_clipped_stretch():
     assert calibration(est).fields > before
 
 
+def test_after_a_short_clip_the_heading_is_not_taken_afresh_from_a_bent_field():
+    # A level body turning at 0.5 rad/s past the gyro's range for 0.1 s
+    # (it loses about 5°), then for 1 s a field bent 30° in heading that
+    # the norm and dip tests cannot see (a magnet passing by). The clip's
+    # doubt (σ about 5°) weighs the fields with its Kalman gain and keeps
+    # them within its gate: the heading stays near its loss and the field
+    # takes the loss back once it is straight again, where taking the heading
+    # afresh from the fields after the clip followed the bend to 30°.
+    est = AhrsObserver(AhrsParams(mag_cal=False, gyro_range=RANGE), use_mag=True,
+                       compiled=False)
+    straight = world_field(NORM, DIP)
+    bent = world_field(NORM, DIP, math.radians(30.0))
+    yaw = 0.0
+
+    def step(rate, field=straight):
+        nonlocal yaw
+        yaw += rate * DT
+        est.update((0.0, 0.0, max(-RANGE, min(RANGE, rate))), LEVEL, body_field(field, yaw), DT)
+        return abs(wrap(yaw_of(est.q) - yaw))
+
+    for _ in range(300):
+        step(0.0)
+    for _ in range(500):
+        step(0.5)
+    for _ in range(10):
+        step(1.2 * RANGE)
+    assert est.clipped == 10
+    assert record(est).field.head_doubt > math.radians(3.0) ** 2
+    during = max(step(0.5, bent) for _ in range(100))
+    assert during < math.radians(10.0)
+    for _ in range(200):
+        after = step(0.5)
+    assert after < math.radians(3.0)
+
+
 def test_after_a_hole_the_heading_comes_back_from_the_field_as_its_doubt_allows():
     # A level body at rest, the field fixed; a 0.45 s hole hides a turn of
     # 16° (40 °/s for 0.4 s) that the bridge between two still samples
@@ -490,6 +527,26 @@ def test_the_gyros_losses_add_up_as_the_fields_doubt_until_the_heading_is_lost()
     assert (s.field.head_doubt, s.field.tilt_doubt, s.field.mag_used) == (0.0, 0.0, 0.0)
 
 
+def test_a_clipped_stretchs_losses_add_up_in_the_heading_doubts_sigma():
+    # Along a clipped stretch the rate stays beyond the range: each sample
+    # adds CLIP_HEADING_SHARE of its σ to the doubt's σ (not its variance to
+    # the variance), the tilt share alike, until the heading is lost.
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = record(est)
+    var = (RANGE * DT) ** 2
+    for n in range(1, 4):
+        field_clipped(s, var)
+        sigma = n * CLIP_HEADING_SHARE * RANGE * DT
+        assert s.field.head_doubt == pytest.approx(sigma * sigma, rel=1e-12)
+        assert s.field.tilt_doubt == pytest.approx(sigma * sigma, rel=1e-12)
+    assert s.field.field_clipped == 1.0 and s.field.mag_used == 20.0
+    while s.field.mag_used != 0.0:
+        field_clipped(s, var)
+    assert s.field.head_doubt == 0.0 and s.field.tilt_doubt == 0.0
+
+
 def test_the_tilts_doubt_is_forgotten_at_the_inclinations_pace():
     # T <- T exp(-2 dt / (tau_acc + tau_acc_gain)) at each field, also one
     # whose norm is off the references (its gain then the usual one).
@@ -502,3 +559,50 @@ def test_the_tilts_doubt_is_forgotten_at_the_inclinations_pace():
     assert _doubt_gain(s, 0.125, 2.0 * NORM, DIP, 0.0, dt) == 0.125
     tau = s.par.tau_acc + s.par.tau_acc_gain
     assert s.field.tilt_doubt == pytest.approx(0.01 * math.exp(-2.0 * dt / tau), rel=1e-12)
+
+
+def test_a_field_back_after_a_loss_doubts_the_heading_not_the_tilt_and_keeps_what_was_learned():
+    # The variance the gyro alone added is the heading's doubt (the tilt's
+    # none); the references and the calibration stay, the calibration
+    # follows the field afresh; past HEADING_LOST the heading is taken
+    # afresh from the next fields; in 6D nothing happens.
+    est = AhrsObserver(AhrsParams(), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = record(est)
+    ref = (s.field.ref[0], s.field.ref[1])
+    field_back(s, 0.0)
+    assert s.field.head_doubt == 0.0 and s.cal.fresh == 0.0
+    field_back(s, 0.25 * HEADING_LOST)
+    field_back(s, 0.5 * HEADING_LOST)
+    assert s.field.head_doubt == pytest.approx(0.75 * HEADING_LOST, rel=1e-12)
+    assert s.field.tilt_doubt == 0.0 and s.field.mag_used == 20.0
+    assert (s.field.ref[0], s.field.ref[1]) == ref and s.field.has_ref == 1.0
+    assert s.cal.fresh == 1.0 and s.cal_feed.wait == math.inf
+    field_back(s, 0.25 * HEADING_LOST)
+    assert (s.field.head_doubt, s.field.mag_used) == (0.0, 0.0)
+    six = AhrsObserver(AhrsParams(mag_cal=False), use_mag=False, compiled=False)
+    six.update(STILL, LEVEL, None, DT)
+    field_back(record(six), 0.1)
+    assert record(six).field.head_doubt == 0.0
+
+
+def test_a_field_off_the_references_does_not_end_the_doubt():
+    # Its own r is large (its deviation over cos²(dip)), so its Kalman gain
+    # is small; the doubt ends only where an undisturbed field's gain would
+    # be the usual one: P / (P + r_u) <= k_mag.
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = record(est)
+    k_mag = s.coef.k_mag
+    ru = FIELD_HEADING_NOISE ** 2 / DT + FIELD_HEADING_BIAS ** 2 / DT
+    p = 3.0 * ru * k_mag
+    s.field.head_doubt = p
+    dip = DIP + math.radians(9.0)  # off by less than mag_dip_th
+    k = _doubt_gain(s, k_mag, NORM, dip, 0.0, DT)
+    assert k == k_mag  # its own gain is below the usual one
+    assert s.field.head_doubt > 0.5 * p  # kept: P ← (1 − k)² P + k² r, not ended
+    s.field.head_doubt = 0.5 * ru * k_mag
+    _doubt_gain(s, k_mag, NORM, DIP, 0.0, DT)
+    assert s.field.head_doubt == 0.0

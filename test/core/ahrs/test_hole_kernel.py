@@ -60,7 +60,8 @@ def test_a_hole_is_an_interval_over_the_factor_and_a_run_of_them_ends():
     assert s.hole.run == 0.0
 
 
-@pytest.mark.parametrize('steps, weight', [(1.0, 1.0), (2.0, 0.75), (4.0, 0.625), (1e6, 0.5000005)])
+@pytest.mark.parametrize('steps, weight',
+                         [(1.0, 1.0), (2.0, 0.75), (4.0, 0.625), (1e6, 0.5000005)])
 def test_the_bridges_rate_is_what_the_usual_steps_would_have_integrated(steps, weight):
     s = STATE.plain()
     s.coef.dt = DT
@@ -165,18 +166,22 @@ def _turning(rate_hz, seconds, lost=None):
     return gyr[keep], acc[keep], t[keep], angle[keep], axis
 
 
+def _bursts_lost(first, every, length=0.2):
+    """The samples kept (a mask of times): ``length`` s lost every ``every`` s from ``first`` s."""
+    def kept(t):
+        keep = np.mod(t - first, every) >= length
+        keep[:2] = True  # the start is never lost
+        return keep
+    return kept
+
+
 def test_a_run_with_bursts_lost_turns_as_the_body_does():
     # 200 ms lost every 2 s while the body turns up to 1.5 rad/s: the turn
     # about the axis follows the body's (the rotation in each hole bridged),
     # and the covariance grows with each hole. Dropping the holes (an
     # interval over max_dt, what the estimator did before it bridged them)
     # loses the turn in each.
-    def lost(t):
-        keep = np.mod(t - 0.7, 2.0) >= 0.2
-        keep[:2] = True
-        return keep
-
-    gyr, acc, times, angle, axis = _turning(200.0, 20.0, lost)
+    gyr, acc, times, angle, axis = _turning(200.0, 20.0, _bursts_lost(0.7, 2.0))
     bridged = attitude_from_imu(gyr, acc, times=times, parameters={'use_mag': False})
     dropped = attitude_from_imu(gyr, acc, times=times,
                                 parameters={'use_mag': False, 'max_dt': 0.05})
@@ -198,12 +203,7 @@ def test_the_general_steps_follow_a_hole_as_the_one_call_sample_does():
     from ext_observer.pipeline.raw_imu import RawImuPipeline
     from ext_observer.recordings.recording import node_settings
 
-    def lost(t):
-        keep = np.mod(t - 0.3, 1.0) >= 0.2
-        keep[:2] = True
-        return keep
-
-    gyr, acc, times, _, _ = _turning(200.0, 4.0, lost)
+    gyr, acc, times, _, _ = _turning(200.0, 4.0, _bursts_lost(0.3, 1.0))
     runs = []
     for general in (False, True):
         pipeline = RawImuPipeline(node_settings({'use_mag': False}), compiled=False)

@@ -86,3 +86,32 @@ def test_parameters_are_refused_with_their_name():
         UncertaintyParams(gain=1.0)
     with pytest.raises(ValueError, match=r'covariance\.\*: heading_floor must be finite'):
         node_settings(**{'covariance.heading_floor': math.nan})
+
+
+def test_the_variance_held_since_the_last_field_is_what_the_gyro_alone_added():
+    # After a field, P grows with the gyro's noise and bias; once the field
+    # is lost (FIELD_SILENT) the held term grows with the rotation: the
+    # held variance is P's growth since the field plus that term, and the
+    # heading variance published grows by exactly as much (the floors, the
+    # calibration's and the lag's shares are constant here).
+    from ext_observer.core.ahrs.uncertainty_kernel import GYRO_MOTION_SIGMA, GYRO_SCALE_SIGMA
+    dt, rate = 0.01, 0.5
+    tracker = AttitudeUncertainty(UncertaintyParams(stamp_error=0.0))
+    tracker.start(dt)
+    for _ in range(100):
+        tracker.step(dt, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), False)
+        tracker.field(dt, 0.05)
+    assert tracker.held_variance == 0.0
+    after_field = tracker.heading_variance
+    ph = tracker._u.axes.ph
+    steps = 500
+    for _ in range(steps):
+        tracker.step(dt, (0.0, 0.0, rate), (1.0, 0.0, 0.0, 0.0), False)
+    lost = tracker._u.held.yaw  # the turn since the field was lost (FIELD_SILENT), rad
+    assert lost == pytest.approx((steps * dt - 1.0) * rate, abs=2.0 * rate * dt)
+    assert tracker._u.held.rotation == lost
+    held = (GYRO_SCALE_SIGMA * lost) ** 2 + (GYRO_MOTION_SIGMA * lost) ** 2
+    grown = tracker._u.axes.ph - ph
+    assert grown > 0.0
+    assert tracker.held_variance == pytest.approx(grown + held, rel=1e-12)
+    assert tracker.heading_variance - after_field == pytest.approx(grown + held, rel=1e-9)

@@ -135,7 +135,8 @@ def test_the_one_call_sample_step_is_the_general_steps(use_mag):
         hole, usual = general.hole_variance, general.step_interval
         tracker.step(usual, gyr, expected, general.rest, general.bias_variance,
                      general.clip_variance, acc,
-                     (dt - usual, hole, general.hole_restart) if hole else None)
+                     (dt - usual, hole, general.hole_restart) if hole else None,
+                     general.held)
         assert tuple(q) == tuple(expected)
         assert tuple(cov) == tuple(tracker.covariance)
         t, h = tracker.tilt_variance, tracker.heading_variance
@@ -250,10 +251,10 @@ def test_a_lost_fields_rotation_counts_every_axis_unsigned_and_a_used_field_shri
     u = tracker.state[0]
     dt, rates = 0.01, ((0.0, 0.0, 2.0), (3.0, 0.0, -4.0), (-3.0, 0.0, 0.0))
     for _ in range(int(K.FIELD_SILENT / dt) + 1):
-        K.uncertainty_propagate(u, dt, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
+        K.uncertainty_propagate(u, dt, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     assert u.held.rotation == 0.0
     for g in rates:
-        K.uncertainty_propagate(u, dt, *g, 1.0, 0.0, 0.0, 0.0, 0.0)
+        K.uncertainty_propagate(u, dt, *g, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     assert u.held.rotation == pytest.approx(dt * (2.0 + 5.0 + 3.0), rel=1e-12)
     assert u.held.yaw == pytest.approx(dt * (2.0 - 4.0), rel=1e-12)
     tracker.field(0.01, 0.25)
@@ -389,9 +390,36 @@ def test_a_bridged_hole_grows_the_variances_by_its_noise_its_bias_and_its_bridge
     holes = []
     for hole_var in (0.0, var):
         w = copy.deepcopy(before)
-        K.covariance_step([w], 0.01, 0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+        K.covariance_step([w], 0.01, 0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
                           extra, hole_var, -1.0, 0.0, 0.0, 9.8, False)
         holes.append((w.axes.ph, w.axes.b))
     (without, b), (with_hole, _) = holes  # the bias's variance as the step left it
     assert with_hole - without == pytest.approx(2e-3 ** 2 * extra + b * extra ** 2 + var,
                                                 rel=1e-9)
+
+
+@pytest.mark.parametrize('turn', [0.0, 0.5])
+def test_held_on_the_gyro_the_tilt_grows_with_the_bias_unless_the_body_turns_it_round(turn):
+    # The inclination held on the gyro (the force rejected: no correction):
+    # a bias error β of variance B tilts the world along R β. A body that
+    # does not turn: the tilt's variance grows by B t²; one turning about the
+    # vertical at Ω carries β round: 2 B (1 − cos Ω t) / Ω², never above 4 B / Ω².
+    b, dt, seconds = 1e-6, 0.01, 20.0
+    params = UncertaintyParams(gyro_noise=1e-9, gyro_rate_noise=0.0, bias_std=1e-3,
+                               bias_init=1e-3, bias_time=1e6, acc_noise=0.05)
+    tracker = AttitudeUncertainty(params, use_mag=False)
+    tracker.start(dt)
+    u = tracker.state[0]
+    u.axes.pt, u.axes.ct, u.axes.ct_turned, u.axes.b = 0.0, 0.0, 0.0, b
+    count = int(seconds / dt)
+    for _ in range(count):
+        tracker.step(dt, (0.0, 0.0, turn), (1.0, 0.0, 0.0, 0.0), False, held=True)
+    t = count * dt
+    expected = (b * t * t if turn == 0.0
+                else 2.0 * b * (1.0 - math.cos(turn * t)) / turn ** 2)
+    # (To the order of Ω dt: the steps turn C after it added to the tilt.)
+    assert u.axes.pt == pytest.approx(expected + b * t * dt, rel=2e-3 + turn * dt * 4.0)
+    # Not held, the force corrects it every sample: back near the accelerometer's own.
+    for _ in range(count):
+        tracker.step(dt, (0.0, 0.0, turn), (1.0, 0.0, 0.0, 0.0), False)
+    assert u.axes.pt < 0.1 * b * t * t
