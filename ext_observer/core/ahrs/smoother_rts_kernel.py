@@ -42,6 +42,31 @@ ACC_BIAS = 9
 SCALE = 12
 
 
+def theta(k):
+    """Where the attitude error's axis ``k`` sits in the error state."""
+    return THETA + k
+
+
+def bias(k):
+    """Where the gyro bias's axis ``k`` sits in the error state."""
+    return BIAS + k
+
+
+def vel(k):
+    """Where the velocity's axis ``k`` sits in the error state."""
+    return VEL + k
+
+
+def acc_bias(k):
+    """Where the accelerometer bias's axis ``k`` sits in the error state."""
+    return ACC_BIAS + k
+
+
+def scale(k):
+    """Where the gyro scale factor's axis ``k`` sits in the error state."""
+    return SCALE + k
+
+
 def rotation_rows(w, x, y, z):
     """``R(q)`` of a unit quaternion, row-major, as a 9-tuple (``v_world = R v_body``)."""
     return (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
@@ -104,16 +129,16 @@ def transition(phi, sums):
     cross = (0.0, -az, ay, az, 0.0, -ax, -ay, ax, 0.0)
     for i in range(3):
         for j in range(3):
-            phi[THETA + i, BIAS + j] = -sums[3 * i + j]
-            phi[THETA + i, SCALE + j] = -sums[12 + 3 * i + j]
+            phi[theta(i), bias(j)] = -sums[3 * i + j]
+            phi[theta(i), scale(j)] = -sums[12 + 3 * i + j]
             # The heading's error left out of the velocity: the velocity is
             # known too loosely to tell the heading, and would spoil it.
-            phi[VEL + i, THETA + j] = -cross[3 * i + j] if j < 2 else 0.0
+            phi[vel(i), theta(j)] = -cross[3 * i + j] if j < 2 else 0.0
             acc = 0.0
             for m in range(3):
                 acc += cross[3 * i + m] * sums[3 * m + j]
-            phi[VEL + i, BIAS + j] = 0.5 * acc
-            phi[VEL + i, ACC_BIAS + j] = -sums[3 * i + j]
+            phi[vel(i), bias(j)] = 0.5 * acc
+            phi[vel(i), acc_bias(j)] = -sums[3 * i + j]
 
 
 def propagate(p, phi, dt_sum, q_gyr, q_head, q_bias, q_vel, q_acc_bias, out_pred):
@@ -136,13 +161,13 @@ def propagate(p, phi, dt_sum, q_gyr, q_head, q_bias, q_vel, q_acc_bias, out_pred
             for m in range(DIM):
                 acc += tmp[DIM * i + m] * phi[j, m]
             out_pred[i, j] = acc
-    out_pred[THETA + 2, THETA + 2] += q_head * dt_sum
+    out_pred[theta(2), theta(2)] += q_head * dt_sum
     for i in range(3):
         if i < 2:
-            out_pred[THETA + i, THETA + i] += q_gyr * dt_sum
-        out_pred[BIAS + i, BIAS + i] += q_bias * dt_sum
-        out_pred[VEL + i, VEL + i] += q_vel * dt_sum
-        out_pred[ACC_BIAS + i, ACC_BIAS + i] += q_acc_bias * dt_sum
+            out_pred[theta(i), theta(i)] += q_gyr * dt_sum
+        out_pred[bias(i), bias(i)] += q_bias * dt_sum
+        out_pred[vel(i), vel(i)] += q_vel * dt_sum
+        out_pred[acc_bias(i), acc_bias(i)] += q_acc_bias * dt_sum
 
 
 def heading_update(p, dx, hx, hy, hz, rho, tilt):
@@ -157,9 +182,9 @@ def heading_update(p, dx, hx, hy, hz, rho, tilt):
     if hh <= 0.0:
         return 0.0
     h = [0.0] * DIM
-    h[THETA + 2] = 1.0
+    h[theta(2)] = 1.0
     if tilt:
-        h[THETA + 1] = -hz / hh
+        h[theta(1)] = -hz / hh
     return scalar_update(p, dx, h, math.atan2(hx, hy), rho)
 
 
@@ -303,7 +328,7 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, s0, p0, gra
         for c in range(3):
             for i in range(DIM):
                 h[i] = 0.0
-            h[VEL + c] = 1.0
+            h[vel(c)] = 1.0
             var = rest_var if at_rest else vel_var * vel_tau / span
             scalar_update(p, dx, h, -(vx, vy, vz)[c], var)
         if n_mag > 0:
@@ -315,21 +340,21 @@ def rts_forward(gyr, acc, mag, rest, count, dt, use_mag, q0, b0, a0, s0, p0, gra
             rho = mag_var * mag_tau / span * worse * worse
             heading_update(p, dx, sh[0], sh[1], sh[2], rho, tilt)
         # The reset: the correction moves into the nominal.
-        cw, cx, cy, cz = rotation_quaternion(dx[THETA], dx[THETA + 1], dx[THETA + 2])
+        cw, cx, cy, cz = rotation_quaternion(dx[theta(0)], dx[theta(1)], dx[theta(2)])
         w, x, y, z = quat_multiply(cw, cx, cy, cz, w, x, y, z)
         w, x, y, z = unit(w, x, y, z)
-        bx += dx[BIAS]
-        by += dx[BIAS + 1]
-        bz += dx[BIAS + 2]
-        vx += dx[VEL]
-        vy += dx[VEL + 1]
-        vz += dx[VEL + 2]
-        ax += dx[ACC_BIAS]
-        ay += dx[ACC_BIAS + 1]
-        az += dx[ACC_BIAS + 2]
-        sx += dx[SCALE]
-        sy += dx[SCALE + 1]
-        sz += dx[SCALE + 2]
+        bx += dx[bias(0)]
+        by += dx[bias(1)]
+        bz += dx[bias(2)]
+        vx += dx[vel(0)]
+        vy += dx[vel(1)]
+        vz += dx[vel(2)]
+        ax += dx[acc_bias(0)]
+        ay += dx[acc_bias(1)]
+        az += dx[acc_bias(2)]
+        sx += dx[scale(0)]
+        sy += dx[scale(1)]
+        sz += dx[scale(2)]
         nominal[k, 0], nominal[k, 1], nominal[k, 2] = bx, by, bz
         nominal[k, 3], nominal[k, 4], nominal[k, 5] = ax, ay, az
         nominal[k, 6], nominal[k, 7], nominal[k, 8] = sx, sy, sz
@@ -433,24 +458,24 @@ def rts_output(count, k_count, steps, qn, smooth, corrs, posts, q_out, cov_out):
             k += 1
         # n in (steps[k − 1], steps[k]]: at a step, the smoothed error of its update.
         if steps[k] == n or k == 0:
-            ex = smooth[k, THETA]
-            ey = smooth[k, THETA + 1]
-            ez = smooth[k, THETA + 2]
+            ex = smooth[k, theta(0)]
+            ey = smooth[k, theta(1)]
+            ez = smooth[k, theta(2)]
             for i in range(3):
                 for j in range(3):
-                    cov_out[n, i, j] = posts[k, THETA + i, THETA + j]
+                    cov_out[n, i, j] = posts[k, theta(i), theta(j)]
         else:
             a = (n - steps[k - 1]) / (steps[k] - steps[k - 1])
-            e0 = smooth[k - 1, THETA]
-            e1 = smooth[k - 1, THETA + 1]
-            e2 = smooth[k - 1, THETA + 2]
-            ex = e0 + a * (smooth[k, THETA] + corrs[k, THETA] - e0)
-            ey = e1 + a * (smooth[k, THETA + 1] + corrs[k, THETA + 1] - e1)
-            ez = e2 + a * (smooth[k, THETA + 2] + corrs[k, THETA + 2] - e2)
+            e0 = smooth[k - 1, theta(0)]
+            e1 = smooth[k - 1, theta(1)]
+            e2 = smooth[k - 1, theta(2)]
+            ex = e0 + a * (smooth[k, theta(0)] + corrs[k, theta(0)] - e0)
+            ey = e1 + a * (smooth[k, theta(1)] + corrs[k, theta(1)] - e1)
+            ez = e2 + a * (smooth[k, theta(2)] + corrs[k, theta(2)] - e2)
             for i in range(3):
                 for j in range(3):
-                    c0 = posts[k - 1, THETA + i, THETA + j]
-                    cov_out[n, i, j] = c0 + a * (posts[k, THETA + i, THETA + j] - c0)
+                    c0 = posts[k - 1, theta(i), theta(j)]
+                    cov_out[n, i, j] = c0 + a * (posts[k, theta(i), theta(j)] - c0)
         cw, cx, cy, cz = rotation_quaternion(ex, ey, ez)
         w, x, y, z = quat_multiply(cw, cx, cy, cz, qn[n, 0], qn[n, 1], qn[n, 2], qn[n, 3])
         q_out[n, 0], q_out[n, 1], q_out[n, 2], q_out[n, 3] = w, x, y, z
