@@ -12,7 +12,9 @@ against the online estimator's::
     .venv/bin/python bench/smooth_rts_broad.py --data ../shared/broad
     .venv/bin/python bench/smooth_rts_broad.py --set mag_sigma=0.1 --set velocity_tau=2
 
-``--cache FILE`` keeps each trial's online calibration (the first pass) between runs.
+``--cache FILE`` keeps each trial's online calibration (the first pass) between runs;
+``--other`` scores :func:`~ext_observer.core.ahrs.smoother.smooth_attitude`'s estimate
+instead, with this smoother's covariance (whether it could serve that estimate).
 """
 
 import argparse
@@ -28,6 +30,7 @@ from ext_observer.broad.data import data_dir, find_trials, load_trials
 from ext_observer.broad.scoring import error_angles, score
 from ext_observer.broad.split import split_of
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
+from ext_observer.core.ahrs.smoother import smooth_attitude
 from ext_observer.core.ahrs.smoother_rts import online_calibration, smooth_attitude_rts
 
 # Means over the BROAD trials of each split and over all 22 (python -m ext_observer
@@ -67,7 +70,7 @@ def nees(q, cov, trial):
             float(np.mean(heading[keep] ** 2 / cov[keep, 2, 2])))
 
 
-def run(trials, params, cals, modes, mag_lag=False):
+def run(trials, params, cals, modes, mag_lag=False, other=False):
     rows = []
     for t in trials:
         for mode in modes:
@@ -80,6 +83,9 @@ def run(trials, params, cals, modes, mag_lag=False):
             else:
                 q, cov = smooth_attitude_rts(t.gyr, t.acc, None, t.rate, params)
             seconds = time.perf_counter() - start
+            if other:
+                # The smoother of smoother.py scored instead, with this one's covariance.
+                q, _ = smooth_attitude(t.gyr, t.acc, t.mag if mode == '9D' else None, t.rate)
             s = score(q, t.quat, t.movement)
             rows.append({'trial': t.name, 'mode': mode, 'split': split_of(t.name),
                          'seconds': seconds, 'nees': nees(q, cov, t), **s})
@@ -125,6 +131,8 @@ def main(argv=None):
     parser.add_argument('--per-trial', action='store_true')
     parser.add_argument('--timing', action='store_true', help='also time the online run')
     parser.add_argument('--json', default=None)
+    parser.add_argument('--other', action='store_true',
+                        help="score smoother.py's estimate against this covariance instead")
     parser.add_argument('--mag-lag', action='store_true',
                         help="take out the field's lag the online calibration learned")
     args = parser.parse_args(argv)
@@ -133,7 +141,7 @@ def main(argv=None):
     trials = load_trials([f for f in found if args.split in ('all', split_of(f[0]))])
     modes = ('9D', '6D') if args.mode == 'both' else (args.mode,)
     cals = calibrations(trials, args.cache) if '9D' in modes else {}
-    rows = run(trials, params, cals, modes, args.mag_lag)
+    rows = run(trials, params, cals, modes, args.mag_lag, args.other)
     if args.per_trial:
         for r in rows:
             print(f'{r["trial"]:45} {r["mode"]} {r[KEY[r["mode"]]]:7.3f} '
