@@ -107,7 +107,8 @@ def fit_calibration(mag, q, rate, prior_bias=None, soft_iron=0.05, hard_iron=10.
         Prior σ of each element of ``E`` (the online calibrator's
         ``mag_cal_soft_iron``).
     hard_iron : float
-        Prior σ of the hard iron about ``prior_bias``, in field norms.
+        Prior σ of the hard iron about ``prior_bias``, in units of the median
+        norm of ``mag − prior_bias`` (the default leaves it free).
     robust : float
         The Cauchy weight's scale, relative to the field's norm.
     correlation : float
