@@ -1,0 +1,130 @@
+"""
+``python -m bench.smooth_hard_iron``: the smoothed 9D estimate with a hard iron of 2× the field.
+
+Each BROAD trial's field gets an offset of twice its median norm, in a
+direction fixed per trial (``numpy.random.default_rng(zlib.crc32(name))``),
+added to every sample; the calibration is unknown to the estimator. Scored
+over the trial's movement samples (:func:`ext_observer.broad.scoring.score`),
+beside the undistorted smoothed figure and the online one, as means over the
+tuning and the held-out trials apart (:mod:`ext_observer.broad.split`) and
+over all (docs/offline.md). ``--calibration fit``: the smoother's heading
+from the calibration fitted on the whole recording
+(:func:`~ext_observer.core.ahrs.smoother_calibration.fit_calibration`, the
+online pass's applied hard iron as its prior's mean) instead of the online
+pass's calibration, for measuring it (the smoother does not use it yet).
+"""
+
+import argparse
+import contextlib
+import json
+import sys
+import zlib
+
+import numpy as np
+
+__all__ = ['hard_iron', 'main', 'trial_figures']
+
+# The offset's norm, in units of the trial's field norm.
+HARD_IRON = 2.0
+
+
+def hard_iron(name, mag, factor=HARD_IRON):
+    """The trial's offset (3,): ``factor`` × its median field norm, direction from its name."""
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
+    direction = rng.normal(size=3)
+    direction /= np.linalg.norm(direction)
+    norm = np.linalg.norm(mag, axis=1)
+    return factor * float(np.median(norm[np.isfinite(norm)])) * direction
+
+
+def trial_figures(trial):
+    """The 9D total error (°) of one trial: online and smoothed, undistorted and hard-iron."""
+    from ext_observer.broad.data import Trial
+    from ext_observer.broad.run import estimate_ours, smoothed_estimate
+    from ext_observer.broad.scoring import score
+    mag = trial.mag + hard_iron(trial.name, trial.mag)
+    distorted = Trial(trial.name, trial.gyr, trial.acc, mag, trial.quat, trial.movement,
+                      trial.rate)
+    out = {}
+    for label, t in (('undistorted', trial), ('hard_iron', distorted)):
+        out[f'smoothed_{label}'] = score(smoothed_estimate(t, True), t.quat,
+                                         t.movement)['total_rmse_deg']
+    online = estimate_ours([distorted], ['9D'], 'extended')[0]['9D'][trial.name]
+    out['online_hard_iron'] = score(online, distorted.quat, distorted.movement)['total_rmse_deg']
+    return out
+
+
+@contextlib.contextmanager
+def fitted_calibration():
+    """Within: the smoother calibrates the field by :func:`fit_calibration`."""
+    from ext_observer.core.ahrs import smoother
+    from ext_observer.core.ahrs.smoother_calibration import fit_calibration
+    calibration, heading = smoother._calibration, smoother._heading
+    prior = {}
+
+    def raw(est):
+        cal = est.calibration
+        prior['bias'] = cal.bias if cal is not None and cal.applied else None
+        return lambda mag: mag
+
+    def fitted(q, mag, rate, p):
+        fit = fit_calibration(mag, q, rate, prior_bias=prior['bias'])
+        return heading(q, fit.apply(mag), rate, p)
+
+    smoother._calibration, smoother._heading = raw, fitted
+    try:
+        yield
+    finally:
+        smoother._calibration, smoother._heading = calibration, heading
+
+
+def _means(rows, names):
+    keys = rows[names[0]].keys() if names else ()
+    return {k: float(np.mean([rows[n][k] for n in names])) for k in keys}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='python -m bench.smooth_hard_iron', description=__doc__)
+    parser.add_argument('--data', default=None, help='BROAD folder (default: as broad finds it)')
+    parser.add_argument('--trials', nargs='*', help='trial name patterns (default: all)')
+    parser.add_argument('--json', help='write the per-trial figures here')
+    parser.add_argument('--calibration', choices=('online', 'fit'), default='online',
+                        help="the smoother's calibration: the online pass's (shipped) or "
+                             'the one fitted on the whole recording')
+    args = parser.parse_args(argv)
+    with fitted_calibration() if args.calibration == 'fit' else contextlib.nullcontext():
+        return _run(args)
+
+
+def _run(args):
+    from ext_observer.broad.data import data_dir, find_trials, load_trial
+    from ext_observer.broad.split import split_of
+    rows = {}
+    for name, path in find_trials(data_dir(args.data), args.trials):
+        rows[name] = trial_figures(load_trial(path, name))
+        r = rows[name]
+        print(f'{name[:28]:28s} smoothed {r["smoothed_undistorted"]:6.3f}° '
+              f'hard iron {r["smoothed_hard_iron"]:6.3f}° '
+              f'({r["smoothed_hard_iron"] / r["smoothed_undistorted"]:4.2f}×) '
+              f'online {r["online_hard_iron"]:6.2f}°', flush=True)
+    groups = {'tuning': [n for n in rows if split_of(n) == 'tuning'],
+              'held-out': [n for n in rows if split_of(n) == 'held-out'],
+              'all': list(rows)}
+    summary = {}
+    for label, names in groups.items():
+        if not names:
+            continue
+        m = _means(rows, names)
+        m['ratio'] = m['smoothed_hard_iron'] / m['smoothed_undistorted']
+        summary[label] = m
+        print(f'{label} ({len(names)}): smoothed {m["smoothed_undistorted"]:.3f}°, '
+              f'hard iron {m["smoothed_hard_iron"]:.3f}° ({m["ratio"]:.2f}×), '
+              f'online {m["online_hard_iron"]:.1f}°')
+    if args.json:
+        with open(args.json, 'w', encoding='utf-8') as f:
+            json.dump({'trials': rows, 'summary': summary}, f, indent=1)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
