@@ -20,7 +20,7 @@ from ext_observer.broad.scoring import criteria, group_means, summary, VQF_RATIO
 
 # The estimator's source, linked from the opening sentence.
 _AHRS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                     'core', 'ahrs', 'ahrs_observer.py')
+                     'ext_observer', 'core', 'ahrs', 'ahrs_observer.py')
 BROAD_URL = 'https://github.com/dlaidig/broad'
 
 
@@ -125,8 +125,8 @@ def _intro(page):
         '',
         'This page measures the raw-IMU estimator of ext_observer (gyro + accelerometer, '
         f'+ magnetometer in 9D; [`{os.path.basename(_AHRS)}`]({page.link(_AHRS)})) '
-        'on real recordings with optical ground truth, against VQF, BasicVQF, Madgwick, '
-        "Mahony and Fusion (at its README's settings, and at its package defaults) run in "
+        'on real recordings with optical ground truth, against VQF, BasicVQF, offline VQF, '
+        "Madgwick, Mahony and Fusion (at its README's settings, and at its package defaults) run in "
         'the same command, each at the settings its authors advise, so that its accuracy '
         'can be judged '
         'against the best open estimators. It is generated; do not edit it '
