@@ -7,15 +7,11 @@ added to every sample; the calibration is unknown to the estimator. Scored
 over the trial's movement samples (:func:`ext_observer.broad.scoring.score`),
 beside the undistorted smoothed figure and the online one, as means over the
 tuning and the held-out trials apart (:mod:`ext_observer.broad.split`) and
-over all (docs/offline.md). ``--calibration fit``: the smoother's heading
-from the calibration fitted on the whole recording
-(:func:`~ext_observer.core.ahrs.smoother_calibration.fit_calibration`, the
-online pass's applied hard iron as its prior's mean) instead of the online
-pass's calibration, for measuring it (the smoother does not use it yet).
+over all (docs/offline.md). The calibration fitted on the whole recording
+that was measured against it (``--calibration fit``) is in commit 5a296f0.
 """
 
 import argparse
-import contextlib
 import json
 import sys
 import zlib
@@ -54,30 +50,6 @@ def trial_figures(trial):
     return out
 
 
-@contextlib.contextmanager
-def fitted_calibration():
-    """Within: the smoother calibrates the field by :func:`fit_calibration`."""
-    from ext_observer.core.ahrs import smoother
-    from ext_observer.core.ahrs.smoother_calibration import fit_calibration
-    calibration, heading = smoother._calibration, smoother._heading
-    prior = {}
-
-    def raw(est):
-        cal = est.calibration
-        prior['bias'] = cal.bias if cal is not None and cal.applied else None
-        return lambda mag: mag
-
-    def fitted(q, mag, rate, p):
-        fit = fit_calibration(mag, q, rate, prior_bias=prior['bias'])
-        return heading(q, fit.apply(mag), rate, p)
-
-    smoother._calibration, smoother._heading = raw, fitted
-    try:
-        yield
-    finally:
-        smoother._calibration, smoother._heading = calibration, heading
-
-
 def _means(rows, names):
     keys = rows[names[0]].keys() if names else ()
     return {k: float(np.mean([rows[n][k] for n in names])) for k in keys}
@@ -88,12 +60,7 @@ def main(argv=None):
     parser.add_argument('--data', default=None, help='BROAD folder (default: as broad finds it)')
     parser.add_argument('--trials', nargs='*', help='trial name patterns (default: all)')
     parser.add_argument('--json', help='write the per-trial figures here')
-    parser.add_argument('--calibration', choices=('online', 'fit'), default='online',
-                        help="the smoother's calibration: the online pass's (shipped) or "
-                             'the one fitted on the whole recording')
-    args = parser.parse_args(argv)
-    with fitted_calibration() if args.calibration == 'fit' else contextlib.nullcontext():
-        return _run(args)
+    return _run(parser.parse_args(argv))
 
 
 def _run(args):

@@ -9,6 +9,5 @@ gyro and rest; ``ahrs_params`` the parameter table (rows of
 ``parameter_rows``), ``frames`` frames and first attitude.
 ``magcal*`` the online calibration,
 ``uncertainty*`` the covariance, ``compiled`` the kernels compiled by numba,
-``smoother`` each sample's attitude from the whole recording (``smoother_rts*``:
-the same from a Rauch–Tung–Striebel smoother, with its covariance).
+``smoother`` each sample's attitude from the whole recording.
 """

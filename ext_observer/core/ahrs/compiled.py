@@ -44,8 +44,7 @@ KERNEL_SOURCES = ('small_matrix.py',
             'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
             'ahrs_filters.py', 'bias_kernel.py', 'clip_and_rest.py',
             'hole_kernel.py', 'velocity_kernel.py', 'accel_rejection.py', 'field_kernel.py',
-            'gravity_kernel.py', 'ahrs_kernel.py', 'uncertainty_kernel.py',
-            'smoother_rts_kernel.py')
+            'gravity_kernel.py', 'ahrs_kernel.py', 'uncertainty_kernel.py')
 ENV = 'EXT_OBSERVER_COMPILED'
 # What running plain costs, measured (docs/compiled.md#without-numba): said
 # once at start by imu_filter_node and the broad, csv and bag commands.
@@ -60,7 +59,7 @@ class CompiledUnavailable(RuntimeError):
 
 
 # The kernel modules a wrapper calls, by their short names (ahrs: ahrs_kernel.py).
-_WRAPPED = ('ahrs', 'magcal', 'uncertainty', 'smoother_rts')
+_WRAPPED = ('ahrs', 'magcal', 'uncertainty')
 
 
 class Kernels:
@@ -69,12 +68,11 @@ class Kernels:
 
     Attributes
     ----------
-    ahrs, magcal, uncertainty, smoother_rts : module
+    ahrs, magcal, uncertainty : module
         The kernel modules the wrappers call (their ``*_in`` functions, on
         holders): :mod:`~ext_observer.core.ahrs.ahrs_kernel`,
-        :mod:`~ext_observer.core.ahrs.magcal_kernel`,
-        :mod:`~ext_observer.core.ahrs.uncertainty_kernel` and
-        :mod:`~ext_observer.core.ahrs.smoother_rts_kernel` (their compiled
+        :mod:`~ext_observer.core.ahrs.magcal_kernel` and
+        :mod:`~ext_observer.core.ahrs.uncertainty_kernel` (their compiled
         twins when compiled).
     sample_step : callable
         :func:`~ext_observer.core.ahrs.uncertainty_kernel.sample_step`, the
