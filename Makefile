@@ -42,7 +42,7 @@ demo: $(RUNTIME_STAMP)
 # folder holds them (test/broad_data.py; EXT_OBSERVER_BROAD_URL for a
 # mirror). Then the whole suite on every core (pytest-xdist; each test has
 # its own ROS domain, test/conftest.py), with the benchmark's own logic
-# checks (bench/test_*.py); test/core/paper/test_observer.py checks in a fresh
+# checks (test/benchmarks/); test/core/paper/test_observer.py checks in a fresh
 # interpreter that the core imports no ROS.
 # Then, with EXT_OBSERVER_COMPILED=0, what the plain kernels (a machine
 # where numba cannot be installed) can break that the first run does not
@@ -63,7 +63,7 @@ PLAIN_DESELECT := $(foreach t,test_fixed_mode_reproduces_todays_imu_data_bit_for
 
 test: $(TEST_STAMP)
 	$(PY) test/broad_data.py
-	$(PY) -m pytest -n $(TEST_WORKERS) --dist worksteal $(PYTEST_ARGS) test $(wildcard bench/test_*.py)
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist worksteal $(PYTEST_ARGS) test
 	EXT_OBSERVER_COMPILED=0 $(PY) -m pytest -n $(TEST_WORKERS) --dist worksteal $(PLAIN_DESELECT) $(PYTEST_ARGS) $(PLAIN_TESTS)
 
 # Which lines of the raw-IMU path the suite runs (docs/tests.md#coverage):

@@ -1,7 +1,7 @@
 """
 Asserts of the test files that the suite never runs: from a coverage run of the tests.
 
-``coverage run --branch --include='test/*' -m pytest test bench/test_*.py``
+``coverage run --branch --include='test/*' -m pytest test``
 then ``coverage json -o out/test_coverage.json`` then
 ``python mutation/asserts_never_run.py out/test_coverage.json``: prints each
 line of a test file (``test/test_*.py``) that never ran and is an assert or

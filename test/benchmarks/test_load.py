@@ -1,5 +1,5 @@
 """
-Checks of the load benchmark's logic (``pytest bench/test_load.py``).
+Checks of the load benchmark's logic (``pytest test/benchmarks/test_load.py``).
 
 The figures of a case from made-up outputs and statuses, the page from
 them, the busy loops' own end; and one short case through DDS (a few
