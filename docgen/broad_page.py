@@ -126,9 +126,9 @@ def _intro(page):
         'This page measures the raw-IMU estimator of ext_observer (gyro + accelerometer, '
         f'+ magnetometer in 9D; [`{os.path.basename(_AHRS)}`]({page.link(_AHRS)})) '
         'on real recordings with optical ground truth, against VQF, BasicVQF, offline VQF, '
-        "Madgwick, Mahony and Fusion (at its README's settings, and at its package defaults) run in "
-        'the same command, each at the settings its authors advise, so that its accuracy '
-        'can be judged '
+        "Madgwick, Mahony and Fusion (at its README's settings, and at its package defaults) "
+        'run in the same command, each at the settings its authors advise, so that its '
+        'accuracy can be judged '
         'against the best open estimators. It is generated; do not edit it '
         'by hand.',
         '',
