@@ -547,6 +547,22 @@ def test_a_clipped_stretchs_losses_add_up_in_the_heading_doubts_sigma():
     assert s.field.head_doubt == 0.0 and s.field.tilt_doubt == 0.0
 
 
+def test_a_field_does_not_end_the_doubt_while_a_clipped_stretch_still_adds_to_it():
+    # A doubt small enough that an undisturbed field's gain is the usual one
+    # ends at that field, but not while the gyro's clipped stretch is still
+    # running (gyro.clip_left): its per-sample losses must add up.
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = record(est)
+    ref_norm, ref_dip = s.field.ref[0], s.field.ref[1]
+    for clip_left, ends in ((0.5, False), (0.0, True)):
+        s.field.head_doubt = 1e-12
+        s.gyro.clip_left = clip_left
+        _doubt_gain(s, s.coef.k_mag, ref_norm, ref_dip, 0.0, DT)
+        assert (s.field.head_doubt == 0.0) == ends
+
+
 def test_the_tilts_doubt_is_forgotten_at_the_inclinations_pace():
     # T <- T exp(-2 dt / (tau_acc + tau_acc_gain)) at each field, also one
     # whose norm is off the references (its gain then the usual one).
