@@ -912,9 +912,21 @@ def _average(x, weight, sigma_samples, far=None, axis=None):
 
 
 def _inclination(q, acc, axis, p):
-    """``c ⊗ q``: ``c``, the smallest rotation turning the averaged specific force in I up."""
+    """
+    ``c ⊗ q``: ``c``, the smallest rotation turning the averaged specific force in I up.
+
+    With samples lost (``axis.slot``), the force in I on the straight line
+    between the samples on either side fills each lost slot of the grid: the
+    window weighs time uniformly across a hole too, so that the body's
+    linear acceleration still averages to its change of velocity over it.
+    """
     a_i = _rotate(q, acc)
-    mean = _average(a_i, axis.spans(p.join_time), p.window_acc * axis.rate, axis=axis)
+    if axis.slot is None:
+        mean = _average(a_i, np.ones(len(q)), p.window_acc * axis.rate)
+    else:
+        grid = np.arange(axis.size)
+        filled = np.stack([np.interp(grid, axis.slot, a_i[:, k]) for k in range(3)], axis=1)
+        mean = _average(filled, np.ones(axis.size), p.window_acc * axis.rate)[axis.slot]
     up = mean / np.linalg.norm(mean, axis=1, keepdims=True)
     # (1 + up·z, up × z) normalized: the rotation by the angle between up and z about up × z.
     c = np.stack((1.0 + up[:, 2], up[:, 1], -up[:, 0], np.zeros(len(up))), axis=1)
