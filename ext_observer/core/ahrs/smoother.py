@@ -915,18 +915,29 @@ def _inclination(q, acc, axis, p):
     """
     ``c ⊗ q``: ``c``, the smallest rotation turning the averaged specific force in I up.
 
-    With samples lost (``axis.slot``), the force in I on the straight line
-    between the samples on either side fills each lost slot of the grid: the
-    window weighs time uniformly across a hole too, so that the body's
-    linear acceleration still averages to its change of velocity over it.
+    With samples lost (``axis.slot``), a sample weighs its share of time
+    (:meth:`_Axis.spans`), and the slots of each hole of at least
+    ``join_time`` hold the force in I on the straight line between the
+    hole's two samples: the window weighs time uniformly across the hole
+    too, so that the body's linear acceleration still averages to its change
+    of velocity over the window.
     """
     a_i = _rotate(q, acc)
     if axis.slot is None:
         mean = _average(a_i, np.ones(len(q)), p.window_acc * axis.rate)
     else:
+        weight = axis.spans(p.join_time)
+        den = axis.grid(weight)
+        num = axis.grid(weight[:, None] * a_i)
         grid = np.arange(axis.size)
-        filled = np.stack([np.interp(grid, axis.slot, a_i[:, k]) for k in range(3)], axis=1)
-        mean = _average(filled, np.ones(axis.size), p.window_acc * axis.rate)[axis.slot]
+        # The interval each slot lies in ends at sample `closing`.
+        closing = np.searchsorted(axis.slot, grid)
+        hole = (den == 0.0) & (axis.dt[closing] >= p.join_time)
+        for k in range(3):
+            num[hole, k] = np.interp(grid[hole], axis.slot, a_i[:, k])
+        den[hole] = 1.0
+        x = num / np.maximum(den, np.finfo(float).tiny)[:, None]
+        mean = _average(x, den, p.window_acc * axis.rate)[axis.slot]
     up = mean / np.linalg.norm(mean, axis=1, keepdims=True)
     # (1 + up·z, up × z) normalized: the rotation by the angle between up and z about up × z.
     c = np.stack((1.0 + up[:, 2], up[:, 1], -up[:, 0], np.zeros(len(up))), axis=1)
