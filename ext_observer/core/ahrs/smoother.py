@@ -28,11 +28,13 @@ With ``times`` (samples lost, unevenly spaced): the strapdown integrates each
 interval with its own length and bridges a hole (an interval over 1.5× the
 usual one) with the rate on the straight line between its two samples; the
 windows run on an even grid in time, a lost sample's time shared by its
-neighbours and a longer hole holding no data; after a hole of at least
-``join_time``, the tilt is joined from both sides (the specific force averaged
-on either side, weighed against the bridge's doubt) and the heading averaged
-within each stretch. A NaN row of the field weighs nothing; a gyro axis at its
-range is bridged across the clipped stretch (Hermite's cubic from both sides).
+neighbours and a longer hole holding no data (the inclination's: the force in
+I on the line across it); after a hole of at least ``join_time``, the tilt
+is joined from both sides (the specific force averaged on either side, weighed
+against the bridge's doubt) and each stretch's heading is solved from all
+stretches' fields at once, through the bridges. A NaN row of the field weighs
+nothing; a gyro axis at its range is bridged across the clipped stretch
+(Hermite's cubic from both sides).
 docs/offline.md ("Holes, lost fields and clipped stretches") has the figures.
 
 The windows are Gaussian-like (three box filters, cumulative sums), symmetric
@@ -1048,7 +1050,7 @@ def _heading_solved(q, unit, weight, axis, p, gaps, bridge):
 
 def _tridiagonal(diagonal, off, rhs):
     """
-    ``x`` (N,) solving the symmetric tridiagonal system of ``diagonal`` (N,) and ``off`` (N − 1,).
+    ``x`` (N,) solving the symmetric tridiagonal system ``diagonal`` (N,), ``off`` (N − 1,).
 
     Thomas's algorithm (the system is diagonally dominant: no pivoting).
     """
