@@ -114,9 +114,9 @@ class SmoothParams:
         specific force averaged over ``window_acc`` s on either side agree
         (:func:`_join_tilt`, weighed against the bridge), and the heading
         (9D) is averaged within each stretch between such holes;
-        ``'solve'``: the tilt as ``'chain'``, the heading (9D) of each
-        stretch from its own fields and all the others' through the
-        bridges, solved at once (:func:`_heading_solved`);
+        ``'solve'``: as ``'chain'``, each stretch's heading then offset
+        by all the others' fields through the bridges, solved at once
+        (:func:`_heading_offsets`);
         ``'local'``: the inclination too is averaged within each stretch;
         ``'none'``: the bridge only, the windows across the holes.
     join_time : float
@@ -954,18 +954,16 @@ def _heading(q, mag, axis, p, gaps=None, bridge=None):
     fields on both sides. ``gaps`` (:func:`_gaps`; ``join`` not
     ``'none'``): the averages within each stretch between two gaps (the
     gyro's bridge across a long hole does not hold the heading); with
-    ``bridge`` (the bridges' variances per body axis, (G, 3), rad²), each
-    stretch's heading from its own fields and its neighbours' through the
-    bridges (:func:`_heading_solved`).
+    ``join='solve'`` and ``bridge`` (the bridges' variances per body axis,
+    (G, 3), rad²), each stretch's turn then offset by the other stretches'
+    fields through the bridges (:func:`_heading_offsets`).
     """
     got = _field_weights(q, mag, axis, p)
     if got is None:
         return q  # no field, no heading: the strapdown's
     unit, weight = got
     has_gaps = gaps is not None and len(gaps[0]) > 0
-    if has_gaps and p.join == 'solve':
-        return _heading_solved(q, unit, weight, axis, p, gaps, bridge)
-    if has_gaps and p.join in ('local', 'chain'):
+    if has_gaps and p.join in ('local', 'chain', 'solve'):
         bounds = np.concatenate(([0], gaps[1], [len(q)]))
         mean = np.concatenate([
             _average(unit[lo:hi], weight[lo:hi], p.window_mag * axis.rate,
@@ -975,7 +973,45 @@ def _heading(q, mag, axis, p, gaps=None, bridge=None):
         mean = _average(unit, weight, p.window_mag * axis.rate,
                         (p.window_far * axis.rate, p.far_share), axis)
     # The rotation by δ about z takes (sin δ, cos δ)·|h| to (0, |h|): north.
-    return normalize(multiply(_about_vertical(np.arctan2(mean[:, 0], mean[:, 1])), q))
+    turn = np.arctan2(mean[:, 0], mean[:, 1])
+    if has_gaps and p.join == 'solve':
+        turn = turn + _heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge)
+    return normalize(multiply(_about_vertical(turn), q))
+
+
+def _heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge):
+    """
+    rad (N,): each stretch's offset to its own heading ``turn`` (N,), all stretches at once.
+
+    Each stretch (between two gaps) holds its own heading, ``turn`` (its
+    fields averaged within it): its offset is 0, doubted by the directions'
+    spread over it (``1 − R̄²``, ``R̄`` the weighted mean's length), the
+    samples independent once every ``heading_tau`` s. Across each gap, the
+    strapdown's heading holds up to the bridge's error about the vertical
+    (``bridge`` (G, 3), rad² per body axis, turned into I): the two sides'
+    turns plus their offsets should agree. The offsets minimizing both come
+    from one tridiagonal linear system (:func:`_tridiagonal`).
+    """
+    n = len(q)
+    bounds = np.concatenate(([0], gaps[1], [n]))
+    count = len(bounds) - 1
+    su = np.add.reduceat(weight[:, None] * unit, bounds[:-1], axis=0)
+    sw = np.add.reduceat(weight, bounds[:-1])
+    length = np.linalg.norm(su, axis=1)
+    some = (sw > 0.0) & (length > 0.0)
+    spread = np.maximum(1.0 - np.square(length / np.maximum(sw, np.finfo(float).tiny)), 0.0)
+    info = np.where(some, sw * axis.usual / (p.heading_tau * np.maximum(spread, _SPREAD)), 0.0)
+    # The bridge's variance about I's vertical: Σ_i R_zi² v_i.
+    vertical = _matrices(q[gaps[1]])[:, 2, :]
+    link = 1.0 / np.maximum(np.sum(np.square(vertical) * bridge, axis=1), 1e-12)
+    jump = np.angle(np.exp(1j * (turn[gaps[1]] - turn[gaps[0]])))
+    # Σ info c_s² + Σ link (c_{s+1} − c_s + jump)²: its normal equations.
+    rhs = np.zeros(count)
+    rhs[:-1] += link * jump
+    rhs[1:] -= link * jump
+    diagonal = info + _PRIOR + np.concatenate((link, [0.0])) + np.concatenate(([0.0], link))
+    offset = _tridiagonal(diagonal, -link, rhs)
+    return offset[np.searchsorted(bounds, np.arange(n), side='right') - 1]
 
 
 def _field_weights(q, mag, axis, p):
@@ -1007,45 +1043,9 @@ def _field_weights(q, mag, axis, p):
 
 
 _SPREAD = 1e-9
-# rad⁻², a weak pull of every stretch's turn to none (a recording without a
-# field in any stretch keeps the strapdown's heading).
+# rad⁻², a weak pull of every stretch's offset to none (no stretch with a
+# field: no offsets).
 _PRIOR = 1e-9
-
-
-def _heading_solved(q, unit, weight, axis, p, gaps, bridge):
-    """
-    ``r_s ⊗ q``: each stretch's turn about the vertical, from all stretches' fields at once.
-
-    Stretch ``s`` (between two gaps) measures its heading ``ψ_s`` by its
-    weighted mean horizontal field; its doubt, the directions' spread over
-    it (``1 − R̄²``, ``R̄`` the mean's length), the samples independent once
-    every ``heading_tau`` s. Across each gap the headings differ by the
-    bridge's error about the vertical (``bridge`` (G, 3), rad² per body
-    axis, turned into I). The turns minimizing both (a tridiagonal linear
-    system, solved at once) are applied per stretch.
-    """
-    n = len(q)
-    bounds = np.concatenate(([0], gaps[1], [n]))
-    count = len(bounds) - 1
-    su = np.add.reduceat(weight[:, None] * unit, bounds[:-1], axis=0)
-    sw = np.add.reduceat(weight, bounds[:-1])
-    length = np.linalg.norm(su, axis=1)
-    some = (sw > 0.0) & (length > 0.0)
-    psi = np.zeros(count)
-    # Unwrapped along the stretches that measure one (the bridges turn little).
-    psi[some] = np.unwrap(np.arctan2(su[some, 0], su[some, 1]))
-    mean_length = length / np.maximum(sw, np.finfo(float).tiny)
-    spread = np.maximum(1.0 - np.square(mean_length), 0.0)
-    # A spread of at least _SPREAD (a mean length short of 1 by rounding).
-    info = np.where(some, sw * axis.usual / (p.heading_tau * np.maximum(spread, _SPREAD)), 0.0)
-    # The bridge's variance about I's vertical: Σ_i R_zi² v_i.
-    vertical = _matrices(q[gaps[1]])[:, 2, :]
-    link = 1.0 / np.maximum(np.sum(np.square(vertical) * bridge, axis=1), 1e-12)
-    # Σ info (turn − ψ)² + Σ link (turn_{s+1} − turn_s)²: its normal equations.
-    diagonal = info + _PRIOR + np.concatenate((link, [0.0])) + np.concatenate(([0.0], link))
-    turn = _tridiagonal(diagonal, -link, info * psi)
-    segment = np.searchsorted(bounds, np.arange(n), side='right') - 1
-    return normalize(multiply(_about_vertical(turn[segment]), q))
 
 
 def _tridiagonal(diagonal, off, rhs):
