@@ -28,11 +28,13 @@ With ``times`` (samples lost, unevenly spaced): the strapdown integrates each
 interval with its own length and bridges a hole (an interval over 1.5× the
 usual one) with the rate on the straight line between its two samples; the
 windows run on an even grid in time, a lost sample's time shared by its
-neighbours and a longer hole holding no data; after a hole of at least
-``join_time``, the tilt is joined from both sides (the specific force averaged
-on either side, weighed against the bridge's doubt) and the heading averaged
-within each stretch. A NaN row of the field weighs nothing; a gyro axis at its
-range is bridged across the clipped stretch (Hermite's cubic from both sides).
+neighbours and a longer hole holding no data (the inclination's: the force in
+I on the line across it); after a hole of at least ``join_time``, the tilt
+is joined from both sides (the specific force averaged on either side, weighed
+against the bridge's doubt) and each stretch's heading is solved from all
+stretches' fields at once, through the bridges. A NaN row of the field weighs
+nothing; a gyro axis at its range is bridged across the clipped stretch
+(Hermite's cubic from both sides).
 docs/offline.md ("Holes, lost fields and clipped stretches") has the figures.
 
 The windows are Gaussian-like (three box filters, cumulative sums), symmetric
@@ -106,12 +108,15 @@ class SmoothParams:
         Bridge each gyro axis across its clipped stretches (at
         ``online.gyro_range``, or stuck at the recording's peak) from both
         sides (:func:`_unclipped`); False: the clipped rates as given.
-    join : {'chain', 'local', 'none'}
+    join : {'solve', 'chain', 'local', 'none'}
         What a hole of at least ``join_time`` changes beyond the gyro's
         bridge. ``'chain'``: the part after it is tilted to make the
         specific force averaged over ``window_acc`` s on either side agree
         (:func:`_join_tilt`, weighed against the bridge), and the heading
         (9D) is averaged within each stretch between such holes;
+        ``'solve'``: as ``'chain'``, each stretch's heading then offset
+        by all the others' fields through the bridges, solved at once
+        (:func:`_heading_offsets`);
         ``'local'``: the inclination too is averaged within each stretch;
         ``'none'``: the bridge only, the windows across the holes.
     join_time : float
@@ -122,6 +127,10 @@ class SmoothParams:
         s: the specific force's samples beside a hole count as independent
         once every ``join_tau`` (the doubt of the join's averages, weighed
         against the gyro bridge's, :func:`_bridge_variance`).
+    heading_tau : float
+        s: the field's directions within a stretch count as independent
+        once every ``heading_tau`` (the doubt of a stretch's heading,
+        weighed against the bridges', ``join='solve'``).
     online : AhrsParams or None
         The online passes' parameters (default: the shipped defaults).
 
@@ -139,9 +148,10 @@ class SmoothParams:
     bridge: str = 'linear'
     slope_time: float = 0.02
     unclip: bool = True
-    join: str = 'chain'
+    join: str = 'solve'
     join_time: float = 0.05
     join_tau: float = 0.01
+    heading_tau: float = 0.1
     online: AhrsParams = None
 
     def __post_init__(self):
@@ -155,10 +165,13 @@ class SmoothParams:
             raise ValueError(f'delay must be finite, got {self.delay}')
         if self.bridge not in ('linear', 'hermite'):
             raise ValueError(f"bridge must be 'linear' or 'hermite', got {self.bridge!r}")
-        if self.join not in ('chain', 'local', 'none'):
-            raise ValueError(f"join must be 'chain', 'local' or 'none', got {self.join!r}")
+        if self.join not in ('solve', 'chain', 'local', 'none'):
+            raise ValueError(
+                f"join must be 'solve', 'chain', 'local' or 'none', got {self.join!r}")
         if not self.join_time > 0.0:
             raise ValueError(f'join_time must be positive, got {self.join_time}')
+        if not (math.isfinite(self.heading_tau) and self.heading_tau > 0.0):
+            raise ValueError(f'heading_tau must be positive and finite, got {self.heading_tau}')
         if not (math.isfinite(self.join_tau) and self.join_tau > 0.0):
             raise ValueError(f'join_tau must be positive and finite, got {self.join_tau}')
         if not (math.isfinite(self.slope_time) and self.slope_time >= 0.0):
@@ -221,7 +234,7 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     rate, dt, rows = _bridged(gyr - bias, axis, p)
     q = _strapdown(rate, dt, first)[rows]
     gaps = _gaps(axis, p.join_time)
-    if p.join == 'chain':
+    if p.join in ('solve', 'chain'):
         q = _inclination(_join_tilt(q, acc, gyr - bias, gaps, axis, p), acc, axis, p)
     elif p.join == 'local' and len(gaps[0]):
         bounds = np.concatenate(([0], gaps[1], [len(q)]))
@@ -230,7 +243,9 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     else:
         q = _inclination(q, acc, axis, p)
     if mag is not None:
-        q = _heading(q, calibration(mag), axis, p, gaps)
+        bridge = (_bridge_axes(gyr - bias, gaps) if p.join == 'solve' and len(gaps[0])
+                  else None)
+        q = _heading(q, calibration(mag), axis, p, gaps, bridge)
     if p.delay:
         q = _ahead(q, p.delay, axis)
     return q, None
@@ -638,10 +653,14 @@ def _bridge_variance(gyr, gaps):
     (:func:`~ext_observer.core.ahrs.hole_kernel.hole_variance`'s terms),
     summed over the axes.
     """
+    return np.sum(_bridge_axes(gyr, gaps), axis=1)
+
+
+def _bridge_axes(gyr, gaps):
+    """rad², :func:`_bridge_variance` per body axis (G, 3)."""
     before, after = gaps[:2]
-    return np.sum(np.square(HOLE_RATE_CHANGE * (gyr[after] - gyr[before]))
-                  * np.square(gaps[2])[:, None]
-                  + HOLE_RATE_WALK * gaps[2][:, None] ** 3 / HOLE_BRIDGE_DIVISOR, axis=1)
+    return (np.square(HOLE_RATE_CHANGE * (gyr[after] - gyr[before])) * np.square(gaps[2])[:, None]
+            + HOLE_RATE_WALK * gaps[2][:, None] ** 3 / HOLE_BRIDGE_DIVISOR)
 
 
 def _toward(turn, share):
@@ -680,6 +699,16 @@ def _join_tilt(q, acc, gyr, gaps, axis, p):
     bridge = _bridge_variance(gyr, gaps)
     share = bridge / np.maximum(bridge + var, np.finfo(float).tiny)
     return _segment_turns(q, _toward(turn, share), gaps)
+
+
+def _matrices(q):
+    """The rotation matrices (N, 3, 3) of unit quaternions ``q`` (N, 4)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack((
+        np.stack((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)), axis=1),
+        np.stack((2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)), axis=1),
+        np.stack((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)), axis=1)),
+        axis=1)
 
 
 def _spread(s, count):
@@ -885,23 +914,113 @@ def _average(x, weight, sigma_samples, far=None, axis=None):
 
 
 def _inclination(q, acc, axis, p):
-    """``c ⊗ q``: ``c``, the smallest rotation turning the averaged specific force in I up."""
+    """
+    ``c ⊗ q``: ``c``, the smallest rotation turning the averaged specific force in I up.
+
+    With samples lost (``axis.slot``), a sample weighs its share of time
+    (:meth:`_Axis.spans`), and the slots of each hole of at least
+    ``join_time`` hold the force in I on the straight line between the
+    hole's two samples: the window weighs time uniformly across the hole
+    too, so that the body's linear acceleration still averages to its change
+    of velocity over the window.
+    """
     a_i = _rotate(q, acc)
-    mean = _average(a_i, axis.spans(p.join_time), p.window_acc * axis.rate, axis=axis)
+    if axis.slot is None:
+        mean = _average(a_i, np.ones(len(q)), p.window_acc * axis.rate)
+    else:
+        weight = axis.spans(p.join_time)
+        den = axis.grid(weight)
+        num = axis.grid(weight[:, None] * a_i)
+        grid = np.arange(axis.size)
+        # The interval each slot lies in ends at sample `closing`.
+        closing = np.searchsorted(axis.slot, grid)
+        hole = (den == 0.0) & (axis.dt[closing] >= p.join_time)
+        for k in range(3):
+            num[hole, k] = np.interp(grid[hole], axis.slot, a_i[:, k])
+        den[hole] = 1.0
+        x = num / np.maximum(den, np.finfo(float).tiny)[:, None]
+        mean = _average(x, den, p.window_acc * axis.rate)[axis.slot]
     up = mean / np.linalg.norm(mean, axis=1, keepdims=True)
     # (1 + up·z, up × z) normalized: the rotation by the angle between up and z about up × z.
     c = np.stack((1.0 + up[:, 2], up[:, 1], -up[:, 0], np.zeros(len(up))), axis=1)
     return normalize(multiply(normalize(c), q))
 
 
-def _heading(q, mag, axis, p, gaps=None):
+def _heading(q, mag, axis, p, gaps=None, bridge=None):
     """
     ``r ⊗ q``: ``r``, about the vertical, turns the averaged horizontal field north (+y).
 
     A NaN row of ``mag`` (no field) weighs 0: its heading comes from the
     fields on both sides. ``gaps`` (:func:`_gaps`; ``join`` not
     ``'none'``): the averages within each stretch between two gaps (the
-    gyro's bridge across a long hole does not hold the heading).
+    gyro's bridge across a long hole does not hold the heading); with
+    ``join='solve'`` and ``bridge`` (the bridges' variances per body axis,
+    (G, 3), rad²), each stretch's turn then offset by the other stretches'
+    fields through the bridges (:func:`_heading_offsets`).
+    """
+    got = _field_weights(q, mag, axis, p)
+    if got is None:
+        return q  # no field, no heading: the strapdown's
+    unit, weight = got
+    has_gaps = gaps is not None and len(gaps[0]) > 0
+    if has_gaps and p.join in ('local', 'chain', 'solve'):
+        bounds = np.concatenate(([0], gaps[1], [len(q)]))
+        mean = np.concatenate([
+            _average(unit[lo:hi], weight[lo:hi], p.window_mag * axis.rate,
+                     (p.window_far * axis.rate, p.far_share), axis.part(lo, hi))
+            for lo, hi in zip(bounds[:-1], bounds[1:])])
+    else:
+        mean = _average(unit, weight, p.window_mag * axis.rate,
+                        (p.window_far * axis.rate, p.far_share), axis)
+    # The rotation by δ about z takes (sin δ, cos δ)·|h| to (0, |h|): north.
+    turn = np.arctan2(mean[:, 0], mean[:, 1])
+    if has_gaps and p.join == 'solve':
+        turn = turn + _heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge)
+    return normalize(multiply(_about_vertical(turn), q))
+
+
+def _heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge):
+    """
+    rad (N,): each stretch's offset to its own heading ``turn`` (N,), all stretches at once.
+
+    Each stretch (between two gaps) holds its own heading, ``turn`` (its
+    fields averaged within it): its offset is 0, doubted by the directions'
+    spread over it (``1 − R̄²``, ``R̄`` the weighted mean's length), the
+    samples independent once every ``heading_tau`` s. Across each gap, the
+    strapdown's heading holds up to the bridge's error about the vertical
+    (``bridge`` (G, 3), rad² per body axis, turned into I): the two sides'
+    turns plus their offsets should agree. The offsets minimizing both come
+    from one tridiagonal linear system (:func:`_tridiagonal`).
+    """
+    n = len(q)
+    bounds = np.concatenate(([0], gaps[1], [n]))
+    count = len(bounds) - 1
+    su = np.add.reduceat(weight[:, None] * unit, bounds[:-1], axis=0)
+    sw = np.add.reduceat(weight, bounds[:-1])
+    length = np.linalg.norm(su, axis=1)
+    some = (sw > 0.0) & (length > 0.0)
+    spread = np.maximum(1.0 - np.square(length / np.maximum(sw, np.finfo(float).tiny)), 0.0)
+    info = np.where(some, sw * axis.usual / (p.heading_tau * np.maximum(spread, _SPREAD)), 0.0)
+    # The bridge's variance about I's vertical: Σ_i R_zi² v_i.
+    vertical = _matrices(q[gaps[1]])[:, 2, :]
+    link = 1.0 / np.maximum(np.sum(np.square(vertical) * bridge, axis=1), 1e-12)
+    jump = np.angle(np.exp(1j * (turn[gaps[1]] - turn[gaps[0]])))
+    # Σ info c_s² + Σ link (c_{s+1} − c_s + jump)²: its normal equations.
+    rhs = np.zeros(count)
+    rhs[:-1] += link * jump
+    rhs[1:] -= link * jump
+    diagonal = info + _PRIOR + np.concatenate((link, [0.0])) + np.concatenate(([0.0], link))
+    offset = _tridiagonal(diagonal, -link, rhs)
+    return offset[np.searchsorted(bounds, np.arange(n), side='right') - 1]
+
+
+def _field_weights(q, mag, axis, p):
+    """
+    The field's horizontal direction in I (N, 2) and each sample's weight (N,), or None.
+
+    A sample weighs by how close its norm and dip stay to the reference's
+    (``ref_time``, ``mag_sigma``) and by its share of time; 0 without a field.
+    None: no horizontal field at all.
     """
     lost = np.isnan(mag[:, 0])
     m = _rotate(q, np.where(lost[:, None], 0.0, mag))
@@ -909,7 +1028,7 @@ def _heading(q, mag, axis, p, gaps=None):
     horizontal = np.hypot(m[:, 0], m[:, 1])
     dip = np.arctan2(m[:, 2], horizontal)
     if not np.any(horizontal > 0.0):
-        return q  # no field, no heading: the strapdown's
+        return None
     start = (axis.slots() < max(1, int(round(p.ref_time * axis.rate)))) & ~lost
     if p.ref_time > 0.0 and start.any() and np.median(norm[start]) > 0.0:
         ref_norm = float(np.median(norm[start]))
@@ -920,18 +1039,33 @@ def _heading(q, mag, axis, p, gaps=None):
          + np.square((dip - ref_dip) / p.mag_sigma))
     weight = np.where(lost, 0.0, np.exp(-0.5 * np.minimum(z, 1400.0)) * axis.spans(p.join_time))
     unit = m[:, :2] / np.maximum(horizontal, np.finfo(float).tiny)[:, None]
-    has_gaps = gaps is not None and len(gaps[0]) > 0
-    if has_gaps and p.join in ('local', 'chain'):
-        bounds = np.concatenate(([0], gaps[1], [len(q)]))
-        mean = np.concatenate([
-            _average(unit[lo:hi], weight[lo:hi], p.window_mag * axis.rate,
-                     (p.window_far * axis.rate, p.far_share), axis.part(lo, hi))
-            for lo, hi in zip(bounds[:-1], bounds[1:])])
-    else:
-        mean = _average(unit, weight, p.window_mag * axis.rate,
-                        (p.window_far * axis.rate, p.far_share), axis)
-    # The rotation by δ about z takes (sin δ, cos δ)·|h| to (0, |h|): north.
-    return normalize(multiply(_about_vertical(np.arctan2(mean[:, 0], mean[:, 1])), q))
+    return unit, weight
+
+
+_SPREAD = 1e-9
+# rad⁻², a weak pull of every stretch's offset to none (no stretch with a
+# field: no offsets).
+_PRIOR = 1e-9
+
+
+def _tridiagonal(diagonal, off, rhs):
+    """
+    ``x`` (N,) solving the symmetric tridiagonal system ``diagonal`` (N,), ``off`` (N − 1,).
+
+    Thomas's algorithm (the system is diagonally dominant: no pivoting).
+    """
+    n = len(diagonal)
+    d = np.array(diagonal, dtype=float)
+    r = np.array(rhs, dtype=float)
+    for k in range(1, n):
+        m = off[k - 1] / d[k - 1]
+        d[k] -= m * off[k - 1]
+        r[k] -= m * r[k - 1]
+    x = np.empty(n)
+    x[-1] = r[-1] / d[-1]
+    for k in range(n - 2, -1, -1):
+        x[k] = (r[k] - off[k] * x[k + 1]) / d[k]
+    return x
 
 
 def _most_common(norm, dip, sigma, candidates=64, samples=20000):

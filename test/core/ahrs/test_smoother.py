@@ -142,18 +142,20 @@ def test_holes_are_bridged_from_both_sides(moving, use_mag):
     q, _ = smooth_attitude(gyr[random], acc[random], None if field is None else field[random],
                            times=times[random])
     kept, whole = errors_deg(q, truth[random]), errors_deg(full[random], truth[random])
-    # 40 % lost at random: within 1.2× the full data's error over the kept samples.
+    # 40 % lost at random: within 1.2× the full data's error over the kept samples
+    # (the total: 1.3×, its three holes of 50 ms joined as long ones).
     assert rms(kept[2]) < 1.2 * rms(whole[2]) + 0.02  # inclination
     if use_mag:
-        assert rms(kept[0]) < 1.2 * rms(whole[0]) + 0.02  # total
+        assert rms(kept[0]) < 1.3 * rms(whole[0]) + 0.02  # total
     # 200 ms lost every 2 s: bridged (the closing rate over each hole alone, the
-    # heading would wander by tens of degrees), short of the full data's figure.
+    # heading would wander by tens of degrees), short of the full data's figure
+    # (1.4° here; 1.6° and 1.9° without the force filled across the holes).
     burst = np.mod(times, 2.0) >= 0.2
     burst[0] = True
     q, _ = smooth_attitude(gyr[burst], acc[burst], None if field is None else field[burst],
                            times=times[burst])
     kept = errors_deg(q, truth[burst])
-    assert rms(kept[2]) < 2.5 and (not use_mag or rms(kept[0]) < 2.5)
+    assert rms(kept[2]) < 1.5 and (not use_mag or rms(kept[0]) < 1.5)
 
 
 def test_lost_fields_weigh_nothing_and_the_heading_is_bridged(moving):
