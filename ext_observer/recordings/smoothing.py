@@ -119,7 +119,10 @@ def _smoothed(gyr, acc, mag, times, settings, mag_times):
     if kept.sum() < 2:
         raise ValueError('the IMU times must increase somewhere to give a rate')
     use_mag = bool(settings['use_mag']) and mag is not None
-    field = field_per_sample(mag, mag_times, times)[kept] if use_mag else None
+    field = None
+    if use_mag:  # fields placed among the kept samples' times (increasing)
+        field = (np.asarray(mag, dtype=float)[kept] if mag_times is None
+                 else field_per_sample(mag, mag_times, times[kept]))
     if field is not None and np.isnan(field).all():
         field = None  # no field at all: 6D
     params = SmoothParams(online=ahrs_params(settings))
