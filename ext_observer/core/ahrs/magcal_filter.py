@@ -27,7 +27,8 @@ from .small_matrix import (add3, add_diagonal, add_scaled3, col3_at, cols, colum
                            combination12_into, copy_into, cross3, diagonal_into, dot12,
                            dot12_onto, dot3, fill, identity_minus, mat3_vec_at, mat3t_vec,
                            matmul_acc_into, neg3, quad3_at, rotation_of, rows, scale3, skew_into,
-                           store3, sub3, sub_combination12, vec12_at, vec3_at, vec_mat3_at)
+                           store3, sub3, sub_combination12, symmetrize, vec12_at, vec3_at,
+                           vec_mat3_at)
 
 
 # --- prediction ------------------------------------------------------------------
@@ -92,7 +93,7 @@ def mc_update(cal, y0, y1, y2, w0, w1, w2, live, norm):
     learned = cal.learned + 1.0
     cal.learned = learned
     if learned % CAL_SYMMETRIZE_EVERY == 0.0:
-        mc_symmetrize(cal.p)
+        symmetrize(cal.p, 0, CAL_N)
     if use:
         mc_field_scale(cal, norm)
     return use
@@ -290,12 +291,3 @@ def mc_inv3(out, a, b, c, d, e, f, g, h, i):
     out[6] = c02 / det
     out[7] = (b * g - a * h) / det
     out[8] = (a * e - b * d) / det
-
-
-def mc_symmetrize(p):
-    """``P ← (P + Pᵀ) / 2`` for the 12 × 12 matrix ``p`` (row-major)."""
-    for i in range(CAL_N):
-        for j in range(i + 1, CAL_N):
-            v = 0.5 * (p[CAL_N * i + j] + p[CAL_N * j + i])
-            p[CAL_N * i + j] = v
-            p[CAL_N * j + i] = v

@@ -240,6 +240,15 @@ def copy_into(out, out_view, a, a_view, n, m):
                 a[a_view[0] + a_view[1] * i + a_view[2] * j]
 
 
+def symmetrize(s, at, n):
+    """``S ← (S + Sᵀ) / 2`` for the ``n × n`` matrix at ``s[at:]`` (row-major)."""
+    for i in range(n):
+        for j in range(i + 1, n):
+            v = 0.5 * (s[at + n * i + j] + s[at + n * j + i])
+            s[at + n * i + j] = v
+            s[at + n * j + i] = v
+
+
 def diagonal_into(s, at, width, first, count, value):
     """``value`` into ``count`` diagonal entries from the ``first`` (a matrix ``width`` wide)."""
     for i in range(first, first + count):

@@ -45,17 +45,15 @@ ENU, SI units. What each step gave on BROAD: docs/offline.md.
 
 import dataclasses
 import math
-import os
 
 import numpy as np
 
-from ..quaternion import multiply, normalize, quaternion_from_rotation_vector
-from .ahrs_filters import quat_multiply, rotate
+from ..quaternion import normalize
 from .ahrs_observer import AhrsObserver
 from .ahrs_params import AhrsParams
-from .compiled import compiled_name, wanted
-from .hole_kernel import (HOLE_BRIDGE_DIVISOR, HOLE_FACTOR, HOLE_RATE_CHANGE,
-                          HOLE_RATE_WALK)
+from .smooth_holes import bridge_axes, bridged, gaps_of, join_tilt
+from .smooth_strapdown import strapdown
+from .smooth_windows import heading, inclination
 
 __all__ = ['SmoothParams', 'smooth_attitude']
 
@@ -112,11 +110,11 @@ class SmoothParams:
         What a hole of at least ``join_time`` changes beyond the gyro's
         bridge. ``'chain'``: the part after it is tilted to make the
         specific force averaged over ``window_acc`` s on either side agree
-        (:func:`_join_tilt`, weighed against the bridge), and the heading
+        (:func:`~ext_observer.core.ahrs.smooth_holes.join_tilt`, weighed against the bridge), and the heading
         (9D) is averaged within each stretch between such holes;
         ``'solve'``: as ``'chain'``, each stretch's heading then offset
         by all the others' fields through the bridges, solved at once
-        (:func:`_heading_offsets`);
+        (:func:`~ext_observer.core.ahrs.smooth_windows.heading_offsets`);
         ``'local'``: the inclination too is averaged within each stretch;
         ``'none'``: the bridge only, the windows across the holes.
     join_time : float
@@ -126,7 +124,7 @@ class SmoothParams:
     join_tau : float
         s: the specific force's samples beside a hole count as independent
         once every ``join_tau`` (the doubt of the join's averages, weighed
-        against the gyro bridge's, :func:`_bridge_variance`).
+        against the gyro bridge's, :func:`~ext_observer.core.ahrs.smooth_holes.bridge_variance`).
     heading_tau : float
         s: the field's directions within a stretch count as independent
         once every ``heading_tau`` (the doubt of a stretch's heading,
@@ -231,21 +229,21 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     if p.unclip:
         gyr = _unclipped(gyr, _clipped(gyr, p), axis.times,
                          max(1, int(round(p.slope_time / axis.usual))))
-    rate, dt, rows = _bridged(gyr - bias, axis, p)
-    q = _strapdown(rate, dt, first)[rows]
-    gaps = _gaps(axis, p.join_time)
+    rate, dt, rows = bridged(gyr - bias, axis, p)
+    q = strapdown(rate, dt, first)[rows]
+    gaps = gaps_of(axis, p.join_time)
     if p.join in ('solve', 'chain'):
-        q = _inclination(_join_tilt(q, acc, gyr - bias, gaps, axis, p), acc, axis, p)
+        q = inclination(join_tilt(q, acc, gyr - bias, gaps, axis, p), acc, axis, p)
     elif p.join == 'local' and len(gaps[0]):
         bounds = np.concatenate(([0], gaps[1], [len(q)]))
-        q = np.concatenate([_inclination(q[lo:hi], acc[lo:hi], axis.part(lo, hi), p)
+        q = np.concatenate([inclination(q[lo:hi], acc[lo:hi], axis.part(lo, hi), p)
                             for lo, hi in zip(bounds[:-1], bounds[1:])])
     else:
-        q = _inclination(q, acc, axis, p)
+        q = inclination(q, acc, axis, p)
     if mag is not None:
-        bridge = (_bridge_axes(gyr - bias, gaps) if p.join == 'solve' and len(gaps[0])
+        bridge = (bridge_axes(gyr - bias, gaps) if p.join == 'solve' and len(gaps[0])
                   else None)
-        q = _heading(q, calibration(mag), axis, p, gaps, bridge)
+        q = heading(q, calibration(mag), axis, p, gaps, bridge)
     if p.delay:
         q = _ahead(q, p.delay, axis)
     return q, None
@@ -550,542 +548,3 @@ def _calibration(est):
     inverse = np.linalg.inv(cal.soft_iron)
     offset = cal.bias
     return lambda mag: (mag - offset) @ inverse.T
-
-
-def _bridged(gyr, axis, p):
-    """
-    The strapdown's steps: rates (M, 3), intervals (M,) and each sample's row in them (N,).
-
-    A usual interval integrates its closing sample's rate, as before. An
-    interval over :data:`HOLE_FACTOR` times the usual one (a hole) is
-    bridged from both sides: split into steps of about the usual interval,
-    each integrating the rate of a curve through the samples on either side
-    (``bridge``: a straight line, or Hermite's cubic with the rate's slopes
-    there, each over ``slope_time``). Without holes, the samples' own rates
-    and intervals.
-    """
-    n = len(gyr)
-    dt = axis.dt
-    bridge = np.zeros(n, dtype=bool)
-    bridge[1:] = dt[1:] > HOLE_FACTOR * axis.usual
-    if not bridge.any():
-        return gyr, dt, slice(None)
-    index = np.arange(n)
-    t = axis.times
-    steps = np.ones(n, dtype=np.int64)
-    steps[bridge] = np.maximum(1, np.rint(dt[bridge] / axis.usual).astype(np.int64))
-    rows = np.cumsum(steps) - 1
-    owner = np.repeat(index, steps)
-    rate = gyr[owner]
-    step_dt = np.repeat(dt / steps, steps)
-    fine = np.flatnonzero(bridge[owner])
-    k = owner[fine]
-    # Each bridged step ends (i + 1) dt_k / L_k after the sample before k.
-    i = fine - (rows[k] - steps[k] + 1)
-    tau = t[k] - dt[k] + (i + 1) * dt[k] / steps[k]
-    a, b = k - 1, k
-    wa, wb = gyr[a], gyr[b]
-    span = dt[k][:, None]
-    s = np.clip((tau - t[a]) / dt[k], 0.0, 1.0)[:, None]
-    if p.bridge == 'hermite':
-        ma, mb = _slopes(gyr, t, p.slope_time)
-        rate[fine] = (wa + (wb - wa) * (s * s * (3.0 - 2.0 * s))
-                      + span * (s * (1.0 - s) ** 2 * ma[a] + s * s * (s - 1.0) * mb[b]))
-    else:
-        rate[fine] = (1.0 - s) * wa + s * wb
-    return rate, step_dt, rows
-
-
-def _gaps(axis, shortest):
-    """
-    The holes to join: ``(before, after)`` sample indices (G,) each.
-
-    A hole: an interval at least ``shortest`` s long, from sample
-    ``before`` to ``after = before + 1``.
-    """
-    before = np.flatnonzero(axis.dt[1:] >= shortest)
-    return before, before + 1, axis.dt[before + 1]
-
-
-def _one_sided(x, weight, gaps, axis, window):
-    """
-    ``Σ w x`` and ``Σ w`` over the ``window`` s before each gap and after it (G, k), (G,).
-
-    Each side's samples stop at the neighbouring gap.
-    """
-    before, after = gaps[:2]
-    t = axis.times
-    c = np.concatenate((np.zeros((1,) + x.shape[1:]), np.cumsum(weight[:, None] * x, axis=0)))
-    cw = np.concatenate(([0.0], np.cumsum(weight)))
-    prev_end = np.concatenate(([0], after[:-1]))
-    next_start = np.concatenate((before[1:], [len(t) - 1]))
-    lo = np.maximum(np.searchsorted(t, t[before] - window, side='left'), prev_end)
-    hi = np.minimum(np.searchsorted(t, t[after] + window, side='right'), next_start + 1)
-    left = (c[before + 1] - c[lo], cw[before + 1] - cw[lo])
-    right = (c[hi] - c[after], cw[hi] - cw[after])
-    return left, right
-
-
-def _segment_turns(q, turns, gaps):
-    """
-    ``D_s ⊗ q``: each sample after gap ``j`` turned by ``turns[0] ⊗ … ⊗ turns[j]`` (G, 4).
-
-    ``D_{j+1} = D_j ⊗ turns[j]``: each turn is measured in the frame of
-    the samples before its gap as they were (uncorrected).
-    """
-    before, after = gaps[:2]
-    if len(before) == 0:
-        return q
-    total = np.empty((len(turns) + 1, 4))
-    total[0] = (1.0, 0.0, 0.0, 0.0)
-    for j, turn in enumerate(turns):
-        total[j + 1] = normalize(multiply(total[j], turn))
-    segment = np.searchsorted(after, np.arange(len(q)), side='right')
-    return normalize(multiply(total[segment], q))
-
-
-def _bridge_variance(gyr, gaps):
-    """
-    rad², how unsure the gyro's bridge across each gap is (G,): the online estimator's model.
-
-    Per axis, :data:`HOLE_RATE_CHANGE` of the rate's change across the gap
-    times its length, squared, and a rate random walk's Brownian bridge
-    (:func:`~ext_observer.core.ahrs.hole_kernel.hole_variance`'s terms),
-    summed over the axes.
-    """
-    return np.sum(_bridge_axes(gyr, gaps), axis=1)
-
-
-def _bridge_axes(gyr, gaps):
-    """rad², :func:`_bridge_variance` per body axis (G, 3)."""
-    before, after = gaps[:2]
-    return (np.square(HOLE_RATE_CHANGE * (gyr[after] - gyr[before])) * np.square(gaps[2])[:, None]
-            + HOLE_RATE_WALK * gaps[2][:, None] ** 3 / HOLE_BRIDGE_DIVISOR)
-
-
-def _toward(turn, share):
-    """Unit quaternions (G, 4) turned ``share`` (G,) of the way from identity to ``turn``."""
-    half = np.arccos(np.clip(np.abs(turn[:, 0]), 0.0, 1.0)) * share
-    axis = turn[:, 1:] * np.sign(turn[:, :1] + (turn[:, :1] == 0.0))
-    axis = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), np.finfo(float).tiny)
-    return np.concatenate((np.cos(half)[:, None], np.sin(half)[:, None] * axis), axis=1)
-
-
-def _join_tilt(q, acc, gyr, gaps, axis, p):
-    """
-    ``q`` with each gap's tilt taken from both sides: the specific force in I averaged over
-    ``window_acc`` s before the gap and after it, the part after turned by the smallest
-    rotation that makes the two agree.
-    """
-    if len(gaps[0]) == 0:
-        return q
-    f = _rotate(q, acc)
-    x = np.concatenate((f, np.einsum('ij,ij->i', f, f)[:, None]), axis=1)
-    (sl, nl), (sr, nr) = _one_sided(x, np.ones(len(q)), gaps, axis, p.window_acc)
-    ul = sl[:, :3] / np.maximum(np.linalg.norm(sl[:, :3], axis=1, keepdims=True),
-                                np.finfo(float).tiny)
-    ur = sr[:, :3] / np.maximum(np.linalg.norm(sr[:, :3], axis=1, keepdims=True),
-                                np.finfo(float).tiny)
-    # The smallest rotation taking ur to ul: (1 + ur·ul, ur × ul), normalized.
-    turn = normalize(np.concatenate((1.0 + np.einsum('ij,ij->i', ur, ul)[:, None],
-                                     np.cross(ur, ul)), axis=1))
-    # The averages' doubt: the specific force's spread over each side, its
-    # samples counting as independent once every join_tau s.
-    var = (_spread(sl, nl) * p.join_tau / np.maximum(nl * axis.usual, axis.usual)
-           + _spread(sr, nr) * p.join_tau / np.maximum(nr * axis.usual, axis.usual))
-    var = var / np.maximum(np.square(0.5 * (np.linalg.norm(sl[:, :3], axis=1) / np.maximum(nl, 1.0)
-                                             + np.linalg.norm(sr[:, :3], axis=1)
-                                             / np.maximum(nr, 1.0))), np.finfo(float).tiny)
-    bridge = _bridge_variance(gyr, gaps)
-    share = bridge / np.maximum(bridge + var, np.finfo(float).tiny)
-    return _segment_turns(q, _toward(turn, share), gaps)
-
-
-def _matrices(q):
-    """The rotation matrices (N, 3, 3) of unit quaternions ``q`` (N, 4)."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return np.stack((
-        np.stack((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)), axis=1),
-        np.stack((2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)), axis=1),
-        np.stack((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)), axis=1)),
-        axis=1)
-
-
-def _spread(s, count):
-    """The mean squared deviation from their mean of vectors given by sums ``(Σx, Σ|x|²)``."""
-    count = np.maximum(count, 1.0)
-    mean = s[:, :-1] / count[:, None]
-    return np.maximum(s[:, -1] / count - np.einsum('ij,ij->i', mean, mean), 0.0)
-
-
-def _slopes(gyr, t, span):
-    """
-    The rate's slope (rad/s²) ending at each sample and starting at it (N, 3) each.
-
-    The difference to the sample about ``span`` s before (after); 0 where
-    there is none.
-    """
-    index = np.arange(len(gyr))
-    tk, wk = t, gyr
-    back = np.searchsorted(tk, tk - span, side='right') - 1
-    ahead = np.searchsorted(tk, tk + span, side='left')
-    back = np.where(back >= np.arange(len(tk)), np.arange(len(tk)) - 1, back)
-    ahead = np.where(ahead <= np.arange(len(tk)), np.arange(len(tk)) + 1, ahead)
-    out_back, out_ahead = np.zeros_like(gyr), np.zeros_like(gyr)
-    ok = back >= 0
-    out_back[index[ok]] = (wk[ok] - wk[back[ok]]) / (tk[ok] - tk[back[ok]])[:, None]
-    ok = ahead < len(tk)
-    out_ahead[index[ok]] = (wk[ahead[ok]] - wk[ok]) / (tk[ahead[ok]] - tk[ok])[:, None]
-    return out_back, out_ahead
-
-
-def _strapdown(rate, dt, first):
-    """
-    ``q_k = q_{k−1} ⊗ exp(ω_k dt_k / 2)`` from ``q_0 = first``, each normalized.
-
-    ``dt``: s, one for all steps or each step's (N,).
-
-    One compiled loop where numba is wanted (:func:`_integrate`); else
-    :func:`_strapdown_blocked`, numpy on whole arrays. The two agree to
-    rounding.
-    """
-    loop = _compiled_loop()
-    if loop is None:
-        return _strapdown_blocked(rate, dt, first)
-    out = np.empty((len(rate), 4))
-    first = normalize(np.asarray(first, dtype=float))
-    dt = np.ascontiguousarray(np.broadcast_to(np.asarray(dt, dtype=float), (len(rate),)))
-    loop(np.ascontiguousarray(rate, dtype=float), dt, first[0], first[1], first[2],
-         first[3], out)
-    return out
-
-
-def _strapdown_blocked(rate, dt, first):
-    """
-    :func:`_strapdown` on whole arrays: a blocked scan.
-
-    The running products within blocks of about √N samples (one product per
-    column, over all blocks at once), then the blocks' running products, then
-    each block's products from its start's.
-    """
-    n = len(rate)
-    dt = np.broadcast_to(np.asarray(dt, dtype=float), (n,))
-    step = quaternion_from_rotation_vector(rate * dt[:, None])
-    step[0] = normalize(np.asarray(first, dtype=float))
-    size = max(1, int(math.ceil(math.sqrt(n))))
-    blocks = -(-n // size)
-    padded = np.zeros((blocks * size, 4))
-    padded[:, 0] = 1.0
-    padded[:n] = step
-    # Column j holds the j-th sample of every block, contiguous.
-    within = np.ascontiguousarray(padded.reshape(blocks, size, 4).transpose(1, 0, 2))
-    for j in range(1, size):
-        within[j] = multiply(within[j - 1], within[j])
-    before = np.empty((blocks, 4))
-    before[0] = (1.0, 0.0, 0.0, 0.0)
-    for i in range(1, blocks):
-        before[i] = multiply(before[i - 1], within[-1, i - 1])
-    q = multiply(before[None, :, :], within).transpose(1, 0, 2).reshape(-1, 4)[:n]
-    return normalize(q)
-
-
-def _integrate(rate, dt, w, x, y, z, out):
-    """
-    The strapdown loop over samples: ``q_k`` into ``out`` (N, 4) from ``q_0 = (w, x, y, z)``.
-
-    ``dt`` (N,): each step's interval, s.
-
-    Compiled by :func:`_compiled_loop` (``_product``: the kernels' quaternion
-    product, compiled).
-    """
-    out[0, 0], out[0, 1], out[0, 2], out[0, 3] = w, x, y, z
-    for k in range(1, rate.shape[0]):
-        vx, vy, vz = rate[k, 0] * dt[k], rate[k, 1] * dt[k], rate[k, 2] * dt[k]
-        angle = math.sqrt(vx * vx + vy * vy + vz * vz)
-        # sin(a / 2) / a, its limit 1/2 below a rounding error's angle.
-        s = math.sin(0.5 * angle) / angle if angle > 1e-8 else 0.5
-        w, x, y, z = _product(w, x, y, z, math.cos(0.5 * angle), s * vx, s * vy, s * vz)
-        scale = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
-        w, x, y, z = w * scale, x * scale, y * scale, z * scale
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w, x, y, z
-
-
-_product = quat_multiply
-_LOOP = []
-
-
-def _compiled_loop():
-    """
-    :func:`_integrate` compiled by numba, or None where numba is not wanted.
-
-    Cached on disk beside the kernels' compiled code, in a folder of its own
-    (the kernels' twin of ``quat_multiply`` has the same file and name) for
-    this version of the kernel files
-    (:func:`~ext_observer.core.ahrs.compiled.compiled_name`).
-    """
-    global _product
-    if not _LOOP:
-        loop = None
-        if wanted(None)[0]:
-            import numba
-            name, folder = compiled_name()
-            saved = numba.config.CACHE_DIR
-            numba.config.CACHE_DIR = os.path.join(folder, f'{name}_smoother')
-            try:
-                _product = numba.njit(cache=True)(quat_multiply)
-                loop = numba.njit(cache=True)(_integrate)
-            finally:
-                numba.config.CACHE_DIR = saved
-        _LOOP.append(loop)
-    return _LOOP[0]
-
-
-def _rotate(q, v):
-    """
-    The vectors ``v`` (N, 3) rotated by the quaternions ``q`` (N, 4): ``q ⊗ v ⊗ q̄ / |q|²``.
-
-    The kernels' rotation (:func:`~ext_observer.core.ahrs.ahrs_filters.rotate`),
-    on columns.
-    """
-    out = np.empty((len(v), 3))
-    out[:, 0], out[:, 1], out[:, 2] = rotate(q[:, 0], q[:, 1], q[:, 2], q[:, 3],
-                                             v[:, 0], v[:, 1], v[:, 2])
-    return out
-
-
-def _about_vertical(angle):
-    """Unit quaternions (N, 4) of rotations by ``angle`` (N,) rad about the world's z axis."""
-    r = np.zeros((len(angle), 4))
-    r[:, 0] = np.cos(0.5 * angle)
-    r[:, 3] = np.sin(0.5 * angle)
-    return r
-
-
-def _box(x, h):
-    """Sums of ``x`` (along axis 0) over ``[k − h, k + h]`` at each sample ``k``, truncated."""
-    n = len(x)
-    c = np.empty((n + 2 * h + 1,) + x.shape[1:])
-    c[:h + 1] = 0.0
-    np.cumsum(x, axis=0, out=c[h + 1:n + h + 1])
-    c[n + h + 1:] = c[n + h]
-    # c[h + 1 + k] is the sum up to sample k; before the first, 0; past the last, all.
-    return c[2 * h + 1:] - c[:n]
-
-
-def _sums(x, weight, sigma_samples, axis=None):
-    """
-    ``Σ K w x`` and ``Σ K w`` over a Gaussian-like window ``K`` of σ samples.
-
-    Three centred box filters of ``2 h + 1`` samples (``h`` ≈ σ: a window of
-    variance σ²), applied alike to ``weight x`` and ``weight``: zero phase,
-    truncated at the ends. ``axis`` (:class:`_Axis`): on its even grid, in
-    usual intervals (a lost sample: a slot of weight 0), read back at the
-    samples.
-    """
-    h = max(1, int(round(sigma_samples)))
-    num = weight[:, None] * x
-    den = weight
-    if axis is not None:
-        num, den = axis.grid(num), axis.grid(den)
-    for _ in range(3):
-        num = _box(num, h)
-        den = _box(den, h)
-    if axis is not None:
-        num, den = axis.samples(num), axis.samples(den)
-    return num, den
-
-
-def _average(x, weight, sigma_samples, far=None, axis=None):
-    """
-    The weighted mean of ``x`` (N, k) over a window of σ samples around each.
-
-    ``far``: ``(σ_far, share)``, a second, wider window whose weights count
-    ``share`` as much (per unit of window weight): where the near window
-    holds no weight, the far one decides. ``axis``: the windows in time
-    (:func:`_sums`), σ in usual intervals.
-    """
-    num, den = _sums(x, weight, sigma_samples, axis)
-    if far is not None and far[1] > 0.0:
-        num_far, den_far = _sums(x, weight, far[0], axis)
-        scale = far[1] * sigma_samples / far[0]
-        num = num + scale * num_far
-        den = den + scale * den_far
-    return num / np.maximum(den, np.finfo(float).tiny)[:, None]
-
-
-def _inclination(q, acc, axis, p):
-    """
-    ``c ⊗ q``: ``c``, the smallest rotation turning the averaged specific force in I up.
-
-    With samples lost (``axis.slot``), a sample weighs its share of time
-    (:meth:`_Axis.spans`), and the slots of each hole of at least
-    ``join_time`` hold the force in I on the straight line between the
-    hole's two samples: the window weighs time uniformly across the hole
-    too, so that the body's linear acceleration still averages to its change
-    of velocity over the window.
-    """
-    a_i = _rotate(q, acc)
-    if axis.slot is None:
-        mean = _average(a_i, np.ones(len(q)), p.window_acc * axis.rate)
-    else:
-        weight = axis.spans(p.join_time)
-        den = axis.grid(weight)
-        num = axis.grid(weight[:, None] * a_i)
-        grid = np.arange(axis.size)
-        # The interval each slot lies in ends at sample `closing`.
-        closing = np.searchsorted(axis.slot, grid)
-        hole = (den == 0.0) & (axis.dt[closing] >= p.join_time)
-        for k in range(3):
-            num[hole, k] = np.interp(grid[hole], axis.slot, a_i[:, k])
-        den[hole] = 1.0
-        x = num / np.maximum(den, np.finfo(float).tiny)[:, None]
-        mean = _average(x, den, p.window_acc * axis.rate)[axis.slot]
-    up = mean / np.linalg.norm(mean, axis=1, keepdims=True)
-    # (1 + up·z, up × z) normalized: the rotation by the angle between up and z about up × z.
-    c = np.stack((1.0 + up[:, 2], up[:, 1], -up[:, 0], np.zeros(len(up))), axis=1)
-    return normalize(multiply(normalize(c), q))
-
-
-def _heading(q, mag, axis, p, gaps=None, bridge=None):
-    """
-    ``r ⊗ q``: ``r``, about the vertical, turns the averaged horizontal field north (+y).
-
-    A NaN row of ``mag`` (no field) weighs 0: its heading comes from the
-    fields on both sides. ``gaps`` (:func:`_gaps`; ``join`` not
-    ``'none'``): the averages within each stretch between two gaps (the
-    gyro's bridge across a long hole does not hold the heading); with
-    ``join='solve'`` and ``bridge`` (the bridges' variances per body axis,
-    (G, 3), rad²), each stretch's turn then offset by the other stretches'
-    fields through the bridges (:func:`_heading_offsets`).
-    """
-    got = _field_weights(q, mag, axis, p)
-    if got is None:
-        return q  # no field, no heading: the strapdown's
-    unit, weight = got
-    has_gaps = gaps is not None and len(gaps[0]) > 0
-    if has_gaps and p.join in ('local', 'chain', 'solve'):
-        bounds = np.concatenate(([0], gaps[1], [len(q)]))
-        mean = np.concatenate([
-            _average(unit[lo:hi], weight[lo:hi], p.window_mag * axis.rate,
-                     (p.window_far * axis.rate, p.far_share), axis.part(lo, hi))
-            for lo, hi in zip(bounds[:-1], bounds[1:])])
-    else:
-        mean = _average(unit, weight, p.window_mag * axis.rate,
-                        (p.window_far * axis.rate, p.far_share), axis)
-    # The rotation by δ about z takes (sin δ, cos δ)·|h| to (0, |h|): north.
-    turn = np.arctan2(mean[:, 0], mean[:, 1])
-    if has_gaps and p.join == 'solve':
-        turn = turn + _heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge)
-    return normalize(multiply(_about_vertical(turn), q))
-
-
-def _heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge):
-    """
-    rad (N,): each stretch's offset to its own heading ``turn`` (N,), all stretches at once.
-
-    Each stretch (between two gaps) holds its own heading, ``turn`` (its
-    fields averaged within it): its offset is 0, doubted by the directions'
-    spread over it (``1 − R̄²``, ``R̄`` the weighted mean's length), the
-    samples independent once every ``heading_tau`` s. Across each gap, the
-    strapdown's heading holds up to the bridge's error about the vertical
-    (``bridge`` (G, 3), rad² per body axis, turned into I): the two sides'
-    turns plus their offsets should agree. The offsets minimizing both come
-    from one tridiagonal linear system (:func:`_tridiagonal`).
-    """
-    n = len(q)
-    bounds = np.concatenate(([0], gaps[1], [n]))
-    count = len(bounds) - 1
-    su = np.add.reduceat(weight[:, None] * unit, bounds[:-1], axis=0)
-    sw = np.add.reduceat(weight, bounds[:-1])
-    length = np.linalg.norm(su, axis=1)
-    some = (sw > 0.0) & (length > 0.0)
-    spread = np.maximum(1.0 - np.square(length / np.maximum(sw, np.finfo(float).tiny)), 0.0)
-    info = np.where(some, sw * axis.usual / (p.heading_tau * np.maximum(spread, _SPREAD)), 0.0)
-    # The bridge's variance about I's vertical: Σ_i R_zi² v_i.
-    vertical = _matrices(q[gaps[1]])[:, 2, :]
-    link = 1.0 / np.maximum(np.sum(np.square(vertical) * bridge, axis=1), 1e-12)
-    jump = np.angle(np.exp(1j * (turn[gaps[1]] - turn[gaps[0]])))
-    # Σ info c_s² + Σ link (c_{s+1} − c_s + jump)²: its normal equations.
-    rhs = np.zeros(count)
-    rhs[:-1] += link * jump
-    rhs[1:] -= link * jump
-    diagonal = info + _PRIOR + np.concatenate((link, [0.0])) + np.concatenate(([0.0], link))
-    offset = _tridiagonal(diagonal, -link, rhs)
-    return offset[np.searchsorted(bounds, np.arange(n), side='right') - 1]
-
-
-def _field_weights(q, mag, axis, p):
-    """
-    The field's horizontal direction in I (N, 2) and each sample's weight (N,), or None.
-
-    A sample weighs by how close its norm and dip stay to the reference's
-    (``ref_time``, ``mag_sigma``) and by its share of time; 0 without a field.
-    None: no horizontal field at all.
-    """
-    lost = np.isnan(mag[:, 0])
-    m = _rotate(q, np.where(lost[:, None], 0.0, mag))
-    norm = np.linalg.norm(m, axis=1)
-    horizontal = np.hypot(m[:, 0], m[:, 1])
-    dip = np.arctan2(m[:, 2], horizontal)
-    if not np.any(horizontal > 0.0):
-        return None
-    start = (axis.slots() < max(1, int(round(p.ref_time * axis.rate)))) & ~lost
-    if p.ref_time > 0.0 and start.any() and np.median(norm[start]) > 0.0:
-        ref_norm = float(np.median(norm[start]))
-        ref_dip = float(np.median(dip[start]))
-    else:
-        ref_norm, ref_dip = _most_common(norm, dip, p.mag_sigma)
-    z = (np.square((norm - ref_norm) / (p.mag_sigma * ref_norm))
-         + np.square((dip - ref_dip) / p.mag_sigma))
-    weight = np.where(lost, 0.0, np.exp(-0.5 * np.minimum(z, 1400.0)) * axis.spans(p.join_time))
-    unit = m[:, :2] / np.maximum(horizontal, np.finfo(float).tiny)[:, None]
-    return unit, weight
-
-
-_SPREAD = 1e-9
-# rad⁻², a weak pull of every stretch's offset to none (no stretch with a
-# field: no offsets).
-_PRIOR = 1e-9
-
-
-def _tridiagonal(diagonal, off, rhs):
-    """
-    ``x`` (N,) solving the symmetric tridiagonal system ``diagonal`` (N,), ``off`` (N − 1,).
-
-    Thomas's algorithm (the system is diagonally dominant: no pivoting).
-    """
-    n = len(diagonal)
-    d = np.array(diagonal, dtype=float)
-    r = np.array(rhs, dtype=float)
-    for k in range(1, n):
-        m = off[k - 1] / d[k - 1]
-        d[k] -= m * off[k - 1]
-        r[k] -= m * r[k - 1]
-    x = np.empty(n)
-    x[-1] = r[-1] / d[-1]
-    for k in range(n - 2, -1, -1):
-        x[k] = (r[k] - off[k] * x[k + 1]) / d[k]
-    return x
-
-
-def _most_common(norm, dip, sigma, candidates=64, samples=20000):
-    """
-    The (norm, dip) that the most samples lie near: the mode, under the weights' kernel.
-
-    The candidates are quantiles of the norm and of the dip (``candidates``
-    of each); the samples (those with a field), at most about ``samples``
-    evenly spread.
-    """
-    some = np.flatnonzero(norm > 0.0)  # a lost field's norm is 0
-    some = some[::max(1, len(some) // samples)]
-    n, d = norm[some], dip[some]
-    pick = np.linspace(0, len(n) - 1, candidates).astype(np.int64)
-    order = np.argsort(n)
-    cn, cd = n[order][pick], d[order][pick]
-    order = np.argsort(d)
-    cn = np.concatenate((cn, n[order][pick]))
-    cd = np.concatenate((cd, d[order][pick]))
-    z = (np.square((n[None, :] - cn[:, None]) / (sigma * cn[:, None]))
-         + np.square((d[None, :] - cd[:, None]) / sigma))
-    best = int(np.argmax(np.exp(-0.5 * np.minimum(z, 1400.0)).sum(axis=1)))
-    return float(cn[best]), float(cd[best])

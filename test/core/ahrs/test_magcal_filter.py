@@ -173,7 +173,7 @@ def assert_equal(s, expected):
         assert get(s, name, -1).tobytes() == get(expected, name, -1).tobytes(), name
 
 
-# --- mc_inv3, mc_symmetrize ------------------------------------------------------
+# --- mc_inv3, symmetrize ---------------------------------------------------------
 
 
 def test_the_written_out_inverse_is_the_inverse_and_writes_nine_values(k):
@@ -193,7 +193,7 @@ def test_symmetrizing_takes_the_mean_of_p_and_its_transpose_and_nothing_else(k):
     s[:CAL_N * CAL_N] = p.ravel().tolist()
     expected = list(s)
     expected[:CAL_N * CAL_N] = (0.5 * (p + p.T)).ravel().tolist()
-    k.filter.mc_symmetrize(s)
+    k.filter.symmetrize(s, 0, CAL_N)
     assert list(s) == expected
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ext_observer.core import quaternion as quat
-from ext_observer.core.ahrs import smoother
+from ext_observer.core.ahrs import smooth_strapdown, smooth_windows, smoother
 from ext_observer.core.ahrs.smoother import smooth_attitude, SmoothParams
 from ext_observer.pipeline.batch import estimate_batch
 from synthetic_motion import errors_deg, RATE, synthetic
@@ -72,8 +72,8 @@ def test_the_strapdown_compiled_and_blocked_is_the_running_product():
     for k in range(1, len(rate)):
         expected[k] = quat.multiply(expected[k - 1], steps[k])
     # The compiled loop where numba is wanted, and numpy's blocked scan.
-    np.testing.assert_allclose(smoother._strapdown(rate, 0.01, first), expected, atol=1e-12)
-    np.testing.assert_allclose(smoother._strapdown_blocked(rate, 0.01, first), expected,
+    np.testing.assert_allclose(smooth_strapdown.strapdown(rate, 0.01, first), expected, atol=1e-12)
+    np.testing.assert_allclose(smooth_strapdown.strapdown_blocked(rate, 0.01, first), expected,
                                atol=1e-12)
 
 
@@ -81,7 +81,7 @@ def test_the_windows_are_zero_phase_and_normalized_by_their_weights():
     n = 2001
     t = np.arange(n, dtype=float)
     ramp = np.stack((t, -2.0 * t), axis=1)
-    mean = smoother._average(ramp, np.ones(n), 50.0)
+    mean = smooth_windows.average(ramp, np.ones(n), 50.0)
     # A ramp is kept where the window is whole: no delay.
     np.testing.assert_allclose(mean[200:-200], ramp[200:-200], atol=1e-9)
     # A sample of weight 0 is not seen; a constant stays itself to the ends.
@@ -89,7 +89,7 @@ def test_the_windows_are_zero_phase_and_normalized_by_their_weights():
     weight[1000] = 0.0
     spiked = np.ones((n, 1))
     spiked[1000] = 1e6
-    np.testing.assert_allclose(smoother._average(spiked, weight, 50.0, (400.0, 0.1)), 1.0,
+    np.testing.assert_allclose(smooth_windows.average(spiked, weight, 50.0, (400.0, 0.1)), 1.0,
                                rtol=1e-9)
 
 

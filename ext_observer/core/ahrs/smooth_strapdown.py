@@ -1,0 +1,179 @@
+"""
+The smoother's strapdown and its arrays of rotations: :func:`strapdown`.
+
+Helpers of :mod:`~ext_observer.core.ahrs.smoother` on whole arrays
+(``(w, x, y, z)``, sensor → I): the gyro's integration (one compiled loop, or
+a blocked scan in numpy), rotations of rows of vectors, rotation matrices.
+"""
+
+import math
+import os
+
+import numpy as np
+
+from ..quaternion import multiply, normalize, quaternion_from_rotation_vector
+from .ahrs_filters import quat_multiply, rotate
+from .compiled import compiled_name, wanted
+
+__all__ = ['about_vertical', 'matrices', 'rotate_rows', 'slopes', 'spread', 'strapdown',
+           'strapdown_blocked']
+
+
+def matrices(q):
+    """The rotation matrices (N, 3, 3) of unit quaternions ``q`` (N, 4)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack((
+        np.stack((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)), axis=1),
+        np.stack((2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)), axis=1),
+        np.stack((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)), axis=1)),
+        axis=1)
+
+
+def spread(s, count):
+    """The mean squared deviation from their mean of vectors given by sums ``(Σx, Σ|x|²)``."""
+    count = np.maximum(count, 1.0)
+    mean = s[:, :-1] / count[:, None]
+    return np.maximum(s[:, -1] / count - np.einsum('ij,ij->i', mean, mean), 0.0)
+
+
+def slopes(gyr, t, span):
+    """
+    The rate's slope (rad/s²) ending at each sample and starting at it (N, 3) each.
+
+    The difference to the sample about ``span`` s before (after); 0 where
+    there is none.
+    """
+    index = np.arange(len(gyr))
+    tk, wk = t, gyr
+    back = np.searchsorted(tk, tk - span, side='right') - 1
+    ahead = np.searchsorted(tk, tk + span, side='left')
+    back = np.where(back >= np.arange(len(tk)), np.arange(len(tk)) - 1, back)
+    ahead = np.where(ahead <= np.arange(len(tk)), np.arange(len(tk)) + 1, ahead)
+    out_back, out_ahead = np.zeros_like(gyr), np.zeros_like(gyr)
+    ok = back >= 0
+    out_back[index[ok]] = (wk[ok] - wk[back[ok]]) / (tk[ok] - tk[back[ok]])[:, None]
+    ok = ahead < len(tk)
+    out_ahead[index[ok]] = (wk[ahead[ok]] - wk[ok]) / (tk[ahead[ok]] - tk[ok])[:, None]
+    return out_back, out_ahead
+
+
+def strapdown(rate, dt, first):
+    """
+    ``q_k = q_{k−1} ⊗ exp(ω_k dt_k / 2)`` from ``q_0 = first``, each normalized.
+
+    ``dt``: s, one for all steps or each step's (N,).
+
+    One compiled loop where numba is wanted (:func:`_integrate`); else
+    :func:`strapdown_blocked`, numpy on whole arrays. The two agree to
+    rounding.
+    """
+    loop = _compiled_loop()
+    if loop is None:
+        return strapdown_blocked(rate, dt, first)
+    out = np.empty((len(rate), 4))
+    first = normalize(np.asarray(first, dtype=float))
+    dt = np.ascontiguousarray(np.broadcast_to(np.asarray(dt, dtype=float), (len(rate),)))
+    loop(np.ascontiguousarray(rate, dtype=float), dt, first[0], first[1], first[2],
+         first[3], out)
+    return out
+
+
+def strapdown_blocked(rate, dt, first):
+    """
+    :func:`strapdown` on whole arrays: a blocked scan.
+
+    The running products within blocks of about √N samples (one product per
+    column, over all blocks at once), then the blocks' running products, then
+    each block's products from its start's.
+    """
+    n = len(rate)
+    dt = np.broadcast_to(np.asarray(dt, dtype=float), (n,))
+    step = quaternion_from_rotation_vector(rate * dt[:, None])
+    step[0] = normalize(np.asarray(first, dtype=float))
+    size = max(1, int(math.ceil(math.sqrt(n))))
+    blocks = -(-n // size)
+    padded = np.zeros((blocks * size, 4))
+    padded[:, 0] = 1.0
+    padded[:n] = step
+    # Column j holds the j-th sample of every block, contiguous.
+    within = np.ascontiguousarray(padded.reshape(blocks, size, 4).transpose(1, 0, 2))
+    for j in range(1, size):
+        within[j] = multiply(within[j - 1], within[j])
+    before = np.empty((blocks, 4))
+    before[0] = (1.0, 0.0, 0.0, 0.0)
+    for i in range(1, blocks):
+        before[i] = multiply(before[i - 1], within[-1, i - 1])
+    q = multiply(before[None, :, :], within).transpose(1, 0, 2).reshape(-1, 4)[:n]
+    return normalize(q)
+
+
+def _integrate(rate, dt, w, x, y, z, out):
+    """
+    The strapdown loop over samples: ``q_k`` into ``out`` (N, 4) from ``q_0 = (w, x, y, z)``.
+
+    ``dt`` (N,): each step's interval, s.
+
+    Compiled by :func:`_compiled_loop` (``_product``: the kernels' quaternion
+    product, compiled).
+    """
+    out[0, 0], out[0, 1], out[0, 2], out[0, 3] = w, x, y, z
+    for k in range(1, rate.shape[0]):
+        vx, vy, vz = rate[k, 0] * dt[k], rate[k, 1] * dt[k], rate[k, 2] * dt[k]
+        angle = math.sqrt(vx * vx + vy * vy + vz * vz)
+        # sin(a / 2) / a, its limit 1/2 below a rounding error's angle.
+        s = math.sin(0.5 * angle) / angle if angle > 1e-8 else 0.5
+        w, x, y, z = _product(w, x, y, z, math.cos(0.5 * angle), s * vx, s * vy, s * vz)
+        scale = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w * scale, x * scale, y * scale, z * scale
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w, x, y, z
+
+
+_product = quat_multiply
+_LOOP = []
+
+
+def _compiled_loop():
+    """
+    :func:`_integrate` compiled by numba, or None where numba is not wanted.
+
+    Cached on disk beside the kernels' compiled code, in a folder of its own
+    (the kernels' twin of ``quat_multiply`` has the same file and name) for
+    this version of the kernel files
+    (:func:`~ext_observer.core.ahrs.compiled.compiled_name`).
+    """
+    global _product
+    if not _LOOP:
+        loop = None
+        if wanted(None)[0]:
+            import numba
+            name, folder = compiled_name()
+            saved = numba.config.CACHE_DIR
+            numba.config.CACHE_DIR = os.path.join(folder, f'{name}_smoother')
+            try:
+                _product = numba.njit(cache=True)(quat_multiply)
+                loop = numba.njit(cache=True)(_integrate)
+            finally:
+                numba.config.CACHE_DIR = saved
+        _LOOP.append(loop)
+    return _LOOP[0]
+
+
+def rotate_rows(q, v):
+    """
+    The vectors ``v`` (N, 3) rotated by the quaternions ``q`` (N, 4): ``q ⊗ v ⊗ q̄ / |q|²``.
+
+    The kernels' rotation (:func:`~ext_observer.core.ahrs.ahrs_filters.rotate`),
+    on columns.
+    """
+    out = np.empty((len(v), 3))
+    out[:, 0], out[:, 1], out[:, 2] = rotate(q[:, 0], q[:, 1], q[:, 2], q[:, 3],
+                                             v[:, 0], v[:, 1], v[:, 2])
+    return out
+
+
+def about_vertical(angle):
+    """Unit quaternions (N, 4) of rotations by ``angle`` (N,) rad about the world's z axis."""
+    r = np.zeros((len(angle), 4))
+    r[:, 0] = np.cos(0.5 * angle)
+    r[:, 3] = np.sin(0.5 * angle)
+    return r
