@@ -221,19 +221,22 @@ def run_bag(path, out, imu_topic='imu/data_raw', mag_topic='imu/mag', compare_to
     try:
         counts = (in_process(side, estimator) if context is None
                   else forked(context, side, estimator))
-        recording = estimator.recording
         if smooth:
             counts = _write_smoothed(estimator, BagSide(reader, roles, out, storage, topics,
                                                         settings),
                                      settings, progress)
-        comparison = None
-        if 'reference' in roles:
-            comparison = _compare_references(recording, estimator.references,
-                                             topics['reference'])
+        recording = estimator.recording
+        comparison = (_compare_references(recording, estimator.references, topics['reference'])
+                      if 'reference' in roles else None)
     except BaseException:
         if out is not None:
             shutil.rmtree(out, ignore_errors=True)
         raise
+    return _bag_run(recording, comparison, storage, topics, counts, estimator)
+
+
+def _bag_run(recording, comparison, storage, topics, counts, estimator):
+    """The :class:`BagRun`: each role's topic, type and messages, what was not decoded."""
     return BagRun(recording, comparison, storage,
                   {role: (topic, msgtype, counts[role])
                    for role, (topic, msgtype, _) in topics.items()},

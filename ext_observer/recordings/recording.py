@@ -238,15 +238,8 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
         (``tesla expected, is it µT?``), a parameter; or no estimate at all.
 
     """
-    gyr = vectors_array(gyr, 'gyr')
-    acc = vectors_array(acc, 'acc')
+    gyr, acc = _imu_arrays(gyr, acc)
     count = len(gyr)
-    if len(acc) != count:
-        raise ValueError(f'gyr and acc must have one row per IMU sample, got {count} and '
-                         f'{len(acc)} rows')
-    if count < 2:
-        raise ValueError(f'at least 2 IMU samples are needed (the first only sets t_0), '
-                         f'got {count}')
     settings = node_settings(parameters)
     mag = _field_rows(mag, mag_times, count)
     if check_units:
@@ -267,6 +260,20 @@ def attitude_from_imu(gyr, acc, mag=None, *, rate=None, times=None, mag_times=No
             velocity_times=velocity_times,
             online_std=(recording.inclination_std, recording.heading_std)))
     return recording
+
+
+def _imu_arrays(gyr, acc):
+    """``gyr`` and ``acc`` as (N, 3) float arrays of one length, N ≥ 2, or a ValueError."""
+    gyr = vectors_array(gyr, 'gyr')
+    acc = vectors_array(acc, 'acc')
+    count = len(gyr)
+    if len(acc) != count:
+        raise ValueError(f'gyr and acc must have one row per IMU sample, got {count} and '
+                         f'{len(acc)} rows')
+    if count < 2:
+        raise ValueError(f'at least 2 IMU samples are needed (the first only sets t_0), '
+                         f'got {count}')
+    return gyr, acc
 
 
 def smoothed_into(recording, smoothed):
