@@ -173,7 +173,8 @@ def main(argv=None):
 
 def _covariance(args, argv, source, folder, trials, groups, progress):
     """The covariance benchmark (``--covariance``) on the trials read."""
-    from ext_observer.broad.covariance import field_gap, gap_table, parse_gap, report
+    from ext_observer.broad.covariance import report
+    from ext_observer.broad.field_gap import field_gap, gap_table, parse_gap
     if args.field_gap is not None:
         gap = parse_gap(args.field_gap)
         print(gap_table(field_gap(trials, groups, gap, workers=args.workers,
@@ -255,7 +256,7 @@ def _check(args, anchors):
     if args.field_gap is not None:
         if not args.covariance or args.docs:
             return '--field-gap goes with --covariance (and writes no page)'
-        from ext_observer.broad.covariance import parse_gap
+        from ext_observer.broad.field_gap import parse_gap
         try:
             parse_gap(args.field_gap)
         except ValueError as error:

@@ -102,8 +102,8 @@ def test_the_bound_margin_is_a_share_of_each_range_and_the_smaller_counts():
 
 
 def test_the_field_gap_benchmark_judges_each_trial_and_pools_the_magnet_trials(capsys):
-    from ext_observer.broad.covariance import (field_gap, gap_figures, gap_table, MAGNET_GROUP,
-                                               parse_gap)
+    from ext_observer.broad.field_gap import (field_gap, gap_figures, gap_table, MAGNET_GROUP,
+                                              parse_gap)
 
     trials = [synthetic_trial('02_undisturbed_a', 30.0),
               synthetic_trial('35_disturbed_attached_magnet_4cm', 30.0),
