@@ -336,59 +336,28 @@ class AhrsObserver:
             return int(self.field(name))
         return np.array([int(STATE.get(h[0], name)) for h in self._states])
 
-    @property
-    def clipped(self):
-        """Samples found at the gyro's range so far (``gyro_range``, or stuck at its peak)."""
-        return self._count('gyro.clips')
-
-    @property
-    def clip_variance(self):
-        """What the last sample, at the gyro's range, adds to the variances (rad²; 0: none)."""
-        return self.field('gyro.clipped')
-
-    @property
-    def holes(self):
-        """Holes in the stream bridged so far (``hole_kernel``: intervals much over the usual)."""
-        return self._count('hole.count')
-
-    @property
-    def hole_variance(self):
-        """What the last sample's hole adds to the variances (rad² per axis; 0: none)."""
-        return self.field('hole.var')
-
-    @property
-    def hole_restart(self):
-        """
-        After a hole: the seconds the inclination's restarted mean weighs the old as.
-
-        −1: the mean kept.
-        """
-        return self.field('hole.t0')
-
-    @property
-    def step_interval(self):
-        """The interval the last step's coefficients are for, s (a hole's keeps the usual one)."""
-        return self.field('coef.dt')
-
-    @property
-    def rest(self):
-        """Whether rest is detected."""
-        return self._flag('rest.detected')
-
-    @property
-    def held(self):
-        """Whether the last step held the inclination on the gyro (the specific force rejected)."""
-        return self._flag('rej.time')
-
-    @property
-    def mag_disturbed(self):
-        """Whether the last magnetometer sample was rejected."""
-        return self._flag('field.mag_dist')
-
-    @property
-    def velocity_used(self):
-        """Whether the last step removed the body's acceleration (a fresh velocity given)."""
-        return self._flag('vel.used')
+    # The state's fields that tell what the last steps did, read-only.
+    clipped = property(lambda self: self._count('gyro.clips'), doc=(
+        "Samples found at the gyro's range so far (``gyro_range``, or stuck at its peak)."))
+    clip_variance = property(lambda self: self.field('gyro.clipped'), doc=(
+        "What the last sample, at the gyro's range, adds to the variances (rad²; 0: none)."))
+    holes = property(lambda self: self._count('hole.count'), doc=(
+        "Holes in the stream bridged so far (``hole_kernel``: intervals much over the usual)."))
+    hole_variance = property(lambda self: self.field('hole.var'), doc=(
+        "What the last sample's hole adds to the variances (rad² per axis; 0: none)."))
+    hole_restart = property(lambda self: self.field('hole.t0'), doc=(
+        "After a hole: the seconds the inclination's restarted mean weighs the old as "
+        "(−1: the mean kept)."))
+    step_interval = property(lambda self: self.field('coef.dt'), doc=(
+        "The interval the last step's coefficients are for, s (a hole's keeps the usual one)."))
+    rest = property(lambda self: self._flag('rest.detected'), doc="Whether rest is detected.")
+    held = property(lambda self: self._flag('rej.time'), doc=(
+        "Whether the last step held the inclination on the gyro (the specific force "
+        "rejected)."))
+    mag_disturbed = property(lambda self: self._flag('field.mag_dist'), doc=(
+        "Whether the last magnetometer sample was rejected."))
+    velocity_used = property(lambda self: self._flag('vel.used'), doc=(
+        "Whether the last step removed the body's acceleration (a fresh velocity given)."))
 
     @property
     def velocity_timeout(self):
