@@ -51,6 +51,7 @@ import numpy as np
 from ..quaternion import normalize
 from .ahrs_observer import AhrsObserver
 from .ahrs_params import AhrsParams
+from .hole_kernel import CLIP_SHARE
 from .smooth_holes import bridge_axes, bridged, gaps_of, join_tilt
 from .smooth_strapdown import strapdown
 from .smooth_windows import heading, inclination
@@ -226,8 +227,11 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     p = params if params is not None else SmoothParams()
     gyr, acc, mag, axis = _checked(gyr, acc, mag, rate, times)
     bias, first, calibration = _bias(gyr, acc, mag, axis.dt, p)
+    clips = None
     if p.unclip:
-        gyr = _unclipped(gyr, _clipped(gyr, p), axis.times,
+        clipped = _clipped(gyr, p)
+        clips = _clip_stretches(gyr, clipped, axis, p)
+        gyr = _unclipped(gyr, clipped, axis.times,
                          max(1, int(round(p.slope_time / axis.usual))))
     rate, dt, rows = bridged(gyr - bias, axis, p)
     q = strapdown(rate, dt, first)[rows]
@@ -241,9 +245,13 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     else:
         q = inclination(q, acc, axis, p)
     if mag is not None:
-        bridge = (bridge_axes(gyr - bias, gaps) if p.join == 'solve' and len(gaps[0])
-                  else None)
-        q = heading(q, calibration(mag), axis, p, gaps, bridge)
+        bridge = bridge_axes(gyr - bias, gaps)
+        if p.join == 'solve' and clips is not None and len(clips[0][0]):
+            # A clip's heading error would spread over the heading's long
+            # windows: its stretches are solved apart, as a hole's.
+            gaps, bridge = _with_clips(gaps, bridge, *clips)
+        q = heading(q, calibration(mag), axis, p, gaps,
+                    bridge if p.join == 'solve' and len(gaps[0]) else None)
     if p.delay:
         q = _ahead(q, p.delay, axis)
     return q, None
@@ -407,6 +415,55 @@ def _clipped(gyr, p):
     at_peak = (size == peak) & (peak > 0.0)
     clipped |= at_peak & (at_peak.sum(axis=0) >= 2)
     return clipped
+
+
+def _clip_stretches(gyr, clipped, axis, p):
+    """
+    The clipped stretches to join as gaps, and the rotation each leaves unknown.
+
+    A stretch: consecutive samples with an axis at the range, from sample
+    ``before + 1`` to ``after − 1``, joined as a hole is when the known
+    samples beside it are at least ``join_time`` apart (a stretch at an end
+    is not joined; a shorter one is bridged only, as a short hole). Per body axis, the online estimator's model of
+    what a clipped axis misses (:data:`~ext_observer.core.ahrs.hole_kernel.CLIP_SHARE`
+    of the range's rotation per clipped sample, summed along the stretch: the
+    rate stays beyond the range), squared. Returns ``((before, after,
+    length), variances (G, 3))``.
+    """
+    n = len(gyr)
+    bad = clipped.any(axis=1)
+    edges = np.diff(np.concatenate(([0], bad.astype(np.int8), [0])))
+    first, last = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    inner = (first > 0) & (last < n - 1)
+    first, last = first[inner], last[inner]
+    long = axis.times[last + 1] - axis.times[first - 1] >= p.join_time
+    first, last = first[long], last[long]
+    limit = 0.0 if p.online is None else float(p.online.gyro_range)
+    top = max(limit, float(np.abs(gyr).max())) * axis.dt
+    # Clipped rotation per axis along each stretch: Σ CLIP_SHARE · top · [clipped].
+    c = np.concatenate((np.zeros((1, 3)), np.cumsum(clipped * top[:, None], axis=0)))
+    sigma = CLIP_SHARE * (c[last + 1] - c[first])
+    before, after = first - 1, last + 1
+    return (before, after, axis.times[after] - axis.times[before]), np.square(sigma)
+
+
+def _with_clips(gaps, bridge, clip_gaps, clip_bridge):
+    """
+    The holes' gaps and the clipped stretches' as one ordered set, with their variances.
+
+    A clipped stretch that overlaps a hole's gap is left out (the hole's bridge holds it).
+    """
+    before, after, length = gaps
+    keep = np.ones(len(clip_gaps[0]), dtype=bool)
+    if len(before):
+        # A stretch [b, a] overlaps hole [hb, ha] unless a <= hb or b >= ha.
+        at = np.searchsorted(before, clip_gaps[1], side='left')  # holes starting at/after a
+        prev = np.clip(at - 1, 0, len(before) - 1)
+        keep = ~((at > 0) & (after[prev] > clip_gaps[0]))
+    joined = [np.concatenate((g, c[keep])) for g, c in zip(gaps, clip_gaps)]
+    order = np.argsort(joined[0], kind='stable')
+    return (tuple(g[order] for g in joined),
+            np.concatenate((bridge, clip_bridge[keep]))[order])
 
 
 def _unclipped(gyr, clipped, t, reach=1):

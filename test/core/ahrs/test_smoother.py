@@ -187,6 +187,22 @@ def test_a_clipped_gyro_is_bridged_across_its_stretches(moving):
     assert err[1] < 0.95 * err[2], err
 
 
+def test_a_clipped_stretch_is_a_heading_of_its_own(moving):
+    truth, gyr, acc, mag = moving
+    limit = 0.5 * np.abs(gyr).max()
+    clipped = np.clip(gyr, -limit, limit)
+    apart, _ = smooth_attitude(clipped, acc, mag, RATE)
+    joined = smoother._with_clips
+    try:
+        smoother._with_clips = lambda gaps, bridge, *clips: (gaps, bridge)
+        across, _ = smooth_attitude(clipped, acc, mag, RATE)
+    finally:
+        smoother._with_clips = joined
+    err = [rms(errors_deg(q, truth)[1]) for q in (apart, across)]
+    # A clip's heading error stays in its stretch, not over the heading's windows.
+    assert err[0] < 0.8 * err[1], err
+
+
 @pytest.mark.parametrize('kwargs, match', [
     ({'rate': 100.0, 'times': np.arange(10.0)}, 'either rate or times'),
     ({'times': np.arange(9.0)}, r'times must have shape \(10,\)'),
