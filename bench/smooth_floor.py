@@ -2,13 +2,14 @@
 ``python -m bench.smooth_floor``: where the smoothed 6D inclination's error on BROAD comes from.
 
 Per trial, over its movement samples: the inclination error of our smoothed
-estimate and of offline VQF's, and the RMS angle between the two estimates'
-verticals (two estimators that agree far better with each other than with
-the truth share the rest of their error). Each error is then split into a
-fixed tilt between the estimate's body frame and the reference's (one
-rotation per trial, :func:`constant_tilt`: BROAD's scoring aligns no frames,
-docs/offline.md) and the rest, and the rest into frequency bands
-(:func:`band_rms`). ``--delay`` reads the reference that many seconds
+estimate and of offline VQF's (and over the rest phases that BROAD does not
+score, where the estimate is the specific force's direction), and the RMS
+angle between the two estimates' verticals (two estimators that agree far
+better with each other than with the truth share the rest of their error).
+Each error is then split into a fixed tilt between the estimate's body frame
+and the reference's (one rotation per trial, :func:`constant_tilt`: BROAD's
+scoring aligns no frames, docs/offline.md) and the rest, and the rest into
+frequency bands (:func:`band_rms`). ``--delay`` reads the reference that many seconds
 earlier (BROAD's timing, docs/offline.md). Means over the tuning and the
 held-out trials apart (:mod:`ext_observer.broad.split`). The body-frame
 vertical of an attitude ``q`` (sensor → world) is ``R(q)ᵀ z``; the
@@ -32,7 +33,7 @@ LAGS = (1, 14, 57, 286, 571)
 
 
 def verticals(q):
-    """The world's vertical in the body frame (N, 3) of attitudes ``q`` (N, 4), sensor → world."""
+    """The body-frame vertical (N, 3) of attitudes ``q`` (N, 4), sensor → world."""
     from ext_observer.core.ahrs.smooth_strapdown import matrices
     return matrices(np.asarray(q, dtype=float))[:, 2, :]
 
@@ -126,8 +127,10 @@ def trial_figures(trial, delay=0.0):
                                                  trial.rate, False)}
     v = {k: verticals(q) for k, q in estimates.items()}
     out = {'agree': _rms_deg(angles(v['ours'], v['offline_vqf'])[keep])}
+    still = ~np.asarray(trial.movement, dtype=bool) & np.isfinite(ref).all(axis=1)
     for key, v_est in v.items():
         out[key] = _rms_deg(angles(v_est, v_ref)[keep])
+        out[f'{key}_at_rest'] = _rms_deg(angles(v_est, v_ref)[still])
         m = constant_tilt(v_est[keep], v_ref[keep])
         out[f'{key}_constant'] = math.degrees(math.acos(min(1.0, (np.trace(m) - 1.0) / 2.0)))
         v_turned = v_ref @ m.T
