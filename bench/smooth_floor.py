@@ -3,13 +3,15 @@
 
 Per trial, over its movement samples: the inclination error of our smoothed
 estimate and of offline VQF's (and over the rest phases that BROAD does not
-score, where the estimate is the specific force's direction), and the RMS
-angle between the two estimates' verticals (two estimators that agree far
-better with each other than with the truth share the rest of their error).
-Each error is then split into a fixed tilt between the estimate's body frame
-and the reference's (one rotation per trial, :func:`constant_tilt`: BROAD's
-scoring aligns no frames, docs/offline.md) and the rest, and the rest into
-frequency bands (:func:`band_rms`). ``--delay`` reads the reference that many seconds
+score, where the estimate is the specific force's direction; the tilt there
+between that direction and the reference's vertical, start and end apart,
+:func:`rest_tilt`), and the RMS angle between the two estimates' verticals
+(two estimators that agree far better with each other than with the truth
+share the rest of their error). Each error is then split into a fixed tilt
+between the estimate's body frame and the reference's (one rotation per
+trial, :func:`constant_tilt`: BROAD's scoring aligns no frames,
+docs/offline.md) and the rest, and the rest into frequency bands
+(:func:`band_rms`). ``--delay`` reads the reference that many seconds
 earlier (BROAD's timing, docs/offline.md). Means over the tuning and the
 held-out trials apart (:mod:`ext_observer.broad.split`). The body-frame
 vertical of an attitude ``q`` (sensor → world) is ``R(q)ᵀ z``; the
@@ -24,7 +26,7 @@ import sys
 import numpy as np
 
 __all__ = ['angles', 'band_rms', 'BANDS', 'constant_tilt', 'lag_disagreement', 'main',
-           'reference_earlier', 'trial_figures', 'verticals']
+           'reference_earlier', 'rest_tilt', 'trial_figures', 'verticals']
 
 # Hz, the bands' edges, high to low: above 5, 1–5, 0.1–1 and below 0.1 Hz.
 BANDS = (5.0, 1.0, 0.1)
@@ -92,6 +94,20 @@ def lag_disagreement(q_est, q_ref, lag, keep):
     return _rms_deg(e[use])
 
 
+def rest_tilt(acc, v_ref, still):
+    """
+    deg (3,), or None: the mean of ``v_ref × f̂`` over ``still``, body frame.
+
+    The tilt between the specific force's direction and the reference's
+    vertical over a rest phase: a constant of the sensor (its bias or its
+    axes' misalignment) is the same at every rest of the same attitude.
+    """
+    if np.count_nonzero(still) == 0:
+        return None
+    f = acc[still] / np.linalg.norm(acc[still], axis=1, keepdims=True)
+    return np.degrees(np.cross(v_ref[still], f).mean(axis=0)).tolist()
+
+
 def reference_earlier(q, rate, delay):
     """
     ``q`` (N, 4) read ``delay`` s earlier: ``q(t − delay)``, NaN where a neighbour is NaN.
@@ -138,9 +154,16 @@ def trial_figures(trial, delay=0.0):
         error = np.where(keep[:, None], np.cross(v_turned, v_est), 0.0)
         for name, value in zip(_band_names(), band_rms(error, trial.rate, keep)):
             out[f'{key}_{name}'] = value
+    first_move = int(np.argmax(trial.movement)) if np.any(trial.movement) else len(ref)
+    for end, part in (('start', slice(0, first_move)), ('end', slice(first_move, None))):
+        out[f'rest_tilt_{end}'] = rest_tilt(trial.acc[part], v_ref[part], still[part])
     for lag in LAGS:
         out[f'lag_{lag}'] = lag_disagreement(estimates['ours'], ref, lag, keep)
     return out
+
+
+def _xy(tilt):
+    return '-' if tilt is None else f'({tilt[0]:+.2f}, {tilt[1]:+.2f})°'
 
 
 def _band_names():
@@ -164,13 +187,14 @@ def main(argv=None):
         rows[name] = r = trial_figures(load_trial(path, name), args.delay)
         print(f'{name[:28]:28s} ours {r["ours"]:.3f}° offline VQF {r["offline_vqf"]:.3f}° '
               f'apart {r["agree"]:.3f}° fixed tilt {r["ours_constant"]:.3f}° '
-              f'rest {r["ours_rest"]:.3f}°', flush=True)
+              f'rest {r["ours_rest"]:.3f}° tilt at rest, start / end (x, y) '
+              f'{_xy(r["rest_tilt_start"])} / {_xy(r["rest_tilt_end"])}', flush=True)
     summary = {}
     for label in ('tuning', 'held-out', 'all'):
         names = [n for n in rows if label == 'all' or split_of(n) == label]
         if names:
             summary[label] = {k: float(np.mean([rows[n][k] for n in names]))
-                              for k in rows[names[0]]}
+                              for k in rows[names[0]] if not k.startswith('rest_tilt')}
             print(f'{label} ({len(names)}): ' + ', '.join(
                 f'{k} {v:.3f}' for k, v in summary[label].items()))
     if args.json:

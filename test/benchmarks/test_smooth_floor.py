@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from bench.smooth_floor import angles, band_rms, constant_tilt, reference_earlier, verticals
+from bench.smooth_floor import (angles, band_rms, constant_tilt, reference_earlier, rest_tilt,
+                                verticals)
 from ext_observer.core.quaternion import quaternion_from_rotation_vector
 from ext_observer.core.ahrs.smooth_strapdown import matrices
 
@@ -42,3 +43,13 @@ def test_reference_earlier_by_one_sample_is_the_previous_sample():
     q = quaternion_from_rotation_vector(np.outer(np.linspace(0, 1, 50), [0.0, 0.0, 1.0]))
     out = reference_earlier(q, 100.0, 0.01)
     np.testing.assert_allclose(out[1:], q[:-1], atol=1e-12)
+
+
+def test_rest_tilt_is_the_tilt_of_the_force_from_the_reference_s_vertical():
+    v_ref = np.tile([0.0, 0.0, 1.0], (100, 1))
+    acc = np.tile([0.0, 9.81 * math.sin(math.radians(0.2)), 9.81 * math.cos(math.radians(0.2))],
+                  (100, 1))
+    still = np.arange(100) < 60
+    tilt = rest_tilt(acc, v_ref, still)
+    np.testing.assert_allclose(tilt, [-0.2, 0.0, 0.0], atol=1e-6)
+    assert rest_tilt(acc, v_ref, np.zeros(100, dtype=bool)) is None
