@@ -53,6 +53,7 @@ from .ahrs_observer import AhrsObserver
 from .ahrs_params import AhrsParams
 from .hole_kernel import CLIP_SHARE
 from .smooth_holes import bridge_axes, bridged, gaps_of, join_tilt
+from .smooth_nav import join_velocity
 from .smooth_strapdown import strapdown
 from .smooth_windows import heading, inclination
 
@@ -130,6 +131,29 @@ class SmoothParams:
         s: the field's directions within a stretch count as independent
         once every ``heading_tau`` (the doubt of a stretch's heading,
         weighed against the bridges', ``join='solve'``).
+    nav : bool
+        After the tilt's join (``join`` ``'solve'`` or ``'chain'``), each
+        stretch's rotation from the velocity and the position carried
+        across the holes (:func:`~ext_observer.core.ahrs.smooth_nav.join_velocity`).
+    nav_speed : float
+        m/s, how fast the body moves, per second of data (the bound on the
+        velocity, ``nav``).
+    nav_room : float
+        m, how far the body goes from where it started, per second of data
+        (``nav``).
+    nav_accel : float
+        m/s², how far the body's acceleration within a hole strays from the
+        mean of the two sides' (``nav``).
+    nav_tilt : float
+        rad, how far each stretch's rotation may stray from the tilt's join
+        (``nav``).
+    nav_bridge : float
+        How much less sure the gyro's bridge across a hole is in the
+        ``nav`` solve than the online estimator's hole model says.
+    nav_field : float
+        rad, how far the field's directions just before and after a hole
+        may disagree once the stretches are turned (9D, ``nav``); inf: the
+        field not used there.
     online : AhrsParams or None
         The online passes' parameters (default: the shipped defaults).
 
@@ -151,6 +175,13 @@ class SmoothParams:
     join_time: float = 0.05
     join_tau: float = 0.01
     heading_tau: float = 0.1
+    nav: bool = True
+    nav_speed: float = 0.5
+    nav_room: float = math.inf
+    nav_accel: float = 10.0
+    nav_tilt: float = 0.1
+    nav_bridge: float = 100.0
+    nav_field: float = math.inf
     online: AhrsParams = None
 
     def __post_init__(self):
@@ -171,6 +202,10 @@ class SmoothParams:
             raise ValueError(f'join_time must be positive, got {self.join_time}')
         if not (math.isfinite(self.heading_tau) and self.heading_tau > 0.0):
             raise ValueError(f'heading_tau must be positive and finite, got {self.heading_tau}')
+        for name in ('nav_speed', 'nav_room', 'nav_accel', 'nav_tilt', 'nav_bridge',
+                     'nav_field'):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
         if not (math.isfinite(self.join_tau) and self.join_tau > 0.0):
             raise ValueError(f'join_tau must be positive and finite, got {self.join_tau}')
         if not (math.isfinite(self.slope_time) and self.slope_time >= 0.0):
@@ -237,7 +272,11 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     q = strapdown(rate, dt, first)[rows]
     gaps = gaps_of(axis, p.join_time)
     if p.join in ('solve', 'chain'):
-        q = inclination(join_tilt(q, acc, gyr - bias, gaps, axis, p), acc, axis, p)
+        joined = join_tilt(q, acc, gyr - bias, gaps, axis, p)
+        if p.nav:
+            joined = join_velocity(joined, q, acc, bridge_axes(gyr - bias, gaps), gaps, axis, p,
+                                   None if mag is None else calibration(mag))
+        q = inclination(joined, acc, axis, p)
     elif p.join == 'local' and len(gaps[0]):
         bounds = np.concatenate(([0], gaps[1], [len(q)]))
         q = np.concatenate([inclination(q[lo:hi], acc[lo:hi], axis.part(lo, hi), p)
