@@ -179,15 +179,14 @@ def _with_true_rates(trial, keep, use_mag, params):
     specific force in it: what a perfect bridge leaves of the holes' loss.
     """
     from ext_observer.broad.scoring import score
-    from ext_observer.core.ahrs.smoother import _bias, smooth_attitude
+    from ext_observer.core.ahrs.smoother import smooth_attitude
     from ext_observer.pipeline.batch import hold_finite
     kept = np.flatnonzero(keep)
     jump = np.flatnonzero(np.diff(kept) > 1)
     before, after = kept[jump], kept[jump + 1]
     turns = _true_turns(trial.quat, before, after)
     gyr = hold_finite(trial.gyr).copy()
-    bias = _bias(gyr, hold_finite(trial.acc), None, np.full(len(gyr), 1.0 / trial.rate),
-                 params)[0]
+    bias = _online_bias(trial, params)
     for a, b, turn in zip(before, after, turns):
         if np.isfinite(turn).all():
             # The bias put back: the smoother removes its own estimate.
@@ -197,12 +196,21 @@ def _with_true_rates(trial, keep, use_mag, params):
     return score(q, trial.quat, trial.movement & keep)
 
 
+def _online_bias(trial, params):
+    """The gyro bias (3,) the smoother takes: its online pass's at the end (6D, every sample)."""
+    from ext_observer.core.ahrs.ahrs_observer import AhrsObserver
+    from ext_observer.pipeline.batch import hold_finite
+    est = AhrsObserver(params.online, use_mag=False)
+    est.run(hold_finite(trial.gyr), hold_finite(trial.acc), None, 1.0 / trial.rate)
+    return np.array(est.bias)
+
+
 def measure(trial):
     """The oracle figures of one trial: ``{name: degrees}``."""
     import dataclasses
 
     from bench.smooth_holes import lost
-    from ext_observer.core.ahrs.smoother import _bias, _checked, SmoothParams
+    from ext_observer.core.ahrs.smoother import SmoothParams
     p = SmoothParams()
     n = len(trial)
     keep = lost(trial.name, n, trial.rate, 'burst')
@@ -219,8 +227,7 @@ def measure(trial):
     move = trial.movement
     out['6D stretch truth'] = _rms(stretch_inclination(trial, keep), keep & move)
     out['6D 2 s stretch truth'] = _rms(_two_second(trial), move)
-    gyr, acc, _, axis = _checked(trial.gyr, trial.acc, None, trial.rate)
-    bias = _bias(gyr, acc, None, axis.dt, p)[0]
+    bias = _online_bias(trial, p)
     line, lost_gyro = hole_rotations(trial, keep, bias)
     out['hole line'] = float(np.sqrt(np.mean(line ** 2)))
     out['hole lost gyro'] = float(np.sqrt(np.mean(lost_gyro ** 2)))
