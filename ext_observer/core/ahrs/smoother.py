@@ -31,8 +31,10 @@ windows run on an even grid in time, a lost sample's time shared by its
 neighbours and a longer hole holding no data (the inclination's: the force in
 I on the line across it); after a hole of at least ``join_time``, the tilt
 is joined from both sides (the specific force averaged on either side, weighed
-against the bridge's doubt) and each stretch's heading is solved from all
-stretches' fields at once, through the bridges. A NaN row of the field weighs
+against the bridge's doubt), each stretch is then turned by the small rotation
+that keeps the body's velocity bounded across all of them (``nav``,
+:mod:`~ext_observer.core.ahrs.smooth_nav`), and each stretch's heading is solved
+from all stretches' fields at once, through the bridges. A NaN row of the field weighs
 nothing; a gyro axis at its range is bridged across the clipped stretch
 (Hermite's cubic from both sides).
 docs/offline.md ("Holes, lost fields and clipped stretches") has the figures.
