@@ -65,6 +65,18 @@ def _segment_cumsum(x, start, segment):
     return c - c[start][segment] + x[start][segment]
 
 
+def _add_prior(normal, rhs, rows, value, weight, start):
+    """
+    Add ``Σ w |A x_s + c|²`` over each stretch's samples to its normal equations, in place.
+
+    ``rows`` (N, 3, 9): ``A`` per sample; ``value`` (N, 3): ``c``; ``weight``
+    (N,); ``start``: each stretch's first sample.
+    """
+    weighted = (weight[:, None, None] * rows).transpose(0, 2, 1)
+    normal += np.add.reduceat(np.matmul(weighted, rows), start, axis=0)
+    rhs -= np.add.reduceat(np.matmul(weighted, value[:, :, None])[:, :, 0], start, axis=0)
+
+
 def _field_rows(q, field, gaps, axis, p):
     """
     The field's rows across each hole: ``J_s`` on φ_s, ``J_{s+1}``, the residual, its weight.
@@ -141,17 +153,16 @@ def join_velocity(q, q_bridged, acc, bridge, gaps, axis, p, field=None):
     tau = axis.times - axis.times[start][segment]
     big_p = _segment_cumsum(big_v * dt[:, None], start, segment)
     big_q = _segment_cumsum(big_f * dt[:, None], start, segment)
-    eye = np.broadcast_to(np.eye(3), (n, 3, 3))
-    zero = np.zeros((n, 3, 3))
-    a_v = np.concatenate((-skew(big_f), eye, zero), axis=2)
-    a_p = np.concatenate((-skew(big_q), tau[:, None, None] * eye, eye), axis=2)
     normal = np.zeros((count, _SIZE, _SIZE))
     rhs = np.zeros((count, _SIZE))
-    for a, c, sigma in ((a_v, big_v, p.nav_speed), (a_p, big_p, p.nav_room)):
-        w = np.where(dt > 0.0, dt, axis.usual) / sigma ** 2
-        normal += np.add.reduceat(w[:, None, None] * np.einsum('nij,nik->njk', a, a), start,
-                                  axis=0)
-        rhs -= np.add.reduceat(w[:, None] * np.einsum('nij,ni->nj', a, c), start, axis=0)
+    weight = np.where(dt > 0.0, dt, axis.usual)
+    eye = np.broadcast_to(np.eye(3), (n, 3, 3))
+    if np.isfinite(p.nav_speed):
+        a = np.concatenate((-skew(big_f), eye, np.zeros((n, 3, 3))), axis=2)
+        _add_prior(normal, rhs, a, big_v, weight / p.nav_speed ** 2, start)
+    if np.isfinite(p.nav_room):
+        a = np.concatenate((-skew(big_q), tau[:, None, None] * eye, eye), axis=2)
+        _add_prior(normal, rhs, a, big_p, weight / p.nav_room ** 2, start)
     upper = np.zeros((count - 1, _SIZE, _SIZE))
     e, b, h = before, after, span[:, None, None]
     fe, fb = f[e], f[b]
