@@ -53,7 +53,7 @@ import numpy as np
 from ..quaternion import normalize
 from .ahrs_observer import AhrsObserver
 from .ahrs_params import AhrsParams
-from .hole_kernel import CLIP_SHARE
+from .smooth_clips import clip_stretches, clipped_rates, unclipped, with_clips
 from .smooth_holes import bridge_axes, bridged, gaps_of, join_tilt
 from .smooth_nav import join_velocity
 from .smooth_strapdown import strapdown
@@ -109,7 +109,7 @@ class SmoothParams:
     unclip : bool
         Bridge each gyro axis across its clipped stretches (at
         ``online.gyro_range``, or stuck at the recording's peak) from both
-        sides (:func:`_unclipped`); False: the clipped rates as given.
+        sides (:func:`unclipped`); False: the clipped rates as given.
     join : {'solve', 'chain', 'local', 'none'}
         What a hole of at least ``join_time`` changes beyond the gyro's
         bridge. ``'chain'``: the part after it is tilted to make the
@@ -266,9 +266,9 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     bias, first, calibration = _bias(gyr, acc, mag, axis.dt, p)
     clips = None
     if p.unclip:
-        clipped = _clipped(gyr, p)
-        clips = _clip_stretches(gyr, clipped, axis, p)
-        gyr = _unclipped(gyr, clipped, axis.times,
+        clipped = clipped_rates(gyr, p)
+        clips = clip_stretches(gyr, clipped, axis, p)
+        gyr = unclipped(gyr, clipped, axis.times,
                          max(1, int(round(p.slope_time / axis.usual))))
     rate, dt, rows = bridged(gyr - bias, axis, p)
     q = strapdown(rate, dt, first)[rows]
@@ -290,7 +290,7 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
         if p.join == 'solve' and clips is not None and len(clips[0][0]):
             # A clip's heading error would spread over the heading's long
             # windows: its stretches are solved apart, as a hole's.
-            gaps, bridge = _with_clips(gaps, bridge, *clips)
+            gaps, bridge = with_clips(gaps, bridge, *clips)
         q = heading(q, calibration(mag), axis, p, gaps,
                     bridge if p.join == 'solve' and len(gaps[0]) else None)
     if p.delay:
@@ -437,109 +437,6 @@ def _checked(gyr, acc, mag, rate, times=None):
         return gyr, acc, mag, _Axis(dt)
     slot = np.rint((times - times[0]) / usual).astype(np.int64)
     return gyr, acc, mag, _Axis(dt, slot)
-
-
-def _clipped(gyr, p):
-    """
-    The rates not known (N, 3): at the gyro's range on their axis.
-
-    At ``online.gyro_range`` where set (> 0), or at the recording's peak
-    on an axis where two or more samples sit at it (a rate stuck at the
-    peak: a range nobody declared).
-    """
-    size = np.abs(gyr)
-    clipped = np.zeros(gyr.shape, dtype=bool)
-    limit = 0.0 if p.online is None else float(p.online.gyro_range)
-    if limit > 0.0:
-        clipped |= size >= limit * (1.0 - _EVEN)
-    peak = size.max(axis=0)
-    at_peak = (size == peak) & (peak > 0.0)
-    clipped |= at_peak & (at_peak.sum(axis=0) >= 2)
-    return clipped
-
-
-def _clip_stretches(gyr, clipped, axis, p):
-    """
-    The clipped stretches to join as gaps, and the rotation each leaves unknown.
-
-    A stretch: consecutive samples with an axis at the range, from sample
-    ``before + 1`` to ``after − 1``, joined as a hole is when the known
-    samples beside it are at least ``join_time`` apart (a stretch at an end
-    is not joined; a shorter one is bridged only, as a short hole). Per body axis, the online estimator's model of
-    what a clipped axis misses (:data:`~ext_observer.core.ahrs.hole_kernel.CLIP_SHARE`
-    of the range's rotation per clipped sample, summed along the stretch: the
-    rate stays beyond the range), squared. Returns ``((before, after,
-    length), variances (G, 3))``.
-    """
-    n = len(gyr)
-    bad = clipped.any(axis=1)
-    edges = np.diff(np.concatenate(([0], bad.astype(np.int8), [0])))
-    first, last = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
-    inner = (first > 0) & (last < n - 1)
-    first, last = first[inner], last[inner]
-    long = axis.times[last + 1] - axis.times[first - 1] >= p.join_time
-    first, last = first[long], last[long]
-    limit = 0.0 if p.online is None else float(p.online.gyro_range)
-    top = max(limit, float(np.abs(gyr).max())) * axis.dt
-    # Clipped rotation per axis along each stretch: Σ CLIP_SHARE · top · [clipped].
-    c = np.concatenate((np.zeros((1, 3)), np.cumsum(clipped * top[:, None], axis=0)))
-    sigma = CLIP_SHARE * (c[last + 1] - c[first])
-    before, after = first - 1, last + 1
-    return (before, after, axis.times[after] - axis.times[before]), np.square(sigma)
-
-
-def _with_clips(gaps, bridge, clip_gaps, clip_bridge):
-    """
-    The holes' gaps and the clipped stretches' as one ordered set, with their variances.
-
-    A clipped stretch that overlaps a hole's gap is left out (the hole's bridge holds it).
-    """
-    before, after, length = gaps
-    keep = np.ones(len(clip_gaps[0]), dtype=bool)
-    if len(before):
-        # A stretch [b, a] overlaps hole [hb, ha] unless a <= hb or b >= ha.
-        at = np.searchsorted(before, clip_gaps[1], side='left')  # holes starting at/after a
-        prev = np.clip(at - 1, 0, len(before) - 1)
-        keep = ~((at > 0) & (after[prev] > clip_gaps[0]))
-    joined = [np.concatenate((g, c[keep])) for g, c in zip(gaps, clip_gaps)]
-    order = np.argsort(joined[0], kind='stable')
-    return (tuple(g[order] for g in joined),
-            np.concatenate((bridge, clip_bridge[keep]))[order])
-
-
-def _unclipped(gyr, clipped, t, reach=1):
-    """
-    ``gyr`` with its clipped rates (``clipped``, (N, 3)) bridged from both sides, per axis.
-
-    Across each clipped stretch of an axis, Hermite's cubic through the
-    rates beside it with their slopes (the differences to the samples
-    ``reach`` before and after), at least the clipped value in size (the rate went
-    beyond the range, not back). A stretch at an end keeps its values.
-    """
-    if not clipped.any():
-        return gyr
-    out = gyr.copy()
-    n = len(gyr)
-    index = np.arange(n)
-    for axis in range(3):
-        bad = clipped[:, axis]
-        if not bad.any() or bad.all():
-            continue
-        w = gyr[:, axis]
-        a = np.maximum.accumulate(np.where(bad, -1, index))[bad]
-        b = np.minimum.accumulate(np.where(bad, n, index)[::-1])[::-1][bad]
-        inner = (a >= 0) & (b < n)
-        k, a, b = np.flatnonzero(bad)[inner], a[inner], b[inner]
-        a0 = np.maximum(a - reach, 0)
-        b1 = np.minimum(b + reach, n - 1)
-        ma = np.where(a > a0, (w[a] - w[a0]) / (t[a] - t[a0]), 0.0)
-        mb = np.where(b1 > b, (w[b1] - w[b]) / (t[b1] - t[b]), 0.0)
-        span = t[b] - t[a]
-        s = (t[k] - t[a]) / span
-        curve = (w[a] + (w[b] - w[a]) * (s * s * (3.0 - 2.0 * s))
-                 + span * (s * (1.0 - s) ** 2 * ma + s * s * (s - 1.0) * mb))
-        out[k, axis] = np.sign(w[k]) * np.maximum(np.abs(curve), np.abs(w[k]))
-    return out
 
 
 def _online(est, gyr, acc, mag, dt, start=0, end=None):

@@ -176,12 +176,12 @@ def test_a_clipped_gyro_is_bridged_across_its_stretches(moving):
     assert (np.abs(gyr) > limit).sum() > 10
     whole, _ = smooth_attitude(gyr, acc, None, RATE)
     held, _ = smooth_attitude(clipped, acc, None, RATE)  # stuck at its peak: found so
-    ignored = smoother._clipped
+    ignored = smoother.clipped_rates
     try:
-        smoother._clipped = lambda g, p: np.zeros(g.shape, dtype=bool)
+        smoother.clipped_rates = lambda g, p: np.zeros(g.shape, dtype=bool)
         naive, _ = smooth_attitude(clipped, acc, None, RATE)
     finally:
-        smoother._clipped = ignored
+        smoother.clipped_rates = ignored
     err = [rms(errors_deg(q, truth)[2]) for q in (whole, held, naive)]
     # Bridged from both sides, nearer the truth than the clipped rates as given.
     assert err[1] < 0.95 * err[2], err
@@ -192,12 +192,12 @@ def test_a_clipped_stretch_is_a_heading_of_its_own(moving):
     limit = 0.5 * np.abs(gyr).max()
     clipped = np.clip(gyr, -limit, limit)
     apart, _ = smooth_attitude(clipped, acc, mag, RATE)
-    joined = smoother._with_clips
+    joined = smoother.with_clips
     try:
-        smoother._with_clips = lambda gaps, bridge, *clips: (gaps, bridge)
+        smoother.with_clips = lambda gaps, bridge, *clips: (gaps, bridge)
         across, _ = smooth_attitude(clipped, acc, mag, RATE)
     finally:
-        smoother._with_clips = joined
+        smoother.with_clips = joined
     err = [rms(errors_deg(q, truth)[1]) for q in (apart, across)]
     # A clip's heading error stays in its stretch, not over the heading's windows.
     assert err[0] < 0.8 * err[1], err
