@@ -241,9 +241,24 @@ def clip_after(s, var):
             s.gyro.clip_left = max(s.gyro.clip_left - s.coef.dt, 0.0)
         return
     s.gyro.clip_left = s.par.tau_acc
-    sigma = s.inc.sigma + CLIP_SHARE * math.sqrt(var)
+    sigma = mean_sigma(s) + CLIP_SHARE * math.sqrt(var)
     s.inc.sigma = sigma
     restart_weighted(s, sigma * sigma)
+
+
+def mean_sigma(s):
+    """
+    The inclination's error σ (rad) beyond the usual: at most what a running mean leaves.
+
+    Within a running mean of ``t`` seconds (``inc.start`` below ``tau_acc``),
+    the estimate follows the mean, whose error is ``m c / (c + t)``
+    (:func:`hole_after`): the losses before its restart are weighed in it.
+    """
+    sigma = s.inc.sigma
+    t = s.inc.start
+    if t < s.par.tau_acc:
+        sigma = min(sigma, math.sqrt(s.inc.acc_dev * HOLE_CORRELATION / (HOLE_CORRELATION + t)))
+    return sigma
 
 
 def hole_slope(s, dt):
