@@ -100,7 +100,7 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     norm, dip, psi, valid = _field_angles(s, mx, my, mz)
     if s.field.has_ref == 0.0:
         _first_references(s, norm, dip)
-    disturbed = _off_references(s, norm, dip)
+    disturbed = _off_references(s, norm, dip, s.inc.sigma)
     _follow_candidate(s, norm, dip, dt)
     disturbed = _reject_or_accept(s, disturbed, dt)
     use = valid and not disturbed and s.par.use_mag != 0.0
@@ -141,11 +141,20 @@ def _first_references(s, norm, dip):
     s.field.ref_rest = 0.0
 
 
-def _off_references(s, norm, dip):
-    """Whether a field's norm or dip is off the references (disturbed)."""
+def _off_references(s, norm, dip, tilt):
+    """
+    Whether a field's norm or dip is off the references (disturbed).
+
+    The dip is the field's in the estimate's world frame: a tilt error of σ
+    ``tilt`` (rad) turns it by as much, so the dip's threshold widens to
+    ``√(mag_dip_th² + (FIELD_GATE tilt)²)`` (the norm does not depend on
+    the attitude).
+    """
     ref_n = s.field.ref[0]
-    return (abs(norm - ref_n) > s.par.mag_norm_th * ref_n) or (abs(dip - s.field.ref[1])
-                                                               > s.par.mag_dip_th)
+    dd = dip - s.field.ref[1]
+    th_d = s.par.mag_dip_th
+    return (abs(norm - ref_n) > s.par.mag_norm_th * ref_n) or (
+        dd * dd > th_d * th_d + FIELD_GATE * FIELD_GATE * tilt * tilt)
 
 
 def _follow_candidate(s, norm, dip, dt):
@@ -490,7 +499,7 @@ def field_calibrate(s, mx, my, mz, dt):
         # A field the norm/dip test rejects does not teach.
         cx, cy, cz = mc_apply(s.cal, mx, my, mz)
         norm, dip, _, _ = _field_angles(s, cx, cy, cz)
-        allow = not _off_references(s, norm, dip)
+        allow = not _off_references(s, norm, dip, 0.0)
     w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
     n2 = w * w + x * x + y * y + z * z
     # The world's vertical in the body frame: R(q̂)ᵀ e_z / |q̂|².
