@@ -106,6 +106,8 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     use = valid and not disturbed and s.par.use_mag != 0.0
     _follow_references(s, norm, dip, use, dt)
     s.field.mag_dist = 1.0 if disturbed else 0.0
+    if use and s.inc.sigma != 0.0:
+        _field_tilt(s, dip, psi, dt)
     if has_cal:
         use, psi = _calibration_wait(s, psi, use)
     kap = _heading_gain(s, use, has_cal, dt)
@@ -429,6 +431,43 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
         forget_wait(s)
         s.field.doubt_gain = k
     return k
+
+
+def _field_tilt(s, dip, psi, dt):
+    """
+    The field's dip corrects the tilt the inclination's doubt leaves (a clipped gyro, a hole).
+
+    A tilt error ``e`` about the horizontal axis across the field (``a``,
+    world frame, the field's heading ``ψ`` turned a quarter) turns the
+    field's dip by ``e``, whatever the body's acceleration: the field is
+    the one measurement of that tilt while the accelerometer is off by the
+    body's own motion. The Kalman gain of the inclination's doubt
+    ``P = inc.sigma²`` against a field's ``r`` (as the heading's,
+    :func:`_doubt_gain`: its noise and the error fields share). ``P`` stays:
+    the field says nothing of the tilt about its own horizontal direction,
+    which only the accelerometer corrects (and ``inc.sigma`` is the doubt of
+    either horizontal axis).
+    """
+    p = s.inc.sigma * s.inc.sigma
+    # r = σ_f² / dt + σ_b² τ_c / dt
+    r = (FIELD_HEADING_NOISE * FIELD_HEADING_NOISE
+         + FIELD_HEADING_BIAS * FIELD_HEADING_BIAS * FIELD_CORRELATION) / dt
+    k = p / (p + r)
+    d = dip - s.field.ref[1]
+    half = -0.5 * k * d
+    # r = (cos θ/2, a sin θ/2), a = (cos ψ, −sin ψ, 0): turns the field's dip by θ = −k d
+    sn = math.sin(half)
+    rw, rx, ry = math.cos(half), sn * math.cos(psi), -sn * math.sin(psi)
+    w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
+    s.est.q[0] = rw * w - rx * x - ry * y
+    s.est.q[1] = rw * x + rx * w + ry * z
+    s.est.q[2] = rw * y + ry * w - rx * z
+    s.est.q[3] = rw * z + rx * y - ry * x
+    # The inclination's filter states follow the applied rotation, as its own correction's.
+    s.inc.lp[0], s.inc.lp[1], s.inc.lp[2] = rotate(rw, rx, ry, 0.0,
+                                                   s.inc.lp[0], s.inc.lp[1], s.inc.lp[2])
+    s.inc.lp[3], s.inc.lp[4], s.inc.lp[5] = rotate(rw, rx, ry, 0.0,
+                                                   s.inc.lp[3], s.inc.lp[4], s.inc.lp[5])
 
 
 def _heading_bias(s, kap, rw, rz, dt):
