@@ -449,9 +449,11 @@ def _field_tilt(s, dip, psi, dt):
     either horizontal axis).
     """
     p = s.inc.sigma * s.inc.sigma
-    # r = σ_f² / dt + σ_b² τ_c / dt
+    # r = (σ_f² / dt + σ_b² τ_c / dt) cos²(dip): a heading's error is the
+    # field direction's over the horizontal share cos(dip), the dip's is the direction's
+    c = math.cos(s.field.ref[1])
     r = (FIELD_HEADING_NOISE * FIELD_HEADING_NOISE
-         + FIELD_HEADING_BIAS * FIELD_HEADING_BIAS * FIELD_CORRELATION) / dt
+         + FIELD_HEADING_BIAS * FIELD_HEADING_BIAS * FIELD_CORRELATION) * c * c / dt
     k = p / (p + r)
     d = dip - s.field.ref[1]
     half = -0.5 * k * d
