@@ -13,7 +13,7 @@ by step"). Quaternions ``(w, x, y, z)``, sensor → ENU.
 
 import math
 
-from .ahrs_filters import gain, rotate, rotation_matrix
+from .ahrs_filters import UNIFORM_ANGLE_VARIANCE, gain, quat_multiply, rotate, rotation_matrix
 from .bias_kernel import bias_measure
 from .hole_kernel import HOLE_CALIBRATION, calibration_restart, forget_wait
 from .magcal_kernel import mc_apply, mc_field, mc_learn
@@ -114,6 +114,9 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     s.field.doubt_gain = 0.0
     if s.field.head_doubt != 0.0 and valid and s.par.use_mag != 0.0:
         kap = _doubt_gain(s, kap, norm, dip, psi, dt)
+    if s.inc.sigma != 0.0 and kap > 0.0 and valid:
+        # A tilt in doubt takes its share of the field's sideways error.
+        kap = _sideways_tilt(s, kap, psi)
     # y = R_z(ψ) ⊗ q̂; q̂ ← (1 − κ) q̂ + κ y, r = (1 − κ + κ cos(ψ/2), 0, 0, κ sin(ψ/2)).
     half = 0.5 * psi
     rw, rz = 1.0 - kap + kap * math.cos(half), kap * math.sin(half)
@@ -460,16 +463,51 @@ def _field_tilt(s, dip, psi, dt):
     # r = (cos θ/2, a sin θ/2), a = (cos ψ, −sin ψ, 0): turns the field's dip by θ = −k d
     sn = math.sin(half)
     rw, rx, ry = math.cos(half), sn * math.cos(psi), -sn * math.sin(psi)
-    w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
-    s.est.q[0] = rw * w - rx * x - ry * y
-    s.est.q[1] = rw * x + rx * w + ry * z
-    s.est.q[2] = rw * y + ry * w - rx * z
-    s.est.q[3] = rw * z + rx * y - ry * x
+    q = s.est.q
+    q[0], q[1], q[2], q[3] = quat_multiply(rw, rx, ry, 0.0, q[0], q[1], q[2], q[3])
     # The inclination's filter states follow the applied rotation, as its own correction's.
-    s.inc.lp[0], s.inc.lp[1], s.inc.lp[2] = rotate(rw, rx, ry, 0.0,
-                                                   s.inc.lp[0], s.inc.lp[1], s.inc.lp[2])
-    s.inc.lp[3], s.inc.lp[4], s.inc.lp[5] = rotate(rw, rx, ry, 0.0,
-                                                   s.inc.lp[3], s.inc.lp[4], s.inc.lp[5])
+    for i in LP_STATES:
+        s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2] = rotate(
+            rw, rx, ry, 0.0, s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2])
+
+
+def _sideways_tilt(s, kap, psi):
+    """
+    A field's sideways error shared by the heading and the tilt about north, as their doubts say.
+
+    A field whose horizontal part lies ``ψ`` off north shows a heading error,
+    or a tilt error about the north axis, which leans its vertical part
+    sideways: ``h ψ ≈ h e_h − v e_t`` (``h``, ``v`` the field direction's
+    horizontal and vertical shares, cos and sin of the dip). The Kalman gains
+    of the two doubts share the field's correction ``κ``: the heading's
+    ``P_h`` (its doubt and ``FIELD_HEADING_BIAS²``) takes
+    ``w = h² P_h / (h² P_h + v² P_t)`` of it, the inclination's
+    ``P_t = inc.sigma²`` the rest, a turn about north that removes that share
+    of the sideways part. While the fields' running mean sets the heading
+    (after a start or a loss: κ above ``k_mag``) ``P_h`` is that of a heading
+    known to be nothing better than uniform. Returns the heading's gain ``w κ``.
+    """
+    ph = s.field.head_doubt + FIELD_HEADING_BIAS * FIELD_HEADING_BIAS
+    if s.field.mag_used * s.coef.k_mag < 1.0:
+        ph = UNIFORM_ANGLE_VARIANCE
+    pt = s.inc.sigma * s.inc.sigma
+    h, v = math.cos(s.field.ref[1]), math.sin(s.field.ref[1])
+    hp, vp = h * h * ph, v * v * pt
+    w = hp / (hp + vp)
+    if w >= 1.0:
+        return kap
+    # The sideways part h sin ψ, the vertical v: a turn b about north, tan b = −h sin ψ / v,
+    # removes it; the tilt's share (1 − w) κ of it.
+    half = 0.5 * (1.0 - w) * kap * math.atan(-h * math.sin(psi) / v)
+    rw, ry = math.cos(half), math.sin(half)
+    # q̂ ← (cos, 0, sin, 0) ⊗ q̂: about the world's north axis
+    q = s.est.q
+    q[0], q[1], q[2], q[3] = quat_multiply(rw, 0.0, ry, 0.0, q[0], q[1], q[2], q[3])
+    # The inclination's filter states follow the applied rotation, as its own correction's.
+    for i in LP_STATES:
+        s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2] = rotate(
+            rw, 0.0, ry, 0.0, s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2])
+    return w * kap
 
 
 def _heading_bias(s, kap, rw, rz, dt):
