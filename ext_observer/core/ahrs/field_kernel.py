@@ -15,7 +15,7 @@ import math
 
 from .ahrs_filters import UNIFORM_ANGLE_VARIANCE, gain, quat_multiply, rotate, rotation_matrix
 from .bias_kernel import bias_measure
-from .hole_kernel import HOLE_CALIBRATION, calibration_restart, forget_wait
+from .hole_kernel import HOLE_CALIBRATION, calibration_restart, forget_wait, mean_sigma
 from .magcal_kernel import mc_apply, mc_field, mc_learn
 from .small_matrix import vec3_at
 from .record import Group
@@ -100,23 +100,24 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     norm, dip, psi, valid = _field_angles(s, mx, my, mz)
     if s.field.has_ref == 0.0:
         _first_references(s, norm, dip)
-    disturbed = _off_references(s, norm, dip, s.inc.sigma)
+    tilt = mean_sigma(s)  # the inclination's doubt
+    disturbed = _off_references(s, norm, dip, tilt)
     _follow_candidate(s, norm, dip, dt)
     disturbed = _reject_or_accept(s, disturbed, dt)
     use = valid and not disturbed and s.par.use_mag != 0.0
     _follow_references(s, norm, dip, use, dt)
     s.field.mag_dist = 1.0 if disturbed else 0.0
-    if use and s.inc.sigma != 0.0:
-        _field_tilt(s, dip, psi, dt)
+    if use and tilt != 0.0:
+        _field_tilt(s, tilt, dip, psi, dt)
     if has_cal:
         use, psi = _calibration_wait(s, psi, use)
     kap = _heading_gain(s, use, has_cal, dt)
     s.field.doubt_gain = 0.0
     if s.field.head_doubt != 0.0 and valid and s.par.use_mag != 0.0:
         kap = _doubt_gain(s, kap, norm, dip, psi, dt)
-    if s.inc.sigma != 0.0 and kap > 0.0 and valid:
+    if tilt != 0.0 and kap > 0.0 and valid:
         # A tilt in doubt takes its share of the field's sideways error.
-        kap = _sideways_tilt(s, kap, psi)
+        kap = _sideways_tilt(s, tilt, kap, psi)
     # y = R_z(ψ) ⊗ q̂; q̂ ← (1 − κ) q̂ + κ y, r = (1 − κ + κ cos(ψ/2), 0, 0, κ sin(ψ/2)).
     half = 0.5 * psi
     rw, rz = 1.0 - kap + kap * math.cos(half), kap * math.sin(half)
@@ -436,7 +437,7 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
     return k
 
 
-def _field_tilt(s, dip, psi, dt):
+def _field_tilt(s, tilt, dip, psi, dt):
     """
     The field's dip corrects the tilt the inclination's doubt leaves (a clipped gyro, a hole).
 
@@ -444,14 +445,16 @@ def _field_tilt(s, dip, psi, dt):
     world frame, the field's heading ``ψ`` turned a quarter) turns the
     field's dip by ``e``, whatever the body's acceleration: the field is
     the one measurement of that tilt while the accelerometer is off by the
-    body's own motion. The Kalman gain of the inclination's doubt
-    ``P = inc.sigma²`` against a field's ``r`` (as the heading's,
-    :func:`_doubt_gain`: its noise and the error fields share). ``P`` stays:
+    body's own motion. The Kalman gain of the inclination's doubt ``tilt``
+    (:func:`~ext_observer.core.ahrs.hole_kernel.mean_sigma`), ``P = tilt²``,
+    against a field's ``r``: the heading's (as in :func:`_doubt_gain`: its
+    noise and the error fields share) times ``cos²(dip)``, for a heading's
+    error is the field direction's over the horizontal share. ``P`` stays:
     the field says nothing of the tilt about its own horizontal direction,
-    which only the accelerometer corrects (and ``inc.sigma`` is the doubt of
-    either horizontal axis).
+    which only the accelerometer corrects (and the doubt is either
+    horizontal axis's).
     """
-    p = s.inc.sigma * s.inc.sigma
+    p = tilt * tilt
     # r = (σ_f² / dt + σ_b² τ_c / dt) cos²(dip): a heading's error is the
     # field direction's over the horizontal share cos(dip), the dip's is the direction's
     c = math.cos(s.field.ref[1])
@@ -460,7 +463,7 @@ def _field_tilt(s, dip, psi, dt):
     k = p / (p + r)
     d = dip - s.field.ref[1]
     half = -0.5 * k * d
-    # r = (cos θ/2, a sin θ/2), a = (cos ψ, −sin ψ, 0): turns the field's dip by θ = −k d
+    # The turn (cos θ/2, a sin θ/2), a = (cos ψ, −sin ψ, 0), turns the dip by θ = −k d
     sn = math.sin(half)
     rw, rx, ry = math.cos(half), sn * math.cos(psi), -sn * math.sin(psi)
     q = s.est.q
@@ -471,7 +474,7 @@ def _field_tilt(s, dip, psi, dt):
             rw, rx, ry, 0.0, s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2])
 
 
-def _sideways_tilt(s, kap, psi):
+def _sideways_tilt(s, tilt, kap, psi):
     """
     A field's sideways error shared by the heading and the tilt about north, as their doubts say.
 
@@ -482,7 +485,7 @@ def _sideways_tilt(s, kap, psi):
     of the two doubts share the field's correction ``κ``: the heading's
     ``P_h`` (its doubt and ``FIELD_HEADING_BIAS²``) takes
     ``w = h² P_h / (h² P_h + v² P_t)`` of it, the inclination's
-    ``P_t = inc.sigma²`` the rest, a turn about north that removes that share
+    ``P_t = tilt²`` the rest, a turn about north that removes that share
     of the sideways part. While the fields' running mean sets the heading
     (after a start or a loss: κ above ``k_mag``) ``P_h`` is that of a heading
     known to be nothing better than uniform. Returns the heading's gain ``w κ``.
@@ -490,7 +493,7 @@ def _sideways_tilt(s, kap, psi):
     ph = s.field.head_doubt + FIELD_HEADING_BIAS * FIELD_HEADING_BIAS
     if s.field.mag_used * s.coef.k_mag < 1.0:
         ph = UNIFORM_ANGLE_VARIANCE
-    pt = s.inc.sigma * s.inc.sigma
+    pt = tilt * tilt
     h, v = math.cos(s.field.ref[1]), math.sin(s.field.ref[1])
     hp, vp = h * h * ph, v * v * pt
     w = hp / (hp + vp)
