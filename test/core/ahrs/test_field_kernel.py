@@ -22,12 +22,12 @@ import numpy as np
 import pytest
 
 from ext_observer.core.ahrs import magcal_kernel
-from ext_observer.core.ahrs.ahrs_filters import rotate
+from ext_observer.core.ahrs.ahrs_filters import UNIFORM_ANGLE_VARIANCE, rotate
 from ext_observer.core.ahrs.field_kernel import (CLIP_HEADING_SHARE, FIELD_CORRELATION,
                                                 FIELD_GATE, FIELD_HEADING_BIAS,
                                                 FIELD_HEADING_NOISE, HEADING_LOST, _doubt_gain,
-                                                _turn_heading, ahrs_update_mag, field_back,
-                                                field_clipped, field_doubt)
+                                                _sideways_tilt, _turn_heading, ahrs_update_mag,
+                                                field_back, field_clipped, field_doubt)
 from ext_observer.core.ahrs.bias_kernel import bias_measure
 from ext_observer.core.ahrs.ahrs_observer import AhrsObserver, AhrsParams
 from ext_observer.core.ahrs.ahrs_state import STATE
@@ -559,6 +559,33 @@ def test_the_fields_dip_corrects_the_tilt_across_it_by_the_kalman_gain_of_the_do
     assert 2.0 * math.atan2(turn[1], turn[0]) == pytest.approx(-k * tilt, rel=2e-3)
     assert abs(turn[2]) < 1e-12 and abs(turn[3]) < 1e-12
     assert s.inc.sigma == sigma
+
+
+def test_a_fields_sideways_error_is_shared_by_heading_and_tilt_as_their_doubts_say():
+    # A field 10° off north, the heading's doubt FIELD_HEADING_BIAS², the
+    # tilt's 10°: the heading takes w = h² P_h / (h² P_h + v² P_t) of the
+    # field's gain κ, a turn about north the rest of the sideways part
+    # (tan b = −h sin ψ / v); while the fields' running mean sets the
+    # heading, its doubt is a uniform heading's.
+    est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = record(est)
+    s.field.mag_used = 1e6  # the running mean long over
+    kap, psi, tilt = 0.01, math.radians(10.0), math.radians(10.0)
+    h2, v2 = math.cos(DIP) ** 2, math.sin(DIP) ** 2
+    ph = FIELD_HEADING_BIAS ** 2
+    w = h2 * ph / (h2 * ph + v2 * tilt ** 2)
+    before = np.array([float(v) for v in s.est.q])
+    assert _sideways_tilt(s, tilt, kap, psi) == pytest.approx(w * kap, rel=1e-9)
+    turn = multiply(np.array([float(v) for v in s.est.q]), conjugate(before))
+    b = (1.0 - w) * kap * math.atan(-math.cos(DIP) * math.sin(psi) / math.sin(DIP))
+    assert 2.0 * math.atan2(turn[2], turn[0]) == pytest.approx(b, rel=1e-9)
+    assert abs(turn[1]) < 1e-12 and abs(turn[3]) < 1e-12
+    s.field.mag_used = 3.0
+    wu = h2 * UNIFORM_ANGLE_VARIANCE / (h2 * UNIFORM_ANGLE_VARIANCE + v2 * tilt ** 2)
+    assert _sideways_tilt(s, tilt, kap, psi) == pytest.approx(wu * kap, rel=1e-9)
+    assert w < 0.1 < 0.9 < wu
 
 
 def _rotation(q, v):
