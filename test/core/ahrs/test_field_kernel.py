@@ -72,7 +72,8 @@ def body_field(field, yaw):
 
 def yaw_of(q):
     w, x, y, z = q
-    assert abs(x) < 1e-6 and abs(y) < 1e-6   # level (a clip or a hole lets the field tilt it a little)
+    # Level (after a clip or a hole, the field may tilt it a little).
+    assert abs(x) < 1e-6 and abs(y) < 1e-6
     return 2.0 * math.atan2(z, w)
 
 
@@ -615,7 +616,8 @@ def _clipped_spin(use_mag, spin=6.0, seconds=3.0, after=1.5, shake=4.0):
         elif k < still + spinning:
             rate = spin * axis
         else:
-            rate = 0.6 * np.array([math.sin(2.1 * t), math.cos(1.3 * t), 0.5 * math.sin(0.7 * t)])
+            rate = 0.6 * np.array([math.sin(2.1 * t), math.cos(1.3 * t),
+                                   0.5 * math.sin(0.7 * t)])
         q = multiply(q, quaternion_from_rotation_vector(rate * DT))
         moved = k >= still
         a = shake * np.array([math.sin(3.0 * math.pi * t), math.cos(2.2 * math.pi * t), 0.0])
