@@ -7,8 +7,10 @@ whose sample step calls :func:`ahrs_update_mag` for each field. The field is
 judged by its norm and dip against references that follow it (VQF's
 magnetic disturbance rejection, Laidig & Seel 2023), taught to the
 magnetometer calibration (:func:`field_calibrate`) and turns the heading
-about the world vertical. The maths: docs/raw_imu.md ("The estimator, step
-by step"). Quaternions ``(w, x, y, z)``, sensor → ENU.
+about the world vertical; while a clipped gyro or a hole leaves the
+inclination in doubt, the field corrects the tilt too, as far as the doubts
+say (:func:`_field_tilt`, :func:`_sideways_tilt`). The maths: docs/raw_imu.md
+("The estimator, step by step"). Quaternions ``(w, x, y, z)``, sensor → ENU.
 """
 
 import math

@@ -228,7 +228,8 @@ def clip_after(s, var):
 
     The rate beyond the range stays beyond it along a clipped stretch: the
     errors add up, :data:`CLIP_SHARE` of the range's σ per sample, into the
-    inclination's σ (``S_INC_SIGMA``), which weighs the mean against new
+    inclination's σ (``inc.sigma``; within a running mean at most the
+    mean's, :func:`mean_sigma`), which weighs the mean against new
     samples as a hole's does (:func:`restart_weighted`). Without a clip, that
     σ is forgotten at the low-pass's pace; the recovery (the health state)
     lasts ``tau_acc`` after the last clipped sample.
