@@ -596,11 +596,12 @@ def _rotation(q, v):
 
 def _clipped_spin(use_mag, spin=6.0, seconds=3.0, after=1.5, shake=4.0):
     """
-    A shaken body: 5 s still, ``seconds`` of a spin at ``spin`` rad/s about a
-    tilted axis (clipped at ±250 °/s), then a slow wobble; a horizontal
-    acceleration of ``shake`` m/s² (1.5 and 1.1 Hz) from the spin on, so
-    that the accelerometer shows the vertical poorly. The inclination error
-    (rad) of each sample after the spin.
+    The inclination error (rad) of each sample after a clipped spin of a shaken body.
+
+    5 s still, ``seconds`` of a spin at ``spin`` rad/s about a tilted axis
+    (clipped at ±250 °/s), then a slow wobble; a horizontal acceleration of
+    ``shake`` m/s² (1.5 and 1.1 Hz) from the spin on, so that the
+    accelerometer shows the vertical poorly.
     """
     axis = np.array([1.0, 0.6, 0.3]) / math.sqrt(1.45)
     est = AhrsObserver(AhrsParams(gyro_range=RANGE, mag_cal=False), use_mag=use_mag,
