@@ -17,6 +17,8 @@ from ..constants import STANDARD_GRAVITY
 # Below this |(1 + a_z, a_y, −a_x)| (about the angle, rad, from upside down) the
 # half-way rotation is rounding: the first attitude turns half a turn about x instead.
 ATTITUDE_FLIP_NORM = 1e-9
+# rad²: the variance of an angle uniform on (−π, π] (σ 104°), one known to be nothing better.
+UNIFORM_ANGLE_VARIANCE = math.pi * math.pi / 3.0
 
 
 def rotate(w, x, y, z, vx, vy, vz):

@@ -27,7 +27,8 @@ sensor → ENU.
 
 import math
 
-from .ahrs_filters import first_attitude, gain, quat_multiply, rotate, rotation_matrix
+from .ahrs_filters import (UNIFORM_ANGLE_VARIANCE, first_attitude, gain, quat_multiply, rotate,
+                           rotation_matrix)
 from .accel_rejection import acc_rejection_reset
 from .clip_and_rest import clipped_variance, detect_rest, gyro_reset, rest_reset
 from .gravity_kernel import ahrs_update_acc, inc_reset
@@ -218,7 +219,7 @@ def ahrs_bridge(s, gx, gy, gz, dt):
 
 # rad² per axis: the most a rotation nobody saw can leave, that of an angle
 # uniform on (−π, π] (σ 104°).
-UNSEEN_ROTATION = math.pi * math.pi / 3.0
+UNSEEN_ROTATION = UNIFORM_ANGLE_VARIANCE
 # An unseen rotation's square, shared alike by the three axes.
 UNSEEN_AXES = 3.0
 

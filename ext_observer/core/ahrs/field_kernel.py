@@ -7,15 +7,17 @@ whose sample step calls :func:`ahrs_update_mag` for each field. The field is
 judged by its norm and dip against references that follow it (VQF's
 magnetic disturbance rejection, Laidig & Seel 2023), taught to the
 magnetometer calibration (:func:`field_calibrate`) and turns the heading
-about the world vertical. The maths: docs/raw_imu.md ("The estimator, step
-by step"). Quaternions ``(w, x, y, z)``, sensor → ENU.
+about the world vertical; while a clipped gyro or a hole leaves the
+inclination in doubt, the field corrects the tilt too, as far as the doubts
+say (:func:`_field_tilt`, :func:`_sideways_tilt`). The maths: docs/raw_imu.md
+("The estimator, step by step"). Quaternions ``(w, x, y, z)``, sensor → ENU.
 """
 
 import math
 
-from .ahrs_filters import gain, rotate, rotation_matrix
+from .ahrs_filters import UNIFORM_ANGLE_VARIANCE, gain, quat_multiply, rotate, rotation_matrix
 from .bias_kernel import bias_measure
-from .hole_kernel import HOLE_CALIBRATION, calibration_restart, forget_wait
+from .hole_kernel import HOLE_CALIBRATION, calibration_restart, forget_wait, mean_sigma
 from .magcal_kernel import mc_apply, mc_field, mc_learn
 from .small_matrix import vec3_at
 from .record import Group
@@ -100,18 +102,24 @@ def ahrs_update_mag(s, mx, my, mz, dt):
     norm, dip, psi, valid = _field_angles(s, mx, my, mz)
     if s.field.has_ref == 0.0:
         _first_references(s, norm, dip)
-    disturbed = _off_references(s, norm, dip)
+    tilt = mean_sigma(s)  # the inclination's doubt
+    disturbed = _off_references(s, norm, dip, tilt)
     _follow_candidate(s, norm, dip, dt)
     disturbed = _reject_or_accept(s, disturbed, dt)
     use = valid and not disturbed and s.par.use_mag != 0.0
     _follow_references(s, norm, dip, use, dt)
     s.field.mag_dist = 1.0 if disturbed else 0.0
+    if use and tilt != 0.0:
+        _field_tilt(s, tilt, dip, psi, dt)
     if has_cal:
         use, psi = _calibration_wait(s, psi, use)
     kap = _heading_gain(s, use, has_cal, dt)
     s.field.doubt_gain = 0.0
     if s.field.head_doubt != 0.0 and valid and s.par.use_mag != 0.0:
         kap = _doubt_gain(s, kap, norm, dip, psi, dt)
+    if tilt != 0.0 and kap > 0.0 and valid:
+        # A tilt in doubt takes its share of the field's sideways error.
+        kap = _sideways_tilt(s, tilt, kap, psi)
     # y = R_z(ψ) ⊗ q̂; q̂ ← (1 − κ) q̂ + κ y, r = (1 − κ + κ cos(ψ/2), 0, 0, κ sin(ψ/2)).
     half = 0.5 * psi
     rw, rz = 1.0 - kap + kap * math.cos(half), kap * math.sin(half)
@@ -141,11 +149,20 @@ def _first_references(s, norm, dip):
     s.field.ref_rest = 0.0
 
 
-def _off_references(s, norm, dip):
-    """Whether a field's norm or dip is off the references (disturbed)."""
+def _off_references(s, norm, dip, tilt):
+    """
+    Whether a field's norm or dip is off the references (disturbed).
+
+    The dip is the field's in the estimate's world frame: a tilt error of σ
+    ``tilt`` (rad) turns it by as much, so the dip's threshold widens to
+    ``√(mag_dip_th² + (FIELD_GATE tilt)²)`` (the norm does not depend on
+    the attitude).
+    """
     ref_n = s.field.ref[0]
-    return (abs(norm - ref_n) > s.par.mag_norm_th * ref_n) or (abs(dip - s.field.ref[1])
-                                                               > s.par.mag_dip_th)
+    dd = dip - s.field.ref[1]
+    th_d = s.par.mag_dip_th
+    return (abs(norm - ref_n) > s.par.mag_norm_th * ref_n) or (
+        dd * dd > th_d * th_d + FIELD_GATE * FIELD_GATE * tilt * tilt)
 
 
 def _follow_candidate(s, norm, dip, dt):
@@ -422,6 +439,82 @@ def _doubt_gain(s, kap, norm, dip, psi, dt):
     return k
 
 
+def _field_tilt(s, tilt, dip, psi, dt):
+    """
+    The field's dip corrects the tilt the inclination's doubt leaves (a clipped gyro, a hole).
+
+    A tilt error ``e`` about the horizontal axis across the field (``a``,
+    world frame, the field's heading ``ψ`` turned a quarter) turns the
+    field's dip by ``e``, whatever the body's acceleration: the field is
+    the one measurement of that tilt while the accelerometer is off by the
+    body's own motion. The Kalman gain of the inclination's doubt ``tilt``
+    (:func:`~ext_observer.core.ahrs.hole_kernel.mean_sigma`), ``P = tilt²``,
+    against a field's ``r``: the heading's (as in :func:`_doubt_gain`: its
+    noise and the error fields share) times ``cos²(dip)``, for a heading's
+    error is the field direction's over the horizontal share. ``P`` stays:
+    the field says nothing of the tilt about its own horizontal direction,
+    which only the accelerometer corrects (and the doubt is either
+    horizontal axis's).
+    """
+    p = tilt * tilt
+    # r = (σ_f² / dt + σ_b² τ_c / dt) cos²(dip): a heading's error is the
+    # field direction's over the horizontal share cos(dip), the dip's is the direction's
+    c = math.cos(s.field.ref[1])
+    r = (FIELD_HEADING_NOISE * FIELD_HEADING_NOISE
+         + FIELD_HEADING_BIAS * FIELD_HEADING_BIAS * FIELD_CORRELATION) * c * c / dt
+    k = p / (p + r)
+    d = dip - s.field.ref[1]
+    half = -0.5 * k * d
+    # The turn (cos θ/2, a sin θ/2), a = (cos ψ, −sin ψ, 0), turns the dip by θ = −k d
+    sn = math.sin(half)
+    rw, rx, ry = math.cos(half), sn * math.cos(psi), -sn * math.sin(psi)
+    q = s.est.q
+    q[0], q[1], q[2], q[3] = quat_multiply(rw, rx, ry, 0.0, q[0], q[1], q[2], q[3])
+    # The inclination's filter states follow the applied rotation, as its own correction's.
+    for i in LP_STATES:
+        s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2] = rotate(
+            rw, rx, ry, 0.0, s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2])
+
+
+def _sideways_tilt(s, tilt, kap, psi):
+    """
+    A field's sideways error shared by the heading and the tilt about north, as their doubts say.
+
+    A field whose horizontal part lies ``ψ`` off north shows a heading error,
+    or a tilt error about the north axis, which leans its vertical part
+    sideways: ``h ψ ≈ h e_h − v e_t`` (``h``, ``v`` the field direction's
+    horizontal and vertical shares, cos and sin of the dip). The Kalman gains
+    of the two doubts share the field's correction ``κ``: the heading's
+    ``P_h`` (its doubt and ``FIELD_HEADING_BIAS²``) takes
+    ``w = h² P_h / (h² P_h + v² P_t)`` of it, the inclination's
+    ``P_t = tilt²`` the rest, a turn about north that removes that share
+    of the sideways part. While the fields' running mean sets the heading
+    (after a start or a loss: κ above ``k_mag``) ``P_h`` is that of a heading
+    known to be nothing better than uniform. Returns the heading's gain ``w κ``.
+    """
+    ph = s.field.head_doubt + FIELD_HEADING_BIAS * FIELD_HEADING_BIAS
+    if s.field.mag_used * s.coef.k_mag < 1.0:
+        ph = UNIFORM_ANGLE_VARIANCE
+    pt = tilt * tilt
+    h, v = math.cos(s.field.ref[1]), math.sin(s.field.ref[1])
+    hp, vp = h * h * ph, v * v * pt
+    w = hp / (hp + vp)
+    if w >= 1.0:
+        return kap
+    # The sideways part h sin ψ, the vertical v: a turn b about north, tan b = −h sin ψ / v,
+    # removes it; the tilt's share (1 − w) κ of it.
+    half = 0.5 * (1.0 - w) * kap * math.atan(-h * math.sin(psi) / v)
+    rw, ry = math.cos(half), math.sin(half)
+    # q̂ ← (cos, 0, sin, 0) ⊗ q̂: about the world's north axis
+    q = s.est.q
+    q[0], q[1], q[2], q[3] = quat_multiply(rw, 0.0, ry, 0.0, q[0], q[1], q[2], q[3])
+    # The inclination's filter states follow the applied rotation, as its own correction's.
+    for i in LP_STATES:
+        s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2] = rotate(
+            rw, 0.0, ry, 0.0, s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2])
+    return w * kap
+
+
 def _heading_bias(s, kap, rw, rz, dt):
     """
     The heading correction measures the bias: its rate follows the drift ``(R β)_z``.
@@ -490,7 +583,7 @@ def field_calibrate(s, mx, my, mz, dt):
         # A field the norm/dip test rejects does not teach.
         cx, cy, cz = mc_apply(s.cal, mx, my, mz)
         norm, dip, _, _ = _field_angles(s, cx, cy, cz)
-        allow = not _off_references(s, norm, dip)
+        allow = not _off_references(s, norm, dip, 0.0)
     w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
     n2 = w * w + x * x + y * y + z * z
     # The world's vertical in the body frame: R(q̂)ᵀ e_z / |q̂|².

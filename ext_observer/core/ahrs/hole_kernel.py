@@ -228,7 +228,8 @@ def clip_after(s, var):
 
     The rate beyond the range stays beyond it along a clipped stretch: the
     errors add up, :data:`CLIP_SHARE` of the range's σ per sample, into the
-    inclination's σ (``S_INC_SIGMA``), which weighs the mean against new
+    inclination's σ (``inc.sigma``; within a running mean at most the
+    mean's, :func:`mean_sigma`), which weighs the mean against new
     samples as a hole's does (:func:`restart_weighted`). Without a clip, that
     σ is forgotten at the low-pass's pace; the recovery (the health state)
     lasts ``tau_acc`` after the last clipped sample.
@@ -241,9 +242,24 @@ def clip_after(s, var):
             s.gyro.clip_left = max(s.gyro.clip_left - s.coef.dt, 0.0)
         return
     s.gyro.clip_left = s.par.tau_acc
-    sigma = s.inc.sigma + CLIP_SHARE * math.sqrt(var)
+    sigma = mean_sigma(s) + CLIP_SHARE * math.sqrt(var)
     s.inc.sigma = sigma
     restart_weighted(s, sigma * sigma)
+
+
+def mean_sigma(s):
+    """
+    The inclination's error σ (rad) beyond the usual: at most what a running mean leaves.
+
+    Within a running mean of ``t`` seconds (``inc.start`` below ``tau_acc``),
+    the estimate follows the mean, whose error is ``m c / (c + t)``
+    (:func:`hole_after`): the losses before its restart are weighed in it.
+    """
+    sigma = s.inc.sigma
+    t = s.inc.start
+    if t < s.par.tau_acc:
+        sigma = min(sigma, math.sqrt(s.inc.acc_dev * HOLE_CORRELATION / (HOLE_CORRELATION + t)))
+    return sigma
 
 
 def hole_slope(s, dt):

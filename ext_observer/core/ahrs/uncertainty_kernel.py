@@ -30,13 +30,13 @@ the compiled kernels, one crossing from Python per sample.
 import math
 
 from ..constants import STANDARD_GRAVITY
-from .ahrs_filters import gravity_deviation, rotate
+from .ahrs_filters import UNIFORM_ANGLE_VARIANCE, gravity_deviation, rotate
 from .ahrs_kernel import ahrs_update
 from .bias_kernel import bias_variance
 from .record import Group
 
 # Variance of a heading known to be nothing better than uniform on (−π, π], rad².
-HEADING_UNKNOWN = math.pi * math.pi / 3.0
+HEADING_UNKNOWN = UNIFORM_ANGLE_VARIANCE
 
 # --- the state -----------------------------------------------------------------
 

@@ -278,6 +278,25 @@ def test_a_clipped_stretch_sums_its_error_and_weighs_the_inclinations_mean():
     assert s.gyro.clip_left == pytest.approx(s.par.tau_acc - DT)
 
 
+def test_within_a_running_mean_a_clipped_samples_sigma_is_at_most_the_means():
+    # 1 s into a running mean of samples that show the vertical to 0.2 rad,
+    # the estimate follows the mean, off by √(m c / (c + t)), whatever the
+    # losses before its start: a clipped sample adds its share to that σ,
+    # and the mean is weighed as a little under its second, not restarted
+    # from nothing.
+    est = _started()
+    s = est.state[0]
+    s.inc.start, s.inc.start_n = 1.0, 1.0 / DT
+    s.inc.acc_dev = 0.04
+    s.inc.sigma = 2.0  # the losses of a long stretch before the mean's start
+    var = 1e-4
+    clip_after(s, var)
+    sigma = math.sqrt(0.04 * HOLE_CORRELATION / (HOLE_CORRELATION + 1.0)) + CLIP_SHARE * 0.01
+    assert s.inc.sigma == pytest.approx(sigma)
+    t0 = HOLE_CORRELATION * (0.04 / sigma ** 2 - 1.0)
+    assert 0.9 < t0 < 1.0 and s.inc.start == pytest.approx(t0)
+
+
 def test_no_acceleration_rejection_while_the_vertical_is_unsure():
     def rejected(sigma):
         est = _started()
