@@ -43,7 +43,8 @@ __all__ = ['CompiledUnavailable', 'ENV', 'KERNEL_SOURCES', 'Kernels', 'PLAIN_COS
 KERNEL_SOURCES = ('small_matrix.py',
             'magcal_layout.py', 'magcal_filter.py', 'magcal_kernel.py',
             'ahrs_filters.py', 'bias_kernel.py', 'clip_and_rest.py',
-            'hole_kernel.py', 'velocity_kernel.py', 'accel_rejection.py', 'field_kernel.py',
+            'hole_kernel.py', 'velocity_kernel.py', 'accel_rejection.py', 'field_references.py',
+            'field_kernel.py',
             'gravity_kernel.py', 'ahrs_kernel.py', 'uncertainty_kernel.py')
 ENV = 'EXT_OBSERVER_COMPILED'
 # What running plain costs, measured (docs/compiled.md#without-numba): said
