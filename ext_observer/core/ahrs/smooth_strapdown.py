@@ -3,11 +3,15 @@ The smoother's strapdown and its arrays of rotations: :func:`strapdown`.
 
 Helpers of :mod:`~ext_observer.core.ahrs.smoother` on whole arrays
 (``(w, x, y, z)``, sensor → I): the gyro's integration (one compiled loop, or
-a blocked scan in numpy), rotations of rows of vectors, rotation matrices.
+a blocked scan in numpy), rotations of rows of vectors, products of rows of
+quaternions, rotation matrices, the windows' box sums. Where numba is wanted,
+loops compiled from this file (:func:`_loops`); else numpy on whole arrays,
+to the same floats.
 """
 
 import math
 import os
+import types
 
 import numpy as np
 
@@ -15,8 +19,8 @@ from ..quaternion import multiply, normalize, quaternion_from_rotation_vector
 from .ahrs_filters import quat_multiply, rotate
 from .compiled import compiled_name, wanted
 
-__all__ = ['about_vertical', 'matrices', 'rotate_rows', 'slopes', 'spread', 'strapdown',
-           'strapdown_blocked']
+__all__ = ['about_vertical', 'box', 'matrices', 'multiply_rows', 'rotate_rows', 'slopes',
+           'spread', 'strapdown', 'strapdown_blocked']
 
 
 def matrices(q):
@@ -67,14 +71,14 @@ def strapdown(rate, dt, first):
     :func:`strapdown_blocked`, numpy on whole arrays. The two agree to
     rounding.
     """
-    loop = _compiled_loop()
-    if loop is None:
+    loops = _loops()
+    if loops is None:
         return strapdown_blocked(rate, dt, first)
     out = np.empty((len(rate), 4))
     first = normalize(np.asarray(first, dtype=float))
     dt = np.ascontiguousarray(np.broadcast_to(np.asarray(dt, dtype=float), (len(rate),)))
-    loop(np.ascontiguousarray(rate, dtype=float), dt, first[0], first[1], first[2],
-         first[3], out)
+    loops.integrate(np.ascontiguousarray(rate, dtype=float), dt, first[0], first[1], first[2],
+                    first[3], out)
     return out
 
 
@@ -112,9 +116,6 @@ def _integrate(rate, dt, w, x, y, z, out):
     The strapdown loop over samples: ``q_k`` into ``out`` (N, 4) from ``q_0 = (w, x, y, z)``.
 
     ``dt`` (N,): each step's interval, s.
-
-    Compiled by :func:`_compiled_loop` (``_product``: the kernels' quaternion
-    product, compiled).
     """
     out[0, 0], out[0, 1], out[0, 2], out[0, 3] = w, x, y, z
     for k in range(1, rate.shape[0]):
@@ -128,22 +129,66 @@ def _integrate(rate, dt, w, x, y, z, out):
         out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w, x, y, z
 
 
-_product = quat_multiply
-_LOOP = []
+def _rotate_each(q, v, out):
+    """Each row of ``v`` (N, 3) rotated by its row of ``q`` (N, 4), into ``out`` (N, 3)."""
+    for k in range(v.shape[0]):
+        out[k, 0], out[k, 1], out[k, 2] = _rotate(q[k, 0], q[k, 1], q[k, 2], q[k, 3],
+                                                  v[k, 0], v[k, 1], v[k, 2])
 
 
-def _compiled_loop():
+def _multiply_each(p, q, out):
+    """Each row's product ``p_k ⊗ q_k`` (N, 4) into ``out``."""
+    for k in range(p.shape[0]):
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = _product(
+            p[k, 0], p[k, 1], p[k, 2], p[k, 3], q[k, 0], q[k, 1], q[k, 2], q[k, 3])
+
+
+def _box_each(x, h, out):
     """
-    :func:`_integrate` compiled by numba, or None where numba is not wanted.
+    The box sums (:func:`box`) of ``x`` (N, m) into ``out``, column by column.
 
-    Cached on disk beside the kernels' compiled code, in a folder of its own
-    (the kernels' twin of ``quat_multiply`` has the same file and name) for
-    this version of the kernel files
+    numpy's way, on one column at a time: the running sum (sequential) in
+    a padded row (0 before the first sample, the total after the last),
+    then its differences ``2 h + 1`` apart: the same floats.
+    """
+    n, m = x.shape
+    c = np.empty(n + 2 * h + 1)
+    for j in range(m):
+        for k in range(h + 1):
+            c[k] = 0.0
+        total = x[0, j]
+        c[h + 1] = total
+        for k in range(1, n):
+            total += x[k, j]
+            c[h + 1 + k] = total
+        for k in range(n + h + 1, n + 2 * h + 1):
+            c[k] = total
+        for k in range(n):
+            out[k, j] = c[2 * h + 1 + k] - c[k]
+
+
+_product = quat_multiply
+_rotate = rotate
+_LOOPS = []
+
+
+def _loops():
+    """
+    The compiled loops (``integrate``, ``rotate``, ``multiply``, ``box``), or None.
+
+    :func:`_integrate`, :func:`_rotate_each`, :func:`_multiply_each` and
+    :func:`_box_each` compiled by numba where it is wanted (``_product``,
+    ``_rotate``: the kernels' quaternion product and rotation, compiled);
+    None where it is not: the callers then run numpy on whole arrays, to
+    the same floats (the strapdown: to rounding). Cached on disk beside the
+    kernels' compiled code, in a folder of its own (the kernels' twins of
+    ``quat_multiply`` and ``rotate`` have the same files and names) for this
+    version of the kernel files
     (:func:`~ext_observer.core.ahrs.compiled.compiled_name`).
     """
-    global _product
-    if not _LOOP:
-        loop = None
+    global _product, _rotate
+    if not _LOOPS:
+        loops = None
         if wanted(None)[0]:
             import numba
             name, folder = compiled_name()
@@ -151,23 +196,73 @@ def _compiled_loop():
             numba.config.CACHE_DIR = os.path.join(folder, f'{name}_smoother')
             try:
                 _product = numba.njit(cache=True)(quat_multiply)
-                loop = numba.njit(cache=True)(_integrate)
+                _rotate = numba.njit(cache=True, error_model='numpy')(rotate)
+                loops = types.SimpleNamespace(
+                    integrate=numba.njit(cache=True)(_integrate),
+                    rotate=numba.njit(cache=True, error_model='numpy')(_rotate_each),
+                    multiply=numba.njit(cache=True)(_multiply_each),
+                    box=numba.njit(cache=True)(_box_each))
             finally:
                 numba.config.CACHE_DIR = saved
-        _LOOP.append(loop)
-    return _LOOP[0]
+        _LOOPS.append(loops)
+    return _LOOPS[0]
+
+
+def multiply_rows(p, q):
+    """
+    The products ``p ⊗ q`` (N, 4) of rows of quaternions ``p``, ``q`` (N, 4).
+
+    The kernels' product
+    (:func:`~ext_observer.core.ahrs.ahrs_filters.quat_multiply`) in a
+    compiled loop, or :func:`~ext_observer.core.quaternion.multiply`: the
+    same floats.
+    """
+    loops = _loops()
+    if loops is None:
+        return multiply(p, q)
+    out = np.empty((len(p), 4))
+    loops.multiply(np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(q, dtype=float),
+                   out)
+    return out
+
+
+def box(x, h):
+    """
+    Sums of ``x`` (N, ...) along axis 0 over ``[k − h, k + h]`` at each sample ``k``, truncated.
+
+    Differences of the running sum: a compiled loop, or numpy's
+    ``cumsum`` on a padded array (the same floats).
+    """
+    loops = _loops()
+    n = len(x)
+    if loops is not None:
+        out = np.empty(x.shape)
+        loops.box(np.ascontiguousarray(x, dtype=float).reshape(n, -1), int(h),
+                  out.reshape(n, -1))
+        return out
+    c = np.empty((n + 2 * h + 1,) + x.shape[1:])
+    c[:h + 1] = 0.0
+    np.cumsum(x, axis=0, out=c[h + 1:n + h + 1])
+    c[n + h + 1:] = c[n + h]
+    # c[h + 1 + k] is the sum up to sample k; before the first, 0; past the last, all.
+    return c[2 * h + 1:] - c[:n]
 
 
 def rotate_rows(q, v):
     """
     The vectors ``v`` (N, 3) rotated by the quaternions ``q`` (N, 4): ``q ⊗ v ⊗ q̄ / |q|²``.
 
-    The kernels' rotation (:func:`~ext_observer.core.ahrs.ahrs_filters.rotate`),
-    on columns.
+    The kernels' rotation (:func:`~ext_observer.core.ahrs.ahrs_filters.rotate`)
+    in a compiled loop, or on columns: the same floats.
     """
     out = np.empty((len(v), 3))
-    out[:, 0], out[:, 1], out[:, 2] = rotate(q[:, 0], q[:, 1], q[:, 2], q[:, 3],
-                                             v[:, 0], v[:, 1], v[:, 2])
+    loops = _loops()
+    if loops is None:
+        out[:, 0], out[:, 1], out[:, 2] = rotate(q[:, 0], q[:, 1], q[:, 2], q[:, 3],
+                                                 v[:, 0], v[:, 1], v[:, 2])
+    else:
+        loops.rotate(np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float),
+                     out)
     return out
 
 

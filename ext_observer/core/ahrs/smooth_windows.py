@@ -10,22 +10,11 @@ The windows are three box filters on cumulative sums (:func:`sums`).
 
 import numpy as np
 
-from ..quaternion import multiply, normalize
-from .smooth_strapdown import about_vertical, matrices, rotate_rows
+from ..quaternion import normalize
+from .smooth_strapdown import about_vertical, box, matrices, multiply_rows, rotate_rows
 
-__all__ = ['average', 'box', 'field_weights', 'heading', 'heading_offsets', 'inclination',
+__all__ = ['average', 'field_weights', 'heading', 'heading_offsets', 'inclination',
            'most_common', 'sums', 'tridiagonal']
-
-
-def box(x, h):
-    """Sums of ``x`` (along axis 0) over ``[k − h, k + h]`` at each sample ``k``, truncated."""
-    n = len(x)
-    c = np.empty((n + 2 * h + 1,) + x.shape[1:])
-    c[:h + 1] = 0.0
-    np.cumsum(x, axis=0, out=c[h + 1:n + h + 1])
-    c[n + h + 1:] = c[n + h]
-    # c[h + 1 + k] is the sum up to sample k; before the first, 0; past the last, all.
-    return c[2 * h + 1:] - c[:n]
 
 
 def sums(x, weight, sigma_samples, axis=None):
@@ -99,7 +88,7 @@ def inclination(q, acc, axis, p):
     up = mean / np.linalg.norm(mean, axis=1, keepdims=True)
     # (1 + up·z, up × z) normalized: the rotation by the angle between up and z about up × z.
     c = np.stack((1.0 + up[:, 2], up[:, 1], -up[:, 0], np.zeros(len(up))), axis=1)
-    return normalize(multiply(normalize(c), q))
+    return normalize(multiply_rows(normalize(c), q))
 
 
 def heading(q, mag, axis, p, gaps=None, bridge=None):
@@ -132,7 +121,7 @@ def heading(q, mag, axis, p, gaps=None, bridge=None):
     turn = np.arctan2(mean[:, 0], mean[:, 1])
     if has_gaps and p.join == 'solve':
         turn = turn + heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge)
-    return normalize(multiply(about_vertical(turn), q))
+    return normalize(multiply_rows(about_vertical(turn), q))
 
 
 def heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge):
