@@ -143,28 +143,34 @@ def _multiply_each(p, q, out):
             p[k, 0], p[k, 1], p[k, 2], p[k, 3], q[k, 0], q[k, 1], q[k, 2], q[k, 3])
 
 
-def _box_each(x, h, out):
+def _box_each(x, h, passes, out):
     """
-    The box sums (:func:`box`) of ``x`` (N, m) into ``out``, column by column.
+    The box sums (:func:`box`) of ``x`` (N, m), ``passes`` times, into ``out``.
 
-    numpy's way, on one column at a time: the running sum (sequential) in
-    a padded row (0 before the first sample, the total after the last),
-    then its differences ``2 h + 1`` apart: the same floats.
+    numpy's way, one column at a time: the running sum (sequential) in a
+    padded row (0 before the first sample, the total after the last), then
+    its differences ``2 h + 1`` apart: the same floats.
     """
     n, m = x.shape
+    column = np.empty(n)
     c = np.empty(n + 2 * h + 1)
     for j in range(m):
-        for k in range(h + 1):
-            c[k] = 0.0
-        total = x[0, j]
-        c[h + 1] = total
-        for k in range(1, n):
-            total += x[k, j]
-            c[h + 1 + k] = total
-        for k in range(n + h + 1, n + 2 * h + 1):
-            c[k] = total
         for k in range(n):
-            out[k, j] = c[2 * h + 1 + k] - c[k]
+            column[k] = x[k, j]
+        for _ in range(passes):
+            for k in range(h + 1):
+                c[k] = 0.0
+            total = column[0]
+            c[h + 1] = total
+            for k in range(1, n):
+                total += column[k]
+                c[h + 1 + k] = total
+            for k in range(n + h + 1, n + 2 * h + 1):
+                c[k] = total
+            for k in range(n):
+                column[k] = c[2 * h + 1 + k] - c[k]
+        for k in range(n):
+            out[k, j] = column[k]
 
 
 _product = quat_multiply
@@ -226,26 +232,29 @@ def multiply_rows(p, q):
     return out
 
 
-def box(x, h):
+def box(x, h, passes=1):
     """
     Sums of ``x`` (N, ...) along axis 0 over ``[k − h, k + h]`` at each sample ``k``, truncated.
 
-    Differences of the running sum: a compiled loop, or numpy's
-    ``cumsum`` on a padded array (the same floats).
+    Differences of the running sum; ``passes``: that many times over (each
+    pass on the last one's sums). A compiled loop, or numpy's ``cumsum`` on
+    a padded array: the same floats.
     """
     loops = _loops()
     n = len(x)
     if loops is not None:
         out = np.empty(x.shape)
-        loops.box(np.ascontiguousarray(x, dtype=float).reshape(n, -1), int(h),
+        loops.box(np.ascontiguousarray(x, dtype=float).reshape(n, -1), int(h), int(passes),
                   out.reshape(n, -1))
         return out
-    c = np.empty((n + 2 * h + 1,) + x.shape[1:])
-    c[:h + 1] = 0.0
-    np.cumsum(x, axis=0, out=c[h + 1:n + h + 1])
-    c[n + h + 1:] = c[n + h]
-    # c[h + 1 + k] is the sum up to sample k; before the first, 0; past the last, all.
-    return c[2 * h + 1:] - c[:n]
+    for _ in range(passes):
+        c = np.empty((n + 2 * h + 1,) + x.shape[1:])
+        c[:h + 1] = 0.0
+        np.cumsum(x, axis=0, out=c[h + 1:n + h + 1])
+        c[n + h + 1:] = c[n + h]
+        # c[h + 1 + k] is the sum up to sample k; before the first, 0; past the last, all.
+        x = c[2 * h + 1:] - c[:n]
+    return x
 
 
 def rotate_rows(q, v):

@@ -32,9 +32,8 @@ def sums(x, weight, sigma_samples, axis=None):
     den = weight
     if axis is not None:
         num, den = axis.grid(num), axis.grid(den)
-    for _ in range(3):
-        num = box(num, h)
-        den = box(den, h)
+    num = box(num, h, 3)
+    den = box(den, h, 3)
     if axis is not None:
         num, den = axis.samples(num), axis.samples(den)
     return num, den
