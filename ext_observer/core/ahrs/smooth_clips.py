@@ -26,15 +26,20 @@ def clipped_rates(gyr, p):
     on an axis where two or more samples sit at it (a rate stuck at the
     peak: a range nobody declared).
     """
-    size = np.abs(gyr)
-    clipped = np.zeros(gyr.shape, dtype=bool)
     limit = 0.0 if p.online is None else float(p.online.gyro_range)
-    if limit > 0.0:
-        clipped |= size >= limit * (1.0 - _AT_RANGE)
-    peak = size.max(axis=0)
-    at_peak = (size == peak) & (peak > 0.0)
-    clipped |= at_peak & (at_peak.sum(axis=0) >= 2)
-    return clipped
+    # One axis at a time, its sizes contiguous: numpy's reductions along a row are fast.
+    clipped = np.zeros((3, len(gyr)), dtype=bool)
+    size = np.empty(len(gyr))
+    for axis in range(3):
+        np.abs(gyr[:, axis], out=size)
+        if limit > 0.0:
+            clipped[axis] = size >= limit * (1.0 - _AT_RANGE)
+        peak = size.max()
+        if peak > 0.0:
+            at_peak = size == peak
+            if np.count_nonzero(at_peak) >= 2:
+                clipped[axis] |= at_peak
+    return clipped.T
 
 
 def clip_stretches(gyr, clipped, axis, p):
@@ -51,13 +56,15 @@ def clip_stretches(gyr, clipped, axis, p):
     length), variances (G, 3))``.
     """
     n = len(gyr)
-    bad = clipped.any(axis=1)
+    bad = clipped[:, 0] | clipped[:, 1] | clipped[:, 2]
     edges = np.diff(np.concatenate(([0], bad.astype(np.int8), [0])))
     first, last = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
     inner = (first > 0) & (last < n - 1)
     first, last = first[inner], last[inner]
     long = axis.times[last + 1] - axis.times[first - 1] >= p.join_time
     first, last = first[long], last[long]
+    if not len(first):  # none to join: no sums over the recording
+        return (first - 1, last + 1, np.zeros(0)), np.zeros((0, 3))
     limit = 0.0 if p.online is None else float(p.online.gyro_range)
     top = max(limit, float(np.abs(gyr).max())) * axis.dt
     # Clipped rotation per axis along each stretch: Σ CLIP_SHARE · top · [clipped].

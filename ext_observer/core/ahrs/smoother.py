@@ -270,13 +270,14 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
         clips = clip_stretches(gyr, clipped, axis, p)
         gyr = unclipped(gyr, clipped, axis.times,
                          max(1, int(round(p.slope_time / axis.usual))))
-    rate, dt, rows = bridged(gyr - bias, axis, p)
+    unbiased = gyr - bias
+    rate, dt, rows = bridged(unbiased, axis, p)
     q = strapdown(rate, dt, first)[rows]
     gaps = gaps_of(axis, p.join_time)
     if p.join in ('solve', 'chain'):
-        joined = join_tilt(q, acc, gyr - bias, gaps, axis, p)
+        joined = join_tilt(q, acc, unbiased, gaps, axis, p)
         if p.nav:
-            joined = join_velocity(joined, q, acc, bridge_axes(gyr - bias, gaps), gaps, axis, p,
+            joined = join_velocity(joined, q, acc, bridge_axes(unbiased, gaps), gaps, axis, p,
                                    None if mag is None else calibration(mag))
         q = inclination(joined, acc, axis, p)
     elif p.join == 'local' and len(gaps[0]):
@@ -286,7 +287,7 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     else:
         q = inclination(q, acc, axis, p)
     if mag is not None:
-        bridge = bridge_axes(gyr - bias, gaps)
+        bridge = bridge_axes(unbiased, gaps)
         if p.join == 'solve' and clips is not None and len(clips[0][0]):
             # A clip's heading error would spread over the heading's long
             # windows: its stretches are solved apart, as a hole's.
@@ -410,7 +411,8 @@ def _checked(gyr, acc, mag, rate, times=None):
             # A NaN anywhere in a row: no field at that sample.
             if np.isinf(a).any():
                 raise ValueError('mag has infinite samples (NaN rows: no field)')
-            mag = np.where(np.isnan(a).any(axis=1, keepdims=True), np.nan, a)
+            if np.isnan(a).any():
+                mag = np.where(np.isnan(a).any(axis=1, keepdims=True), np.nan, a)
         elif not np.isfinite(a).all():
             raise ValueError(f'{name} has non-finite samples')
     n = len(gyr)
