@@ -19,8 +19,8 @@ from ..quaternion import multiply, normalize, quaternion_from_rotation_vector
 from .ahrs_filters import quat_multiply, rotate
 from .compiled import compiled_name, wanted
 
-__all__ = ['about_vertical', 'box', 'matrices', 'multiply_rows', 'rotate_rows', 'slopes',
-           'spread', 'strapdown', 'strapdown_blocked']
+__all__ = ['about_vertical', 'box', 'matrices', 'rotate_rows', 'slopes',
+           'spread', 'strapdown', 'strapdown_blocked', 'tilted', 'turned']
 
 
 def matrices(q):
@@ -136,13 +136,6 @@ def _rotate_each(q, v, out):
                                                   v[k, 0], v[k, 1], v[k, 2])
 
 
-def _multiply_each(p, q, out):
-    """Each row's product ``p_k ⊗ q_k`` (N, 4) into ``out``."""
-    for k in range(p.shape[0]):
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = _product(
-            p[k, 0], p[k, 1], p[k, 2], p[k, 3], q[k, 0], q[k, 1], q[k, 2], q[k, 3])
-
-
 def _box_each(x, h, passes, out):
     """
     The box sums (:func:`box`) of ``x`` (N, m), ``passes`` times, into ``out``.
@@ -173,16 +166,49 @@ def _box_each(x, h, passes, out):
             out[k, j] = column[k]
 
 
+def _size4(w, x, y, z):
+    """
+    ``|q|`` as :func:`~ext_observer.core.quaternion.normalize` sums it.
+
+    numpy's ``einsum`` over four contiguous floats adds them in two lanes
+    (x86-64): ``(w² + y²) + (x² + z²)``.
+    """
+    return math.sqrt((w * w + y * y) + (x * x + z * z))
+
+
+def _turn_each(r, q, first, out):
+    """
+    ``r_k ⊗ q_k`` normalized (N, 4) into ``out``; ``first``: ``r_k`` normalized first.
+
+    Returns False where a quaternion to normalize is 0 or not finite
+    (``out`` then partly written).
+    """
+    for k in range(q.shape[0]):
+        rw, rx, ry, rz = r[k, 0], r[k, 1], r[k, 2], r[k, 3]
+        if first:
+            size = _size(rw, rx, ry, rz)
+            if not (math.isfinite(size) and size != 0.0):
+                return False
+            rw, rx, ry, rz = rw / size, rx / size, ry / size, rz / size
+        w, x, y, z = _product(rw, rx, ry, rz, q[k, 0], q[k, 1], q[k, 2], q[k, 3])
+        size = _size(w, x, y, z)
+        if not (math.isfinite(size) and size != 0.0):
+            return False
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w / size, x / size, y / size, z / size
+    return True
+
+
 _product = quat_multiply
 _rotate = rotate
+_size = _size4
 _LOOPS = []
 
 
 def _loops():
     """
-    The compiled loops (``integrate``, ``rotate``, ``multiply``, ``box``), or None.
+    The compiled loops (``integrate``, ``rotate``, ``turn``, ``box``), or None.
 
-    :func:`_integrate`, :func:`_rotate_each`, :func:`_multiply_each` and
+    :func:`_integrate`, :func:`_rotate_each`, :func:`_turn_each` and
     :func:`_box_each` compiled by numba where it is wanted (``_product``,
     ``_rotate``: the kernels' quaternion product and rotation, compiled);
     None where it is not: the callers then run numpy on whole arrays, to
@@ -192,7 +218,7 @@ def _loops():
     version of the kernel files
     (:func:`~ext_observer.core.ahrs.compiled.compiled_name`).
     """
-    global _product, _rotate
+    global _product, _rotate, _size
     if not _LOOPS:
         loops = None
         if wanted(None)[0]:
@@ -203,10 +229,11 @@ def _loops():
             try:
                 _product = numba.njit(cache=True)(quat_multiply)
                 _rotate = numba.njit(cache=True, error_model='numpy')(rotate)
+                _size = numba.njit(cache=True)(_size4)
                 loops = types.SimpleNamespace(
                     integrate=numba.njit(cache=True)(_integrate),
                     rotate=numba.njit(cache=True, error_model='numpy')(_rotate_each),
-                    multiply=numba.njit(cache=True)(_multiply_each),
+                    turn=numba.njit(cache=True, error_model='numpy')(_turn_each),
                     box=numba.njit(cache=True)(_box_each))
             finally:
                 numba.config.CACHE_DIR = saved
@@ -214,22 +241,44 @@ def _loops():
     return _LOOPS[0]
 
 
-def multiply_rows(p, q):
+def turned(r, q, first=False):
     """
-    The products ``p ⊗ q`` (N, 4) of rows of quaternions ``p``, ``q`` (N, 4).
+    ``r ⊗ q`` normalized (N, 4), for rows of quaternions ``r``, ``q`` (N, 4).
 
-    The kernels' product
-    (:func:`~ext_observer.core.ahrs.ahrs_filters.quat_multiply`) in a
-    compiled loop, or :func:`~ext_observer.core.quaternion.multiply`: the
-    same floats.
+    ``first``: ``r`` normalized first. A compiled loop, or
+    :func:`~ext_observer.core.quaternion.normalize` and
+    :func:`~ext_observer.core.quaternion.multiply` on whole arrays: the same
+    floats (:func:`_size4`).
+
+    Raises
+    ------
+    ValueError
+        Where a quaternion to normalize is 0 or not finite.
     """
     loops = _loops()
     if loops is None:
-        return multiply(p, q)
-    out = np.empty((len(p), 4))
-    loops.multiply(np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(q, dtype=float),
-                   out)
+        return normalize(multiply(normalize(r) if first else r, q))
+    out = np.empty((len(q), 4))
+    if not loops.turn(np.ascontiguousarray(r, dtype=float), np.ascontiguousarray(q, dtype=float),
+                      bool(first), out):
+        raise ValueError('Cannot normalize a quaternion that is zero or not finite')
     return out
+
+
+def tilted(f, q):
+    """
+    ``c ⊗ q`` (N, 4): ``c``, the smallest rotation turning each row of ``f`` (N, 3) up (+z).
+
+    ``c = (1 + u·z, u × z)`` normalized, ``u = f / |f|``: the rotation by
+    the angle between ``u`` and z about ``u × z``.
+    """
+    size = np.sqrt((f[:, 0] * f[:, 0] + f[:, 1] * f[:, 1]) + f[:, 2] * f[:, 2])
+    c = np.empty((len(f), 4))
+    c[:, 0] = 1.0 + f[:, 2] / size
+    c[:, 1] = f[:, 1] / size
+    c[:, 2] = -(f[:, 0] / size)
+    c[:, 3] = 0.0
+    return turned(c, q, first=True)
 
 
 def box(x, h, passes=1):

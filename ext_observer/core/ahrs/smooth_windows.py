@@ -10,8 +10,7 @@ The windows are three box filters on cumulative sums (:func:`sums`).
 
 import numpy as np
 
-from ..quaternion import normalize
-from .smooth_strapdown import about_vertical, box, matrices, multiply_rows, rotate_rows
+from .smooth_strapdown import about_vertical, box, matrices, rotate_rows, tilted, turned
 
 __all__ = ['average', 'field_weights', 'heading', 'heading_offsets', 'inclination',
            'most_common', 'sums', 'tridiagonal']
@@ -84,10 +83,7 @@ def inclination(q, acc, axis, p):
         den[hole] = 1.0
         x = num / np.maximum(den, np.finfo(float).tiny)[:, None]
         mean = average(x, den, p.window_acc * axis.rate)[axis.slot]
-    up = mean / np.linalg.norm(mean, axis=1, keepdims=True)
-    # (1 + up·z, up × z) normalized: the rotation by the angle between up and z about up × z.
-    c = np.stack((1.0 + up[:, 2], up[:, 1], -up[:, 0], np.zeros(len(up))), axis=1)
-    return normalize(multiply_rows(normalize(c), q))
+    return tilted(mean, q)
 
 
 def heading(q, mag, axis, p, gaps=None, bridge=None):
@@ -120,7 +116,7 @@ def heading(q, mag, axis, p, gaps=None, bridge=None):
     turn = np.arctan2(mean[:, 0], mean[:, 1])
     if has_gaps and p.join == 'solve':
         turn = turn + heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge)
-    return normalize(multiply_rows(about_vertical(turn), q))
+    return turned(about_vertical(turn), q)
 
 
 def heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge):

@@ -77,6 +77,34 @@ def test_the_strapdown_compiled_and_blocked_is_the_running_product():
                                atol=1e-12)
 
 
+def test_the_compiled_loops_give_numpys_floats(monkeypatch):
+    pytest.importorskip('numba')
+    rng = np.random.default_rng(2)
+    q = quat.normalize(rng.normal(size=(500, 4)))
+    r = rng.normal(size=(500, 4))
+    v = rng.normal(size=(500, 3))
+
+    def run():
+        return (smooth_strapdown.rotate_rows(q, v), smooth_strapdown.box(v, 7, 3),
+                smooth_strapdown.box(v[:, 0], 600, 2), smooth_strapdown.turned(r, q),
+                smooth_strapdown.turned(r, q, first=True), smooth_strapdown.tilted(v, q))
+
+    monkeypatch.setenv('EXT_OBSERVER_COMPILED', '1')
+    monkeypatch.setattr(smooth_strapdown, '_LOOPS', [])
+    compiled = run()
+    monkeypatch.setattr(smooth_strapdown, '_LOOPS', [None])
+    plain = run()
+    for a, b in zip(compiled[:3], plain[:3]):
+        np.testing.assert_array_equal(a, b)
+    # Equal to the bit where numpy's einsum sums four floats in two lanes (x86-64).
+    for a, b in zip(compiled[3:], plain[3:]):
+        np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-15)
+    for loops in ([], [None]):  # upside down: no smallest rotation to turn it up
+        monkeypatch.setattr(smooth_strapdown, '_LOOPS', loops)
+        with pytest.raises(ValueError, match='zero or not finite'):
+            smooth_strapdown.tilted(np.array([[0.0, 0.0, -1.0]]), q[:1])
+
+
 def test_the_windows_are_zero_phase_and_normalized_by_their_weights():
     n = 2001
     t = np.arange(n, dtype=float)
