@@ -19,7 +19,7 @@ from ..quaternion import multiply, normalize, quaternion_from_rotation_vector
 from .ahrs_filters import quat_multiply, rotate
 from .compiled import compiled_name, wanted
 
-__all__ = ['about_vertical', 'box', 'matrices', 'rotate_rows', 'slopes',
+__all__ = ['about_vertical', 'box', 'field_parts', 'matrices', 'rotate_rows', 'slopes',
            'spread', 'strapdown', 'strapdown_blocked', 'tilted', 'turned']
 
 
@@ -176,6 +176,14 @@ def _size4(w, x, y, z):
     return math.sqrt((w * w + y * y) + (x * x + z * z))
 
 
+def _turn_one(rw, rx, ry, rz, q, k, out):
+    """``out[k] = r ⊗ q[k]`` normalized; False where it is 0 or not finite."""
+    w, x, y, z = _product(rw, rx, ry, rz, q[k, 0], q[k, 1], q[k, 2], q[k, 3])
+    size = _size(w, x, y, z)
+    out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w / size, x / size, y / size, z / size
+    return math.isfinite(size) and size != 0.0
+
+
 def _turn_each(r, q, first, out):
     """
     ``r_k ⊗ q_k`` normalized (N, 4) into ``out``; ``first``: ``r_k`` normalized first.
@@ -190,27 +198,55 @@ def _turn_each(r, q, first, out):
             if not (math.isfinite(size) and size != 0.0):
                 return False
             rw, rx, ry, rz = rw / size, rx / size, ry / size, rz / size
-        w, x, y, z = _product(rw, rx, ry, rz, q[k, 0], q[k, 1], q[k, 2], q[k, 3])
-        size = _size(w, x, y, z)
+        if not _turn_row(rw, rx, ry, rz, q, k, out):
+            return False
+    return True
+
+
+def _tilt_each(f, q, out):
+    """:func:`tilted` into ``out`` (N, 4); False as :func:`_turn_each`."""
+    for k in range(q.shape[0]):
+        fx, fy, fz = f[k, 0], f[k, 1], f[k, 2]
+        size = math.sqrt((fx * fx + fy * fy) + fz * fz)
+        cw, cx, cy = 1.0 + fz / size, fy / size, -(fx / size)
+        size = _size(cw, cx, cy, 0.0)
         if not (math.isfinite(size) and size != 0.0):
             return False
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w / size, x / size, y / size, z / size
+        if not _turn_row(cw / size, cx / size, cy / size, 0.0 / size, q, k, out):
+            return False
     return True
+
+
+def _field_each(q, mag, norm, horizontal, vertical, unit):
+    """:func:`field_parts` into ``norm``, ``horizontal``, ``vertical`` (N,), ``unit`` (N, 2)."""
+    for k in range(q.shape[0]):
+        vx, vy, vz = mag[k, 0], mag[k, 1], mag[k, 2]
+        if math.isnan(vx):
+            vx, vy, vz = 0.0, 0.0, 0.0
+        mx, my, mz = _rotate(q[k, 0], q[k, 1], q[k, 2], q[k, 3], vx, vy, vz)
+        norm[k] = math.sqrt((mx * mx + my * my) + mz * mz)
+        h = math.hypot(mx, my)
+        horizontal[k], vertical[k] = h, mz
+        d = _TINY if h < _TINY else h
+        unit[k, 0], unit[k, 1] = mx / d, my / d
 
 
 _product = quat_multiply
 _rotate = rotate
 _size = _size4
+_turn_row = _turn_one
+_TINY = float(np.finfo(float).tiny)
 _LOOPS = []
 
 
 def _loops():
     """
-    The compiled loops (``integrate``, ``rotate``, ``turn``, ``box``), or None.
+    The compiled loops (``integrate``, ``rotate``, ``turn``, ``tilt``, ``field``, ``box``), or None.
 
-    :func:`_integrate`, :func:`_rotate_each`, :func:`_turn_each` and
-    :func:`_box_each` compiled by numba where it is wanted (``_product``,
-    ``_rotate``: the kernels' quaternion product and rotation, compiled);
+    :func:`_integrate`, :func:`_rotate_each`, :func:`_turn_each`,
+    :func:`_tilt_each`, :func:`_field_each` and :func:`_box_each` compiled
+    by numba where it is wanted (``_product``, ``_rotate``: the kernels'
+    quaternion product and rotation, compiled; ``_size``, ``_turn_row``);
     None where it is not: the callers then run numpy on whole arrays, to
     the same floats (the strapdown: to rounding). Cached on disk beside the
     kernels' compiled code, in a folder of its own (the kernels' twins of
@@ -218,7 +254,7 @@ def _loops():
     version of the kernel files
     (:func:`~ext_observer.core.ahrs.compiled.compiled_name`).
     """
-    global _product, _rotate, _size
+    global _product, _rotate, _size, _turn_row
     if not _LOOPS:
         loops = None
         if wanted(None)[0]:
@@ -230,10 +266,13 @@ def _loops():
                 _product = numba.njit(cache=True)(quat_multiply)
                 _rotate = numba.njit(cache=True, error_model='numpy')(rotate)
                 _size = numba.njit(cache=True)(_size4)
+                _turn_row = numba.njit(cache=True, error_model='numpy')(_turn_one)
                 loops = types.SimpleNamespace(
                     integrate=numba.njit(cache=True)(_integrate),
                     rotate=numba.njit(cache=True, error_model='numpy')(_rotate_each),
                     turn=numba.njit(cache=True, error_model='numpy')(_turn_each),
+                    tilt=numba.njit(cache=True, error_model='numpy')(_tilt_each),
+                    field=numba.njit(cache=True, error_model='numpy')(_field_each),
                     box=numba.njit(cache=True)(_box_each))
             finally:
                 numba.config.CACHE_DIR = saved
@@ -269,16 +308,47 @@ def tilted(f, q):
     """
     ``c ⊗ q`` (N, 4): ``c``, the smallest rotation turning each row of ``f`` (N, 3) up (+z).
 
-    ``c = (1 + u·z, u × z)`` normalized, ``u = f / |f|``: the rotation by
-    the angle between ``u`` and z about ``u × z``.
+    A compiled loop, or numpy on whole arrays: the same floats
+    (:func:`_size4`).
+
+    Raises
+    ------
+    ValueError
+        Where ``f`` points straight down, is 0 or is not finite.
     """
-    size = np.sqrt((f[:, 0] * f[:, 0] + f[:, 1] * f[:, 1]) + f[:, 2] * f[:, 2])
-    c = np.empty((len(f), 4))
-    c[:, 0] = 1.0 + f[:, 2] / size
-    c[:, 1] = f[:, 1] / size
-    c[:, 2] = -(f[:, 0] / size)
-    c[:, 3] = 0.0
-    return turned(c, q, first=True)
+    loops = _loops()
+    if loops is None:
+        up = f / np.linalg.norm(f, axis=1, keepdims=True)
+        # (1 + up·z, up × z) normalized: the rotation by the angle between up and z about
+        # up × z.
+        c = np.stack((1.0 + up[:, 2], up[:, 1], -up[:, 0], np.zeros(len(up))), axis=1)
+        return normalize(multiply(normalize(c), q))
+    out = np.empty((len(q), 4))
+    if not loops.tilt(np.ascontiguousarray(f, dtype=float), np.ascontiguousarray(q, dtype=float),
+                      out):
+        raise ValueError('Cannot normalize a quaternion that is zero or not finite')
+    return out
+
+
+def field_parts(q, mag):
+    """
+    The field ``mag`` (N, 3) rotated by ``q`` (N, 4), in parts; a NaN row reads as 0.
+
+    Returns its norm, its horizontal norm and its vertical component (N,)
+    each, and its horizontal direction (N, 2) (0 where it has none). A
+    compiled loop, or numpy on whole arrays: the same floats.
+    """
+    loops = _loops()
+    if loops is None:
+        m = rotate_rows(q, np.where(np.isnan(mag[:, :1]), 0.0, mag))
+        horizontal = np.hypot(m[:, 0], m[:, 1])
+        return (np.linalg.norm(m, axis=1), horizontal, m[:, 2],
+                m[:, :2] / np.maximum(horizontal, np.finfo(float).tiny)[:, None])
+    n = len(q)
+    norm, horizontal, vertical, unit = np.empty(n), np.empty(n), np.empty(n), np.empty((n, 2))
+    loops.field(np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(mag, dtype=float),
+                norm, horizontal, vertical, unit)
+    return norm, horizontal, vertical, unit
 
 
 def box(x, h, passes=1):

@@ -10,7 +10,8 @@ The windows are three box filters on cumulative sums (:func:`sums`).
 
 import numpy as np
 
-from .smooth_strapdown import about_vertical, box, matrices, rotate_rows, tilted, turned
+from .smooth_strapdown import (about_vertical, box, field_parts, matrices, rotate_rows, tilted,
+                               turned)
 
 __all__ = ['average', 'field_weights', 'heading', 'heading_offsets', 'inclination',
            'most_common', 'sums', 'tridiagonal']
@@ -163,10 +164,8 @@ def field_weights(q, mag, axis, p):
     None: no horizontal field at all.
     """
     lost = np.isnan(mag[:, 0])
-    m = rotate_rows(q, np.where(lost[:, None], 0.0, mag))
-    norm = np.linalg.norm(m, axis=1)
-    horizontal = np.hypot(m[:, 0], m[:, 1])
-    dip = np.arctan2(m[:, 2], horizontal)
+    norm, horizontal, vertical, unit = field_parts(q, mag)
+    dip = np.arctan2(vertical, horizontal)
     if not np.any(horizontal > 0.0):
         return None
     start = (axis.slots() < max(1, int(round(p.ref_time * axis.rate)))) & ~lost
@@ -178,7 +177,6 @@ def field_weights(q, mag, axis, p):
     z = (np.square((norm - ref_norm) / (p.mag_sigma * ref_norm))
          + np.square((dip - ref_dip) / p.mag_sigma))
     weight = np.where(lost, 0.0, np.exp(-0.5 * np.minimum(z, 1400.0)) * axis.spans(p.join_time))
-    unit = m[:, :2] / np.maximum(horizontal, np.finfo(float).tiny)[:, None]
     return unit, weight
 
 
