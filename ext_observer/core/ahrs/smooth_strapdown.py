@@ -19,7 +19,7 @@ from ..quaternion import multiply, normalize, quaternion_from_rotation_vector
 from .ahrs_filters import quat_multiply, rotate
 from .compiled import compiled_name, wanted
 
-__all__ = ['about_vertical', 'box', 'field_parts', 'matrices', 'rotate_rows', 'slopes',
+__all__ = ['about_vertical', 'box3', 'field_parts', 'matrices', 'rotate_rows', 'slopes',
            'spread', 'strapdown', 'strapdown_blocked', 'tilted', 'turned']
 
 
@@ -136,34 +136,48 @@ def _rotate_each(q, v, out):
                                                   v[k, 0], v[k, 1], v[k, 2])
 
 
-def _box_each(x, h, passes, out):
+def _box_pass(i, v, total, ring, p, s, n, h):
     """
-    The box sums (:func:`box`) of ``x`` (N, m), ``passes`` times, into ``out``.
+    One box pass at its sample ``i`` (input ``v``): its running sum, and its box sum at ``i − h``.
 
-    numpy's way, one column at a time: the running sum (sequential) in a
-    padded row (0 before the first sample, the total after the last), then
-    its differences ``2 h + 1`` apart: the same floats.
+    The running sum goes into ``ring[p, s]``; the slot after ``s`` holds
+    the one at ``i − 2 h − 1`` (written ``2 h + 1`` steps before). Past the
+    last sample the running sum holds the total; before the first, 0.
+    """
+    if i < n:
+        total = v if i == 0 else total + v
+    ring[p, s] = total
+    lo = ring[p, s + 1 if s + 1 < ring.shape[1] else 0]
+    return total, total - (lo if i >= 2 * h + 1 else 0.0)
+
+
+def _box3_each(x, h, out):
+    """
+    :func:`box3` of ``x`` (N, m) into ``out``, one column at a time in one sweep.
+
+    The three passes run together, each ``h`` samples behind the one
+    before (its input, the box sum at ``i − h``, is then known), each
+    keeping its last ``2 h + 2`` running sums in a ring: numpy's floats
+    (the same sums in the same order) with a small working set.
     """
     n, m = x.shape
-    column = np.empty(n)
-    c = np.empty(n + 2 * h + 1)
+    # Beyond the recording's length, a wider box sums the same samples.
+    h = min(h, n)
+    size = 2 * h + 2
+    ring = np.empty((3, size))
     for j in range(m):
-        for k in range(n):
-            column[k] = x[k, j]
-        for _ in range(passes):
-            for k in range(h + 1):
-                c[k] = 0.0
-            total = column[0]
-            c[h + 1] = total
-            for k in range(1, n):
-                total += column[k]
-                c[h + 1 + k] = total
-            for k in range(n + h + 1, n + 2 * h + 1):
-                c[k] = total
-            for k in range(n):
-                column[k] = c[2 * h + 1 + k] - c[k]
-        for k in range(n):
-            out[k, j] = column[k]
+        s = 0
+        t0 = t1 = t2 = 0.0
+        for t in range(n + 3 * h):
+            v = x[t, j] if t < n else 0.0
+            t0, v = _step(t, v, t0, ring, 0, s, n, h)
+            if t >= h:
+                t1, v = _step(t - h, v, t1, ring, 1, s, n, h)
+                if t >= 2 * h:
+                    t2, v = _step(t - 2 * h, v, t2, ring, 2, s, n, h)
+                    if t >= 3 * h:
+                        out[t - 3 * h, j] = v
+            s = s + 1 if s + 1 < size else 0
 
 
 def _size4(w, x, y, z):
@@ -235,18 +249,20 @@ _product = quat_multiply
 _rotate = rotate
 _size = _size4
 _turn_row = _turn_one
+_step = _box_pass
 _TINY = float(np.finfo(float).tiny)
 _LOOPS = []
 
 
 def _loops():
     """
-    The compiled loops (``integrate``, ``rotate``, ``turn``, ``tilt``, ``field``, ``box``), or None.
+    The compiled loops (``integrate``, ``rotate``, ``turn``, ``tilt``, ``field``, ``box3``), or None.
 
     :func:`_integrate`, :func:`_rotate_each`, :func:`_turn_each`,
-    :func:`_tilt_each`, :func:`_field_each` and :func:`_box_each` compiled
+    :func:`_tilt_each`, :func:`_field_each` and :func:`_box3_each` compiled
     by numba where it is wanted (``_product``, ``_rotate``: the kernels'
-    quaternion product and rotation, compiled; ``_size``, ``_turn_row``);
+    quaternion product and rotation, compiled; ``_size``, ``_turn_row``,
+    ``_step``);
     None where it is not: the callers then run numpy on whole arrays, to
     the same floats (the strapdown: to rounding). Cached on disk beside the
     kernels' compiled code, in a folder of its own (the kernels' twins of
@@ -254,7 +270,7 @@ def _loops():
     version of the kernel files
     (:func:`~ext_observer.core.ahrs.compiled.compiled_name`).
     """
-    global _product, _rotate, _size, _turn_row
+    global _product, _rotate, _size, _turn_row, _step
     if not _LOOPS:
         loops = None
         if wanted(None)[0]:
@@ -267,13 +283,14 @@ def _loops():
                 _rotate = numba.njit(cache=True, error_model='numpy')(rotate)
                 _size = numba.njit(cache=True)(_size4)
                 _turn_row = numba.njit(cache=True, error_model='numpy')(_turn_one)
+                _step = numba.njit(cache=True)(_box_pass)
                 loops = types.SimpleNamespace(
                     integrate=numba.njit(cache=True)(_integrate),
                     rotate=numba.njit(cache=True, error_model='numpy')(_rotate_each),
                     turn=numba.njit(cache=True, error_model='numpy')(_turn_each),
                     tilt=numba.njit(cache=True, error_model='numpy')(_tilt_each),
                     field=numba.njit(cache=True, error_model='numpy')(_field_each),
-                    box=numba.njit(cache=True)(_box_each))
+                    box3=numba.njit(cache=True)(_box3_each))
             finally:
                 numba.config.CACHE_DIR = saved
         _LOOPS.append(loops)
@@ -351,22 +368,22 @@ def field_parts(q, mag):
     return norm, horizontal, vertical, unit
 
 
-def box(x, h, passes=1):
+def box3(x, h):
     """
-    Sums of ``x`` (N, ...) along axis 0 over ``[k − h, k + h]`` at each sample ``k``, truncated.
+    ``x`` (N, ...) through three box sums in a row along axis 0 (a Gaussian-like window).
 
-    Differences of the running sum; ``passes``: that many times over (each
-    pass on the last one's sums). A compiled loop, or numpy's ``cumsum`` on
-    a padded array: the same floats.
+    Each box sums its input over ``[k − h, k + h]`` at each sample ``k``,
+    truncated at the ends: the differences of the running sum. A compiled
+    loop, or numpy's ``cumsum`` on a padded array: the same floats.
     """
     loops = _loops()
     n = len(x)
     if loops is not None:
         out = np.empty(x.shape)
-        loops.box(np.ascontiguousarray(x, dtype=float).reshape(n, -1), int(h), int(passes),
-                  out.reshape(n, -1))
+        loops.box3(np.ascontiguousarray(x, dtype=float).reshape(n, -1), int(h),
+                   out.reshape(n, -1))
         return out
-    for _ in range(passes):
+    for _ in range(3):
         c = np.empty((n + 2 * h + 1,) + x.shape[1:])
         c[:h + 1] = 0.0
         np.cumsum(x, axis=0, out=c[h + 1:n + h + 1])

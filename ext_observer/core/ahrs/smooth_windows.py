@@ -10,7 +10,7 @@ The windows are three box filters on cumulative sums (:func:`sums`).
 
 import numpy as np
 
-from .smooth_strapdown import (about_vertical, box, field_parts, matrices, rotate_rows, tilted,
+from .smooth_strapdown import (about_vertical, box3, field_parts, matrices, rotate_rows, tilted,
                                turned)
 
 __all__ = ['average', 'field_weights', 'heading', 'heading_offsets', 'inclination',
@@ -32,8 +32,8 @@ def sums(x, weight, sigma_samples, axis=None):
     den = weight
     if axis is not None:
         num, den = axis.grid(num), axis.grid(den)
-    num = box(num, h, 3)
-    den = box(den, h, 3)
+    num = box3(num, h)
+    den = box3(den, h)
     if axis is not None:
         num, den = axis.samples(num), axis.samples(den)
     return num, den

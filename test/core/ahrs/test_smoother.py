@@ -88,8 +88,9 @@ def test_the_compiled_loops_give_numpys_floats(monkeypatch):
     q[5], field[5] = (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 2.0)  # no horizontal part
 
     def run():
-        return (smooth_strapdown.rotate_rows(q, v), smooth_strapdown.box(v, 7, 3),
-                smooth_strapdown.box(v[:, 0], 600, 2), *smooth_strapdown.field_parts(q, field),
+        return (smooth_strapdown.rotate_rows(q, v), smooth_strapdown.box3(v, 7),
+                smooth_strapdown.box3(v[:, 0], 600), smooth_strapdown.box3(v[:2], 1),
+                *smooth_strapdown.field_parts(q, field),
                 smooth_strapdown.turned(r, q), smooth_strapdown.turned(r, q, first=True),
                 smooth_strapdown.tilted(v, q))
 
