@@ -20,7 +20,8 @@ from .ahrs_filters import quat_multiply, rotate
 from .compiled import compiled_name, wanted
 
 __all__ = ['about_vertical', 'box3', 'field_parts', 'matrices', 'rotate_rows', 'slopes',
-           'spread', 'strapdown', 'strapdown_blocked', 'tilted', 'turned']
+           'spread', 'strapdown', 'strapdown_blocked', 'tilted', 'turned',
+           'turned_about_vertical']
 
 
 def matrices(q):
@@ -217,6 +218,14 @@ def _turn_each(r, q, first, out):
     return True
 
 
+def _vertical_each(cos, sin, q, out):
+    """:func:`turned_about_vertical` into ``out`` (N, 4) from the half angles' cosines and sines."""
+    for k in range(q.shape[0]):
+        if not _turn_row(cos[k], 0.0, 0.0, sin[k], q, k, out):
+            return False
+    return True
+
+
 def _tilt_each(f, q, out):
     """:func:`tilted` into ``out`` (N, 4); False as :func:`_turn_each`."""
     for k in range(q.shape[0]):
@@ -256,10 +265,12 @@ _LOOPS = []
 
 def _loops():
     """
-    The compiled loops (``integrate``, ``rotate``, ``turn``, ``tilt``, ``field``, ``box3``), or None.
+    The compiled loops (``integrate``, ``rotate``, ``turn``, ``tilt``, ``vertical``, ``field``,
+    ``box3``), or None.
 
     :func:`_integrate`, :func:`_rotate_each`, :func:`_turn_each`,
-    :func:`_tilt_each`, :func:`_field_each` and :func:`_box3_each` compiled
+    :func:`_tilt_each`, :func:`_vertical_each`, :func:`_field_each` and
+    :func:`_box3_each` compiled
     by numba where it is wanted (``_product``, ``_rotate``: the kernels'
     quaternion product and rotation, compiled; ``_size``, ``_turn_row``,
     ``_step``);
@@ -289,6 +300,7 @@ def _loops():
                     rotate=numba.njit(cache=True, error_model='numpy')(_rotate_each),
                     turn=numba.njit(cache=True, error_model='numpy')(_turn_each),
                     tilt=numba.njit(cache=True, error_model='numpy')(_tilt_each),
+                    vertical=numba.njit(cache=True, error_model='numpy')(_vertical_each),
                     field=numba.njit(cache=True, error_model='numpy')(_field_each),
                     box3=numba.njit(cache=True)(_box3_each))
             finally:
@@ -317,6 +329,22 @@ def turned(r, q, first=False):
     out = np.empty((len(q), 4))
     if not loops.turn(np.ascontiguousarray(r, dtype=float), np.ascontiguousarray(q, dtype=float),
                       bool(first), out):
+        raise ValueError('Cannot normalize a quaternion that is zero or not finite')
+    return out
+
+
+def turned_about_vertical(angle, q):
+    """
+    ``r ⊗ q`` normalized (N, 4): ``r``, the rotations by ``angle`` (N,) rad about the world's z.
+
+    :func:`turned` of :func:`about_vertical`'s, without their array.
+    """
+    loops = _loops()
+    if loops is None:
+        return turned(about_vertical(angle), q)
+    out = np.empty((len(q), 4))
+    if not loops.vertical(np.cos(0.5 * angle), np.sin(0.5 * angle),
+                          np.ascontiguousarray(q, dtype=float), out):
         raise ValueError('Cannot normalize a quaternion that is zero or not finite')
     return out
 
@@ -368,18 +396,20 @@ def field_parts(q, mag):
     return norm, horizontal, vertical, unit
 
 
-def box3(x, h):
+def box3(x, h, out=None):
     """
     ``x`` (N, ...) through three box sums in a row along axis 0 (a Gaussian-like window).
 
     Each box sums its input over ``[k − h, k + h]`` at each sample ``k``,
     truncated at the ends: the differences of the running sum. A compiled
-    loop, or numpy's ``cumsum`` on a padded array: the same floats.
+    loop, or numpy's ``cumsum`` on a padded array: the same floats. ``out``:
+    an array of ``x``'s shape for the result, ``x`` itself allowed.
     """
     loops = _loops()
     n = len(x)
+    out = np.empty(np.shape(x)) if out is None else out
     if loops is not None:
-        out = np.empty(x.shape)
+        # Each sample's sums are written after its input is read: out may be x.
         loops.box3(np.ascontiguousarray(x, dtype=float).reshape(n, -1), int(h),
                    out.reshape(n, -1))
         return out
@@ -390,7 +420,8 @@ def box3(x, h):
         c[n + h + 1:] = c[n + h]
         # c[h + 1 + k] is the sum up to sample k; before the first, 0; past the last, all.
         x = c[2 * h + 1:] - c[:n]
-    return x
+    out[...] = x
+    return out
 
 
 def rotate_rows(q, v):

@@ -10,8 +10,8 @@ The windows are three box filters on cumulative sums (:func:`sums`).
 
 import numpy as np
 
-from .smooth_strapdown import (about_vertical, box3, field_parts, matrices, rotate_rows, tilted,
-                               turned)
+from .smooth_strapdown import (box3, field_parts, matrices, rotate_rows, tilted,
+                               turned_about_vertical)
 
 __all__ = ['average', 'field_weights', 'heading', 'heading_offsets', 'inclination',
            'most_common', 'sums', 'tridiagonal']
@@ -32,7 +32,7 @@ def sums(x, weight, sigma_samples, axis=None):
     den = weight
     if axis is not None:
         num, den = axis.grid(num), axis.grid(den)
-    num = box3(num, h)
+    num = box3(num, h, out=num)
     den = box3(den, h)
     if axis is not None:
         num, den = axis.samples(num), axis.samples(den)
@@ -52,9 +52,9 @@ def average(x, weight, sigma_samples, far=None, axis=None):
     if far is not None and far[1] > 0.0:
         num_far, den_far = sums(x, weight, far[0], axis)
         scale = far[1] * sigma_samples / far[0]
-        num = num + scale * num_far
+        num += np.multiply(scale, num_far, out=num_far)
         den = den + scale * den_far
-    return num / np.maximum(den, np.finfo(float).tiny)[:, None]
+    return np.divide(num, np.maximum(den, np.finfo(float).tiny)[:, None], out=num)
 
 
 def inclination(q, acc, axis, p):
@@ -117,7 +117,7 @@ def heading(q, mag, axis, p, gaps=None, bridge=None):
     turn = np.arctan2(mean[:, 0], mean[:, 1])
     if has_gaps and p.join == 'solve':
         turn = turn + heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge)
-    return turned(about_vertical(turn), q)
+    return turned_about_vertical(turn, q)
 
 
 def heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge):
