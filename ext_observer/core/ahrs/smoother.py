@@ -457,7 +457,7 @@ def _online(est, gyr, acc, mag, dt, start=0, end=None):
     out = np.empty((end - start, 4))
     for lo, hi in zip(bounds[:-1], bounds[1:]):
         field = None if has is None or not has[lo] else mag[lo:hi]
-        out[lo - start:hi - start] = est.run(gyr[lo:hi], acc[lo:hi], field, float(dt[lo]))
+        est.run(gyr[lo:hi], acc[lo:hi], field, float(dt[lo]), out=out[lo - start:hi - start])
     return out
 
 
