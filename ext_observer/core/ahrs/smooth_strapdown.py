@@ -254,6 +254,8 @@ def _field_each(q, mag, norm, horizontal, vertical, unit):
         unit[k, 0], unit[k, 1] = mx / d, my / d
 
 
+# The helpers the loops call, by these names: _loops binds them to their compiled twins
+# (a compiled loop calls only compiled functions).
 _product = quat_multiply
 _rotate = rotate
 _size = _size4
@@ -265,20 +267,16 @@ _LOOPS = []
 
 def _loops():
     """
-    The compiled loops (``integrate``, ``rotate``, ``turn``, ``tilt``, ``vertical``, ``field``,
-    ``box3``), or None.
+    The loops of this file compiled by numba, or None where numba is not wanted.
 
-    :func:`_integrate`, :func:`_rotate_each`, :func:`_turn_each`,
-    :func:`_tilt_each`, :func:`_vertical_each`, :func:`_field_each` and
-    :func:`_box3_each` compiled
-    by numba where it is wanted (``_product``, ``_rotate``: the kernels'
-    quaternion product and rotation, compiled; ``_size``, ``_turn_row``,
-    ``_step``);
-    None where it is not: the callers then run numpy on whole arrays, to
-    the same floats (the strapdown: to rounding). Cached on disk beside the
-    kernels' compiled code, in a folder of its own (the kernels' twins of
-    ``quat_multiply`` and ``rotate`` have the same files and names) for this
-    version of the kernel files
+    A namespace of :func:`_integrate` (``integrate``), :func:`_rotate_each`
+    (``rotate``), :func:`_turn_each` (``turn``), :func:`_tilt_each`
+    (``tilt``), :func:`_vertical_each` (``vertical``), :func:`_field_each`
+    (``field``) and :func:`_box3_each` (``box3``). None: the callers run
+    numpy on whole arrays, to the same floats (the strapdown: to rounding).
+    Cached on disk beside the kernels' compiled code, in a folder of its own
+    (the kernels' twins of ``quat_multiply`` and ``rotate`` have the same
+    files and names) for this version of the kernel files
     (:func:`~ext_observer.core.ahrs.compiled.compiled_name`).
     """
     global _product, _rotate, _size, _turn_row, _step
@@ -403,7 +401,8 @@ def box3(x, h, out=None):
     Each box sums its input over ``[k − h, k + h]`` at each sample ``k``,
     truncated at the ends: the differences of the running sum. A compiled
     loop, or numpy's ``cumsum`` on a padded array: the same floats. ``out``:
-    an array of ``x``'s shape for the result, ``x`` itself allowed.
+    a C-contiguous array of ``x``'s shape for the result, ``x`` itself
+    allowed.
     """
     loops = _loops()
     n = len(x)

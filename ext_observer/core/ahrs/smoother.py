@@ -40,8 +40,10 @@ nothing; a gyro axis at its range is bridged across the clipped stretch
 docs/offline.md ("Holes, lost fields and clipped stretches") has the figures.
 
 The windows are Gaussian-like (three box filters, cumulative sums), symmetric
-in time, so without delay; everything but the online passes is numpy on
-whole arrays. Conventions as the estimator's: ``(w, x, y, z)``, sensor →
+in time, so without delay; beside the online passes, numpy on whole arrays
+and the loops over samples of
+:mod:`~ext_observer.core.ahrs.smooth_strapdown` (compiled by numba where it
+is wanted, else numpy to the same floats). Conventions as the estimator's: ``(w, x, y, z)``, sensor →
 ENU, SI units. What each step gave on BROAD: docs/offline.md.
 """
 
