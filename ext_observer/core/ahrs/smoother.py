@@ -487,6 +487,10 @@ def _bias_pass(gyr, acc, mag, dt, p):
     return ends - 1, biases, variances, first, est
 
 
+# Samples per call of the online pass where only its end matters.
+_CHUNK = 65536
+
+
 def _bias(gyr, acc, mag, dt, p):
     """
     The gyro bias (N, 3) or (3,), the first attitude and the field's calibration.
@@ -499,8 +503,13 @@ def _bias(gyr, acc, mag, dt, p):
     if p.bias == 'both':
         return _bias_both_ways(gyr, acc, mag, dt, p)
     est = AhrsObserver(p.online, use_mag=mag is not None)
-    q = _online(est, gyr, acc, mag, dt)
-    return np.array(est.bias), q[0], _calibration(est)
+    # Of the estimates only the first is kept: the pass runs in chunks (the same steps),
+    # each chunk's estimates dropped, not an array of the recording's length.
+    first = None
+    for lo in range(0, len(gyr), _CHUNK):
+        q = _online(est, gyr, acc, mag, dt, lo, min(lo + _CHUNK, len(gyr)))
+        first = q[0] if first is None else first
+    return np.array(est.bias), first, _calibration(est)
 
 
 def _bias_both_ways(gyr, acc, mag, dt, p):
