@@ -139,7 +139,7 @@ def _rotate_each(q, v, out):
 
 def _box_pass(i, v, total, ring, p, s, n, h):
     """
-    One box pass at its sample ``i`` (input ``v``): its running sum, and its box sum at ``i − h``.
+    One box pass at its sample ``i`` (input ``v``): its running sum, its box sum at ``i − h``.
 
     The running sum goes into ``ring[p, s]``; the slot after ``s`` holds
     the one at ``i − 2 h − 1`` (written ``2 h + 1`` steps before). Past the
@@ -219,7 +219,7 @@ def _turn_each(r, q, first, out):
 
 
 def _vertical_each(cos, sin, q, out):
-    """:func:`turned_about_vertical` into ``out`` (N, 4) from the half angles' cosines and sines."""
+    """:func:`turned_about_vertical` into ``out`` (N, 4), from the half angles' cos and sin."""
     for k in range(q.shape[0]):
         if not _turn_row(cos[k], 0.0, 0.0, sin[k], q, k, out):
             return False

@@ -43,8 +43,8 @@ The windows are Gaussian-like (three box filters, cumulative sums), symmetric
 in time, so without delay; beside the online passes, numpy on whole arrays
 and the loops over samples of
 :mod:`~ext_observer.core.ahrs.smooth_strapdown` (compiled by numba where it
-is wanted, else numpy to the same floats). Conventions as the estimator's: ``(w, x, y, z)``, sensor →
-ENU, SI units. What each step gave on BROAD: docs/offline.md.
+is wanted, else numpy to the same floats). Conventions as the estimator's:
+``(w, x, y, z)``, sensor → ENU, SI units. What each step gave on BROAD: docs/offline.md.
 """
 
 import dataclasses
