@@ -189,7 +189,7 @@ def _watch_clipping(s, gx, gy, gz):
         return
     field_clipped(s, var)
     forget_wait(s)
-    calibration_restart(s)
+    calibration_restart(s, True)
 
 
 def ahrs_update_gyr(s, gx, gy, gz):

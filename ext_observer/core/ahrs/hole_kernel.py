@@ -106,10 +106,16 @@ def forget_wait(s):
     s.field.wait_n = 0.0
 
 
-def calibration_restart(s):
-    """The magnetometer calibration follows the field afresh: it learns nothing across a gap."""
+def calibration_restart(s, keep_refused=False):
+    """
+    The magnetometer calibration follows the field afresh: it learns nothing across a gap.
+
+    ``keep_refused``: the fields it refused before count on (a clipped gyro:
+    the fields went on and were judged; only the turn across the stretch is
+    not known); otherwise a fresh count (a hole, a field that comes back).
+    """
     if s.par.has_cal != 0.0:
-        mc_restart(s.cal)
+        mc_restart(s.cal, s.cal.refused_share if keep_refused else 0.0)
         s.cal_feed.turn[0] = 1.0
         for i in range(1, 4):
             s.cal_feed.turn[i] = 0.0

@@ -205,7 +205,6 @@ def mc_start(cal, y0, y1, y2, norm):
         mc_prior_loaded(cal, norm)
     mc_start_field(cal, (y0, y1, y2), norm)
     mc_field_scale(cal, norm)
-    cal.refused_share = 0.0
     cal.fresh = 0.0
 
 

@@ -99,8 +99,16 @@ def mc_forget(cal):
     cal.has_prior = 0.0
 
 
-def mc_restart(cal):
-    """Keep what is learned, follow the field afresh from the next sample."""
+def mc_restart(cal, refused=0.0):
+    """
+    Keep what is learned, follow the field afresh from the next sample.
+
+    ``refused``: the share of fields refused while turning that the restart
+    starts from (its evidence that the calibration no longer fits,
+    :func:`mc_lost`): 0 forgets it; a restart that nothing but the body's
+    unknown turn called for (a clipped gyro) keeps it.
+    """
+    cal.refused_share = refused
     if cal.enabled != 0.0 and cal.fresh == 0.0:
         copy_into(cal.prior_x, rows(0, 1), cal.x, rows(CAL_Z, 1), CAL_ZDT, 1)
         cal.prior_scale = cal.scale
@@ -135,6 +143,7 @@ def mc_load_state(cal, x3, x4, x5, x6, x7, x8, x9, x10, x11, scale):
         cal.has_prior = 1.0
         cal.prior_cov = 0.0
         cal.fresh = 1.0
+        cal.refused_share = 0.0
         cal.loaded = 1.0
         cal.identity = 0.0
         cal.converged = 0.0
@@ -484,7 +493,7 @@ def mc_reset_in(holder):
 
 
 def mc_restart_in(holder):
-    """:func:`mc_restart` on the record in ``holder``."""
+    """:func:`mc_restart` on the record in ``holder``: what was refused forgotten."""
     mc_restart(holder[0])
 
 

@@ -456,6 +456,36 @@ def test_the_calibration_learns_nothing_from_a_clipped_stretch():
     assert calibration(est).fields > before
 
 
+def test_a_clip_keeps_the_fields_the_calibration_refused_and_a_hole_forgets_them():
+    # A calibration that no longer fits starts over once most fields are
+    # refused while the body turns. A clipped sample restarts its filter (the
+    # turn across the stretch is unknown) but the fields went on being judged:
+    # the refused share stands. A hole's restart counts afresh.
+    est = AhrsObserver(AhrsParams(gyro_range=RANGE, mag_cal_rate=1e4), use_mag=True,
+                       compiled=False)
+    field = world_field(NORM, DIP)
+    yaw = 0.0
+
+    def step(rate, dt=DT):
+        nonlocal yaw
+        yaw += rate * dt
+        est.update((0.0, 0.0, max(-RANGE, min(RANGE, rate))), LEVEL, body_field(field, yaw), dt)
+
+    for _ in range(100):
+        step(0.5)
+    est.set_field('cal.refused_share', 0.6)
+    step(1.5 * RANGE)
+    for _ in range(10):  # the filter starts again from what it learned
+        step(0.5)
+    assert est.clipped == 1
+    assert est.field('cal.refused_share') == pytest.approx(0.6, abs=0.02)
+    step(0.5, 0.3)  # a hole whose turn the calibration cannot trust
+    for _ in range(10):
+        step(0.5)
+    assert est.holes == 1
+    assert est.field('cal.refused_share') < 0.02
+
+
 def test_after_a_short_clip_the_heading_is_not_taken_afresh_from_a_bent_field():
     # A level body turning at 0.5 rad/s past the gyro's range for 0.1 s
     # (it loses about 5°), then for 1 s a field bent 30° in heading that

@@ -339,7 +339,12 @@ def test_a_field_not_live_is_only_counted_and_p_is_symmetrized_every_64(k, learn
 
 
 def started(k, s, y, norm, x_after_zero, p_before, scale):
-    """What mc_start leaves: ``s = y + Y d``, its covariance, the scratch, the flags."""
+    """
+    What mc_start leaves: ``s = y + Y d``, its covariance, the scratch, the flags.
+
+    The refused share is as the restart, forget or load that made the filter
+    fresh left it (mc_restart's ``refused``).
+    """
     expected = copy(k, s)
     yy = regressor(y)
     x = np.array(x_after_zero, dtype=float)
@@ -355,7 +360,6 @@ def started(k, s, y, norm, x_after_zero, p_before, scale):
     put(expected, 'k', yy @ p_before[6:11, 6:11])  # 15 of its scratch's 36
     put(expected, 'scale', scale)
     put(expected, 'field_scale', max(np.linalg.norm(x[:3] - x[3:6]), 0.25 * norm))
-    put(expected, 'refused_share', 0.0)
     put(expected, 'fresh', 0.0)
     return expected
 

@@ -264,15 +264,17 @@ def test_restart_keeps_what_is_learned_as_the_prior_and_follows_the_field_afresh
     e.has_prior = 1.0
     e.prior_cov = 1.0
     e.fresh = 1.0
+    e.refused_share = 0.0  # counted afresh, unless the caller keeps it
     assert_block(s, e)
-    # Already fresh (nothing learned since), or off: only fresh.
+    # Already fresh (nothing learned since), or off: only fresh and the share.
     for enabled, fresh in ((1.0, 1.0), (0.0, 0.0)):
         s = dirty(compiled, 3)
         s.enabled = enabled
         s.fresh = fresh
         e = copy(s)
         e.fresh = 1.0
-        mk(s).mc_restart(s)
+        e.refused_share = 0.3
+        mk(s).mc_restart(s, 0.3)
         assert_block(s, e)
 
 
@@ -286,7 +288,7 @@ def test_a_loaded_calibration_is_the_prior_without_covariance_and_applied(compil
     put(e, 'x', prior, at=3)  # applied at once
     for name, v in (('prior_scale', 1.25), ('scale', 1.25), ('has_prior', 1.0),
                     ('prior_cov', 0.0), ('fresh', 1.0), ('loaded', 1.0), ('identity', 0.0),
-                    ('converged', 0.0)):
+                    ('converged', 0.0), ('refused_share', 0.0)):
         put(e, name, v)
     expect_cache(e)
     assert e.applied == 1.0
