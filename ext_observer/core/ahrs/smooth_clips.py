@@ -49,7 +49,8 @@ def clip_stretches(gyr, clipped, axis, p):
     A stretch: consecutive samples with an axis at the range, from sample
     ``before + 1`` to ``after − 1``, joined as a hole is when the known
     samples beside it are at least ``join_time`` apart (a stretch at an end
-    is not joined; a shorter one is bridged only, as a short hole). Per body axis, the online estimator's model of
+    is not joined; a shorter one is bridged only, as a short hole). Per body
+    axis, the online estimator's model of
     what a clipped axis misses (:data:`~ext_observer.core.ahrs.hole_kernel.CLIP_SHARE`
     of the range's rotation per clipped sample, summed along the stretch: the
     rate stays beyond the range), squared. Returns ``((before, after,

@@ -104,6 +104,48 @@ def _field_rows(q, field, gaps, axis, p):
     return js, jt, mb - ma, info
 
 
+def _hole_rows(q, q_bridged, f, g, sums, bridge, gaps, p):
+    """
+    The rows across each hole (G): velocity, position and rotation, with their information.
+
+    Each row is ``(J_s, J_t, c, W)``: the residual ``J_s x_s + J_t x_{s+1} + c``
+    between the stretches before and after the hole, weighed by ``W``.
+    ``sums``: the stretches' running ``F``, ``V``, ``P``, ``Q`` and ``τ``
+    (:func:`join_velocity`).
+    """
+    big_f, big_v, big_p, big_q, tau = sums
+    before, after, span = gaps
+    e, b, h = before, after, span[:, None, None]
+    fe, fb = f[e], f[b]
+    i3 = np.broadcast_to(np.eye(3), (len(e), 3, 3))
+    z3 = np.zeros((len(e), 3, 3))
+    # Velocity across the hole: v_{s+1} = v_e + h (a_e + a_b) / 2.
+    jv_s = np.concatenate((skew(big_f[e]) + 0.5 * h * skew(fe), -i3, z3), axis=2)
+    jv_t = np.concatenate((0.5 * h * skew(fb), i3, z3), axis=2)
+    cv = -big_v[e] - 0.5 * span[:, None] * (fe + fb - 2.0 * g)
+    # Position: p_{s+1} = p_e + h v_e + h² (2 a_e + a_b) / 6.
+    jp_s = np.concatenate((skew(big_q[e]) + h * skew(big_f[e]) + h * h / 3.0 * skew(fe),
+                           -(tau[e][:, None, None] + h) * i3, -i3), axis=2)
+    jp_t = np.concatenate((h * h / 6.0 * skew(fb), z3, i3), axis=2)
+    cp = (-big_p[e] - span[:, None] * big_v[e]
+          - np.square(span)[:, None] / 6.0 * (2.0 * fe + fb - 3.0 * g))
+    # Rotation: φ_{s+1} − φ_s + ρ, ρ the stretches' turn against the bridge, doubted by
+    # the bridge's variance turned into I, times nav_bridge.
+    turn = multiply(multiply(q[b], conjugate(q_bridged[b])),
+                    conjugate(multiply(q[e], conjugate(q_bridged[e]))))
+    turn = normalize(np.where(turn[:, :1] < 0.0, -turn, turn))
+    rho = rotation_vector_from_quaternion(turn)
+    r = matrices(q[b])
+    cov = p.nav_bridge * np.einsum('gij,gj,gkj->gik', r, bridge, r) + 1e-12 * np.eye(3)
+    jr_s = np.concatenate((-i3, z3, z3), axis=2)
+    jr_t = np.concatenate((i3, z3, z3), axis=2)
+    return ((jv_s, jv_t, cv, np.broadcast_to(np.eye(3) / p.nav_accel ** 2, (len(e), 3, 3))
+             / np.square(span)[:, None, None]),
+            (jp_s, jp_t, cp, np.broadcast_to(np.eye(3) / p.nav_accel ** 2, (len(e), 3, 3))
+             / (0.25 * span ** 4)[:, None, None]),
+            (jr_s, jr_t, rho, np.linalg.inv(cov)))
+
+
 def join_velocity(q, q_bridged, acc, bridge, gaps, axis, p, field=None):
     """
     ``q`` with each stretch turned by ``exp(φ_s)``: the rotations that keep the motion bounded.
@@ -164,35 +206,7 @@ def join_velocity(q, q_bridged, acc, bridge, gaps, axis, p, field=None):
         a = np.concatenate((-skew(big_q), tau[:, None, None] * eye, eye), axis=2)
         _add_prior(normal, rhs, a, big_p, weight / p.nav_room ** 2, start)
     upper = np.zeros((count - 1, _SIZE, _SIZE))
-    e, b, h = before, after, span[:, None, None]
-    fe, fb = f[e], f[b]
-    i3 = np.broadcast_to(np.eye(3), (len(e), 3, 3))
-    z3 = np.zeros((len(e), 3, 3))
-    # Velocity across the hole: v_{s+1} = v_e + h (a_e + a_b) / 2.
-    jv_s = np.concatenate((skew(big_f[e]) + 0.5 * h * skew(fe), -i3, z3), axis=2)
-    jv_t = np.concatenate((0.5 * h * skew(fb), i3, z3), axis=2)
-    cv = -big_v[e] - 0.5 * span[:, None] * (fe + fb - 2.0 * g)
-    # Position: p_{s+1} = p_e + h v_e + h² (2 a_e + a_b) / 6.
-    jp_s = np.concatenate((skew(big_q[e]) + h * skew(big_f[e]) + h * h / 3.0 * skew(fe),
-                           -(tau[e][:, None, None] + h) * i3, -i3), axis=2)
-    jp_t = np.concatenate((h * h / 6.0 * skew(fb), z3, i3), axis=2)
-    cp = (-big_p[e] - span[:, None] * big_v[e]
-          - np.square(span)[:, None] / 6.0 * (2.0 * fe + fb - 3.0 * g))
-    # Rotation: φ_{s+1} − φ_s + ρ, ρ the stretches' turn against the bridge, doubted by
-    # the bridge's variance turned into I, times nav_bridge.
-    turn = multiply(multiply(q[b], conjugate(q_bridged[b])),
-                    conjugate(multiply(q[e], conjugate(q_bridged[e]))))
-    turn = normalize(np.where(turn[:, :1] < 0.0, -turn, turn))
-    rho = rotation_vector_from_quaternion(turn)
-    r = matrices(q[b])
-    cov = p.nav_bridge * np.einsum('gij,gj,gkj->gik', r, bridge, r) + 1e-12 * np.eye(3)
-    jr_s = np.concatenate((-i3, z3, z3), axis=2)
-    jr_t = np.concatenate((i3, z3, z3), axis=2)
-    rows = ((jv_s, jv_t, cv, np.broadcast_to(np.eye(3) / p.nav_accel ** 2, (len(e), 3, 3))
-             / np.square(span)[:, None, None]),
-            (jp_s, jp_t, cp, np.broadcast_to(np.eye(3) / p.nav_accel ** 2, (len(e), 3, 3))
-             / (0.25 * span ** 4)[:, None, None]),
-            (jr_s, jr_t, rho, np.linalg.inv(cov)))
+    rows = _hole_rows(q, q_bridged, f, g, (big_f, big_v, big_p, big_q, tau), bridge, gaps, p)
     if field is not None and np.isfinite(p.nav_field):
         rows = rows + (_field_rows(q, field, gaps, axis, p),)
     for js, jt, c, info in rows:

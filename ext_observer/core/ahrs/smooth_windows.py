@@ -23,7 +23,8 @@ def sums(x, weight, sigma_samples, axis=None):
 
     Three centred box filters of ``2 h + 1`` samples (``h`` ≈ σ: a window of
     variance σ²), applied alike to ``weight x`` and ``weight``: zero phase,
-    truncated at the ends. ``axis`` (:class:`~ext_observer.core.ahrs.smoother._Axis`): on its even grid, in
+    truncated at the ends. ``axis``
+    (:class:`~ext_observer.core.ahrs.smoother._Axis`): on its even grid, in
     usual intervals (a lost sample: a slot of weight 0), read back at the
     samples.
     """

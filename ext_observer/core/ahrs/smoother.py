@@ -116,7 +116,8 @@ class SmoothParams:
         What a hole of at least ``join_time`` changes beyond the gyro's
         bridge. ``'chain'``: the part after it is tilted to make the
         specific force averaged over ``window_acc`` s on either side agree
-        (:func:`~ext_observer.core.ahrs.smooth_holes.join_tilt`, weighed against the bridge), and the heading
+        (:func:`~ext_observer.core.ahrs.smooth_holes.join_tilt`, weighed
+        against the bridge), and the heading
         (9D) is averaged within each stretch between such holes;
         ``'solve'``: as ``'chain'``, each stretch's heading then offset
         by all the others' fields through the bridges, solved at once
