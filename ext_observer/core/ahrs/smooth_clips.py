@@ -50,11 +50,11 @@ def clip_stretches(gyr, clipped, axis, p):
     ``before + 1`` to ``after − 1``, joined as a hole is when the known
     samples beside it are at least ``join_time`` apart (a stretch at an end
     is not joined; a shorter one is bridged only, as a short hole). Per body
-    axis, the online estimator's model of
-    what a clipped axis misses (:data:`~ext_observer.core.ahrs.hole_kernel.CLIP_SHARE`
-    of the range's rotation per clipped sample, summed along the stretch: the
-    rate stays beyond the range), squared. Returns ``((before, after,
-    length), variances (G, 3))``.
+    axis, the online estimator's model of what a clipped axis misses
+    (:data:`~ext_observer.core.ahrs.hole_kernel.CLIP_SHARE` of the range's
+    rotation per clipped sample, summed along the stretch: the rate stays
+    beyond the range), squared. Returns ``((before, after, length),
+    variances (G, 3))``.
     """
     n = len(gyr)
     bad = clipped[:, 0] | clipped[:, 1] | clipped[:, 2]
