@@ -14,7 +14,7 @@ calibrator is given (any unit).
 """
 
 from .record import Group
-from .small_matrix import store3, vec3_at, vec5_at
+from .small_matrix import store3, value_at, vec3_at, vec5_at
 
 # --- tuning -------------------------------------------------------------------
 
@@ -95,7 +95,7 @@ def soft_iron_of(x):
 
 def lag_of(x):
     """``τ`` (s): how far the field lags the gyro."""
-    return x[CAL_TAU]
+    return value_at(x, CAL_TAU)
 
 # --- the state -------------------------------------------------------------------
 

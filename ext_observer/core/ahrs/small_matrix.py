@@ -37,6 +37,11 @@ def cols(at, width):
     return (at, 1, width)
 
 
+def value_at(s, at):
+    """``s[at]``: one entry, as the vectors' readers read theirs."""
+    return s[at]
+
+
 def vec3_at(s, at):
     """``s[at:at + 3]`` as a 3-vector."""
     return (s[at], s[at + 1], s[at + 2])
