@@ -36,8 +36,8 @@ LAGS = (1, 14, 57, 286, 571)
 
 def verticals(q):
     """The body-frame vertical (N, 3) of attitudes ``q`` (N, 4), sensor → world."""
-    from ext_observer.core.ahrs.smooth_strapdown import matrices
-    return matrices(np.asarray(q, dtype=float))[:, 2, :]
+    from ext_observer.core.quaternion import rotation_matrices
+    return rotation_matrices(np.asarray(q, dtype=float))[:, 2, :]
 
 
 def angles(a, b):

@@ -52,9 +52,9 @@ def field_spread(trial):
     turned by the optical reference; its body-frame direction at every scored
     sample spreads by the square roots of its covariance's eigenvalues.
     """
-    from ext_observer.core.ahrs.smooth_strapdown import matrices
+    from ext_observer.core.quaternion import rotation_matrices
     ok = np.isfinite(trial.quat).all(axis=1) & trial.movement.astype(bool)
-    r = matrices(trial.quat[ok] / np.linalg.norm(trial.quat[ok], axis=1, keepdims=True))
+    r = rotation_matrices(trial.quat[ok] / np.linalg.norm(trial.quat[ok], axis=1, keepdims=True))
     world = np.einsum('nij,nj->ni', r[:2000], trial.mag[ok][:2000]).mean(axis=0)
     body = np.einsum('nji,j->ni', r, world / np.linalg.norm(world))
     return np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov(body.T)), 0.0))[:2]

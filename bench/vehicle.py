@@ -27,6 +27,7 @@ import numpy as np
 
 from bench import vehicle_sim
 from bench.machine import add_page_arguments, log
+from ext_observer.core.quaternion import rotation_matrices
 
 MODES = ('6D', '9D')
 TESLA_PER_MICROTESLA = 1e-6
@@ -123,7 +124,7 @@ def score(sim, estimate):
 
 def apparent_gravity(sim):
     """The inclination errors of taking the specific force as gravity."""
-    up = np.einsum('nji,j->ni', vehicle_sim.matrices(sim.quat), (0.0, 0.0, 1.0))
+    up = np.einsum('nji,j->ni', rotation_matrices(sim.quat), (0.0, 0.0, 1.0))
     cosine = np.sum(up * sim.acc, axis=1) / np.linalg.norm(sim.acc, axis=1)
     angle = np.arccos(np.clip(cosine, -1.0, 1.0))
     return {'inclination_manoeuvre': _rms_deg(angle[sim.manoeuvre]),

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ext_observer.core.quaternion import multiply
+from ext_observer.core.quaternion import multiply, rotation_matrices
 
 GRAVITY = 9.81  # m/s², the simulated world's
 RATE = 100.0  # Hz, the IMU's
@@ -149,16 +149,6 @@ def attitude(heading, slope_deg):
     return multiply(np.array([math.cos(a), math.sin(a), 0.0, 0.0]), q_z)
 
 
-def matrices(q):
-    """Rotation matrices of unit quaternions ``(w, x, y, z)``, shape (N, 3, 3)."""
-    w, x, y, z = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
-
-
 def body_kinematic_acceleration(speed, accel, yaw_rate):
     """``dv_b/dt + ω × v_b`` for ``v_b = (v, 0, 0)``, ``ω = (0, 0, r)``: ``(v̇, r v, 0)``."""
     return np.stack([accel, yaw_rate * speed, 0.0 * speed], axis=-1)
@@ -189,7 +179,7 @@ def simulate(scenario, seed=0, rate=RATE, noise=True):
     times, speed, accel, yaw_rate, heading, manoeuvre = profile(scenario, rate)
     count = len(times)
     quat = attitude(heading, scenario.slope_deg)
-    r = matrices(quat)
+    r = rotation_matrices(quat)
     up = np.array([0.0, 0.0, GRAVITY])
     kinematic = body_kinematic_acceleration(speed, accel, yaw_rate)
     # f = R^T (a_world − g_world), a_world = R · kinematic.

@@ -35,6 +35,7 @@ __all__ = [
     'normalize',
     'quaternion_from_rotation_vector',
     'random_unit_quaternions',
+    'rotation_matrices',
     'right_matrix',
     'rotation_vector_from_quaternion',
     'squared_norm',
@@ -160,6 +161,28 @@ def right_matrix(q):
     if q.shape != (4,):
         raise ValueError(f'Expected `q` to have shape (4,), got {q.shape}')
     return multiply(np.eye(4), q)
+
+
+def rotation_matrices(q):
+    """
+    Rotation matrices of unit quaternions: ``R(q) v = q ⊗ v ⊗ q̄``.
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        Unit quaternions ``(w, x, y, z)`` (not normalized here).
+
+    Returns
+    -------
+    R : ndarray, shape (..., 3, 3)
+
+    """
+    w, x, y, z = np.moveaxis(check_quaternions(q), -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
 
 
 def conjugate(q):

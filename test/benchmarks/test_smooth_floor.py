@@ -8,13 +8,13 @@ import pytest
 from bench.smooth_floor import (angles, band_rms, constant_tilt, reference_earlier, rest_tilt,
                                 verticals)
 from ext_observer.core.quaternion import quaternion_from_rotation_vector
-from ext_observer.core.ahrs.smooth_strapdown import matrices
+from ext_observer.core.quaternion import rotation_matrices
 
 
 def test_constant_tilt_finds_a_fixed_rotation_and_leaves_only_the_rest():
     rng = np.random.default_rng(3)
     ref = verticals(quaternion_from_rotation_vector(rng.normal(scale=0.6, size=(2000, 3))))
-    tilt = matrices(quaternion_from_rotation_vector(np.array([[0.004, -0.003, 0.002]])))[0]
+    tilt = rotation_matrices(quaternion_from_rotation_vector(np.array([[0.004, -0.003, 0.002]])))[0]
     noise = rng.normal(scale=1e-4, size=ref.shape)
     est = ref @ tilt.T + noise
     est /= np.linalg.norm(est, axis=1, keepdims=True)

@@ -16,13 +16,14 @@ import pytest
 from bench import vehicle, vehicle_sim
 from docgen import vehicle_page
 from bench.vehicle_sim import GRAVITY, Scenario, Segment
-from ext_observer.core.quaternion import multiply, quaternion_from_rotation_vector
+from ext_observer.core.quaternion import (multiply, quaternion_from_rotation_vector,
+                                         rotation_matrices)
 
 SLOPES = (0.0, vehicle_sim.SLOPE_DEG)
 
 
 def _world(sim, body_vectors):
-    return np.einsum('nij,nj->ni', vehicle_sim.matrices(sim.quat), body_vectors)
+    return np.einsum('nij,nj->ni', rotation_matrices(sim.quat), body_vectors)
 
 
 def _drive(*segments, slope=0.0, speed0=0.0, yaw_rate0=0.0, heading0=90.0):
@@ -49,7 +50,7 @@ def test_in_a_constant_turn_the_horizontal_specific_force_is_v_omega_towards_the
     speed, omega = 15.0, 0.3
     sim = vehicle_sim.simulate(_drive(Segment(20.0), slope=slope, speed0=speed,
                                       yaw_rate0=omega), noise=False)
-    r = vehicle_sim.matrices(sim.quat)
+    r = rotation_matrices(sim.quat)
     normal = r[:, :, 2]  # the road's normal, the body's z
     world = _world(sim, sim.acc_true)
     in_plane = world - np.einsum('ni,ni->n', world, normal)[:, None] * normal

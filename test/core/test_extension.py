@@ -54,10 +54,10 @@ def test_so3_extension_drives_the_constraint_to_zero():
     rng = np.random.default_rng(6)
     ext = so3_extension()
     q = quat.random_unit_quaternions(rng, (200,))
-    R = rotation_matrices(q) + 0.1 * rng.standard_normal((200, 3, 3))
+    R = quat.rotation_matrices(q) + 0.1 * rng.standard_normal((200, 3, 3))
 
     def f(R, theta):
-        return R @ rotation_matrices(quat.quaternion_from_rotation_vector(theta))
+        return R @ quat.rotation_matrices(quat.quaternion_from_rotation_vector(theta))
 
     theta = rng.uniform(0, 1, (200, 3))
     # A1 for SO(3): V(f(R)) = V(R).
@@ -85,13 +85,3 @@ def test_so3_gradient_equals_constraint_form():
             dR[a, b] = h
             numeric[a, b] = (ext.V(R0 + dR) - ext.V(R0 - dR)) / (2 * h)
     assert_allclose(ext.grad_V(R0), numeric, rtol=1e-6)
-
-
-def rotation_matrices(q):
-    """Rotation matrices of unit quaternions (test helper)."""
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)

@@ -17,9 +17,9 @@ number of holes.
 import numpy as np
 
 from ..quaternion import conjugate, multiply, normalize, quaternion_from_rotation_vector
-from ..quaternion import rotation_vector_from_quaternion
+from ..quaternion import rotation_matrices, rotation_vector_from_quaternion
 from .smooth_holes import one_sided
-from .smooth_strapdown import matrices, rotate_rows
+from .smooth_strapdown import rotate_rows
 
 __all__ = ['block_tridiagonal', 'join_velocity', 'skew']
 
@@ -135,7 +135,7 @@ def _hole_rows(q, q_bridged, f, g, sums, bridge, gaps, p):
                     conjugate(multiply(q[e], conjugate(q_bridged[e]))))
     turn = normalize(np.where(turn[:, :1] < 0.0, -turn, turn))
     rho = rotation_vector_from_quaternion(turn)
-    r = matrices(q[b])
+    r = rotation_matrices(q[b])
     cov = p.nav_bridge * np.einsum('gij,gj,gkj->gik', r, bridge, r) + 1e-12 * np.eye(3)
     jr_s = np.concatenate((-i3, z3, z3), axis=2)
     jr_t = np.concatenate((i3, z3, z3), axis=2)

@@ -4,7 +4,7 @@ The smoother's strapdown and its arrays of rotations: :func:`strapdown`.
 Helpers of :mod:`~ext_observer.core.ahrs.smoother` on whole arrays
 (``(w, x, y, z)``, sensor → I): the gyro's integration (one compiled loop, or
 a blocked scan in numpy), rotations of rows of vectors, products of rows of
-quaternions, rotation matrices, the windows' box sums. Where numba is wanted,
+quaternions, the windows' box sums. Where numba is wanted,
 loops compiled from this file (:func:`_loops`); else numpy on whole arrays,
 to the same floats.
 """
@@ -19,19 +19,9 @@ from ..quaternion import multiply, normalize, quaternion_from_rotation_vector
 from .ahrs_filters import quat_multiply, rotate
 from .compiled import compiled_name, wanted
 
-__all__ = ['about_vertical', 'box3', 'field_parts', 'matrices', 'rotate_rows', 'slopes',
+__all__ = ['about_vertical', 'box3', 'field_parts', 'rotate_rows', 'slopes',
            'spread', 'strapdown', 'strapdown_blocked', 'tilted', 'turned',
            'turned_about_vertical']
-
-
-def matrices(q):
-    """The rotation matrices (N, 3, 3) of unit quaternions ``q`` (N, 4)."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return np.stack((
-        np.stack((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)), axis=1),
-        np.stack((2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)), axis=1),
-        np.stack((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)), axis=1)),
-        axis=1)
 
 
 def spread(s, count):

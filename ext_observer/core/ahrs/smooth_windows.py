@@ -10,8 +10,8 @@ The windows are three box filters on cumulative sums (:func:`sums`).
 
 import numpy as np
 
-from .smooth_strapdown import (box3, field_parts, matrices, rotate_rows, tilted,
-                               turned_about_vertical)
+from ..quaternion import rotation_matrices
+from .smooth_strapdown import box3, field_parts, rotate_rows, tilted, turned_about_vertical
 
 __all__ = ['average', 'field_weights', 'heading', 'heading_offsets', 'inclination',
            'most_common', 'sums', 'tridiagonal']
@@ -144,7 +144,7 @@ def heading_offsets(q, turn, unit, weight, axis, p, gaps, bridge):
     spread = np.maximum(1.0 - np.square(length / np.maximum(sw, np.finfo(float).tiny)), 0.0)
     info = np.where(some, sw * axis.usual / (p.heading_tau * np.maximum(spread, _SPREAD)), 0.0)
     # The bridge's variance about I's vertical: Σ_i R_zi² v_i.
-    vertical = matrices(q[gaps[1]])[:, 2, :]
+    vertical = rotation_matrices(q[gaps[1]])[:, 2, :]
     link = 1.0 / np.maximum(np.sum(np.square(vertical) * bridge, axis=1), 1e-12)
     jump = np.angle(np.exp(1j * (turn[gaps[1]] - turn[gaps[0]])))
     # Σ info c_s² + Σ link (c_{s+1} − c_s + jump)²: its normal equations.
