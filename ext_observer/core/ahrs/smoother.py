@@ -274,14 +274,15 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
         gyr = unclipped(gyr, clipped, axis.times,
                          max(1, int(round(p.slope_time / axis.usual))))
     unbiased = gyr - bias
+    field = None if mag is None else calibration(mag)
     rate, dt, rows = bridged(unbiased, axis, p)
     q = strapdown(rate, dt, first)[rows]
     gaps = gaps_of(axis, p.join_time)
+    bridge = bridge_axes(unbiased, gaps)
     if p.join in ('solve', 'chain'):
         joined = join_tilt(q, acc, unbiased, gaps, axis, p)
         if p.nav:
-            joined = join_velocity(joined, q, acc, bridge_axes(unbiased, gaps), gaps, axis, p,
-                                   None if mag is None else calibration(mag))
+            joined = join_velocity(joined, q, acc, bridge, gaps, axis, p, field)
         q = inclination(joined, acc, axis, p)
     elif p.join == 'local' and len(gaps[0]):
         bounds = np.concatenate(([0], gaps[1], [len(q)]))
@@ -289,13 +290,12 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
                             for lo, hi in zip(bounds[:-1], bounds[1:])])
     else:
         q = inclination(q, acc, axis, p)
-    if mag is not None:
-        bridge = bridge_axes(unbiased, gaps)
+    if field is not None:
         if p.join == 'solve' and clips is not None and len(clips[0][0]):
             # A clip's heading error would spread over the heading's long
             # windows: its stretches are solved apart, as a hole's.
             gaps, bridge = with_clips(gaps, bridge, *clips)
-        q = heading(q, calibration(mag), axis, p, gaps,
+        q = heading(q, field, axis, p, gaps,
                     bridge if p.join == 'solve' and len(gaps[0]) else None)
     if p.delay:
         q = _ahead(q, p.delay, axis)
