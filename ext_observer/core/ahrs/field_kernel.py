@@ -349,13 +349,7 @@ def _field_tilt(s, tilt, dip, psi, dt):
     half = -0.5 * k * d
     # The turn (cos θ/2, a sin θ/2), a = (cos ψ, −sin ψ, 0), turns the dip by θ = −k d
     sn = math.sin(half)
-    rw, rx, ry = math.cos(half), sn * math.cos(psi), -sn * math.sin(psi)
-    q = s.est.q
-    q[0], q[1], q[2], q[3] = quat_multiply(rw, rx, ry, 0.0, q[0], q[1], q[2], q[3])
-    # The inclination's filter states follow the applied rotation, as its own correction's.
-    for i in LP_STATES:
-        s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2] = rotate(
-            rw, rx, ry, 0.0, s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2])
+    _tilt_by(s, math.cos(half), sn * math.cos(psi), -sn * math.sin(psi))
 
 
 def _sideways_tilt(s, tilt, kap, psi):
@@ -386,15 +380,22 @@ def _sideways_tilt(s, tilt, kap, psi):
     # The sideways part h sin ψ, the vertical v: a turn b about north, tan b = −h sin ψ / v,
     # removes it; the tilt's share (1 − w) κ of it.
     half = 0.5 * (1.0 - w) * kap * math.atan(-h * math.sin(psi) / v)
-    rw, ry = math.cos(half), math.sin(half)
     # q̂ ← (cos, 0, sin, 0) ⊗ q̂: about the world's north axis
+    _tilt_by(s, math.cos(half), 0.0, math.sin(half))
+    return w * kap
+
+
+def _tilt_by(s, rw, rx, ry):
+    """
+    ``q̂ ← r ⊗ q̂`` for the unit ``r = (rw, rx, ry, 0)`` about a horizontal axis.
+
+    The inclination's filter states follow the rotation, as its own correction's.
+    """
     q = s.est.q
-    q[0], q[1], q[2], q[3] = quat_multiply(rw, 0.0, ry, 0.0, q[0], q[1], q[2], q[3])
-    # The inclination's filter states follow the applied rotation, as its own correction's.
+    q[0], q[1], q[2], q[3] = quat_multiply(rw, rx, ry, 0.0, q[0], q[1], q[2], q[3])
     for i in LP_STATES:
         s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2] = rotate(
-            rw, 0.0, ry, 0.0, s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2])
-    return w * kap
+            rw, rx, ry, 0.0, s.inc.lp[i], s.inc.lp[i + 1], s.inc.lp[i + 2])
 
 
 def _heading_bias(s, kap, rw, rz, dt):
