@@ -16,12 +16,11 @@ import numpy as np
 
 from ext_observer.core.ahrs.frames import world_from_enu
 from ext_observer.core.ahrs.smoother import SmoothParams, smooth_attitude
-from ext_observer.core.quaternion import multiply, quaternion_from_rotation_vector
 from ext_observer.pipeline.batch import hold_finite
 from ext_observer.pipeline.imu_filter_parameters import ahrs_params
 from ext_observer.recordings.pipeline_run import run_arrays
 
-__all__ = ['combined', 'field_per_sample', 'smoothed_attitude', 'time_reversed']
+__all__ = ['combined_std', 'field_per_sample', 'smoothed_attitude', 'time_reversed']
 
 
 def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocity=None,
@@ -41,7 +40,7 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
     The σ is the online covariance model's, from ``imu_filter_node``'s
     estimator run forward and on the time-reversed recording
     (:func:`time_reversed`): for the inclination and for the heading, the
-    two runs' σ combined as of two independent estimates (:func:`combined`),
+    two runs' σ combined as of two independent estimates (:func:`combined_std`),
     as the smoothed estimate uses the samples on both sides. On BROAD's 22
     trials the smoothed estimate's mean e²/σ² is within 0.3–3 for both, on
     the tuning and on the held-out trials (docs/offline.md). The forward
@@ -88,8 +87,7 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
         mag_times = None
     q = _smoothed(gyr, acc, mag, times, settings, mag_times)
     inputs = (gyr, acc, mag, mag_times, velocity, velocity_times)
-    # Only the σ is kept of each run (memory: a long recording); combined as
-    # combined() combines them.
+    # Only the σ is kept of each run (memory: a long recording).
     if online_std is None:
         forward = _estimate(run_arrays(settings, None, times, *inputs))
     else:
@@ -97,16 +95,8 @@ def smoothed_attitude(gyr, acc, mag, times, settings, *, mag_times=None, velocit
     reversed_times, reversed_inputs = time_reversed(times, *inputs)
     backward = _estimate(run_arrays(settings, None, reversed_times, *reversed_inputs))
     del reversed_times, reversed_inputs
-    inclination_std = _weights(forward[1], backward[1][::-1])[1]
-    heading_std = _weights(forward[2], backward[2][::-1])[1]
-    return q, _held(inclination_std), _held(heading_std)
-
-
-def _held(std):
-    """A row without a σ (neither run had an estimate there) takes the nearest before's."""
-    if np.isnan(std).any() and not np.isnan(std).all():
-        return hold_finite(std[:, None])[:, 0]
-    return std
+    return (q, combined_std(forward[1], backward[1][::-1]),
+            combined_std(forward[2], backward[2][::-1]))
 
 
 def _smoothed(gyr, acc, mag, times, settings, mag_times):
@@ -208,67 +198,18 @@ def time_reversed(times, gyr, acc, mag=None, mag_times=None, velocity=None,
                                   *timed(velocity, velocity_times, -1.0))
 
 
-def combined(first, second, heading=True):
+def combined_std(std1, std2):
     """
-    Return two estimates of the same samples combined by their σ: ``(q, σ_i, σ_h)``.
+    Two independent estimates' σ combined, ``(σ₁⁻² + σ₂⁻²)^(−1/2)`` (N,).
 
-    The second's inclination error (the body's vertical) is taken by the
-    weight ``σ₁² / (σ₁² + σ₂²)`` of the first's inclination σ, about the
-    axis between the two verticals; then, with ``heading``, the heading
-    about the world's vertical likewise; the σ as of two independent
-    estimates, ``(σ₁⁻² + σ₂⁻²)^(−1/2)``. A sample without a σ (NaN: no
-    estimate of its own) takes the other's estimate; without ``heading``,
-    the heading and its σ are the first's (a row without its σ: held as
-    the quaternion is, from the nearest before, or the first).
-
-    Parameters
-    ----------
-    first, second : tuple
-        ``(quaternions (N, 4), inclination_std (N,), heading_std (N,))``,
-        unit quaternions sensor → world, rad.
-    heading : bool
-
+    Where one has no σ (NaN: no estimate of its own), the other's; where
+    neither has, the nearest before's (or the first's); an infinite σ1 with
+    nothing to combine stays.
     """
-    q1, i1, h1 = first
-    q2, i2, h2 = second
-    weight, inclination_std = _weights(i1, i2)
-    up1, up2 = _body_vertical(q1), _body_vertical(q2)
-    axis = np.cross(up1, up2)
-    sine = np.linalg.norm(axis, axis=1)
-    angle = np.arctan2(sine, np.einsum('ij,ij->i', up1, up2))
-    with np.errstate(invalid='ignore', divide='ignore'):
-        unit = np.where(sine[:, None] > 0.0, axis / sine[:, None], 0.0)
-    # R = R₁ C with Cᵀ turning the first's vertical towards the second's.
-    q = multiply(q1, quaternion_from_rotation_vector(-(weight * angle)[:, None] * unit))
-    if heading:
-        weight, heading_std = _weights(h1, h2)
-        turn = multiply(q2, q * [1.0, -1.0, -1.0, -1.0])
-        yaw = 2.0 * np.arctan2(turn[:, 3], turn[:, 0])
-        yaw = (yaw + np.pi) % (2.0 * np.pi) - np.pi
-        zeros = np.zeros_like(yaw)
-        q = multiply(quaternion_from_rotation_vector(
-            np.column_stack([zeros, zeros, weight * yaw])), q)
-    else:
-        heading_std = np.asarray(h1, dtype=float)
-        if np.isnan(heading_std).any() and not np.isnan(heading_std).all():
-            heading_std = hold_finite(heading_std[:, None])[:, 0]
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return q, inclination_std, heading_std
-
-
-def _weights(std1, std2):
-    """The second's weight and the combined σ, where either σ may be NaN (none)."""
     with np.errstate(divide='ignore', invalid='ignore'):
-        info1, info2 = (np.nan_to_num(1.0 / np.maximum(np.asarray(s, dtype=float), 1e-12) ** 2)
-                        for s in (std1, std2))
-        total = info1 + info2
-        weight = np.where(total > 0.0, info2 / total, 0.0)
-        std = np.where(total > 0.0, 1.0 / np.sqrt(total), std1)
-    return weight, std
-
-
-def _body_vertical(q):
-    """The world's z axis in the sensor frame, ``Rᵀ e_z``, shape (N, 3)."""
-    w, x, y, z = q.T
-    return np.column_stack([2.0 * (x * z - w * y), 2.0 * (y * z + w * x),
-                            w * w - x * x - y * y + z * z])
+        total = sum(np.nan_to_num(1.0 / np.maximum(np.asarray(s, dtype=float), 1e-12) ** 2)
+                    for s in (std1, std2))
+        std = np.where(total > 0.0, 1.0 / np.sqrt(total), np.asarray(std1, dtype=float))
+    if np.isnan(std).any() and not np.isnan(std).all():
+        return hold_finite(std[:, None])[:, 0]
+    return std

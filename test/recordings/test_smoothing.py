@@ -10,7 +10,7 @@ import numpy as np
 from synthetic_motion import errors_deg, RATE, synthetic
 from ext_observer.core.ahrs.frames import world_from_enu
 from ext_observer.recordings.recording import attitude_from_imu
-from ext_observer.recordings.smoothing import combined, field_per_sample, time_reversed
+from ext_observer.recordings.smoothing import combined_std, field_per_sample, time_reversed
 
 
 def _rms(angles):
@@ -81,19 +81,12 @@ def test_time_reversed_twice_is_the_recording():
     np.testing.assert_array_equal(again_mag, mag)
 
 
-def test_combined_weighs_the_inclination_by_the_sigmas():
-    tilt = np.radians(2.0)
-    first = np.array([[1.0, 0.0, 0.0, 0.0]] * 3)
-    second = np.array([[np.cos(tilt / 2), np.sin(tilt / 2), 0.0, 0.0]] * 3)
-    std1 = np.array([1.0, 1.0, np.nan])
-    std2 = np.array([1.0, np.sqrt(3.0), 1.0])
-    q, inclination_std, heading_std = combined((first, std1, std1), (second, std2, std2),
-                                               heading=False)
-    # Halfway with equal σ, a quarter of the way with 3× the variance, all of it without a σ.
-    _, _, inclination = errors_deg(q, first)
-    np.testing.assert_allclose(inclination, [1.0, 0.5, 2.0], atol=1e-9)
-    np.testing.assert_allclose(inclination_std, [np.sqrt(0.5), np.sqrt(0.75), 1.0])
-    np.testing.assert_array_equal(heading_std, [1.0, 1.0, 1.0])
+def test_two_runs_sigmas_combine_as_independent_estimates():
+    std1 = np.array([1.0, 1.0, np.nan, np.nan])
+    std2 = np.array([1.0, np.sqrt(3.0), 1.0, np.nan])
+    # Equal σ: 1/√2; 3× the variance: √(3/4); one without a σ: the other's; neither: held.
+    np.testing.assert_allclose(combined_std(std1, std2),
+                               [np.sqrt(0.5), np.sqrt(0.75), 1.0, 1.0])
 
 
 def test_a_hole_is_bridged_and_a_repeated_stamp_shows_the_estimate_before_it():
