@@ -18,7 +18,6 @@ import numpy as np
 
 from ..quaternion import conjugate, multiply, normalize, quaternion_from_rotation_vector
 from ..quaternion import rotation_matrices, rotation_vector_from_quaternion
-from .smooth_holes import one_sided
 from .smooth_strapdown import rotate_rows
 
 __all__ = ['block_tridiagonal', 'join_velocity', 'skew']
@@ -77,33 +76,6 @@ def _add_prior(normal, rhs, rows, value, weight, start):
     rhs -= np.add.reduceat(np.matmul(weighted, value[:, :, None])[:, :, 0], start, axis=0)
 
 
-def _field_rows(q, field, gaps, axis, p):
-    """
-    The field's rows across each hole: ``J_s`` on φ_s, ``J_{s+1}``, the residual, its weight.
-
-    ``exp(φ) m ≈ m − [m]× φ``: the two sides' directions ``m_a``, ``m_b``
-    after the rotations differ by ``m_b − m_a − [m_b]× φ_{s+1} + [m_a]× φ_s``.
-    """
-    lost = np.isnan(field).any(axis=1)
-    m = rotate_rows(q, np.where(lost[:, None], 0.0, field))
-    norm = np.linalg.norm(m, axis=1)
-    # Undisturbed: the norm near the recording's median (its direction is what is sought).
-    usual = np.median(norm[~lost]) if (~lost).any() else 0.0
-    z = np.square((norm - usual) / (p.mag_sigma * max(usual, np.finfo(float).tiny)))
-    weight = np.where(lost, 0.0, np.exp(-0.5 * np.minimum(z, 1400.0)))
-    m = m / np.maximum(norm, np.finfo(float).tiny)[:, None]
-    (sa, na), (sb, nb) = one_sided(m, weight, gaps, axis, p.join_time)
-    (_, ca), (_, cb) = one_sided(m, np.ones(len(m)), gaps, axis, p.join_time)
-    ma = sa / np.maximum(np.linalg.norm(sa, axis=1, keepdims=True), np.finfo(float).tiny)
-    mb = sb / np.maximum(np.linalg.norm(sb, axis=1, keepdims=True), np.finfo(float).tiny)
-    trust = np.minimum(na / np.maximum(ca, 1.0), nb / np.maximum(cb, 1.0))
-    z3 = np.zeros((len(ma), 3, 3))
-    js = np.concatenate((skew(ma), z3, z3), axis=2)
-    jt = np.concatenate((-skew(mb), z3, z3), axis=2)
-    info = trust[:, None, None] * np.eye(3) / p.nav_field ** 2
-    return js, jt, mb - ma, info
-
-
 def _hole_rows(q, q_bridged, f, g, sums, bridge, gaps, p):
     """
     The rows across each hole (G): velocity, position and rotation, with their information.
@@ -146,7 +118,7 @@ def _hole_rows(q, q_bridged, f, g, sums, bridge, gaps, p):
             (jr_s, jr_t, rho, np.linalg.inv(cov)))
 
 
-def join_velocity(q, q_bridged, acc, bridge, gaps, axis, p, field=None):
+def join_velocity(q, q_bridged, acc, bridge, gaps, axis, p):
     """
     ``q`` with each stretch turned by ``exp(φ_s)``: the rotations that keep the motion bounded.
 
@@ -165,15 +137,7 @@ def join_velocity(q, q_bridged, acc, bridge, gaps, axis, p, field=None):
     gaps, axis, p
         The holes (:func:`~ext_observer.core.ahrs.smooth_holes.gaps_of`), the
         time axis and the settings (``nav_speed``, ``nav_room``,
-        ``nav_accel``, ``nav_tilt``, ``nav_bridge``, ``nav_field``,
-        ``join_time``).
-    field : ndarray, shape (N, 3), optional
-        The calibrated field, any unit (a NaN row: none): across each hole,
-        its directions in I averaged over ``join_time`` s on either side
-        agree up to ``nav_field`` rad, weighed by the smaller of the two
-        sides' mean weights, a sample's weight from how close its norm stays
-        to the recording's median (``mag_sigma``). 9D: the field holds two
-        of the three axes of the rotation across a hole.
+        ``nav_accel``, ``nav_tilt``, ``nav_bridge``).
 
     """
     before, after, span = gaps
@@ -207,8 +171,6 @@ def join_velocity(q, q_bridged, acc, bridge, gaps, axis, p, field=None):
         _add_prior(normal, rhs, a, big_p, weight / p.nav_room ** 2, start)
     upper = np.zeros((count - 1, _SIZE, _SIZE))
     rows = _hole_rows(q, q_bridged, f, g, (big_f, big_v, big_p, big_q, tau), bridge, gaps, p)
-    if field is not None and np.isfinite(p.nav_field):
-        rows = rows + (_field_rows(q, field, gaps, axis, p),)
     for js, jt, c, info in rows:
         normal[:-1] += np.einsum('gji,gjk,gkl->gil', js, info, js)
         normal[1:] += np.einsum('gji,gjk,gkl->gil', jt, info, jt)

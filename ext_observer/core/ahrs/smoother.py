@@ -155,10 +155,6 @@ class SmoothParams:
     nav_bridge : float
         How much less sure the gyro's bridge across a hole is in the
         ``nav`` solve than the online estimator's hole model says.
-    nav_field : float
-        rad, how far the field's directions just before and after a hole
-        may disagree once the stretches are turned (9D, ``nav``); inf: the
-        field not used there.
     online : AhrsParams or None
         The online passes' parameters (default: the shipped defaults).
 
@@ -186,7 +182,6 @@ class SmoothParams:
     nav_accel: float = 10.0
     nav_tilt: float = 0.1
     nav_bridge: float = 100.0
-    nav_field: float = math.inf
     online: AhrsParams = None
 
     def __post_init__(self):
@@ -207,8 +202,7 @@ class SmoothParams:
             raise ValueError(f'join_time must be positive, got {self.join_time}')
         if not (math.isfinite(self.heading_tau) and self.heading_tau > 0.0):
             raise ValueError(f'heading_tau must be positive and finite, got {self.heading_tau}')
-        for name in ('nav_speed', 'nav_room', 'nav_accel', 'nav_tilt', 'nav_bridge',
-                     'nav_field'):
+        for name in ('nav_speed', 'nav_room', 'nav_accel', 'nav_tilt', 'nav_bridge'):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
         if not (math.isfinite(self.join_tau) and self.join_tau > 0.0):
@@ -282,7 +276,7 @@ def smooth_attitude(gyr, acc, mag, rate=None, params=None, *, times=None):
     if p.join in ('solve', 'chain'):
         joined = join_tilt(q, acc, unbiased, gaps, axis, p)
         if p.nav:
-            joined = join_velocity(joined, q, acc, bridge, gaps, axis, p, field)
+            joined = join_velocity(joined, q, acc, bridge, gaps, axis, p)
         q = inclination(joined, acc, axis, p)
     elif p.join == 'local' and len(gaps[0]):
         bounds = np.concatenate(([0], gaps[1], [len(q)]))
