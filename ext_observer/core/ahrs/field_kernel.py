@@ -20,7 +20,8 @@ from .bias_kernel import bias_measure
 from .field_references import (FIELD_GATE, field_angles, first_references, follow_candidate,
                                follow_references, off_references, reject_or_accept)
 from .hole_kernel import HOLE_CALIBRATION, calibration_restart, forget_wait, mean_sigma
-from .magcal_kernel import mc_apply, mc_field, mc_learn
+from .magcal_kernel import mc_apply, mc_as_given, mc_field, mc_learn
+from .magcal_layout import CAL_REFUSED_SHARE, CAL_TURNING2
 from .small_matrix import vec3_at
 from .record import Group
 
@@ -49,6 +50,7 @@ CAL_FEED = Group('cal_feed', 'What the field step tells the calibration, and whe
     ('moved', '1', 'the body has turned since the start'),
     ('since', 's', 'since a calibration was applied (inf: never)'),
     ('loaded', '1', 'a loaded calibration waits to set the heading and references'),
+    ('as_given', '1', 'share of the fields refused calibrated that fit as given, while turning'),
 ])
 
 # After a calibration is applied, the heading's time constant is this share
@@ -192,6 +194,7 @@ def cal_feed_reset(s):
         s.cal_feed.moved = 0.0  # the body has not turned yet
         s.cal_feed.since = math.inf  # time since a calibration was applied
         s.cal_feed.loaded = 0.0
+        s.cal_feed.as_given = 0.0
 
 
 def field_forget(s):
@@ -467,6 +470,9 @@ def field_calibrate(s, mx, my, mz, dt):
         cx, cy, cz = mc_apply(s.cal, mx, my, mz)
         norm, dip, _, _ = field_angles(s, cx, cy, cz)
         allow = not off_references(s, norm, dip, 0.0)
+        if applied and _taken_off(s, mx, my, mz, not allow):
+            mc_as_given(s.cal)
+            allow = True  # the fresh start learns from this field
     w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
     n2 = w * w + x * x + y * y + z * z
     # The world's vertical in the body frame: R(q̂)ᵀ e_z / |q̂|².
@@ -484,6 +490,32 @@ def field_calibrate(s, mx, my, mz, dt):
     if switched and has_ref:
         _calibration_applied(s, w, x, y, z)
     return mc_apply(s.cal, mx, my, mz)
+
+
+def _taken_off(s, mx, my, mz, refused):
+    """
+    Whether the fields fit as given where the applied calibration refuses them: its magnet is gone.
+
+    A magnet or payload taken off the body leaves a calibration that
+    subtracts an offset no longer there. Its refused share (CAL_REFUSED_TAU)
+    tells after some 12 s of turning; the fields as given tell at once. The
+    share of the fields learned from while the body turns that the
+    calibration refuses and the references take as given, low-passed over
+    FIELD_CORRELATION (the fields of one correlation time share their
+    error: one bent field is no evidence), beyond CAL_REFUSED_SHARE: the
+    calibration starts over from none (``mc_as_given``). A body that keeps
+    its magnet does not fit as given, nor a field bent from outside.
+    """
+    rate = s.cal_feed.rate
+    if rate[0] * rate[0] + rate[1] * rate[1] + rate[2] * rate[2] <= CAL_TURNING2:
+        return False
+    norm, dip, _, _ = field_angles(s, mx, my, mz)
+    fits = refused and not off_references(s, norm, dip, 0.0)
+    k = 1.0 - math.exp(-s.cal_feed.wait / FIELD_CORRELATION)
+    share = s.cal_feed.as_given + k * ((1.0 if fits else 0.0) - s.cal_feed.as_given)
+    gone = share > CAL_REFUSED_SHARE
+    s.cal_feed.as_given = 0.0 if gone else share
+    return gone
 
 
 def _after_clip(s):

@@ -119,6 +119,30 @@ def mc_restart(cal, refused=0.0):
     cal.fresh = 1.0
 
 
+def mc_as_given(cal):
+    """
+    Start over from no calibration, ready at once: the fields fit as given (a magnet taken off).
+
+    The caller found the fields it refuses calibrated fitting as given: the
+    offset the calibration learned is gone (a magnet or payload taken off
+    the body). Counted as a reset; learned afresh from the next field, with
+    a loaded calibration's prior about none (the lag kept: the sensor's);
+    ready at once, so that the heading takes the fields as given without
+    waiting for a convergence, and applied once what it learns turns the
+    heading by more than the deadband, as any calibration.
+    """
+    cal.resets += 1.0
+    mc_forget(cal)
+    if cal.enabled != 0.0:
+        copy_into(cal.prior_x, rows(0, 1), cal.x, rows(CAL_Z, 1), CAL_ZDT, 1)
+        fill(cal.prior_x, 0, CAL_ZD, 0.0)  # no offset, no soft iron; τ as learned
+        cal.prior_scale = 1.0
+        cal.has_prior = 1.0
+        cal.prior_cov = 0.0  # the loaded calibration's prior spread about it
+        cal.converged = 1.0
+    mc_cache(cal)
+
+
 def mc_load_state(cal, x3, x4, x5, x6, x7, x8, x9, x10, x11, scale):
     """
     Start from a saved calibration: ``x[3:]`` and the scale (see ``MagCalibrator.load``).

@@ -787,3 +787,50 @@ def test_a_field_off_the_references_does_not_end_the_doubt():
     s.field.head_doubt = 0.5 * ru * k_mag
     _doubt_gain(s, k_mag, NORM, DIP, 0.0, DT)
     assert s.field.head_doubt == 0.0
+
+
+def _turning_with(est, field, offset, seconds, yaw, rate=0.5, scale=1.0):
+    """Turn the level body at ``rate`` about the vertical, fed ``scale`` × the field plus ``offset``."""
+    for _ in range(round(seconds / DT)):
+        yaw += rate * DT
+        raw = np.asarray(body_field(field * scale, yaw)) + offset
+        est.update((0.0, 0.0, rate), LEVEL, tuple(raw), DT)
+        if calibration(est).resets:
+            break
+    return yaw
+
+
+@pytest.mark.parametrize('case', ['taken off', 'kept, bent from outside', 'taken off, still'])
+def test_a_magnet_taken_off_is_told_by_the_fields_fitting_as_given(case):
+    # A calibration with an offset applied (loaded), the body turning. The
+    # magnet taken off: the calibrated fields are refused, the fields as
+    # given fit the references. Their share, low-passed over
+    # FIELD_CORRELATION while the body turns, passes CAL_REFUSED_SHARE after
+    # −ln(0.3) = 1.2 s: the calibration starts over from none (a reset),
+    # ready at once and not applied, so the heading takes the fields as
+    # given and stays right. Kept on, a field bent from outside fits as
+    # given no more than calibrated; a still body tells nothing.
+    est = AhrsObserver(AhrsParams(), use_mag=True, compiled=False)
+    field = world_field(NORM, DIP, 0.0)
+    offset = np.array([1.5e-5, -1e-5, 0.8e-5])
+    est.load_calibration(tuple(offset), np.eye(3))
+    yaw = _turning_with(est, field, offset, 3.0, 0.0)
+    cal = calibration(est)
+    assert (cal.applied, cal.resets, record(est).cal_feed.as_given) == (1.0, 0.0, 0.0)
+    if case == 'taken off':
+        start = yaw
+        yaw = _turning_with(est, field, 0.0 * offset, 3.0, yaw)
+        after = (yaw - start) / 0.5
+        assert 1.1 < after < 1.5
+        assert (cal.resets, cal.applied, cal.ready, cal.loaded) == (1.0, 0.0, 1.0, 0.0)
+        assert est.calibration_state == 'converged'
+        yaw = _turning_with(est, field, 0.0 * offset, 2.0, yaw)
+        assert abs(wrap(yaw_of(est.q) - yaw)) < math.radians(2.0)
+        assert cal.resets == 1.0 and cal.applied == 0.0
+    elif case == 'kept, bent from outside':
+        _turning_with(est, field, offset, 5.0, yaw, scale=1.3)
+        assert cal.resets == 0.0 and cal.applied == 1.0
+        assert record(est).cal_feed.as_given == 0.0
+    else:
+        _turning_with(est, field, 0.0 * offset, 5.0, yaw, rate=0.0)
+        assert cal.resets == 0.0 and cal.applied == 1.0
