@@ -134,6 +134,7 @@ class ImuFilterNode(EstimatorNode):
         self._unit_counts = dict(self.pipeline.units.counts)
         self._status_clipped = 0
         self._calibration_state = None  # as last reported
+        self._calibration_resets = 0  # the calibration's start-overs, as last reported
         self.save_calibration_service = self.create_service(
             Trigger, '~/save_calibration', self.save_calibration_callback)
         self._cache_settings(settings)
@@ -516,6 +517,13 @@ class ImuFilterNode(EstimatorNode):
         # log at each change.
         core = self.pipeline.estimator.core
         state = core.calibration_state
+        resets = 0 if core.calibration is None else int(core.calibration.counts['resets'][0])
+        if resets > self._calibration_resets:
+            self.get_logger().warning(
+                'magnetometer calibration started over: the fields no longer fit it (a '
+                'magnet or payload taken off or moved on the body, or it was learned wrong); '
+                f'{resets} so far (diagnostics: calibration_resets)')
+        self._calibration_resets = resets
         if state == 'learning' and not self.pairer.processed['measurement']:
             state = None
         if state == 'converged' and core.calibration.applied:

@@ -381,6 +381,7 @@ class RawImuEstimator:
             return []
         b = calibration.bias
         return [('calibration_heading_std_deg', math.degrees(calibration.quality)),
+                ('calibration_resets', int(calibration.counts['resets'][0])),
                 ('calibration_bias_x', float(b[0])), ('calibration_bias_y', float(b[1])),
                 ('calibration_bias_z', float(b[2])),
                 ('calibration_soft_iron', ' '.join(

@@ -579,3 +579,34 @@ def test_lost_samples_go_warn_with_their_share_once_and_back_to_ok(
     assert set(keys) <= values.keys()
     assert [key for key in keys + ['undecodable_increment', 'undecodable_measurement']
             if f'`{key}`' not in text] == []
+
+
+def test_a_magnet_taken_off_starts_the_calibration_over_and_says_so(ros_context, spinner):
+    # A saved calibration of a pure offset (a magnet on the body), the body
+    # turning about the vertical at 0.3 rad/s: the calibrated fields fit.
+    # The offset gone (the magnet taken off), the fields fit as given: the
+    # calibration starts over, ready at once ('converged', used as given),
+    # and the status counts it (calibration_resets).
+    bias = (1.5e-5, -1e-5, 0.8e-5)
+    node = spinner.add(ImuFilterNode(
+        node_name='magnet', context=ros_context, parameter_overrides=overrides(
+            mag_bias_x=bias[0], mag_bias_y=bias[1], mag_bias_z=bias[2])))
+    field = (0.0, 2.2e-5, -3.9e-5)  # T, north and down, dip about 60°
+    rate, period = 0.3, SECOND // 100
+
+    def turn(seconds, start, angle, offset):
+        for k in range(seconds * 100):
+            stamp = start + k * period
+            angle += rate / 100
+            c, s = math.cos(angle), math.sin(angle)
+            body = (c * field[0] + s * field[1], -s * field[0] + c * field[1], field[2])
+            node.pipeline.field(stamp, tuple(b + o for b, o in zip(body, offset)))
+            node.pipeline.imu(stamp, (0.0, 0.0, rate), (0.0, 0.0, 9.81))
+        return start + seconds * 100 * period, angle
+
+    stamp, angle = turn(4, START, 0.0, bias)
+    values = values_of(node.status())
+    assert (values['calibration'], values['calibration_resets']) == ('loaded', '0')
+    turn(4, stamp, angle, (0.0, 0.0, 0.0))
+    values = values_of(node.status())
+    assert (values['calibration'], values['calibration_resets']) == ('converged', '1')
