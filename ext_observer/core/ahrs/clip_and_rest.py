@@ -12,7 +12,7 @@ sample stays in the kernel.
 
 import math
 
-from .ahrs_filters import clip, first_order_step
+from .ahrs_filters import clip, first_order_step, rotation_matrix
 from .bias_kernel import BIAS_P_XX, BIAS_P_YY, BIAS_P_ZZ
 from .record import Group
 
@@ -28,6 +28,7 @@ REST = Group('rest', 'Rest: the body still, the bias learned from the rate at re
 GYRO = Group('gyro', "The gyro's recent rates and a clipped gyro", [
     ('clips', '', 'clipped samples counted'),
     ('clipped', 'rad²', "the last sample's clipped variance (0: not clipped)"),
+    ('clipped_vertical', 'rad²', "its part about the world's vertical: the heading's"),
     ('last', 'rad/s', "the latest sample's rate, as measured", 3),
     ('prev', 'rad/s', 'the rate of the sample before the latest', 3),
     ('peak', 'rad/s', 'the largest |rate| on any axis seen'),
@@ -44,6 +45,7 @@ def rest_reset(s):
 def gyro_reset(s):
     """No clipped sample to weigh, no recovery to run (the rates and counts stay)."""
     s.gyro.clipped = 0.0
+    s.gyro.clipped_vertical = 0.0
     s.gyro.clip_left = 0.0
 
 
@@ -93,7 +95,10 @@ def clipped_variance(s, gx, gy, gz):
 
     The rate beyond the range is unknown: each clipped axis adds
     ``(range dt)²`` (``S_CLIPPED``, for the covariance), and the sample is
-    counted (``S_CLIPS``).
+    counted (``S_CLIPS``). The part about the world's vertical, each clipped
+    axis's times the square of its vertical component (the third row of
+    ``R(q̂)``), is the heading's (``gyro.clipped_vertical``); the rest turns
+    the tilt.
     """
     dt = s.coef.dt
     cx = _at_range(s, 0, gx)
@@ -105,6 +110,9 @@ def clipped_variance(s, gx, gy, gz):
     top = max(s.par.gyro_range, s.gyro.peak) * dt
     var = ((1.0 if cx else 0.0) + (1.0 if cy else 0.0) + (1.0 if cz else 0.0)) * top * top
     s.gyro.clipped = var
+    r = rotation_matrix(s)
+    s.gyro.clipped_vertical = ((r[6] * r[6] if cx else 0.0) + (r[7] * r[7] if cy else 0.0)
+                               + (r[8] * r[8] if cz else 0.0)) * top * top
     if var != 0.0:
         s.gyro.clips += 1.0
     return var

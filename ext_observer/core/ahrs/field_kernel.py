@@ -210,29 +210,42 @@ def field_clipped(s, var):
 
     The rate beyond the range stays beyond it along a clipped stretch, so the
     heading's losses add up as the inclination's do (``clip_after``): the
-    doubt's σ grows by :data:`CLIP_HEADING_SHARE` of the range's σ per
-    sample, its variance by the difference of the squares (:func:`field_doubt`).
+    doubt's σ grows by :data:`CLIP_HEADING_SHARE` of the σ of the part about
+    the world's vertical (``gyro.clipped_vertical``; a body clipping about a
+    horizontal axis loses its tilt, not its heading), the variance by the
+    difference of the squares. The share of tilt that weighs the fields
+    grows by that of all of it, as before: the vertical is the estimate's,
+    and a field right after a clip about it is weighed by the tilt the
+    estimate may have lost (taking only the horizontal part for the tilt
+    measured no better on BROAD, and let a bent field take the heading).
     """
     s.field.field_clipped = 1.0
-    p = s.field.head_doubt
-    grow = math.sqrt(p) + CLIP_HEADING_SHARE * math.sqrt(var)
+    up = s.gyro.clipped_vertical
+    p, t = s.field.head_doubt, s.field.tilt_doubt
     # σ ← σ + c √var: the variance grows by (σ + c √var)² − σ²
-    field_doubt(s, grow * grow - p)
+    head = math.sqrt(p) + CLIP_HEADING_SHARE * math.sqrt(up)
+    tilt = math.sqrt(t) + CLIP_HEADING_SHARE * math.sqrt(var)
+    _add_doubt(s, head * head - p, tilt * tilt - t)
 
 
 def field_doubt(s, var):
     """
-    The gyro step lost ``var`` rad² per axis (a clipped sample, a hole): the field's to give back.
+    The gyro step lost ``var`` rad² per axis (a hole, unbridged samples): the field's to give back.
 
     Past :data:`HEADING_LOST` the heading is taken afresh from the running
     mean of the next fields, as at the start.
     """
+    _add_doubt(s, var, var)
+
+
+def _add_doubt(s, head, tilt):
+    """The heading's doubt gains ``head`` rad², its share of tilt ``tilt``; lost past HEADING_LOST."""
     if s.par.use_mag == 0.0:
         return
-    p = s.field.head_doubt + var
+    p = s.field.head_doubt + head
     if p < HEADING_LOST:
         s.field.head_doubt = p
-        s.field.tilt_doubt += var
+        s.field.tilt_doubt += tilt
     else:
         s.field.head_doubt = 0.0
         s.field.tilt_doubt = 0.0

@@ -692,24 +692,56 @@ def test_the_gyros_losses_add_up_as_the_fields_doubt_until_the_heading_is_lost()
     assert (s.field.head_doubt, s.field.tilt_doubt, s.field.mag_used) == (0.0, 0.0, 0.0)
 
 
-def test_a_clipped_stretchs_losses_add_up_in_the_heading_doubts_sigma():
+@pytest.mark.parametrize('vertical', [1.0, 0.25, 0.0])
+def test_a_clipped_stretchs_losses_add_up_in_the_heading_doubts_sigma(vertical):
     # Along a clipped stretch the rate stays beyond the range: each sample
-    # adds CLIP_HEADING_SHARE of its σ to the doubt's σ (not its variance to
-    # the variance), the tilt share alike, until the heading is lost.
+    # adds CLIP_HEADING_SHARE of the σ of its part about the vertical to the
+    # doubt's σ (not its variance to the variance), and of all of it to the
+    # tilt share's σ, until the heading is lost. ``vertical``: the share of
+    # the clipped variance about the world's vertical (gyro.clipped_vertical).
     est = AhrsObserver(AhrsParams(mag_cal=False), use_mag=True, compiled=False)
     for _ in range(20):
         est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
     s = record(est)
     var = (RANGE * DT) ** 2
+    s.gyro.clipped_vertical = vertical * var
     for n in range(1, 4):
         field_clipped(s, var)
         sigma = n * CLIP_HEADING_SHARE * RANGE * DT
-        assert s.field.head_doubt == pytest.approx(sigma * sigma, rel=1e-12)
+        assert s.field.head_doubt == pytest.approx(vertical * sigma * sigma, rel=1e-12)
         assert s.field.tilt_doubt == pytest.approx(sigma * sigma, rel=1e-12)
     assert s.field.field_clipped == 1.0 and s.field.mag_used == 20.0
+    if vertical == 0.0:
+        return  # the heading is never lost
     while s.field.mag_used != 0.0:
         field_clipped(s, var)
     assert s.field.head_doubt == 0.0 and s.field.tilt_doubt == 0.0
+
+
+def test_a_clipped_axis_is_the_headings_by_its_vertical_component():
+    # gyro.clipped_vertical: each clipped axis's (range dt)² times the square
+    # of its component along the world's vertical (R(q̂)ᵀ e_z); the range is
+    # the largest rate seen (1.2 × RANGE here). Level: z all of it, x none;
+    # rolled 90° about x: y all of it; rolled 60°: the vertical in the body
+    # is (0, sin 60°, cos 60°), y and z together all of it, y alone 3/4.
+    est = AhrsObserver(AhrsParams(mag_cal=False, gyro_range=RANGE), use_mag=True,
+                       compiled=False)
+    for _ in range(20):
+        est.update(STILL, LEVEL, body_field(world_field(NORM, DIP), 0.0), DT)
+    s = record(est)
+    top2 = (1.2 * RANGE * DT) ** 2
+    for angle, rate, share in ((0.0, (0.0, 0.0, 1.2 * RANGE), 1.0),
+                               (0.0, (1.2 * RANGE, 0.0, 0.0), 0.0),
+                               (90.0, (0.0, 1.2 * RANGE, 0.0), 1.0),
+                               (60.0, (0.0, 1.2 * RANGE, 1.2 * RANGE), 1.0),
+                               (60.0, (0.0, 1.2 * RANGE, 0.0), 0.75)):
+        half = 0.5 * math.radians(angle)
+        for i, v in enumerate((math.cos(half), math.sin(half), 0.0, 0.0)):
+            s.est.q[i] = v
+        est.update(rate, LEVEL, None, DT)
+        clipped = sum(abs(r) > 0 for r in rate)
+        assert s.gyro.clipped == pytest.approx(clipped * top2, rel=1e-12), (angle, rate)
+        assert s.gyro.clipped_vertical == pytest.approx(share * top2, rel=1e-6), (angle, rate)
 
 
 def test_a_field_does_not_end_the_doubt_while_a_clipped_stretch_still_adds_to_it():
