@@ -216,8 +216,8 @@ def field_clipped(s, var):
     difference of the squares. The share of tilt that weighs the fields
     grows by that of all of it, as before: the vertical is the estimate's,
     and a field right after a clip about it is weighed by the tilt the
-    estimate may have lost (taking only the horizontal part for the tilt
-    measured no better on BROAD, and let a bent field take the heading).
+    estimate may have lost (with the horizontal part only, a field bent in
+    heading right after a clip about the vertical took the heading).
     """
     s.field.field_clipped = 1.0
     up = s.gyro.clipped_vertical
