@@ -128,6 +128,14 @@ def lowpass(bw, st, i, vx, vy, vz):
     return fx, fy, fz
 
 
+def vertical_in_body(s):
+    """The world's vertical in the body frame, ``R(q̂)ᵀ e_z`` (``R``'s third row), ``q̂`` of any nonzero norm."""
+    w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
+    n2 = w * w + x * x + y * y + z * z
+    return (2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
+            (w * w - x * x - y * y + z * z) / n2)
+
+
 def rotation_matrix(s):
     """The rows of ``R(q̂)`` (sensor → world), ``q̂`` of any nonzero norm."""
     w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]

@@ -12,7 +12,7 @@ sample stays in the kernel.
 
 import math
 
-from .ahrs_filters import clip, first_order_step, rotation_matrix
+from .ahrs_filters import clip, first_order_step, vertical_in_body
 from .bias_kernel import BIAS_P_XX, BIAS_P_YY, BIAS_P_ZZ
 from .record import Group
 
@@ -96,8 +96,8 @@ def clipped_variance(s, gx, gy, gz):
     The rate beyond the range is unknown: each clipped axis adds
     ``(range dt)²`` (``S_CLIPPED``, for the covariance), and the sample is
     counted (``S_CLIPS``). The part about the world's vertical, each clipped
-    axis's times the square of its vertical component (the third row of
-    ``R(q̂)``), is the heading's (``gyro.clipped_vertical``); the rest turns
+    axis's times the square of its vertical component
+    (:func:`~ext_observer.core.ahrs.ahrs_filters.vertical_in_body`), is the heading's (``gyro.clipped_vertical``); the rest turns
     the tilt.
     """
     dt = s.coef.dt
@@ -110,11 +110,12 @@ def clipped_variance(s, gx, gy, gz):
     top = max(s.par.gyro_range, s.gyro.peak) * dt
     var = ((1.0 if cx else 0.0) + (1.0 if cy else 0.0) + (1.0 if cz else 0.0)) * top * top
     s.gyro.clipped = var
-    r = rotation_matrix(s)
-    s.gyro.clipped_vertical = ((r[6] * r[6] if cx else 0.0) + (r[7] * r[7] if cy else 0.0)
-                               + (r[8] * r[8] if cz else 0.0)) * top * top
+    s.gyro.clipped_vertical = 0.0
     if var != 0.0:
         s.gyro.clips += 1.0
+        ux, uy, uz = vertical_in_body(s)
+        s.gyro.clipped_vertical = ((ux * ux if cx else 0.0) + (uy * uy if cy else 0.0)
+                                   + (uz * uz if cz else 0.0)) * top * top
     return var
 
 

@@ -15,7 +15,8 @@ say (:func:`_field_tilt`, :func:`_sideways_tilt`). The maths: docs/raw_imu.md
 
 import math
 
-from .ahrs_filters import UNIFORM_ANGLE_VARIANCE, gain, quat_multiply, rotate, rotation_matrix
+from .ahrs_filters import (UNIFORM_ANGLE_VARIANCE, gain, quat_multiply, rotate, rotation_matrix,
+                           vertical_in_body)
 from .bias_kernel import bias_measure
 from .field_references import (FIELD_GATE, field_angles, first_references, follow_candidate,
                                follow_references, off_references, reject_or_accept)
@@ -486,11 +487,7 @@ def field_calibrate(s, mx, my, mz, dt):
         if applied and _taken_off(s, mx, my, mz, not allow):
             mc_as_given(s.cal)
             allow = True  # the fresh start learns from this field
-    w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
-    n2 = w * w + x * x + y * y + z * z
-    # The world's vertical in the body frame: R(q̂)ᵀ e_z / |q̂|².
-    up = (2.0 * (x * z - w * y) / n2, 2.0 * (y * z + w * x) / n2,
-          (w * w - x * x - y * y + z * z) / n2)
+    up = vertical_in_body(s)
     turn = (s.cal_feed.turn[0], s.cal_feed.turn[1], s.cal_feed.turn[2], s.cal_feed.turn[3])
     mc_learn(s.cal, (mx, my, mz), turn, s.cal_feed.wait, vec3_at(s.cal_feed.rate, 0), 1.0, up,
              1.0 if allow else 0.0)
@@ -501,7 +498,7 @@ def field_calibrate(s, mx, my, mz, dt):
     switched = s.cal.applied != 0.0 and (not applied or s.cal_feed.loaded != 0.0)
     s.cal_feed.loaded = 0.0
     if switched and has_ref:
-        _calibration_applied(s, w, x, y, z)
+        _calibration_applied(s)
     return mc_apply(s.cal, mx, my, mz)
 
 
@@ -539,13 +536,14 @@ def _after_clip(s):
     return True
 
 
-def _calibration_applied(s, w, x, y, z):
+def _calibration_applied(s):
     """
     A learned calibration applied: the heading set once from its field, the references its.
 
     The calibration's field is the noise of many fields averaged; then the
     heading follows the calibrated fields, with the refinement's gain.
     """
+    w, x, y, z = s.est.q[0], s.est.q[1], s.est.q[2], s.est.q[3]
     fx, fy, fz = mc_field(s.cal)
     hx, hy, hz = rotate(w, x, y, z, fx, fy, fz)
     half = 0.5 * math.atan2(hx, hy)
